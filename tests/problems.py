@@ -1,0 +1,109 @@
+"""Test problems with a known solution: Bai's matrices, as LCP and as ICP.
+
+Bai's matrices (n = m*m, m x m blocks):
+
+    A = Â + mu*I,  Â = blocktridiag(-I, S, -I),             S = tridiag(-1, 4, -1)      (symmetric)
+                   Â = blocktridiag(-1.5 I, S, -0.5 I),     S = tridiag(-1.5, 4, -0.5)  (nonsymmetric)
+
+blocktridiag(lower, diagonal, upper) / tridiag(sub, diagonal, super).  With mu = 4 the
+diagonal of A is 8 and A is strictly diagonally dominant (a P-matrix), so every problem
+below has exactly one solution.
+
+Known solution.  Pick z*, and a split of the indices into an "active" set, where
+g*_i = z*_i - zeta(z*)_i = 0 and w*_i > 0, and an "inactive" set, where g*_i > 0 and w*_i = 0.
+Then q = w* - A z* makes z* the solution:  w* = A z* + q >= 0,  g* >= 0,  g*^T w* = 0.
+
+For the ICP, zeta(z) = c*sin(z) + s (componentwise, Lipschitz constant c), with
+s = z* - g* - c*sin(z*) so that z* - zeta(z*) = g*.
+"""
+
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+import numpy as np
+import scipy.sparse as sp
+
+
+def tridiag(m, sub, diag, sup):
+    """m x m tridiagonal matrix with constant sub-, main and super-diagonal."""
+    return sp.diags([np.full(m - 1, sub), np.full(m, diag), np.full(m - 1, sup)], [-1, 0, 1])
+
+
+def bai_matrix(m, symmetric=True, mu=4.0):
+    """Bai's test matrix A = Â + mu*I of size n = m*m, as CSR (float64, sorted indices)."""
+    if symmetric:
+        S = tridiag(m, -1.0, 4.0, -1.0)
+        T = tridiag(m, -1.0, 0.0, -1.0)      # block pattern: -I below and above the diagonal
+    else:
+        S = tridiag(m, -1.5, 4.0, -0.5)
+        T = tridiag(m, -1.5, 0.0, -0.5)      # -1.5 I below, -0.5 I above the diagonal
+    I = sp.identity(m)
+    A = sp.kron(I, S) + sp.kron(T, I) + mu * sp.identity(m * m)
+    A = sp.csr_matrix(A, dtype=np.float64)
+    A.sum_duplicates()
+    A.sort_indices()
+    return A
+
+
+@dataclass
+class Problem:
+    """ICP(q, A, zeta) with its known solution z_star.  zeta is None for an LCP."""
+    name: str
+    A: sp.csr_matrix
+    q: np.ndarray
+    zeta: Optional[Callable[[np.ndarray], np.ndarray]]
+    z_star: np.ndarray
+    w_star: np.ndarray
+    g_star: np.ndarray
+
+
+def known_solution_parts(n, seed=0):
+    """z*, g*, w* with a deterministic mixed active set.
+
+    About half of the indices are active (g_i = 0, w_i > 0), the others inactive
+    (g_i > 0, w_i = 0).  Values are bounded away from 0 (in [0.5, 1.5]) so that the
+    strict complementarity of the solution is clear-cut.
+    """
+    rng = np.random.default_rng(seed)
+    active = rng.random(n) < 0.5
+    g_star = np.where(active, 0.0, rng.uniform(0.5, 1.5, n))
+    w_star = np.where(active, rng.uniform(0.5, 1.5, n), 0.0)
+    return active, g_star, w_star
+
+
+def make_lcp(m, symmetric=True, seed=0):
+    """LCP(q, A) (zeta = 0): z* = g*."""
+    A = bai_matrix(m, symmetric)
+    n = A.shape[0]
+    _, g_star, w_star = known_solution_parts(n, seed)
+    z_star = g_star.copy()
+    q = w_star - A @ z_star
+    name = f"lcp-{'sym' if symmetric else 'nonsym'}-m{m}"
+    return Problem(name, A, q, None, z_star, w_star, g_star)
+
+
+def make_icp(m, symmetric=True, c=0.1, seed=0):
+    """ICP(q, A, zeta) with zeta(z) = c*sin(z) + s and a known solution z*."""
+    A = bai_matrix(m, symmetric)
+    n = A.shape[0]
+    _, g_star, w_star = known_solution_parts(n, seed)
+    rng = np.random.default_rng(seed + 1)
+    z_star = g_star + rng.uniform(-1.0, 1.0, n)   # z* is no longer g*: the obstacle is nonzero
+    s = z_star - g_star - c * np.sin(z_star)
+
+    def zeta(z):
+        return c * np.sin(z) + s
+
+    assert np.allclose(z_star - zeta(z_star), g_star, atol=1e-14)
+    q = w_star - A @ z_star
+    name = f"icp-{'sym' if symmetric else 'nonsym'}-m{m}"
+    return Problem(name, A, q, zeta, z_star, w_star, g_star)
+
+
+def make_problem(kind, m, symmetric=True):
+    """kind is 'lcp' or 'icp'."""
+    if kind == "lcp":
+        return make_lcp(m, symmetric)
+    if kind == "icp":
+        return make_icp(m, symmetric)
+    raise ValueError(f"unknown problem kind {kind!r}")
