@@ -176,3 +176,31 @@ def test_large_problem_reports_its_residual_and_w(method, z_update, kind, symmet
 def test_large_problem_finds_known_solution(method, z_update, kind, symmetric):
     P, res = large_solution(method, z_update, kind, symmetric)
     assert np.max(np.abs(res.z - P.z_star)) < 1e-6
+
+
+# ---- defaults the contract fixes -------------------------------------------------------------
+
+@pytest.mark.parametrize("kind, expected_update", [("lcp", "explicit"), ("icp", "solve")])
+def test_auto_z_update_is_explicit_for_lcp_and_solve_for_icp(kind, expected_update):
+    P = problem(kind, M_SMALL, False)
+    ref = ref_solve(P, "nrmgs", expected_update, tol=TOL, maxiter=3)
+    res = core_solve(P, "nrmgs", "auto", tol=TOL, maxiter=3, record_history=True)
+    np.testing.assert_allclose(res.history["residual"], ref.residuals, rtol=1e-10, atol=0)
+
+
+SPEC_DEFAULTS = {   # SPEC.md's method table, for the methods whose every default it fixes
+    "nrm": lambda A: dict(omega1=1.0, omega2=1.0, phi=0.0),
+    "nrmm": lambda A: dict(omega1=1.0, alpha=A.diagonal().mean(), phi=0.0),
+    "nrmgs": lambda A: dict(omega1=1.0, omega2=A.diagonal(), phi=0.0),
+    "nrmj": lambda A: dict(omega1=1.0, omega2=A.diagonal(), phi=0.0),
+}
+
+
+@pytest.mark.parametrize("method", sorted(SPEC_DEFAULTS))
+def test_default_parameters_follow_spec_table(method):
+    """nrmicp.solve with only `method` given iterates like the reference with SPEC's defaults."""
+    P = problem("icp", M_SMALL, False)
+    ref = reference_solve(P.A, P.q, P.zeta, method=method, z_update="solve", gamma=1.0,
+                          tol=TOL, maxiter=3, **SPEC_DEFAULTS[method](P.A))
+    res = nrmicp.solve(P.A, P.q, P.zeta, method=method, maxiter=3, record_history=True)
+    np.testing.assert_allclose(res.history["residual"], ref.residuals, rtol=1e-10, atol=0)
