@@ -1,0 +1,120 @@
+// nrmicp — options of Method 3.1 and its family.
+#pragma once
+
+#include <Eigen/Core>
+
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+
+namespace nrmicp {
+
+/// The members of the family (paper §3) and the baselines it is compared with (§2).
+/// Each fixes the splitting A = M − N; see docs/SPEC.md for the table.
+enum class Method {
+  NRM,       ///< M = A, Ω1 = Ω2 = I (paper); Lm factorized once
+  NRMM,      ///< M = A, Ω1 = I, Ω2 = αI; Lm factorized once
+  NRMAOR,    ///< M = (D − βL)/α; Lm lower triangular (forward substitution)
+  NRMSOR,    ///< NRMAOR with β = α
+  NRMGS,     ///< NRMAOR with α = β = 1
+  NRMJ,      ///< NRMAOR with α = 1, β = 0; Lm diagonal
+  MMS,       ///< Zheng–Vong modified modulus splitting: AOR splitting, Ω1 = I, φ = 0
+  TwoSweep,  ///< two-sweep modulus method (Wu–Li form), M1 = (D − βL)/α, M2 = D − U, relaxation θ
+};
+
+/// How z⁽ᵏ⁾ is recovered from the modulus vector x⁽ᵏ⁾.
+enum class ZUpdate {
+  Auto,      ///< Explicit for an LCP (no factorization of A), Solve for an ICP
+  Explicit,  ///< z = ζ(z_prev) + Ω1(|x| + x)/γ — no solve with A
+  Solve,     ///< A z = Ω2(|x| − x)/γ − q — the paper's Step 1 (a factorization of A)
+};
+
+/// Which sparse direct solver factorizes Lm (NRM, NRMM) and A (Solve z-update).
+/// The AOR-type left matrices never need one: they are triangular or diagonal.
+enum class Inner {
+  Auto,      ///< CHOLMOD if symmetric positive definite, else UMFPACK; Eigen's solvers without SuiteSparse
+  Cholmod,   ///< CHOLMOD supernodal LLᵀ (SuiteSparse)
+  Umfpack,   ///< UMFPACK LU (SuiteSparse)
+  EigenLLT,  ///< Eigen::SimplicialLLT (AMD ordering)
+  EigenLU,   ///< Eigen::SparseLU (COLAMD ordering)
+};
+
+/// Stabilizers beyond the paper.
+enum class Accelerate {
+  None,      ///< the plain fixed-point step
+  Anderson,  ///< safeguarded Anderson acceleration of x ↦ x⁺ with memory `anderson_m`
+};
+
+/// Every option of the iteration, with its default. Vectors left empty take the method's
+/// default (docs/SPEC.md); a NaN alpha/beta takes the method's default too.
+struct Options {
+  Method method = Method::NRMGS;
+  double tol = 1e-8;               ///< stop when Res(z) = ‖min(Az + q, z − ζ(z))‖₂ < tol
+  int maxiter = 10000;             ///< at most this many x-updates
+  Eigen::VectorXd omega1;          ///< Ω1 (positive), length n or empty
+  Eigen::VectorXd omega2;          ///< Ω2 (positive), length n or empty
+  double gamma = 1.0;              ///< γ > 0
+  Eigen::VectorXd phi;             ///< relaxation diagonal φ (≥ 0), length n or empty
+  double alpha = std::numeric_limits<double>::quiet_NaN();  ///< AOR α (NRMM: Ω2 = αI)
+  double beta = std::numeric_limits<double>::quiet_NaN();   ///< AOR β
+  double theta = 1.0;              ///< relaxation of the two-sweep step, 0 < θ ≤ 2
+  ZUpdate z_update = ZUpdate::Auto;
+  Inner inner = Inner::Auto;
+  Accelerate accelerate = Accelerate::None;
+  int anderson_m = 5;              ///< Anderson memory (number of past differences kept)
+  bool record_history = false;     ///< keep (iteration, seconds, Res) of every iterate
+  int stall_iterations = 100;      ///< STAGNATED when the best Res has not improved for this many iterations
+  double divergence_factor = 1e10; ///< DIVERGED when Res exceeds this factor times the best Res seen
+
+  /// Throws std::invalid_argument naming the offending field, its value and what is accepted.
+  void check(Eigen::Index n) const {
+    auto fail = [](const std::string& msg) { throw std::invalid_argument("Options: " + msg); };
+    auto num = [](double v) { std::ostringstream s; s << v; return s.str(); };
+    if (!(tol > 0) || !std::isfinite(tol)) fail("tol must be a finite number > 0, got " + num(tol));
+    if (maxiter < 0) fail("maxiter must be >= 0, got " + std::to_string(maxiter));
+    if (!(gamma > 0) || !std::isfinite(gamma)) fail("gamma must be a finite number > 0, got " + num(gamma));
+    auto check_vec = [&](const Eigen::VectorXd& v, const char* name, bool strictly_positive) {
+      if (v.size() == 0) return;
+      if (v.size() != n)
+        fail(std::string(name) + " must have length n = " + std::to_string(n) + ", got " + std::to_string(v.size()));
+      for (Eigen::Index i = 0; i < n; ++i) {
+        const double x = v[i];
+        if (!std::isfinite(x) || (strictly_positive ? !(x > 0) : x < 0))
+          fail(std::string(name) + "[" + std::to_string(i) + "] = " + num(x) + "; it must be finite and " +
+               (strictly_positive ? "> 0" : ">= 0"));
+      }
+    };
+    check_vec(omega1, "omega1", true);
+    check_vec(omega2, "omega2", true);
+    check_vec(phi, "phi", false);
+    if (!std::isnan(alpha) && (!(alpha > 0) || !std::isfinite(alpha)))
+      fail("alpha must be a finite number > 0, got " + num(alpha));
+    if (!std::isnan(beta) && (!(beta >= 0) || !std::isfinite(beta)))
+      fail("beta must be a finite number >= 0, got " + num(beta));
+    if (!(theta > 0 && theta <= 2)) fail("theta must lie in (0, 2], got " + num(theta));
+    if (anderson_m < 1 || anderson_m > 100) fail("anderson_m must lie in [1, 100], got " + std::to_string(anderson_m));
+    if (stall_iterations < 1) fail("stall_iterations must be >= 1, got " + std::to_string(stall_iterations));
+    if (!(divergence_factor > 1)) fail("divergence_factor must be > 1, got " + num(divergence_factor));
+  }
+};
+
+inline const char* to_string(Method m) {
+  switch (m) {
+    case Method::NRM: return "nrm";
+    case Method::NRMM: return "nrmm";
+    case Method::NRMAOR: return "nrmaor";
+    case Method::NRMSOR: return "nrmsor";
+    case Method::NRMGS: return "nrmgs";
+    case Method::NRMJ: return "nrmj";
+    case Method::MMS: return "mms";
+    case Method::TwoSweep: return "two_sweep";
+  }
+  return "?";
+}
+
+/// True for the members whose M is the AOR lower-triangular part (no factorization of Lm).
+inline bool is_aor_type(Method m) { return m != Method::NRM && m != Method::NRMM; }
+
+}  // namespace nrmicp

@@ -1,0 +1,61 @@
+// nrmicp — what a solve returns.
+#pragma once
+
+#include <Eigen/Core>
+
+#include <string>
+#include <vector>
+
+namespace nrmicp {
+
+enum class Status {
+  Converged = 0,      ///< Res(z) < tol
+  MaxIterations = 1,  ///< maxiter x-updates done without reaching tol
+  Diverged = 2,       ///< Res became non-finite or grew beyond divergence_factor × best
+  Stagnated = 3,      ///< the best Res did not improve for stall_iterations iterations
+  CallbackStop = 4,   ///< the callback asked to stop
+  ZetaFailed = 5,     ///< ζ(z) returned non-finite values
+};
+
+inline const char* to_string(Status s) {
+  switch (s) {
+    case Status::Converged: return "converged: Res < tol";
+    case Status::MaxIterations: return "maximum number of iterations reached";
+    case Status::Diverged: return "diverged: Res became non-finite or grew without bound";
+    case Status::Stagnated: return "stagnated: Res stopped decreasing before reaching tol";
+    case Status::CallbackStop: return "stopped by the callback";
+    case Status::ZetaFailed: return "zeta(z) returned non-finite values";
+  }
+  return "?";
+}
+
+/// Wall-clock seconds by phase. `factorization` is part of `setup` (Solver construction) or
+/// happens lazily during the first solve that needs A factorized.
+struct Timings {
+  double setup = 0;          ///< building Lm and factorizations (Solver construction)
+  double factorization = 0;  ///< sparse factorizations (Lm and, when needed, A)
+  double iterations = 0;     ///< the iteration loop of this solve
+  double zeta = 0;           ///< evaluating ζ
+  double spmv = 0;           ///< products with A (and ζ's B, two-sweep's N2)
+  double inner_solve = 0;    ///< solves with Lm and A (factor or triangular)
+  double total = 0;          ///< this solve, from entry to return
+};
+
+struct Result {
+  Eigen::VectorXd z;         ///< best iterate (smallest Res seen); the last one when converged
+  Eigen::VectorXd w;         ///< A z + q
+  Status status = Status::MaxIterations;
+  int nit = 0;               ///< x-updates performed to reach the returned z
+  int iterations = 0;        ///< x-updates performed in all
+  double residual = 0;       ///< Res(z) of the returned z
+  std::string message;
+  std::string inner;         ///< the inner solver used for Lm
+  // history (filled when Options::record_history)
+  std::vector<int> history_iteration;
+  std::vector<double> history_seconds;
+  std::vector<double> history_residual;
+  Timings timings;
+  bool success() const { return status == Status::Converged; }
+};
+
+}  // namespace nrmicp

@@ -1,0 +1,287 @@
+// nrmicp — Method 3.1 of the paper, written once for every splitting:
+//
+//   x⁽ᵏ⁺¹⁾ = x⁽ᵏ⁾ + Lm⁻¹ [Ω2(|x⁽ᵏ⁾| − x⁽ᵏ⁾) − γ(A ẑ + q)],   ẑ = ζ(z⁽ᵏ⁾) + Ω1(|x⁽ᵏ⁾| + x⁽ᵏ⁾)/γ,
+//
+// which is the paper's Lm x⁽ᵏ⁺¹⁾ = (N + φ)Ω1 x⁽ᵏ⁾ + (Ω2 − AΩ1)|x⁽ᵏ⁾| − γAζ(z⁽ᵏ⁾) − γq with
+// N = M − A rearranged (no cancellation of large terms). See docs/SPEC.md.
+#pragma once
+
+#include "detail/anderson.hpp"
+#include "detail/timer.hpp"
+#include "inner_solver.hpp"
+#include "options.hpp"
+#include "result.hpp"
+#include "splitting.hpp"
+#include "zeta.hpp"
+
+#include <Eigen/SparseCore>
+
+#include <chrono>
+#include <cmath>
+#include <functional>
+#include <limits>
+#include <mutex>
+#include <optional>
+#include <stdexcept>
+
+namespace nrmicp {
+
+/// Res(z) = ‖min(w, g)‖₂ with w = Az + q, g = z − ζ(z).
+inline double residual(const Eigen::VectorXd& w, const Eigen::VectorXd& g) { return w.cwiseMin(g).norm(); }
+
+/// Set-up (splitting, factorization) once; solve(q, ζ) many times.
+/// `A` is held by reference: it must outlive the Solver (as with Eigen's solvers).
+template <typename MatrixType>
+class Solver {
+ public:
+  using StorageIndex = typename MatrixType::StorageIndex;
+  using Vector = Eigen::VectorXd;
+  using ColMatrix = Eigen::SparseMatrix<double, Eigen::ColMajor, StorageIndex>;
+  /// Called after every iterate with (k, z⁽ᵏ⁾, Res); return true to stop.
+  using Callback = std::function<bool(int, const Vector&, double)>;
+  /// Called about every 50 ms during a solve; may throw to abort (e.g. on Ctrl-C).
+  using Poll = std::function<void()>;
+
+  Solver(const MatrixType& A, Options options) : A_(A), options_(std::move(options)) {
+    if (A.rows() != A.cols())
+      throw std::invalid_argument("Solver: A must be square, got " + std::to_string(A.rows()) + "x" +
+                                  std::to_string(A.cols()));
+    options_.check(A.rows());
+    const auto t0 = std::chrono::steady_clock::now();
+    params_ = resolve_parameters(A, options_);
+    {
+      detail::ScopedTimer t(setup_factorization_);
+      splitting_.emplace(A, options_.method, params_, options_.inner);
+    }
+    if (options_.z_update == ZUpdate::Solve) factorize_A();
+    setup_seconds_ = detail::ScopedTimer::seconds_since(t0);
+  }
+
+  const Options& options() const { return options_; }
+  const Parameters& parameters() const { return params_; }
+  const char* inner_name() const { return splitting_->inner_name(); }
+
+  /// Solves ICP(q, A, ζ) from the initial guess z0 (zeros when null). The iteration fields of
+  /// `iteration_options` (tol, maxiter, z_update, accelerate, anderson_m, theta, record_history,
+  /// stall_iterations, divergence_factor) override the constructor's; the splitting stays.
+  Result solve(const Vector& q, const Zeta<StorageIndex>& zeta = Zeta<StorageIndex>::none(),
+               const Vector* z0 = nullptr, const Callback& callback = {}, const Poll& poll = {},
+               const Options* iteration_options = nullptr) const {
+    const auto t0 = std::chrono::steady_clock::now();
+    const Eigen::Index n = A_.rows();
+    Options o = options_;
+    if (iteration_options) {
+      iteration_options->check(n);
+      o.tol = iteration_options->tol; o.maxiter = iteration_options->maxiter;
+      o.z_update = iteration_options->z_update; o.accelerate = iteration_options->accelerate;
+      o.anderson_m = iteration_options->anderson_m; o.theta = iteration_options->theta;
+      o.record_history = iteration_options->record_history;
+      o.stall_iterations = iteration_options->stall_iterations;
+      o.divergence_factor = iteration_options->divergence_factor;
+    }
+    if (q.size() != n) throw std::invalid_argument("Solver::solve: q has length " + std::to_string(q.size()) + ", expected n = " + std::to_string(n));
+    if (z0 && z0->size() != n) throw std::invalid_argument("Solver::solve: x0 has length " + std::to_string(z0->size()) + ", expected n = " + std::to_string(n));
+    zeta.check(n);
+    Result r;
+    if (zeta.kind() == ZetaKind::Constant) {
+      // ζ ≡ c: LCP(q + Ac, A) in y = z − c. Res and w are the same in both variables.
+      Vector q_shift = q;
+      q_shift.noalias() += A_ * zeta.c();
+      std::optional<Vector> y0;
+      if (z0) y0 = *z0 - zeta.c();
+      r = iterate(q_shift, Zeta<StorageIndex>::none(), y0 ? &*y0 : nullptr, callback, poll, o, zeta.c());
+      r.z += zeta.c();
+    } else {
+      r = iterate(q, zeta, z0, callback, poll, o, Vector());
+    }
+    r.timings.setup = setup_seconds_;
+    r.timings.factorization += setup_factorization_;
+    r.timings.total = detail::ScopedTimer::seconds_since(t0);
+    r.inner = splitting_->inner_name();
+    return r;
+  }
+
+ private:
+  void factorize_A() const {
+    std::lock_guard<std::mutex> lock(a_mutex_);
+    if (a_solver_.ready()) return;
+    detail::ScopedTimer t(a_factorization_);
+    a_solver_.compute(ColMatrix(A_), options_.inner, "A (for the z-update 'solve')");
+  }
+
+  // The loop. `shift` is the constant obstacle (only to report z to the callback), or empty.
+  Result iterate(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0, const Callback& callback,
+                 const Poll& poll, const Options& o, const Vector& shift) const {
+    using clock = std::chrono::steady_clock;
+    const Eigen::Index n = A_.rows();
+    const bool lcp = zeta.kind() == ZetaKind::None;
+    const ZUpdate zu = o.z_update == ZUpdate::Auto ? (lcp ? ZUpdate::Explicit : ZUpdate::Solve) : o.z_update;
+    Result res;
+    Timings& tm = res.timings;
+    if (zu == ZUpdate::Solve) {
+      const double before = a_factorization_;
+      factorize_A();
+      tm.factorization += a_factorization_ - before;  // only if this solve paid for it
+    }
+    const auto t_start = clock::now();
+    const Vector& om1 = params_.omega1;
+    const Vector& om2 = params_.omega2;
+    const double gamma = params_.gamma;
+
+    Vector x(n), absx(n), z(n), Az(n), zeta_z = Vector::Zero(n), zeta_prev = Vector::Zero(n), w(n), g(n);
+    Vector zhat(n), Azhat(n), rhs(n), dx(n), absx_prev, x_plain, x_next, best_z, tmp(n);
+
+    auto spmv = [&](const Vector& v, Vector& out) { detail::ScopedTimer t(tm.spmv); out.noalias() = A_ * v; };
+    bool zeta_ok = true;
+    auto eval_zeta = [&](const Vector& v, Vector& out) {
+      if (lcp) return;
+      detail::ScopedTimer t(tm.zeta);
+      zeta_ok = zeta.eval(v, out);
+    };
+    // z from x (and, for the explicit update, ζ of the previous z).
+    auto compute_z = [&]() {
+      if (zu == ZUpdate::Explicit) {
+        z = zeta_prev + om1.cwiseProduct(x.cwiseAbs() + x) / gamma;
+      } else {
+        tmp = om2.cwiseProduct(x.cwiseAbs() - x) / gamma - q;
+        detail::ScopedTimer t(tm.inner_solve);
+        a_solver_.solve(tmp, z);
+      }
+    };
+    // Az, ζ(z), w, g, Res for the current z.
+    auto evaluate = [&]() -> double {
+      spmv(z, Az);
+      eval_zeta(z, zeta_z);
+      w = Az + q;
+      if (lcp) g = z; else g = z - zeta_z;
+      return residual(w, g);
+    };
+
+    // Start: x⁽⁰⁾ = γ/2 (Ω1⁻¹(z0 − ζ(z0)) − Ω2⁻¹(Az0 + q)).
+    {
+      Vector zs = z0 ? *z0 : Vector::Zero(n);
+      Vector zeta0 = Vector::Zero(n);
+      eval_zeta(zs, zeta0);
+      if (!zeta_ok) {
+        res.status = Status::ZetaFailed; res.z = zs; res.w = A_ * zs + q;
+        res.residual = std::numeric_limits<double>::quiet_NaN();
+        res.message = std::string(to_string(res.status)) + " at the initial guess";
+        return res;
+      }
+      spmv(zs, Az);
+      x = gamma / 2 * ((zs - zeta0).cwiseQuotient(om1) - (Az + q).cwiseQuotient(om2));
+      zeta_prev = zeta0;
+    }
+    compute_z();
+
+    const bool anderson = o.accelerate == Accelerate::Anderson;
+    std::optional<detail::Anderson> aa;
+    if (anderson) aa.emplace(o.anderson_m);
+    bool aa_pending = false;  // x came from an Anderson step not yet checked
+    if (params_.theta != 1 || splitting_->two_sweep()) absx_prev = x.cwiseAbs();
+
+    double best = std::numeric_limits<double>::infinity(), prev_res = best;
+    int best_k = 0;
+    auto last_poll = t_start;
+    const bool two_sweep = splitting_->two_sweep();
+    res.status = Status::MaxIterations;
+
+    for (int k = 0;; ++k) {
+      double r = evaluate();
+      if (aa_pending && zeta_ok && !(r < prev_res)) {
+        // Safeguard: the accelerated step did not reduce Res; take the plain step instead.
+        x = x_plain;
+        aa->reset();
+        compute_z();
+        r = evaluate();
+      }
+      aa_pending = false;
+      if (!zeta_ok) { res.status = Status::ZetaFailed; res.iterations = k; break; }
+      if (o.record_history) {
+        res.history_iteration.push_back(k);
+        res.history_seconds.push_back(detail::ScopedTimer::seconds_since(t_start));
+        res.history_residual.push_back(r);
+      }
+      if (r < best) { best = r; best_k = k; best_z = z; }
+      res.iterations = k;
+      if (r < o.tol) { res.status = Status::Converged; break; }
+      if (!std::isfinite(r) || r > o.divergence_factor * best) { res.status = Status::Diverged; break; }
+      if (k - best_k >= o.stall_iterations) { res.status = Status::Stagnated; break; }
+      if (callback) {
+        bool stop;
+        if (shift.size()) stop = callback(k, z + shift, r); else stop = callback(k, z, r);
+        if (stop) { res.status = Status::CallbackStop; break; }
+      }
+      if (poll && detail::ScopedTimer::seconds_since(last_poll) > 0.05) { poll(); last_poll = clock::now(); }
+      if (k >= o.maxiter) { res.status = Status::MaxIterations; break; }
+      prev_res = r;
+
+      // One step of Method 3.1.
+      absx = x.cwiseAbs();
+      if (lcp && zu == ZUpdate::Explicit) {
+        Azhat = Az;  // ẑ = z exactly: no second product
+      } else {
+        zhat = zeta_z + om1.cwiseProduct(absx + x) / gamma;
+        spmv(zhat, Azhat);
+      }
+      rhs = om2.cwiseProduct(absx - x) - gamma * (Azhat + q);
+      if (two_sweep) {
+        detail::ScopedTimer t(tm.spmv);
+        rhs.noalias() -= splitting_->n2() * (absx - absx_prev);
+        absx_prev = absx;
+      }
+      {
+        detail::ScopedTimer t(tm.inner_solve);
+        splitting_->solve(rhs, dx);
+      }
+      if (params_.theta != 1) dx *= params_.theta;
+      if (anderson) {
+        x_plain = x + dx;
+        aa->step(x, dx, x_next);
+        x.swap(x_next);
+        aa_pending = true;
+      } else {
+        x += dx;
+      }
+      zeta_prev = zeta_z;
+      compute_z();
+    }
+
+    tm.iterations = detail::ScopedTimer::seconds_since(t_start);
+    if (best_z.size() == 0) best_z = z;  // no finite Res was ever seen
+    res.nit = (res.status == Status::Converged) ? res.iterations : best_k;
+    res.z = best_z;
+    // w and Res of the returned iterate, recomputed (honest even if it is not the last one).
+    spmv(res.z, Az);
+    res.w = Az + q;
+    if (std::isfinite(best)) {
+      res.residual = best;
+    } else {
+      res.residual = std::numeric_limits<double>::quiet_NaN();
+    }
+    res.message = to_string(res.status);
+    if (res.status != Status::Converged && res.status != Status::ZetaFailed)
+      res.message += "; returning the best iterate (iteration " + std::to_string(best_k) + ")";
+    if (res.status == Status::ZetaFailed) res.message += " at iteration " + std::to_string(res.iterations);
+    return res;
+  }
+
+  const MatrixType& A_;
+  Options options_;
+  Parameters params_;
+  std::optional<Splitting<StorageIndex>> splitting_;
+  double setup_seconds_ = 0, setup_factorization_ = 0;
+  mutable std::mutex a_mutex_;
+  mutable InnerSolver<StorageIndex> a_solver_;
+  mutable double a_factorization_ = 0;
+};
+
+/// One call: set up and solve.
+template <typename MatrixType>
+Result solve(const MatrixType& A, const Eigen::VectorXd& q,
+             const Zeta<typename MatrixType::StorageIndex>& zeta = Zeta<typename MatrixType::StorageIndex>::none(),
+             const Options& options = Options(), const Eigen::VectorXd* z0 = nullptr) {
+  return Solver<MatrixType>(A, options).solve(q, zeta, z0);
+}
+
+}  // namespace nrmicp

@@ -1,0 +1,182 @@
+// nrmicp — the splitting A = M − N of each method, as the left matrix
+//     Lm = Ω2 + (M + φ) Ω1
+// of Method 3.1 and the way to solve with it. For the AOR-type members
+// M = (D − βL)/α is lower triangular, so Lm is solved by forward substitution (or is
+// diagonal when β = 0); for NRM and NRMM (M = A) Lm is factorized once.
+#pragma once
+
+#include "inner_solver.hpp"
+#include "options.hpp"
+
+#include <Eigen/SparseCore>
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace nrmicp {
+
+/// diag(A) for any sparse matrix type (Eigen's Map<const SparseMatrix> has no diagonal()).
+template <typename MatrixType>
+Eigen::VectorXd diagonal(const MatrixType& A) {
+  Eigen::VectorXd d = Eigen::VectorXd::Zero(A.rows());
+  for (Eigen::Index k = 0; k < A.outerSize(); ++k)
+    for (typename MatrixType::InnerIterator it(A, k); it; ++it)
+      if (it.row() == it.col()) d[it.row()] += it.value();  // duplicates add up, as in A·x
+  return d;
+}
+
+/// The method's parameters with every default resolved (docs/SPEC.md).
+struct Parameters {
+  Eigen::VectorXd omega1, omega2, phi;
+  double gamma = 1, alpha = 1, beta = 1, theta = 1;
+};
+
+/// Resolves the method defaults: Ω1 = I; Ω2 = I (NRM), αI (NRMM, α = mean diag A),
+/// D = diag(A) (AOR types, MMS, two-sweep); φ = 0; α, β by the method's definition.
+template <typename MatrixType>
+Parameters resolve_parameters(const MatrixType& A, const Options& o) {
+  const Eigen::Index n = A.rows();
+  const Eigen::VectorXd d = diagonal(A);
+  Parameters p;
+  p.gamma = o.gamma;
+  p.theta = o.theta;
+  const bool has_alpha = !std::isnan(o.alpha), has_beta = !std::isnan(o.beta);
+  switch (o.method) {
+    case Method::NRM: p.alpha = 1; p.beta = 1; break;
+    case Method::NRMM: p.alpha = has_alpha ? o.alpha : (n > 0 ? d.mean() : 1.0); p.beta = 1; break;
+    case Method::NRMAOR: case Method::MMS: case Method::TwoSweep:
+      p.alpha = has_alpha ? o.alpha : 1.0;
+      p.beta = has_beta ? o.beta : p.alpha;
+      break;
+    case Method::NRMSOR:
+      p.alpha = has_alpha ? o.alpha : 1.0;
+      p.beta = p.alpha;
+      if (has_beta && o.beta != p.alpha)
+        throw std::invalid_argument("Options: method 'nrmsor' has beta = alpha; do not set beta (or use 'nrmaor')");
+      break;
+    case Method::NRMGS: case Method::NRMJ:
+      if (has_alpha || has_beta)
+        throw std::invalid_argument(std::string("Options: method '") + to_string(o.method) +
+                                    "' fixes alpha and beta; use 'nrmaor' to choose them");
+      p.alpha = 1; p.beta = (o.method == Method::NRMGS) ? 1 : 0;
+      break;
+  }
+  const bool fixed_omega1_phi = (o.method == Method::MMS || o.method == Method::TwoSweep);
+  if (fixed_omega1_phi && (o.omega1.size() || o.phi.size()))
+    throw std::invalid_argument(std::string("Options: method '") + to_string(o.method) +
+                                "' fixes omega1 = I and phi = 0; use an NRM-family method to set them");
+  p.omega1 = o.omega1.size() ? o.omega1 : Eigen::VectorXd::Ones(n);
+  p.phi = o.phi.size() ? o.phi : Eigen::VectorXd::Zero(n);
+  if (o.omega2.size()) {
+    p.omega2 = o.omega2;
+  } else if (o.method == Method::NRM) {
+    p.omega2 = Eigen::VectorXd::Ones(n);
+  } else if (o.method == Method::NRMM) {
+    p.omega2 = Eigen::VectorXd::Constant(n, p.alpha);
+  } else {
+    for (Eigen::Index i = 0; i < n; ++i)
+      if (!(d[i] > 0))
+        throw std::invalid_argument(std::string("Options: method '") + to_string(o.method) +
+                                    "' takes omega2 = diag(A) by default, which needs a positive diagonal, but A[" +
+                                    std::to_string(i) + "," + std::to_string(i) + "] = " + std::to_string(d[i]) +
+                                    "; pass omega2 explicitly");
+    p.omega2 = d;
+  }
+  if (!(p.omega2.array() > 0).all()) throw std::invalid_argument("Options: omega2 must be positive");
+  return p;
+}
+
+/// How Lm is solved.
+enum class LeftKind { Factorized, Lower, Diagonal };
+
+/// Lm and its solver; for the two-sweep method also N2 (its second sweep).
+template <typename StorageIndex = int>
+class Splitting {
+ public:
+  using Vector = Eigen::VectorXd;
+  using ColMatrix = Eigen::SparseMatrix<double, Eigen::ColMajor, StorageIndex>;
+  using RowMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, StorageIndex>;
+
+  template <typename MatrixType>
+  Splitting(const MatrixType& A, Method method, const Parameters& p, Inner inner) {
+    using Triplet = Eigen::Triplet<double, StorageIndex>;
+    const Eigen::Index n = A.rows();
+    std::vector<Triplet> t;
+    if (!is_aor_type(method)) {
+      // Lm = Ω2 + (A + φ)Ω1
+      kind_ = LeftKind::Factorized;
+      t.reserve(A.nonZeros() + n);
+      for (Eigen::Index k = 0; k < A.outerSize(); ++k)
+        for (typename MatrixType::InnerIterator it(A, k); it; ++it)
+          t.emplace_back(it.row(), it.col(), it.value() * p.omega1[it.col()]);
+      for (Eigen::Index i = 0; i < n; ++i) t.emplace_back(i, i, p.omega2[i] + p.phi[i] * p.omega1[i]);
+      ColMatrix Lm(n, n);
+      Lm.setFromTriplets(t.begin(), t.end());  // sums duplicates: the diagonal of A joins its shift
+      solver_.compute(std::move(Lm), inner, "the left matrix Omega2 + (A + phi) Omega1");
+      return;
+    }
+    // Lm = Ω2 + ((D − βL)/α + φ)Ω1: diagonal Ω2 + (d/α + φ)Ω1, strictly lower (β/α) a_ij Ω1_j.
+    const double a = p.alpha, b = p.beta;
+    diagonal_ = p.omega2 + (diagonal(A) / a + p.phi).cwiseProduct(p.omega1);
+    for (Eigen::Index i = 0; i < n; ++i)
+      if (!(diagonal_[i] != 0) || !std::isfinite(diagonal_[i]))
+        throw std::invalid_argument("Splitting: the left matrix has a zero diagonal entry at " + std::to_string(i));
+    const bool lower = (b != 0);
+    kind_ = lower ? LeftKind::Lower : LeftKind::Diagonal;
+    if (lower) {
+      t.reserve(A.nonZeros() / 2 + n);
+      for (Eigen::Index k = 0; k < A.outerSize(); ++k)
+        for (typename MatrixType::InnerIterator it(A, k); it; ++it)
+          if (it.col() < it.row() && it.value() != 0) t.emplace_back(it.row(), it.col(), b / a * it.value() * p.omega1[it.col()]);
+      for (Eigen::Index i = 0; i < n; ++i) t.emplace_back(i, i, diagonal_[i]);
+      lower_.resize(n, n);
+      lower_.setFromTriplets(t.begin(), t.end());
+      lower_.makeCompressed();
+    }
+    if (method == Method::TwoSweep) {
+      // N2 = M2 − A with M2 = D − U: N2 = L = −(strictly lower part of A).
+      t.clear();
+      for (Eigen::Index k = 0; k < A.outerSize(); ++k)
+        for (typename MatrixType::InnerIterator it(A, k); it; ++it)
+          if (it.col() < it.row() && it.value() != 0) t.emplace_back(it.row(), it.col(), -it.value());
+      n2_.resize(n, n);
+      n2_.setFromTriplets(t.begin(), t.end());
+      n2_.makeCompressed();
+    }
+  }
+
+  /// x = Lm⁻¹ r (r is overwritten for the triangular kinds).
+  void solve(Vector& r, Vector& x) const {
+    switch (kind_) {
+      case LeftKind::Factorized: solver_.solve(r, x); return;
+      case LeftKind::Diagonal: x = r.cwiseQuotient(diagonal_); return;
+      case LeftKind::Lower:
+        lower_.template triangularView<Eigen::Lower>().solveInPlace(r);
+        x.swap(r);
+        return;
+    }
+  }
+
+  LeftKind kind() const { return kind_; }
+  const char* inner_name() const {
+    switch (kind_) {
+      case LeftKind::Factorized: return solver_.name();
+      case LeftKind::Lower: return "forward_substitution";
+      case LeftKind::Diagonal: return "diagonal";
+    }
+    return "?";
+  }
+  bool two_sweep() const { return n2_.rows() > 0; }
+  const RowMatrix& n2() const { return n2_; }
+
+ private:
+  LeftKind kind_ = LeftKind::Factorized;
+  InnerSolver<StorageIndex> solver_;
+  Vector diagonal_;
+  RowMatrix lower_;
+  RowMatrix n2_;
+};
+
+}  // namespace nrmicp

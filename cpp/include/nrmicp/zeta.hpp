@@ -1,0 +1,71 @@
+// nrmicp — the implicit map ζ of ICP(q, A, ζ). Each kind costs only what it needs:
+// None (an LCP) evaluates nothing, a constant is solved as the shifted LCP, an affine
+// ζ(z) = Bz + c is one sparse product in C++, a functor is called once per iteration.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+
+#include <functional>
+#include <stdexcept>
+
+namespace nrmicp {
+
+enum class ZetaKind { None, Constant, Affine, Functor };
+
+template <typename StorageIndex = int>
+class Zeta {
+ public:
+  using Vector = Eigen::VectorXd;
+  using RowMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, StorageIndex>;
+  /// Writes ζ(z) to out (both of length n). Returns false when ζ cannot be evaluated.
+  using Functor = std::function<bool(const double* z, double* out, Eigen::Index n)>;
+
+  /// ζ ≡ 0: the linear complementarity problem.
+  static Zeta none() { return Zeta(ZetaKind::None); }
+  /// ζ ≡ c: solved as LCP(q + Ac, A) in y = z − c.
+  static Zeta constant(Vector c) { Zeta t(ZetaKind::Constant); t.c_ = std::move(c); return t; }
+  /// ζ(z) = Bz + c.
+  static Zeta affine(RowMatrix B, Vector c) {
+    if (B.rows() != B.cols() || B.rows() != c.size())
+      throw std::invalid_argument("Zeta::affine: B must be n-by-n and c of length n");
+    Zeta t(ZetaKind::Affine); t.B_ = std::move(B); t.c_ = std::move(c); return t;
+  }
+  /// ζ given by a functor (e.g. a Python callable).
+  static Zeta functor(Functor f) { Zeta t(ZetaKind::Functor); t.f_ = std::move(f); return t; }
+
+  ZetaKind kind() const { return kind_; }
+  const Vector& c() const { return c_; }
+
+  /// Checks the sizes against n; throws std::invalid_argument naming the mismatch.
+  void check(Eigen::Index n) const {
+    if ((kind_ == ZetaKind::Constant || kind_ == ZetaKind::Affine) && c_.size() != n)
+      throw std::invalid_argument("Zeta: c has length " + std::to_string(c_.size()) + ", expected n = " + std::to_string(n));
+    if (kind_ == ZetaKind::Affine && B_.rows() != n)
+      throw std::invalid_argument("Zeta: B has " + std::to_string(B_.rows()) + " rows, expected n = " + std::to_string(n));
+    if (kind_ == ZetaKind::Functor && !f_) throw std::invalid_argument("Zeta: empty functor");
+  }
+
+  /// out = ζ(z). Returns false when ζ failed or produced non-finite values.
+  bool eval(const Vector& z, Vector& out) const {
+    switch (kind_) {
+      case ZetaKind::None: out.setZero(z.size()); return true;
+      case ZetaKind::Constant: out = c_; return true;
+      case ZetaKind::Affine: out.noalias() = B_ * z; out += c_; break;
+      case ZetaKind::Functor:
+        out.resize(z.size());
+        if (!f_(z.data(), out.data(), z.size())) return false;
+        break;
+    }
+    return out.allFinite();
+  }
+
+ private:
+  explicit Zeta(ZetaKind k) : kind_(k) {}
+  ZetaKind kind_;
+  Vector c_;
+  RowMatrix B_;
+  Functor f_;
+};
+
+}  // namespace nrmicp

@@ -1,0 +1,236 @@
+// nrmicp._core — the pybind11 bridge. Conversion and GIL handling only: no numerics here.
+// A is mapped zero-copy over scipy's CSR arrays (the Python layer guarantees canonical
+// float64 CSR with int32/int64 indices); the arrays are kept alive by the solver object.
+#include <pybind11/eigen.h>
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <nrmicp/nrmicp.hpp>
+
+#include <cstdint>
+#include <cstring>
+#include <memory>
+#include <optional>
+#include <string>
+
+namespace py = pybind11;
+using nrmicp::Options;
+
+namespace {
+
+template <typename I>
+using CsrMap = Eigen::Map<const Eigen::SparseMatrix<double, Eigen::RowMajor, I>>;
+
+template <typename T>
+const T* checked_data(const py::array& a, const char* what) {
+  if (!a.dtype().is(py::dtype::of<T>()))
+    throw py::type_error(std::string(what) + " has dtype " + std::string(py::str(a.dtype())) + ", expected " +
+                         std::string(py::str(py::dtype::of<T>())));
+  if (a.ndim() != 1 || !(a.flags() & py::array::c_style))
+    throw py::value_error(std::string(what) + " must be a contiguous 1-D array");
+  return static_cast<const T*>(a.data());
+}
+
+Eigen::VectorXd to_vector(const py::array& a, const char* what) {
+  const double* p = checked_data<double>(a, what);
+  return Eigen::Map<const Eigen::VectorXd>(p, a.shape(0));
+}
+
+// ζ given by a Python callable: called with the GIL taken, on a read-only float64 array that
+// is allocated once per solve (ζ must not keep it: its contents change every iteration).
+struct CallableZeta {
+  py::object fn;
+  std::shared_ptr<py::array_t<double>> zbuf;
+
+  bool operator()(const double* z, double* out, Eigen::Index n) {
+    py::gil_scoped_acquire gil;
+    if (zbuf->size() != n) {
+      *zbuf = py::array_t<double>(n);
+      py::detail::array_proxy(zbuf->ptr())->flags &= ~py::detail::npy_api::NPY_ARRAY_WRITEABLE_;
+    }
+    std::memcpy(const_cast<double*>(zbuf->data()), z, sizeof(double) * n);
+    py::object r = fn(*zbuf);
+    if (py::isinstance<py::array>(r)) {
+      const char kind = py::array(r).dtype().kind();
+      if (kind != 'f' && kind != 'i' && kind != 'u')
+        throw py::type_error("zeta(z) returned an array of dtype " + std::string(py::str(py::array(r).dtype())) +
+                             "; expected a real floating-point array of shape (" + std::to_string(n) + ",)");
+    }
+    auto arr = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(r);
+    if (!arr)
+      throw py::type_error("zeta(z) must return a float64 array of shape (" + std::to_string(n) + ",), got " +
+                           std::string(py::str(py::type::of(r).attr("__name__"))));
+    if (arr.ndim() != 1 || arr.shape(0) != n) {
+      std::string shape = "(";
+      for (py::ssize_t d = 0; d < arr.ndim(); ++d) shape += std::to_string(arr.shape(d)) + (d + 1 < arr.ndim() ? ", " : "");
+      shape += arr.ndim() == 1 ? ",)" : ")";
+      throw py::value_error("zeta(z) must return an array of shape (" + std::to_string(n) + ",), got shape " + shape);
+    }
+    std::memcpy(out, arr.data(), sizeof(double) * n);
+    return true;  // finiteness is checked by the core (status ZetaFailed)
+  }
+};
+
+template <typename I>
+class PySolver {
+ public:
+  PySolver(py::array indptr, py::array indices, py::array data, Eigen::Index n)
+      : indptr_(indptr), indices_(indices), data_(data),
+        A_(n, n, data.shape(0), checked_data<I>(indptr, "A.indptr"), checked_data<I>(indices, "A.indices"),
+           checked_data<double>(data, "A.data")) {
+    if (indptr.shape(0) != n + 1) throw py::value_error("A.indptr must have length n + 1");
+    if (indices.shape(0) != data.shape(0)) throw py::value_error("A.indices and A.data differ in length");
+  }
+  void build(const Options& o) { solver_.emplace(A_, o); }
+
+  py::dict solve(py::array q, int zeta_kind, py::object zeta_c, py::object b_indptr, py::object b_indices,
+                 py::object b_data, py::object zeta_fn, py::object z0, py::object callback, const Options& it) {
+    using Z = nrmicp::Zeta<I>;
+    const Eigen::Index n = A_.rows();
+    Eigen::VectorXd qv = to_vector(q, "q");
+    std::optional<Eigen::VectorXd> z0v;
+    if (!z0.is_none()) z0v = to_vector(z0.cast<py::array>(), "x0");
+    Z zeta = Z::none();
+    switch (zeta_kind) {
+      case 0: break;
+      case 1: zeta = Z::constant(to_vector(zeta_c.cast<py::array>(), "zeta")); break;
+      case 2: {
+        py::array bp = b_indptr.cast<py::array>(), bi = b_indices.cast<py::array>(), bd = b_data.cast<py::array>();
+        CsrMap<I> B(n, n, bd.shape(0), checked_data<I>(bp, "zeta.B.indptr"), checked_data<I>(bi, "zeta.B.indices"),
+                    checked_data<double>(bd, "zeta.B.data"));
+        zeta = Z::affine(typename Z::RowMatrix(B), to_vector(zeta_c.cast<py::array>(), "zeta.c"));
+        break;
+      }
+      case 3: zeta = Z::functor(CallableZeta{zeta_fn, std::make_shared<py::array_t<double>>()}); break;
+      default: throw py::value_error("unknown zeta kind");
+    }
+    typename nrmicp::Solver<CsrMap<I>>::Callback cb;
+    if (!callback.is_none()) {
+      cb = [&callback](int k, const Eigen::VectorXd& z, double res) -> bool {
+        py::gil_scoped_acquire gil;
+        return callback(k, py::array_t<double>(z.size(), z.data()), res).template cast<bool>();
+      };
+    }
+    auto poll = [] {
+      py::gil_scoped_acquire gil;
+      if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+    };
+    nrmicp::Result r;
+    {
+      py::gil_scoped_release release;
+      r = solver_->solve(qv, zeta, z0v ? &*z0v : nullptr, cb, poll, &it);
+    }
+    py::dict d;
+    d["z"] = py::array_t<double>(r.z.size(), r.z.data());
+    d["w"] = py::array_t<double>(r.w.size(), r.w.data());
+    d["status"] = static_cast<int>(r.status);
+    d["message"] = r.message;
+    d["nit"] = r.nit;
+    d["iterations"] = r.iterations;
+    d["residual"] = r.residual;
+    d["inner"] = r.inner;
+    if (it.record_history) {
+      py::dict h;
+      h["iteration"] = py::array_t<int>(r.history_iteration.size(), r.history_iteration.data());
+      h["seconds"] = py::array_t<double>(r.history_seconds.size(), r.history_seconds.data());
+      h["residual"] = py::array_t<double>(r.history_residual.size(), r.history_residual.data());
+      d["history"] = h;
+    } else {
+      d["history"] = py::none();
+    }
+    py::dict t;
+    t["setup"] = r.timings.setup;
+    t["factorization"] = r.timings.factorization;
+    t["iterations"] = r.timings.iterations;
+    t["zeta"] = r.timings.zeta;
+    t["spmv"] = r.timings.spmv;
+    t["inner_solve"] = r.timings.inner_solve;
+    t["total"] = r.timings.total;
+    d["timings"] = t;
+    return d;
+  }
+
+  py::dict parameters() const {
+    const auto& p = solver_->parameters();
+    py::dict d;
+    d["omega1"] = p.omega1; d["omega2"] = p.omega2; d["phi"] = p.phi;
+    d["gamma"] = p.gamma; d["alpha"] = p.alpha; d["beta"] = p.beta; d["theta"] = p.theta;
+    d["inner"] = std::string(solver_->inner_name());
+    return d;
+  }
+
+ private:
+  py::array indptr_, indices_, data_;  // A_ maps these
+  CsrMap<I> A_;
+  std::optional<nrmicp::Solver<CsrMap<I>>> solver_;
+};
+
+template <typename I>
+void bind_solver(py::module_& m, const char* name) {
+  py::class_<PySolver<I>>(m, name)
+      .def(py::init([](py::array indptr, py::array indices, py::array data, Eigen::Index n, const Options& o) {
+             auto s = std::make_unique<PySolver<I>>(indptr, indices, data, n);
+             py::gil_scoped_release release;  // factorization may take a while
+             s->build(o);
+             return s;
+           }),
+           py::arg("indptr"), py::arg("indices"), py::arg("data"), py::arg("n"), py::arg("options"))
+      .def("solve", &PySolver<I>::solve, py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("b_indptr"),
+           py::arg("b_indices"), py::arg("b_data"), py::arg("zeta_fn"), py::arg("x0"), py::arg("callback"),
+           py::arg("options"))
+      .def("parameters", &PySolver<I>::parameters);
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_core, m) {
+  m.doc() = "nrmicp C++ core (internal: use the nrmicp package)";
+  py::enum_<nrmicp::Method>(m, "Method")
+      .value("nrm", nrmicp::Method::NRM).value("nrmm", nrmicp::Method::NRMM)
+      .value("nrmaor", nrmicp::Method::NRMAOR).value("nrmsor", nrmicp::Method::NRMSOR)
+      .value("nrmgs", nrmicp::Method::NRMGS).value("nrmj", nrmicp::Method::NRMJ)
+      .value("mms", nrmicp::Method::MMS).value("two_sweep", nrmicp::Method::TwoSweep);
+  py::enum_<nrmicp::ZUpdate>(m, "ZUpdate")
+      .value("auto", nrmicp::ZUpdate::Auto).value("explicit", nrmicp::ZUpdate::Explicit)
+      .value("solve", nrmicp::ZUpdate::Solve);
+  py::enum_<nrmicp::Inner>(m, "Inner")
+      .value("auto", nrmicp::Inner::Auto).value("cholmod", nrmicp::Inner::Cholmod)
+      .value("umfpack", nrmicp::Inner::Umfpack).value("eigen_llt", nrmicp::Inner::EigenLLT)
+      .value("eigen_lu", nrmicp::Inner::EigenLU);
+  py::enum_<nrmicp::Accelerate>(m, "Accelerate")
+      .value("none", nrmicp::Accelerate::None).value("anderson", nrmicp::Accelerate::Anderson);
+
+  py::class_<Options>(m, "Options")
+      .def(py::init<>())
+      .def_readwrite("method", &Options::method)
+      .def_readwrite("tol", &Options::tol)
+      .def_readwrite("maxiter", &Options::maxiter)
+      .def_readwrite("omega1", &Options::omega1)
+      .def_readwrite("omega2", &Options::omega2)
+      .def_readwrite("gamma", &Options::gamma)
+      .def_readwrite("phi", &Options::phi)
+      .def_readwrite("alpha", &Options::alpha)
+      .def_readwrite("beta", &Options::beta)
+      .def_readwrite("theta", &Options::theta)
+      .def_readwrite("z_update", &Options::z_update)
+      .def_readwrite("inner", &Options::inner)
+      .def_readwrite("accelerate", &Options::accelerate)
+      .def_readwrite("anderson_m", &Options::anderson_m)
+      .def_readwrite("record_history", &Options::record_history)
+      .def_readwrite("stall_iterations", &Options::stall_iterations)
+      .def_readwrite("divergence_factor", &Options::divergence_factor)
+      .def("check", &Options::check, py::arg("n"));
+
+  bind_solver<std::int32_t>(m, "SolverI32");
+  bind_solver<std::int64_t>(m, "SolverI64");
+
+  m.def("backends", [] {
+    py::dict d;
+    d["cholmod"] = nrmicp::have_cholmod();
+    d["umfpack"] = nrmicp::have_umfpack();
+    d["eigen_llt"] = true;
+    d["eigen_lu"] = true;
+    return d;
+  });
+}

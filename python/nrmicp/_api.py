@@ -1,0 +1,297 @@
+"""The Python API: solve(), Solver, Affine, Result, Status."""
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.optimize import OptimizeResult
+
+from . import _core
+from ._inputs import as_csr, as_diagonal, as_vector
+
+__all__ = ["solve", "Solver", "Affine", "Result", "Status", "METHODS", "residual", "backends"]
+
+#: The methods, in the order of the paper: the NRM family, then the baselines.
+METHODS = ("nrm", "nrmm", "nrmaor", "nrmsor", "nrmgs", "nrmj", "mms", "two_sweep")
+Z_UPDATES = ("auto", "explicit", "solve")
+INNERS = ("auto", "cholmod", "umfpack", "eigen_llt", "eigen_lu")
+ACCELERATIONS = ("none", "anderson")
+
+
+class Status(enum.IntEnum):
+    """Why a solve ended. Only CONVERGED means success."""
+    CONVERGED = 0       #: Res(z) < tol
+    MAX_ITERATIONS = 1  #: maxiter iterations without reaching tol
+    DIVERGED = 2        #: Res became non-finite or grew without bound
+    STAGNATED = 3       #: Res stopped decreasing before reaching tol (e.g. tol below rounding)
+    CALLBACK_STOP = 4   #: the callback raised StopIteration or returned True
+    ZETA_FAILED = 5     #: zeta(z) returned non-finite values
+
+
+class Result(OptimizeResult):
+    """Result of a solve (a scipy ``OptimizeResult``).
+
+    Attributes: ``z`` (the solution, or the best iterate when not converged), ``w`` (= Az + q),
+    ``success``, ``status`` (:class:`Status`), ``message``, ``nit`` (iterations to reach ``z``),
+    ``residual`` (Res(z) = ‖min(Az+q, z−ζ(z))‖₂), ``history`` (dict of arrays ``iteration``,
+    ``seconds``, ``residual``; None unless ``record_history``), ``timings`` (dict of seconds:
+    ``setup``, ``factorization``, ``iterations``, ``zeta``, ``spmv``, ``inner_solve``, ``total``),
+    ``method``, ``inner`` (the solver used for the left matrix).
+    """
+
+
+@dataclass(frozen=True)
+class Affine:
+    """ζ(z) = B z + c, evaluated in C++ (no Python call per iteration)."""
+    B: Any
+    c: Any
+
+    def __call__(self, z):
+        return self.B @ z + self.c
+
+
+def backends() -> dict:
+    """Which inner solvers this build has: {'cholmod': bool, 'umfpack': bool, 'eigen_llt': True, 'eigen_lu': True}."""
+    return dict(_core.backends())
+
+
+def residual(A, q, z, zeta=None) -> float:
+    """Res(z) = ‖min(Az + q, z − ζ(z))‖₂, computed in numpy (independent of the C++ core)."""
+    z = np.asarray(z, dtype=float)
+    w = A @ z + q
+    if zeta is None:
+        g = z
+    elif callable(zeta):
+        g = z - np.asarray(zeta(z), dtype=float)
+    else:
+        g = z - np.asarray(zeta, dtype=float)
+    return float(np.linalg.norm(np.minimum(w, g)))
+
+
+def _choice(value, allowed, name):
+    if not isinstance(value, str) or value.lower() not in allowed:
+        raise ValueError(f"{name} must be one of {', '.join(map(repr, allowed))}; got {value!r}")
+    return value.lower()
+
+
+def _scalar(value, name, *, low=None, low_inclusive=False, high=None, allow_none=False, integer=False):
+    if value is None and allow_none:
+        return None
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name} must be a {'whole ' if integer else ''}number, got {value!r}")
+    if integer and int(value) != value:
+        raise TypeError(f"{name} must be a whole number, got {value!r}")
+    v = int(value) if integer else float(value)
+    if not math.isfinite(v):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    if low is not None and (v < low or (v == low and not low_inclusive)):
+        raise ValueError(f"{name} must be {'>=' if low_inclusive else '>'} {low}, got {value!r}")
+    if high is not None and v > high:
+        raise ValueError(f"{name} must be <= {high}, got {value!r}")
+    return v
+
+
+def _iteration_options(opts, *, tol, maxiter, z_update, accelerate, anderson_m, theta, record_history,
+                       stall_iterations):
+    opts.tol = _scalar(tol, "tol", low=0)
+    opts.maxiter = _scalar(maxiter, "maxiter", low=0, low_inclusive=True, integer=True)
+    opts.z_update = getattr(_core.ZUpdate, _choice(z_update, Z_UPDATES, "z_update"))
+    opts.accelerate = getattr(_core.Accelerate, _choice(accelerate or "none", ACCELERATIONS, "accelerate"))
+    opts.anderson_m = _scalar(anderson_m, "anderson_m", low=1, low_inclusive=True, high=100, integer=True)
+    opts.theta = _scalar(theta, "theta", low=0, high=2)
+    opts.record_history = bool(record_history)
+    opts.stall_iterations = _scalar(stall_iterations, "stall_iterations", low=1, low_inclusive=True, integer=True)
+    return opts
+
+
+def _make_zeta(zeta, n, index_dtype):
+    """-> (kind, c, B.indptr, B.indices, B.data, callable)."""
+    if zeta is None:
+        return 0, None, None, None, None, None
+    if isinstance(zeta, Affine):
+        B = as_csr(zeta.B, "zeta.B")
+        if B.shape != (n, n):
+            raise ValueError(f"zeta.B must have shape ({n}, {n}), got {B.shape}")
+        c = as_vector(zeta.c, n, "zeta.c") if not np.isscalar(zeta.c) else np.full(n, float(zeta.c))
+        return (2, c, B.indptr.astype(index_dtype, copy=False), B.indices.astype(index_dtype, copy=False),
+                B.data, None)
+    if callable(zeta):
+        return 3, None, None, None, None, zeta
+    if np.isscalar(zeta):
+        return 1, np.full(n, float(_scalar(zeta, "zeta"))), None, None, None, None
+    return 1, as_vector(zeta, n, "zeta"), None, None, None, None
+
+
+class Solver:
+    """Set up once (splitting, factorizations), then solve ICP(q, A, ζ) for many q and ζ.
+
+    ``Solver(A, method=..., **options)`` accepts the set-up options of :func:`solve`
+    (method, omega1, omega2, gamma, phi, alpha, beta, inner) and defaults for the iteration
+    options (tol, maxiter, theta, z_update, accelerate, anderson_m, record_history,
+    stall_iterations), each of which :meth:`solve` may override. A is referenced, not
+    copied, when it is canonical float64 CSR: do not modify it while the Solver lives.
+
+    Typical use: implicit time stepping (the same A every step, warm start from the previous
+    solution)::
+
+        s = nrmicp.Solver(A, method="nrmgs")
+        for k in range(steps):
+            res = s.solve(q_k, zeta=payoff, x0=res.z if k else None)
+    """
+
+    def __init__(self, A, *, method="nrmgs", omega1=None, omega2=None, gamma=1.0, phi=None, alpha=None,
+                 beta=None, inner="auto", tol=1e-8, maxiter=10000, theta=1.0, z_update="auto",
+                 accelerate="none", anderson_m=5, record_history=False, stall_iterations=100):
+        self.A = as_csr(A, "A")
+        n = self.A.shape[0]
+        if n == 0:
+            raise ValueError("A must have at least one row, got shape (0, 0)")
+        self.n = n
+        self.method = _choice(method, METHODS, "method")
+        opts = _core.Options()
+        opts.method = getattr(_core.Method, self.method)
+        for name, value, positive in (("omega1", omega1, True), ("omega2", omega2, True), ("phi", phi, False)):
+            vec = as_diagonal(value, n, name, positive=positive)
+            if vec is not None:
+                setattr(opts, name, vec)
+        opts.gamma = _scalar(gamma, "gamma", low=0)
+        opts.alpha = math.nan if alpha is None else _scalar(alpha, "alpha", low=0)
+        opts.beta = math.nan if beta is None else _scalar(beta, "beta", low=0, low_inclusive=True)
+        opts.inner = getattr(_core.Inner, _choice(inner, INNERS, "inner"))
+        self._defaults = dict(tol=tol, maxiter=maxiter, theta=theta, z_update=z_update, accelerate=accelerate,
+                              anderson_m=anderson_m, record_history=record_history,
+                              stall_iterations=stall_iterations)
+        _iteration_options(opts, **self._defaults)
+        if self.method in ("mms", "two_sweep") and (omega1 is not None or phi is not None):
+            raise ValueError(f"method {self.method!r} fixes omega1 = I and phi = 0; "
+                             "use an NRM-family method to set them")
+        if self.method != "two_sweep" and theta != 1.0:
+            raise ValueError(f"theta is the relaxation of method 'two_sweep'; method {self.method!r} has none")
+        self._index_dtype = self.A.indices.dtype
+        core_cls = _core.SolverI64 if self._index_dtype == np.int64 else _core.SolverI32
+        try:
+            self._core = core_cls(self.A.indptr, self.A.indices, self.A.data, n, opts)
+        except RuntimeError as exc:  # a factorization failed: a property of A and the options
+            raise np.linalg.LinAlgError(str(exc)) from None
+
+    @property
+    def parameters(self) -> dict:
+        """The method's parameters with defaults resolved: omega1, omega2, phi, gamma, alpha, beta, theta, inner."""
+        return dict(self._core.parameters())
+
+    def solve(self, q, zeta=None, *, x0=None, callback=None, **iteration_options) -> Result:
+        """Solve ICP(q, A, ζ). See :func:`nrmicp.solve` for the arguments."""
+        n = self.n
+        unknown = set(iteration_options) - set(self._defaults)
+        if unknown:
+            raise TypeError(f"Solver.solve() got unexpected keyword argument(s) {sorted(unknown)}; the splitting "
+                            "options (method, omega1, omega2, gamma, phi, alpha, beta, inner) are fixed at set-up")
+        it = dict(self._defaults, **iteration_options)
+        if self.method != "two_sweep" and it["theta"] != 1.0:
+            raise ValueError(f"theta is the relaxation of method 'two_sweep'; method {self.method!r} has none")
+        opts = _iteration_options(_core.Options(), **it)
+        qv = as_vector(q, n, "q")
+        z0 = None if x0 is None else as_vector(x0, n, "x0")
+        kind, c, bp, bi, bd, fn = _make_zeta(zeta, n, self._index_dtype)
+        if kind == 1 and np.isscalar(zeta):
+            pass
+        cb = None
+        if callback is not None:
+            if not callable(callback):
+                raise TypeError(f"callback must be callable, got {type(callback).__name__}")
+
+            def cb(k, z, res):
+                try:
+                    stop = callback(OptimizeResult(z=z, nit=k, residual=res))
+                except StopIteration:
+                    return True
+                return bool(stop)
+
+        if fn is not None:
+            fn = _check_zeta_callable(fn)
+        d = self._core.solve(qv, kind, c, bp, bi, bd, fn, z0, cb, opts)
+        status = Status(d["status"])
+        if status == Status.ZETA_FAILED:
+            raise ValueError(f"zeta(z) returned non-finite values (NaN or Inf): {d['message']}")
+        return Result(z=d["z"], w=d["w"], success=status == Status.CONVERGED, status=status,
+                      message=d["message"], nit=d["nit"], iterations=d["iterations"], residual=d["residual"],
+                      history=d["history"], timings=d["timings"], method=self.method, inner=d["inner"])
+
+
+def _check_zeta_callable(fn):
+    return fn
+
+
+def solve(A, q, zeta=None, *, method="nrmgs", tol=1e-8, maxiter=10000, omega1=None, omega2=None, gamma=1.0,
+          phi=None, alpha=None, beta=None, theta=1.0, z_update="auto", inner="auto", accelerate="none",
+          anderson_m=5, x0=None, callback=None, record_history=False, stall_iterations=100) -> Result:
+    r"""Solve the implicit complementarity problem ICP(q, A, ζ):
+
+    find z with  w = Az + q ≥ 0,  g = z − ζ(z) ≥ 0,  gᵀw = 0   (ζ ≡ 0: the LCP),
+
+    by Method 3.1 of Kumar, Deepmala & Das (the NRM family) or a baseline.
+
+    Parameters
+    ----------
+    A : scipy.sparse matrix (CSR, CSC or COO; int32 or int64 indices) or dense ndarray, (n, n)
+        Canonical float64 CSR is used without a copy; anything else is converted with a
+        :class:`nrmicp.ConversionWarning`.
+    q : array_like, (n,)
+    zeta : None, array_like, :class:`Affine` or callable
+        ``None``: the LCP (ζ is never evaluated). An array ``c``: a constant obstacle, solved as
+        the shifted LCP in ``z − c``. ``Affine(B, c)``: ζ(z) = Bz + c, evaluated in C++. A
+        callable ``zeta(z) -> ndarray``: called once per iteration with a read-only float64
+        array (valid only during the call); exceptions it raises reach the caller unchanged.
+    method : str
+        ``'nrmgs'`` (default), ``'nrm'``, ``'nrmm'``, ``'nrmaor'``, ``'nrmsor'``, ``'nrmj'``,
+        ``'mms'`` (Zheng–Vong baseline), ``'two_sweep'`` (two-sweep baseline). The AOR-type
+        methods need no factorization (forward substitution, O(nnz) per iteration); NRM and
+        NRMM factorize Ω2 + (A + φ)Ω1 once. Default by measurement: see README "Choosing a method".
+    tol : float
+        Stop when Res(z) = ‖min(Az + q, z − ζ(z))‖₂ < tol (absolute, the paper's criterion).
+    maxiter : int
+    omega1, omega2 : float or array_like (n,), positive
+        Ω1, Ω2. Defaults: Ω1 = I; Ω2 = I (nrm, the paper's definition), αI (nrmm),
+        diag(A) (AOR types, mms, two_sweep; Theorem 4.2's Ω2 ≥ DΩ1).
+    gamma : float > 0
+        γ; only rescales the modulus variable.
+    phi : float or array_like (n,), ≥ 0
+        The relaxation diagonal φ (default 0).
+    alpha, beta : float
+        AOR parameters (nrmaor: defaults α = 1, β = α; nrmsor: α, β = α); for nrmm α sets Ω2 = αI
+        (default: the mean of diag(A)). nrmgs and nrmj fix them.
+    theta : float in (0, 2]
+        Relaxation of the two-sweep method only.
+    z_update : {'auto', 'explicit', 'solve'}
+        How z is recovered from the modulus vector: 'solve' is the paper's Step 1 (a solve with A,
+        factorized once); 'explicit' needs no solve with A. 'auto': explicit for an LCP (no
+        factorization of A is made), solve for an ICP.
+    inner : {'auto', 'cholmod', 'umfpack', 'eigen_llt', 'eigen_lu'}
+        Factorization for Ω2 + (A + φ)Ω1 (nrm, nrmm) and for A ('solve' z-update). 'auto':
+        CHOLMOD when symmetric positive definite, else UMFPACK (Eigen's solvers without SuiteSparse).
+    accelerate : {'none', 'anderson'}
+        Safeguarded Anderson acceleration of the fixed-point map (memory ``anderson_m``).
+    x0 : array_like (n,), optional
+        Initial guess for z (warm start); default zeros.
+    callback : callable, optional
+        ``callback(intermediate_result)`` after each iterate with ``z``, ``nit``, ``residual``;
+        raise StopIteration (or return True) to stop: status CALLBACK_STOP.
+    record_history : bool
+        Keep (iteration, seconds, Res) of every iterate in ``result.history``.
+    stall_iterations : int
+        STAGNATED when the best Res has not improved for this many iterations.
+
+    Returns
+    -------
+    Result
+        ``z``, ``w``, ``success``, ``status``, ``message``, ``nit``, ``residual``, ``history``,
+        ``timings``. A solve that does not converge says so in ``status`` and returns its best iterate.
+    """
+    s = Solver(A, method=method, omega1=omega1, omega2=omega2, gamma=gamma, phi=phi, alpha=alpha, beta=beta,
+               inner=inner, tol=tol, maxiter=maxiter, theta=theta, z_update=z_update, accelerate=accelerate,
+               anderson_m=anderson_m, record_history=record_history, stall_iterations=stall_iterations)
+    return s.solve(q, zeta, x0=x0, callback=callback)

@@ -1,0 +1,131 @@
+"""Validation and conversion of user input. Nothing the user passed is ever mutated."""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import scipy.sparse as sp
+
+__all__ = ["as_csr", "as_vector", "as_diagonal", "ConversionWarning"]
+
+
+class ConversionWarning(sp.SparseEfficiencyWarning):
+    """An input had to be copied/converted before nrmicp could use it (zero-copy needs
+    canonical float64 CSR with int32/int64 indices and float64 C-contiguous vectors)."""
+
+
+def _warn(msg: str) -> None:
+    warnings.warn(msg, ConversionWarning, stacklevel=4)
+
+
+def as_csr(A, name: str = "A", *, square: bool = True) -> sp.csr_matrix:
+    """Return A as canonical float64 CSR (sorted indices, no duplicates), int32 or int64
+    indices. Canonical float64 CSR is returned as-is (zero-copy); anything else is copied
+    with a ConversionWarning. Raises TypeError/ValueError naming `name`."""
+    if sp.issparse(A):
+        M = A
+        if M.format != "csr":
+            _warn(f"{name}: converting {M.format.upper()} to CSR (copy); pass CSR to avoid it")
+            M = M.tocsr()
+            copied = True
+        else:
+            copied = False
+    elif isinstance(A, np.ndarray) or hasattr(A, "__array__"):
+        arr = np.asarray(A)
+        if arr.ndim != 2:
+            raise ValueError(f"{name} must be a 2-D matrix, got an array of shape {arr.shape}")
+        if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)
+                or arr.dtype == bool):
+            raise TypeError(f"{name} must have a real numeric dtype, got {arr.dtype}")
+        _warn(f"{name}: a dense array was converted to CSR (copy); pass a scipy.sparse matrix")
+        M = sp.csr_matrix(arr.astype(np.float64))
+        copied = True
+    else:
+        raise TypeError(f"{name} must be a scipy.sparse matrix or a 2-D numpy array, got {type(A).__name__}")
+
+    if M.ndim != 2:
+        raise ValueError(f"{name} must be 2-D, got shape {M.shape}")
+    if square and M.shape[0] != M.shape[1]:
+        raise ValueError(f"{name} must be square, got shape {M.shape}")
+    if np.iscomplexobj(M.data):
+        raise TypeError(f"{name} must be real, got dtype {M.dtype}")
+    if M.dtype != np.float64:
+        if not (np.issubdtype(M.dtype, np.floating) or np.issubdtype(M.dtype, np.integer) or M.dtype == bool):
+            raise TypeError(f"{name} must have a real numeric dtype, got {M.dtype}")
+        if not copied:
+            _warn(f"{name}: converting dtype {M.dtype} to float64 (copy)")
+        M = M.astype(np.float64)
+        copied = True
+    if M.indices.dtype not in (np.int32, np.int64) or M.indptr.dtype != M.indices.dtype:
+        idx = np.int64 if max(M.nnz, M.shape[0]) > np.iinfo(np.int32).max else np.int32
+        if not copied:
+            _warn(f"{name}: converting index arrays to {np.dtype(idx).name} (copy)")
+        M = sp.csr_matrix((M.data, M.indices.astype(idx), M.indptr.astype(idx)), shape=M.shape)
+        copied = True
+    if not _is_canonical(M):
+        if not copied:
+            _warn(f"{name}: sorting indices / summing duplicate entries (copy)")
+            M = M.copy()
+        M.sum_duplicates()  # also sorts
+    if not (M.data.flags.c_contiguous and M.indices.flags.c_contiguous and M.indptr.flags.c_contiguous):
+        M = sp.csr_matrix((np.ascontiguousarray(M.data), np.ascontiguousarray(M.indices),
+                           np.ascontiguousarray(M.indptr)), shape=M.shape)
+    if not np.all(np.isfinite(M.data)):
+        bad = np.flatnonzero(~np.isfinite(M.data))[0]
+        row = int(np.searchsorted(M.indptr, bad, side="right") - 1)
+        raise ValueError(f"{name} has a non-finite entry {M.data[bad]} at ({row}, {int(M.indices[bad])})")
+    return M
+
+
+def _is_canonical(M: sp.csr_matrix) -> bool:
+    # Checks sortedness and duplicates directly (scipy's cached flag may be stale).
+    if M.nnz == 0:
+        return True
+    d = np.diff(M.indices)
+    row_starts = M.indptr[1:-1]
+    mask = np.ones(d.shape, dtype=bool)
+    # positions where a new row starts are allowed to decrease
+    starts = row_starts[(row_starts > 0) & (row_starts < M.nnz)] - 1
+    mask[starts] = False
+    return bool(np.all(d[mask] > 0))
+
+
+def as_vector(v, n: int, name: str) -> np.ndarray:
+    """A float64 C-contiguous copy-free view of v when possible, checked for length and finiteness."""
+    if sp.issparse(v):
+        raise TypeError(f"{name} must be a dense 1-D array, got a sparse matrix")
+    try:
+        arr = np.asarray(v)
+    except Exception as exc:  # pragma: no cover - numpy's own message is fine
+        raise TypeError(f"{name} must be array-like: {exc}") from None
+    if arr.dtype == object or not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)
+                                   or arr.dtype == bool):
+        raise TypeError(f"{name} must be a real numeric array, got dtype {arr.dtype}")
+    if arr.ndim == 2 and 1 in arr.shape:
+        arr = arr.reshape(-1)
+    if arr.ndim != 1:
+        raise ValueError(f"{name} must be 1-D of length {n}, got shape {arr.shape}")
+    if arr.shape[0] != n:
+        raise ValueError(f"{name} must have length n = {n}, got {arr.shape[0]}")
+    arr = np.ascontiguousarray(arr, dtype=np.float64)
+    if not np.all(np.isfinite(arr)):
+        i = int(np.flatnonzero(~np.isfinite(arr))[0])
+        raise ValueError(f"{name} has a non-finite entry {arr[i]} at index {i}")
+    return arr
+
+
+def as_diagonal(v, n: int, name: str, *, positive: bool) -> np.ndarray | None:
+    """None, a scalar (times I) or a length-n vector -> float64 vector (or None)."""
+    if v is None:
+        return None
+    if np.isscalar(v) or (isinstance(v, np.ndarray) and v.ndim == 0):
+        if isinstance(v, (bool, np.bool_)) or not np.isreal(v):
+            raise TypeError(f"{name} must be a real number or a length-{n} vector, got {v!r}")
+        arr = np.full(n, float(v))
+    else:
+        arr = as_vector(v, n, name).copy()
+    bad = ~np.isfinite(arr) | ((arr <= 0) if positive else (arr < 0))
+    if np.any(bad):
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"{name}[{i}] = {arr[i]}; {name} must be finite and {'> 0' if positive else '>= 0'}")
+    return arr
