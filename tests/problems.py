@@ -13,8 +13,10 @@ Known solution.  Pick z*, and a split of the indices into an "active" set, where
 g*_i = z*_i - zeta(z*)_i = 0 and w*_i > 0, and an "inactive" set, where g*_i > 0 and w*_i = 0.
 Then q = w* - A z* makes z* the solution:  w* = A z* + q >= 0,  g* >= 0,  g*^T w* = 0.
 
-For the ICP, zeta(z) = c*sin(z) + s (componentwise, Lipschitz constant c), with
-s = z* - g* - c*sin(z*) so that z* - zeta(z*) = g*.
+Three kinds of ICP, each with its shift s chosen so that z* - zeta(z*) = g*:
+  'icp'       zeta(z) = c*sin(z) + s   (componentwise, Lipschitz constant c; a Python callable)
+  'affine'    zeta(z) = B z + s        (B sparse, ||B||_inf = c; nrmicp evaluates it in C++)
+  'obstacle'  zeta(z) = s              (a constant obstacle; nrmicp solves the shifted LCP)
 """
 
 from dataclasses import dataclass
@@ -100,10 +102,58 @@ def make_icp(m, symmetric=True, c=0.1, seed=0):
     return Problem(name, A, q, zeta, z_star, w_star, g_star)
 
 
+class AffineZeta:
+    """zeta(z) = B z + c."""
+    def __init__(self, B, c):
+        self.B, self.c = B, c
+
+    def __call__(self, z):
+        return self.B @ z + self.c
+
+
+class ConstantZeta:
+    """zeta(z) = c."""
+    def __init__(self, c):
+        self.c = c
+
+    def __call__(self, z):
+        return self.c.copy()
+
+
+def make_affine_icp(m, symmetric=True, c=0.1, seed=0):
+    """ICP with zeta(z) = B z + s, B = c * tridiag(0.5, 0, 0.5) (so ||B||_inf <= c)."""
+    A = bai_matrix(m, symmetric)
+    n = A.shape[0]
+    _, g_star, w_star = known_solution_parts(n, seed)
+    rng = np.random.default_rng(seed + 2)
+    z_star = g_star + rng.uniform(-1.0, 1.0, n)
+    B = sp.csr_matrix(c * tridiag(n, 0.5, 0.0, 0.5))
+    zeta = AffineZeta(B, z_star - g_star - B @ z_star)
+    assert np.allclose(z_star - zeta(z_star), g_star, atol=1e-14)
+    q = w_star - A @ z_star
+    name = f"affine-{'sym' if symmetric else 'nonsym'}-m{m}"
+    return Problem(name, A, q, zeta, z_star, w_star, g_star)
+
+
+def make_obstacle_icp(m, symmetric=True, seed=0):
+    """ICP with a constant obstacle zeta(z) = s."""
+    A = bai_matrix(m, symmetric)
+    n = A.shape[0]
+    _, g_star, w_star = known_solution_parts(n, seed)
+    rng = np.random.default_rng(seed + 3)
+    z_star = g_star + rng.uniform(-1.0, 1.0, n)
+    zeta = ConstantZeta(z_star - g_star)
+    q = w_star - A @ z_star
+    name = f"obstacle-{'sym' if symmetric else 'nonsym'}-m{m}"
+    return Problem(name, A, q, zeta, z_star, w_star, g_star)
+
+
+PROBLEM_KINDS = {"lcp": make_lcp, "icp": make_icp, "affine": make_affine_icp,
+                 "obstacle": make_obstacle_icp}
+
+
 def make_problem(kind, m, symmetric=True):
-    """kind is 'lcp' or 'icp'."""
-    if kind == "lcp":
-        return make_lcp(m, symmetric)
-    if kind == "icp":
-        return make_icp(m, symmetric)
-    raise ValueError(f"unknown problem kind {kind!r}")
+    """kind is 'lcp', 'icp', 'affine' or 'obstacle'."""
+    if kind not in PROBLEM_KINDS:
+        raise ValueError(f"unknown problem kind {kind!r}")
+    return PROBLEM_KINDS[kind](m, symmetric)

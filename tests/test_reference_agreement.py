@@ -17,13 +17,16 @@ import numpy as np
 import pytest
 
 import nrmicp
-from problems import make_problem
+from problems import AffineZeta, ConstantZeta, make_problem
 from reference_impl import METHODS, reference_solve
 
 TOL = 1e-8
 GAMMA = 2.0               # not the default 1: exercises gamma in the x0 mapping and the z-updates
 Z_UPDATES = ("explicit", "solve")
-PROBLEMS = [("lcp", True), ("lcp", False), ("icp", True), ("icp", False)]
+# (kind, symmetric): a Python-callable zeta ('icp'), zeta = Bz + c evaluated in C++ ('affine'),
+# a constant obstacle solved as a shifted LCP ('obstacle'); see problems.py.
+PROBLEMS = [("lcp", True), ("lcp", False), ("icp", True), ("icp", False),
+            ("affine", False), ("obstacle", False)]
 M_SMALL = 10              # n = 100: agreement with the reference
 M_LARGE = 64              # n = 4096: convergence to z*, core only
 
@@ -55,14 +58,28 @@ def problem(kind, m, symmetric):
     return make_problem(kind, m, symmetric)
 
 
-def core_solve(P, method, z_update, **kwargs):
-    return nrmicp.solve(P.A, P.q, P.zeta, method=method, gamma=GAMMA, z_update=z_update,
-                        **method_parameters(method, P.A), **kwargs)
+def core_zeta(zeta):
+    """zeta as nrmicp takes it: None, a callable, nrmicp.Affine(B, c), or a constant vector."""
+    if isinstance(zeta, AffineZeta):
+        return nrmicp.Affine(zeta.B, zeta.c)
+    if isinstance(zeta, ConstantZeta):
+        return zeta.c
+    return zeta
 
 
-def ref_solve(P, method, z_update, **kwargs):
+# The initial guess of z is passed explicitly too (zeros unless a test says otherwise);
+# test_default_initial_guess_is_zero checks the default separately.
+
+def core_solve(P, method, z_update, z0=None, **kwargs):
+    z0 = np.zeros(P.q.size) if z0 is None else z0
+    return nrmicp.solve(P.A, P.q, core_zeta(P.zeta), method=method, gamma=GAMMA, z_update=z_update,
+                        x0=z0, **method_parameters(method, P.A), **kwargs)
+
+
+def ref_solve(P, method, z_update, z0=None, **kwargs):
+    z0 = np.zeros(P.q.size) if z0 is None else z0
     return reference_solve(P.A, P.q, P.zeta, method=method, gamma=GAMMA, z_update=z_update,
-                           **method_parameters(method, P.A), **kwargs)
+                           z0=z0, **method_parameters(method, P.A), **kwargs)
 
 
 def case_id(method, z_update, kind, symmetric):
@@ -108,7 +125,7 @@ def test_first_iterates_agree_from_initial_guess(method, z_update):
     P = problem("icp", M_SMALL, False)
     z0 = P.z_star + np.random.default_rng(7).uniform(-0.5, 0.5, P.z_star.size)
     ref = ref_solve(P, method, z_update, tol=TOL, maxiter=2, z0=z0)
-    res = core_solve(P, method, z_update, tol=TOL, maxiter=2, x0=z0, record_history=True)
+    res = core_solve(P, method, z_update, tol=TOL, maxiter=2, z0=z0, record_history=True)
     np.testing.assert_allclose(res.history["residual"], ref.residuals, rtol=1e-10, atol=0)
     assert relative_error(res.z, ref.z) < 1e-10
 
@@ -203,4 +220,16 @@ def test_default_parameters_follow_spec_table(method):
     ref = reference_solve(P.A, P.q, P.zeta, method=method, z_update="solve", gamma=1.0,
                           tol=TOL, maxiter=3, **SPEC_DEFAULTS[method](P.A))
     res = nrmicp.solve(P.A, P.q, P.zeta, method=method, maxiter=3, record_history=True)
+    np.testing.assert_allclose(res.history["residual"], ref.residuals, rtol=1e-10, atol=0)
+
+
+@pytest.mark.parametrize("kind", ["lcp", "icp", "affine", "obstacle"])
+def test_default_initial_guess_is_zero(kind):
+    """SPEC: x0 (the initial guess of z) defaults to zeros, whatever the kind of zeta."""
+    P = problem(kind, M_SMALL, False)
+    params = method_parameters("nrmgs", P.A)
+    ref = reference_solve(P.A, P.q, P.zeta, method="nrmgs", z_update="explicit", gamma=GAMMA,
+                          tol=TOL, maxiter=2, z0=np.zeros(P.q.size), **params)
+    res = nrmicp.solve(P.A, P.q, core_zeta(P.zeta), method="nrmgs", z_update="explicit",
+                       gamma=GAMMA, maxiter=2, record_history=True, **params)
     np.testing.assert_allclose(res.history["residual"], ref.residuals, rtol=1e-10, atol=0)
