@@ -5,9 +5,13 @@
 (c) at m = 64 the returned z satisfies the complementarity conditions, checked here in numpy;
 (d) at m = 64 the returned z is within 1e-6 of the known solution z*.
 
-Every parameter (omega1, omega2, phi, alpha, beta, theta, gamma) is passed explicitly to both
-sides, so neither relies on the other's per-method defaults.  Methods whose table entry fixes
-Omega1 = I and phi = 0 (mms, two_sweep) get neither argument.
+Every parameter (omega1, omega2, phi, alpha, beta, theta, gamma) and the initial guess are
+passed explicitly to both sides, so neither relies on the other's per-method defaults.  Methods
+whose table entry fixes Omega1 = I and phi = 0 (mms, two_sweep) get neither argument.  A few
+tests at the end check the defaults SPEC.md fixes (z_update='auto', the method table, x0 = 0).
+
+Problems (problems.py): Bai's symmetric and nonsymmetric matrices, as an LCP and as ICPs whose
+zeta is a Python callable, an nrmicp.Affine map (evaluated in C++) or a constant obstacle.
 """
 
 import functools
