@@ -1,0 +1,175 @@
+"""Test and benchmark scenes for nrmicp: each returns a :class:`Problem`.
+
+A scene is one ICP(q, A, ζ): find z with
+
+    w = A z + q ≥ 0,   g = z − ζ(z) ≥ 0,   gᵀ w = 0.
+
+The principle is *simulate only the effects a scene calls for*, and pay only for them:
+
+- a constant obstacle is a constant vector ζ (an ``ndarray``): nrmicp solves it as a
+  shifted LCP and never calls back into Python;
+- an affine ζ(z) = B z + c is an ``nrmicp.Affine(B, c)``, evaluated in C++;
+- only a genuinely nonlinear ζ is a Python callable; it is vectorized numpy, called once
+  per iteration, and writes into a buffer preallocated when the scene is built. **The array
+  it returns is overwritten by the next call** — copy it if you keep it.
+
+Scenes (one module per family):
+
+=======================  ==========================================================
+:func:`bai`               Bai's block-tridiagonal test matrices, LCP / ICP / affine ICP
+                          with a solution known by construction
+:func:`obstacle_1d`       membrane over a concave obstacle, closed-form solution
+:func:`obstacle_2d`       membrane over a paraboloid obstacle on the unit square
+:func:`thermoforming_1d`  implicit obstacle: a mould that expands with a temperature
+:func:`thermoforming_2d`  driven by the membrane (a quasi-variational inequality)
+:func:`impulse_control`   1D impulse-control QVI: ζ(z)_i = max_{j≥i} z_j − cost
+:func:`american_put`      one Rannacher/Crank–Nicolson step of an American put;
+                          :func:`american_put_price` marches all steps with one Solver
+=======================  ==========================================================
+
+``z_exact`` is the exact solution *of the discrete problem* (what an iterative solver
+should converge to), computed by construction or by a direct policy-iteration solver
+(:func:`solve_exact_obstacle`); quantities of the continuous model, such as a sampled
+closed-form solution or a price, live in ``reference``.
+
+nrmicp itself is imported lazily (only where ``nrmicp.Affine`` or ``nrmicp.Solver`` is
+needed), so these modules import and build their matrices without the compiled core.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable, Optional, Union
+
+import numpy as np
+import scipy.sparse as sp
+
+__all__ = [
+    "Problem",
+    "bai",
+    "obstacle_1d",
+    "obstacle_2d",
+    "thermoforming_1d",
+    "thermoforming_2d",
+    "impulse_control",
+    "american_put",
+    "american_put_price",
+    "binomial_american_put",
+    "solve_exact_obstacle",
+    "evaluate_zeta",
+    "catalog",
+]
+
+ZetaLike = Union[None, np.ndarray, Callable[[np.ndarray], np.ndarray], Any]
+
+
+def evaluate_zeta(zeta: ZetaLike, z: np.ndarray) -> np.ndarray:
+    """ζ(z) for every form a scene may use, as a fresh array (never a shared buffer).
+
+    None → zeros; ndarray → the constant obstacle; ``nrmicp.Affine`` (recognized by its
+    ``B`` and ``c`` attributes) → B z + c; callable → ``zeta(z)``.
+    """
+    z = np.asarray(z, dtype=np.float64)
+    if zeta is None:
+        return np.zeros_like(z)
+    if isinstance(zeta, np.ndarray):
+        return np.array(zeta, dtype=np.float64)
+    if hasattr(zeta, "B") and hasattr(zeta, "c"):
+        return np.asarray(zeta.B @ z + np.asarray(zeta.c), dtype=np.float64)
+    if callable(zeta):
+        return np.array(zeta(z), dtype=np.float64)
+    raise TypeError(f"zeta must be None, an ndarray, nrmicp.Affine or a callable; got {type(zeta)!r}")
+
+
+@dataclass(frozen=True, eq=False)
+class Problem:
+    """One ICP(q, A, ζ) scene.
+
+    Attributes
+    ----------
+    name : str
+        Short identifier, e.g. ``"obstacle_1d(n=255)"``.
+    A : scipy.sparse.csr_matrix, float64, n × n
+    q : ndarray, shape (n,)
+    zeta : None | ndarray | nrmicp.Affine | callable
+        None for an LCP, an ndarray for a constant obstacle, ``nrmicp.Affine`` for an
+        affine map, a callable ``zeta(z) -> ndarray`` only when ζ is nonlinear.
+    z_exact : ndarray or None
+        Exact solution of this discrete problem when known.
+    reference : dict
+        Continuous-model quantities (closed-form solution, price, grid, ...); may be empty.
+    description : str
+        One line.
+    models, omits : tuple of str
+        The effects the scene models, and what it deliberately leaves out.
+    lipschitz : float or None
+        A Lipschitz constant of ζ in the ∞-norm when known (0 for a constant obstacle).
+    """
+
+    name: str
+    A: sp.csr_matrix
+    q: np.ndarray
+    zeta: ZetaLike
+    z_exact: Optional[np.ndarray]
+    reference: dict = field(default_factory=dict)
+    description: str = ""
+    models: tuple = ()
+    omits: tuple = ()
+    lipschitz: Optional[float] = None
+
+    @property
+    def n(self) -> int:
+        """Number of unknowns."""
+        return self.A.shape[0]
+
+    def zeta_at(self, z: np.ndarray) -> np.ndarray:
+        """ζ(z) as a fresh array, whatever form ``zeta`` has."""
+        return evaluate_zeta(self.zeta, z)
+
+    def parts(self, z: np.ndarray) -> tuple:
+        """(w, g) = (A z + q, z − ζ(z)) at z."""
+        z = np.asarray(z, dtype=np.float64)
+        return self.A @ z + self.q, z - self.zeta_at(z)
+
+    def residual(self, z: np.ndarray) -> float:
+        """Res(z) = ‖min(A z + q, z − ζ(z))‖₂, the paper's criterion (computed in numpy)."""
+        w, g = self.parts(z)
+        return float(np.linalg.norm(np.minimum(w, g)))
+
+    def solve(self, **options):
+        """``nrmicp.solve(self.A, self.q, self.zeta, **options)`` (imports nrmicp)."""
+        import nrmicp
+
+        return nrmicp.solve(self.A, self.q, self.zeta, **options)
+
+
+from ._exact import solve_exact_obstacle  # noqa: E402
+from .bai import bai  # noqa: E402
+from .obstacle import obstacle_1d, obstacle_2d  # noqa: E402
+from .thermoforming import thermoforming_1d, thermoforming_2d  # noqa: E402
+from .impulse import impulse_control  # noqa: E402
+from .american import american_put, american_put_price, binomial_american_put  # noqa: E402
+
+
+def catalog(size: str = "small") -> list:
+    """One instance of every scene, for smoke tests and benchmark sweeps.
+
+    ``size`` is ``"small"`` (n of a few hundred, milliseconds to build) or ``"medium"``
+    (n of tens of thousands).
+    """
+    if size == "small":
+        m1, m2 = 255, 16
+    elif size == "medium":
+        m1, m2 = 4095, 128
+    else:
+        raise ValueError(f"size must be 'small' or 'medium', got {size!r}")
+    return [
+        bai(m2, kind="lcp"),
+        bai(m2, kind="lcp", symmetric=False),
+        bai(m2, kind="icp"),
+        obstacle_1d(m1),
+        obstacle_2d(m2),
+        thermoforming_1d(m1),
+        thermoforming_2d(m2),
+        impulse_control(m1),
+        american_put(n_space=m1 + 1),
+    ]
