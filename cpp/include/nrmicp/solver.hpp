@@ -87,9 +87,9 @@ class Solver {
       // ζ ≡ c: LCP(q + Ac, A) in y = z − c. Res and w are the same in both variables.
       Vector q_shift = q;
       q_shift.noalias() += A_ * zeta.c();
-      std::optional<Vector> y0;
-      if (z0) y0 = *z0 - zeta.c();
-      r = iterate(q_shift, Zeta<StorageIndex>::none(), y0 ? &*y0 : nullptr, callback, poll, o, zeta.c());
+      // y0 = z0 − c (z0 = 0 by default), so that the iterates are exactly those of the ICP.
+      const Vector y0 = z0 ? Vector(*z0 - zeta.c()) : Vector(-zeta.c());
+      r = iterate(q_shift, Zeta<StorageIndex>::none(), &y0, callback, poll, o, zeta.c());
       r.z += zeta.c();
     } else {
       r = iterate(q, zeta, z0, callback, poll, o, Vector());
