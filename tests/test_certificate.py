@@ -176,6 +176,8 @@ def test_exact_rho_matches_brute_force_on_bai(m, symmetric):
             assert c.rho == pytest.approx(ref, rel=1e-9, abs=1e-12), (method, psi)
             assert c.certified == (ref < 1)
             assert c.conditions["A_is_H_plus"]
+            if method != "two_sweep":
+                assert c.conditions["H_splitting"] is True   # Bai's matrices are M-matrices
 
 
 @pytest.mark.parametrize("symmetric", [True, False])

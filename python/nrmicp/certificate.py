@@ -180,11 +180,8 @@ def _lipschitz_matrix(lipschitz, n):
 def _comparison(M):
     """<M>: |diagonal|, minus |off-diagonal|."""
     M = sp.csr_matrix(M)
-    d = np.abs(M.diagonal())
-    C = -abs(M)
-    C = C.tolil()
-    C.setdiag(d)
-    C = C.tocsr()
+    d = M.diagonal()
+    C = sp.csr_matrix(sp.diags(np.abs(d)) - abs(M - sp.diags(d)))
     C.eliminate_zeros()
     return C
 
@@ -285,6 +282,7 @@ def _setup(A, method, omega1, omega2, gamma, phi, alpha, beta, theta, lipschitz,
     M = sp.csr_matrix(M)
     N = sp.csr_matrix(M - A)
     W1, W2, Ph = sp.diags(s.w1), sp.diags(s.w2), sp.diags(s.phi)
+    s.M, s.N, s.Ph = M, N, Ph
     s.two_sweep = method == "two_sweep"
     s.Lm = sp.csr_matrix(W2 + (M + Ph) @ W1)
     if s.two_sweep:
@@ -437,8 +435,9 @@ def convergence_bound(A, *, method="nrmgs", lipschitz=0.0, omega1=None, omega2=N
     A : (n, n) scipy sparse matrix or ndarray.
     method : 'nrm', 'nrmm', 'nrmaor', 'nrmsor', 'nrmgs', 'nrmj', 'mms' or 'two_sweep'.
     lipschitz : Lipschitz matrix Psi of zeta, |zeta(x) - zeta(y)| <= Psi |x - y| componentwise:
-        a scalar psi >= 0 (Psi = psi I; 0 for an LCP), a length-n vector (diagonal Psi) or an
-        n x n nonnegative matrix (dense or sparse).
+        a scalar psi >= 0 (Psi = psi I; 0 for an LCP or a constant obstacle), a length-n vector
+        (diagonal Psi) or an n x n nonnegative matrix (dense or sparse); for an affine
+        zeta(z) = B z + c (nrmicp.Affine) pass abs(B).
     omega1, omega2, phi : scalar or length-n vector (defaults per method: Omega1 = I;
         Omega2 = I for nrm, alpha I for nrmm, diag(A) for the AOR types; phi = 0).
     gamma : > 0.  It only rescales x and does not enter any condition.
@@ -466,7 +465,8 @@ def convergence_bound(A, *, method="nrmgs", lipschitz=0.0, omega1=None, omega2=N
       rho_T (exact) or rho_T_upper (bound) and rho_T_cw_lower (lower CW bound of the majorant),
       power_iterations; rho_comparison (exact spectral radius of the comparison majorant, small n);
       A_is_H_plus, rho_jacobi_abs (rho(D^-1 |B|), exact or an upper bound);
-      Lm_is_H (matrix-free path); omega2_ge_D_omega1, thm43_rho, thm43_lhs, thm43_rhs, thm43_holds
+      Lm_is_H; H_splitting (<M + phi> - |N + phi| an M-matrix, hypothesis of Theorems 4.2/4.4);
+      omega2_ge_D_omega1, thm43_rho, thm43_lhs, thm43_rhs, thm43_holds
       (AOR-type methods with the paper's z-update).
     """
     A = _as_matrix(A)
@@ -492,6 +492,13 @@ def convergence_bound(A, *, method="nrmgs", lipschitz=0.0, omega1=None, omega2=N
 
     aor_thm43 = method in _AOR_METHODS and not s.explicit_f
     Cmp_A = _comparison(A)
+
+    # Theorems 4.2/4.4 hypothesis: A = (M + phi) - (N + phi) is an H-splitting,
+    # i.e. <M + phi> - |N + phi| is a nonsingular M-matrix
+    if not s.two_sweep:
+        MP = s.M + s.Ph
+        Zs = sp.csr_matrix(_comparison(MP) - abs(s.N + s.Ph))
+        cond["H_splitting"] = _mmatrix_solver(Zs, "<M + phi> - |N + phi|", triangular=False)[0] is not None
 
     if exact:
         rho, is_exact, theorem, certified, note = _exact_path(s, A, cond, d, Cmp_A, form, aor_thm43)
