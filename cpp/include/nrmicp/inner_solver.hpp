@@ -84,6 +84,8 @@ class InnerSolver {
   /// x = M⁻¹ b.
   void solve(const Vector& b, Vector& x) const { impl_->solve(b, x); }
   bool ready() const { return static_cast<bool>(impl_); }
+  /// The factorized matrix (a copy kept for the backend).
+  const ColMatrix& matrix() const { return impl_->matrix(); }
   const char* name() const { return impl_ ? impl_->name : "none"; }
 
   static const char* name_of(Inner k) {
@@ -102,23 +104,25 @@ class InnerSolver {
     const char* name = "";
     virtual ~Base() = default;
     virtual void solve(const Vector& b, Vector& x) const = 0;
+    virtual const ColMatrix& matrix() const = 0;
   };
   template <typename EigenSolver>
   struct Impl : Base {
-    ColMatrix matrix;  // the solver refers to it
+    ColMatrix mat;  // the solver refers to it
     EigenSolver solver;
     bool compute(ColMatrix M) {
-      matrix = std::move(M);
+      mat = std::move(M);
 #if defined(NRMICP_HAVE_CHOLMOD)
       // CHOLMOD prints its warnings (e.g. "not positive definite") to stdout; we report
       // failures ourselves, and a library must not write to the user's terminal.
       if constexpr (std::is_base_of_v<Eigen::CholmodBase<ColMatrix, Eigen::Lower, EigenSolver>, EigenSolver>)
         solver.cholmod().print = 0;
 #endif
-      solver.compute(matrix);
+      solver.compute(mat);
       return solver.info() == Eigen::Success;
     }
     void solve(const Vector& b, Vector& x) const override { x = solver.solve(b); }
+    const ColMatrix& matrix() const override { return mat; }
   };
 
   template <typename EigenSolver>

@@ -65,7 +65,9 @@ struct Options {
   Accelerate accelerate = Accelerate::None;
   int anderson_m = 5;              ///< Anderson memory (number of past differences kept)
   bool record_history = false;     ///< keep (iteration, seconds, Res) of every iterate
-  int stall_iterations = 100;      ///< STAGNATED when the best Res has not improved for this many iterations
+  /// STAGNATED after this many iterations without a better Res whose steps are at rounding level
+  /// (tol below what floating point reaches), or 10× as many with Res above the best (a cycle).
+  int stall_iterations = 100;
   double divergence_factor = 1e10; ///< DIVERGED when Res exceeds this factor times the best Res seen
 
   /// Throws std::invalid_argument naming the offending field, its value and what is accepted.

@@ -60,6 +60,7 @@ class Solver {
   const Options& options() const { return options_; }
   const Parameters& parameters() const { return params_; }
   const char* inner_name() const { return splitting_->inner_name(); }
+  const Splitting<StorageIndex>& splitting() const { return *splitting_; }
 
   /// Solves ICP(q, A, ζ) from the initial guess z0 (zeros when null). The iteration fields of
   /// `iteration_options` (tol, maxiter, z_update, accelerate, anderson_m, theta, record_history,
@@ -180,8 +181,8 @@ class Solver {
     bool aa_pending = false;  // x came from an Anderson step not yet checked
     if (params_.theta != 1 || splitting_->two_sweep()) absx_prev = x.cwiseAbs();
 
-    double best = std::numeric_limits<double>::infinity(), prev_res = best;
-    int best_k = 0;
+    double best = std::numeric_limits<double>::infinity(), prev_res = best, last_step = best;
+    int best_k = 0, floor_count = 0, worse_count = 0;
     auto last_poll = t_start;
     const bool two_sweep = splitting_->two_sweep();
     res.status = Status::MaxIterations;
@@ -202,11 +203,25 @@ class Solver {
         res.history_seconds.push_back(detail::ScopedTimer::seconds_since(t_start));
         res.history_residual.push_back(r);
       }
-      if (r < best) { best = r; best_k = k; best_z = z; }
+      // Stagnation, two ways. (1) At the rounding floor: Res does not improve while the steps
+      // are at rounding level. (2) No progress: Res stays strictly above the best for
+      // 10 × stall_iterations iterations (a cycle). A Res equal to the best does not count:
+      // the iteration can sit on a plateau of bit-identical Res for thousands of steps while x
+      // moves towards the solution (measured on the impulse-control and thermoforming scenes).
+      if (r < best) {
+        best = r; best_k = k; best_z = z; floor_count = 0; worse_count = 0;
+      } else if (k > 0) {
+        const double xnorm = x.template lpNorm<Eigen::Infinity>();
+        floor_count = (last_step <= 1e-8 * (xnorm > 0 ? xnorm : 1.0)) ? floor_count + 1 : 0;
+        if (r > best) ++worse_count;
+      }
       res.iterations = k;
       if (r < o.tol) { res.status = Status::Converged; break; }
       if (!std::isfinite(r) || r > o.divergence_factor * best) { res.status = Status::Diverged; break; }
-      if (k - best_k >= o.stall_iterations) { res.status = Status::Stagnated; break; }
+      if (floor_count >= o.stall_iterations || worse_count >= 10 * o.stall_iterations) {
+        res.status = Status::Stagnated;
+        break;
+      }
       if (callback) {
         bool stop;
         if (shift.size()) stop = callback(k, z + shift, r); else stop = callback(k, z, r);
@@ -238,9 +253,11 @@ class Solver {
       if (anderson) {
         x_plain = x + dx;
         aa->step(x, dx, x_next);
+        last_step = (x_next - x).template lpNorm<Eigen::Infinity>();
         x.swap(x_next);
         aa_pending = true;
       } else {
+        last_step = dx.template lpNorm<Eigen::Infinity>();
         x += dx;
       }
       zeta_prev = zeta_z;

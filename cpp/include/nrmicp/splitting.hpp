@@ -13,6 +13,7 @@
 #include <cmath>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace nrmicp {
@@ -88,6 +89,42 @@ Parameters resolve_parameters(const MatrixType& A, const Options& o) {
   return p;
 }
 
+/// The splitting A = M − N of a method as explicit matrices, from the paper's formulas
+/// (NRM/NRMM: M = A, N = 0; AOR types: M = (D − βL)/α, N = ((1−α)D + (α−β)L + αU)/α;
+/// two-sweep: its first splitting M1, N1). For tests and for inspecting a method.
+template <typename MatrixType>
+std::pair<Eigen::SparseMatrix<double, Eigen::ColMajor, typename MatrixType::StorageIndex>,
+          Eigen::SparseMatrix<double, Eigen::ColMajor, typename MatrixType::StorageIndex>>
+splitting_matrices(const MatrixType& A, Method method, const Parameters& p) {
+  using StorageIndex = typename MatrixType::StorageIndex;
+  using ColMatrix = Eigen::SparseMatrix<double, Eigen::ColMajor, StorageIndex>;
+  using Triplet = Eigen::Triplet<double, StorageIndex>;
+  const Eigen::Index n = A.rows();
+  ColMatrix M(n, n), N(n, n);
+  if (!is_aor_type(method)) {
+    M = ColMatrix(A);
+    return {M, N};
+  }
+  const double a = p.alpha, b = p.beta;
+  std::vector<Triplet> tm, tn;
+  for (Eigen::Index k = 0; k < A.outerSize(); ++k)
+    for (typename MatrixType::InnerIterator it(A, k); it; ++it) {
+      const double v = it.value();  // D = diag, L = −strict lower, U = −strict upper
+      if (it.row() == it.col()) {
+        tm.emplace_back(it.row(), it.col(), v / a);
+        tn.emplace_back(it.row(), it.col(), (1 - a) * v / a);
+      } else if (it.col() < it.row()) {
+        tm.emplace_back(it.row(), it.col(), b * v / a);          // −βL/α with L = −v
+        tn.emplace_back(it.row(), it.col(), -(a - b) * v / a);   // (α−β)L/α
+      } else {
+        tn.emplace_back(it.row(), it.col(), -v);                 // αU/α
+      }
+    }
+  M.setFromTriplets(tm.begin(), tm.end());
+  N.setFromTriplets(tn.begin(), tn.end());
+  return {M, N};
+}
+
 /// How Lm is solved.
 enum class LeftKind { Factorized, Lower, Diagonal };
 
@@ -160,6 +197,19 @@ class Splitting {
   }
 
   LeftKind kind() const { return kind_; }
+
+  /// Lm as a sparse matrix (built on demand: for tests and inspection).
+  ColMatrix left_matrix() const {
+    switch (kind_) {
+      case LeftKind::Factorized: return solver_.matrix();
+      case LeftKind::Lower: return ColMatrix(lower_);
+      case LeftKind::Diagonal: break;
+    }
+    ColMatrix D(diagonal_.size(), diagonal_.size());
+    D.reserve(Eigen::VectorXi::Ones(diagonal_.size()));
+    for (Eigen::Index i = 0; i < diagonal_.size(); ++i) D.insert(i, i) = diagonal_[i];
+    return D;
+  }
   const char* inner_name() const {
     switch (kind_) {
       case LeftKind::Factorized: return solver_.name();

@@ -1,0 +1,163 @@
+// Every method solves problems with a known solution: LCP and ICP (affine, functor and
+// constant ζ), both z-updates, int and int64 indices, row- and column-major matrices.
+#include "common.hpp"
+
+#include <doctest/doctest.h>
+
+#include <cstdint>
+
+using namespace nrmicp;
+
+namespace {
+const Method all_methods[] = {Method::NRM, Method::NRMM, Method::NRMAOR, Method::NRMSOR,
+                              Method::NRMGS, Method::NRMJ, Method::MMS, Method::TwoSweep};
+
+Options tuned(Method m) {
+  Options o;
+  o.method = m;
+  o.tol = 1e-10;
+  if (m == Method::NRM) o.omega2 = Eigen::VectorXd();  // the paper's Ω2 = I: slower, still converges
+  if (m == Method::NRMSOR) o.alpha = 1.1;
+  return o;
+}
+
+template <typename Mat>
+void check_solution(const Result& r, const Mat& A, const Eigen::VectorXd& q, const Eigen::VectorXd& zeta_z,
+                    const Eigen::VectorXd& z_star, double tol) {
+  CHECK(r.status == Status::Converged);
+  const Eigen::VectorXd w = A * r.z + q;
+  const Eigen::VectorXd g = r.z - zeta_z;
+  CHECK(w.cwiseMin(g).norm() < tol);        // Res recomputed here
+  CHECK(w.minCoeff() > -tol);
+  CHECK(g.minCoeff() > -tol);
+  CHECK(std::abs(g.dot(w)) < 1e-8);
+  CHECK((r.z - z_star).lpNorm<Eigen::Infinity>() < 1e-8);
+}
+
+template <typename I, int Order>
+void lcp_for_all_methods(bool symmetric) {
+  const auto A = testing::bai<I, Order>(12, 4.0, symmetric);
+  const auto k = testing::known_solution(A.rows());
+  const Eigen::VectorXd q = k.w - A * k.g;  // ζ ≡ 0: z* = g*
+  for (Method m : all_methods) {
+    for (ZUpdate zu : {ZUpdate::Explicit, ZUpdate::Solve}) {
+      CAPTURE(to_string(m));
+      CAPTURE(static_cast<int>(zu));
+      Options o = tuned(m);
+      o.z_update = zu;
+      Solver<testing::SpMat<I, Order>> s(A, o);
+      const Result r = s.solve(q);
+      check_solution(r, A, q, Eigen::VectorXd::Zero(A.rows()), k.g, o.tol);
+    }
+  }
+}
+}  // namespace
+
+TEST_CASE("LCP: all methods, both z-updates, symmetric and nonsymmetric, int and int64, both storage orders") {
+  lcp_for_all_methods<int, Eigen::ColMajor>(true);
+  lcp_for_all_methods<int, Eigen::RowMajor>(false);
+  lcp_for_all_methods<std::int64_t, Eigen::ColMajor>(false);
+  lcp_for_all_methods<std::int64_t, Eigen::RowMajor>(true);
+}
+
+TEST_CASE("ICP with an affine zeta evaluated in C++") {
+  const auto A = testing::bai(12, 4.0, false);
+  const Eigen::Index n = A.rows();
+  const auto k = testing::known_solution(n);
+  // B = 0.2 * (shift by one), z* = g* + 1 so that ζ(z*) = B z* + c with c chosen below.
+  testing::SpMat<int, Eigen::RowMajor> B(n, n);
+  for (Eigen::Index i = 0; i + 1 < n; ++i) B.insert(i, i + 1) = 0.2;
+  const Eigen::VectorXd z_star = k.g + Eigen::VectorXd::Ones(n);
+  const Eigen::VectorXd c = z_star - k.g - B * z_star;
+  const Eigen::VectorXd q = k.w - A * z_star;
+  const auto zeta = Zeta<int>::affine(B, c);
+  for (Method m : all_methods) {
+    for (ZUpdate zu : {ZUpdate::Explicit, ZUpdate::Solve}) {
+      CAPTURE(to_string(m));
+      Options o = tuned(m);
+      o.z_update = zu;
+      const Result r = Solver<testing::SpMat<>>(A, o).solve(q, zeta);
+      check_solution(r, A, q, Eigen::VectorXd(B * r.z + c), z_star, o.tol);
+    }
+  }
+}
+
+TEST_CASE("ICP with a functor zeta and with a constant obstacle") {
+  const auto A = testing::bai(10, 4.0, true);
+  const Eigen::Index n = A.rows();
+  const auto k = testing::known_solution(n);
+  const Eigen::VectorXd z_star = k.g + Eigen::VectorXd::Constant(n, 0.5);
+  const Eigen::VectorXd s = z_star - k.g - 0.1 * z_star.array().sin().matrix();
+  const Eigen::VectorXd q = k.w - A * z_star;
+  int calls = 0;
+  const auto zeta = Zeta<int>::functor([&](const double* z, double* out, Eigen::Index nn) {
+    ++calls;
+    for (Eigen::Index i = 0; i < nn; ++i) out[i] = 0.1 * std::sin(z[i]) + s[i];
+    return true;
+  });
+  const Result r = Solver<testing::SpMat<>>(A, tuned(Method::NRMGS)).solve(q, zeta);
+  check_solution(r, A, q, Eigen::VectorXd(0.1 * r.z.array().sin().matrix() + s), z_star, 1e-10);
+  CHECK(calls == r.iterations + 2);  // once per iterate, once at the initial guess
+
+  // ζ ≡ c: the shifted LCP, no functor involved.
+  const Eigen::VectorXd c = z_star - k.g;
+  const Result rc = Solver<testing::SpMat<>>(A, tuned(Method::NRMGS)).solve(q, Zeta<int>::constant(c));
+  check_solution(rc, A, q, c, z_star, 1e-10);
+}
+
+TEST_CASE("statuses: max iterations, stagnation, callback stop, zeta failure; the best iterate is returned") {
+  const auto A = testing::bai(8, 4.0, true);
+  const auto k = testing::known_solution(A.rows());
+  const Eigen::VectorXd q = k.w - A * k.g;
+  Options o;
+  o.maxiter = 3;
+  o.record_history = true;
+  Result r = Solver<testing::SpMat<>>(A, o).solve(q);
+  CHECK(r.status == Status::MaxIterations);
+  CHECK(r.history_residual.size() == 4);
+  CHECK(r.residual == doctest::Approx(*std::min_element(r.history_residual.begin(), r.history_residual.end())));
+
+  o = Options();
+  o.tol = 1e-300;  // below what floating point can reach
+  o.stall_iterations = 30;
+  r = Solver<testing::SpMat<>>(A, o).solve(q);
+  CHECK(r.status == Status::Stagnated);
+  CHECK(r.residual < 1e-12);
+  CHECK(r.z.allFinite());
+
+  r = Solver<testing::SpMat<>>(A, Options()).solve(q, Zeta<int>::none(), nullptr,
+                                                   [](int it, const Eigen::VectorXd&, double) { return it == 2; });
+  CHECK(r.status == Status::CallbackStop);
+  CHECK(r.iterations == 2);
+
+  const auto bad = Zeta<int>::functor([](const double*, double* out, Eigen::Index nn) {
+    for (Eigen::Index i = 0; i < nn; ++i) out[i] = NAN;
+    return true;
+  });
+  r = Solver<testing::SpMat<>>(A, Options()).solve(q, bad);
+  CHECK(r.status == Status::ZetaFailed);
+}
+
+TEST_CASE("warm start from the solution converges at once") {
+  const auto A = testing::bai(8, 4.0, false);
+  const auto k = testing::known_solution(A.rows());
+  const Eigen::VectorXd q = k.w - A * k.g;
+  Options o;
+  o.tol = 1e-10;
+  const Result r = Solver<testing::SpMat<>>(A, o).solve(q, Zeta<int>::none(), &k.g);
+  CHECK(r.status == Status::Converged);
+  CHECK(r.nit == 0);
+}
+
+TEST_CASE("Anderson acceleration converges to the same solution") {
+  const auto A = testing::bai(12, 0.0, true);
+  const auto k = testing::known_solution(A.rows());
+  const Eigen::VectorXd q = k.w - A * k.g;
+  Options o;
+  o.tol = 1e-10;
+  const Result plain = Solver<testing::SpMat<>>(A, o).solve(q);
+  o.accelerate = Accelerate::Anderson;
+  const Result aa = Solver<testing::SpMat<>>(A, o).solve(q);
+  check_solution(aa, A, q, Eigen::VectorXd::Zero(A.rows()), k.g, o.tol);
+  CHECK(plain.status == Status::Converged);
+}

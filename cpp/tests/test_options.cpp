@@ -1,0 +1,28 @@
+// Options::check names the offending field and value.
+#include <nrmicp/nrmicp.hpp>
+
+#include <doctest/doctest.h>
+
+#include <cmath>
+
+using nrmicp::Options;
+
+TEST_CASE("default options are valid") { CHECK_NOTHROW(Options().check(10)); }
+
+TEST_CASE("invalid fields are named in the error") {
+  Options o;
+  o.tol = -1;
+  CHECK_THROWS_WITH_AS(o.check(3), doctest::Contains("tol"), std::invalid_argument);
+  o = Options(); o.gamma = 0;
+  CHECK_THROWS_WITH_AS(o.check(3), doctest::Contains("gamma"), std::invalid_argument);
+  o = Options(); o.omega1 = Eigen::VectorXd::Ones(2);
+  CHECK_THROWS_WITH_AS(o.check(3), doctest::Contains("omega1 must have length n = 3"), std::invalid_argument);
+  o = Options(); o.omega2 = Eigen::Vector3d(1, -1, 1);
+  CHECK_THROWS_WITH_AS(o.check(3), doctest::Contains("omega2[1]"), std::invalid_argument);
+  o = Options(); o.phi = Eigen::Vector3d(0, NAN, 1);
+  CHECK_THROWS_WITH_AS(o.check(3), doctest::Contains("phi[1]"), std::invalid_argument);
+  o = Options(); o.theta = 2.5;
+  CHECK_THROWS_WITH_AS(o.check(3), doctest::Contains("theta"), std::invalid_argument);
+  o = Options(); o.maxiter = -1;
+  CHECK_THROWS_WITH_AS(o.check(3), doctest::Contains("maxiter"), std::invalid_argument);
+}
