@@ -34,6 +34,48 @@ try:
 except Exception:  # noqa: BLE001 - any failure to import means "not available"
     _nrmicp, _HAVE_SOLVE = None, False
 
+
+
+def _openblas_thread_setters():
+    """(get, set) pairs of the OpenBLAS builds numpy/scipy wheels bundle, found via ctypes."""
+    import ctypes
+    import glob
+    import os
+    pairs = []
+    import importlib
+    for base in ("numpy", "scipy"):
+        top = importlib.import_module(base)
+        root = os.path.dirname(os.path.dirname(os.path.abspath(top.__file__)))
+        for f in glob.glob(os.path.join(root, base + ".libs", "*openblas*.so*")):
+            try:
+                lib = ctypes.CDLL(f)
+            except OSError:
+                continue
+            for suffix in ("64_", ""):
+                get = getattr(lib, "scipy_openblas_get_num_threads" + suffix, None)
+                put = getattr(lib, "scipy_openblas_set_num_threads" + suffix, None)
+                if get is not None and put is not None:
+                    pairs.append((get, put))
+                    break
+    return pairs
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _single_threaded_blas():
+    """These tests do many small dense eigenproblems; a multi-threaded OpenBLAS on a busy
+    machine makes each of them ~100x slower (threads spin on oversubscribed cores)."""
+    try:
+        pairs = _openblas_thread_setters()
+        saved = [(put, get()) for get, put in pairs]
+        for _, put in pairs:
+            put(1)
+    except Exception:  # noqa: BLE001 - best effort only
+        saved = []
+    yield
+    for put, n in saved:
+        put(n)
+
+
 METHODS = ("nrm", "nrmm", "nrmaor", "nrmsor", "nrmgs", "nrmj", "mms", "two_sweep")
 NOT_CERTIFIED = "not certified (sufficient condition only)"
 
@@ -244,18 +286,18 @@ def test_theorem_4_3():
 # (2) the matrix-free value is an upper bound
 
 
-@pytest.mark.parametrize("m,symmetric,flip", [(9, True, False), (10, False, True), (12, True, True)])
+@pytest.mark.parametrize("m,symmetric,flip", [(8, True, False), (9, False, True), (10, True, True)])
 def test_large_n_bound_is_upper_bound(m, symmetric, flip):
     A = bai(m, symmetric)
     if flip:
         A = flipped(A, seed=m)
-    methods = ("nrm", "nrmsor", "nrmj", "two_sweep") if m > 10 else ("nrmm", "nrmgs", "nrmj", "two_sweep")
+    methods = ("nrm", "nrmsor", "nrmj", "two_sweep") if m >= 10 else ("nrmm", "nrmgs", "nrmj", "two_sweep")
     for method in methods:
         kw = dict(alpha=1.2) if method == "nrmsor" else {}
         for psi, zu in ((0.0, "auto"), (0.1, "solve"), (0.1, "explicit")):
             exact = convergence_bound(A, method=method, lipschitz=psi, z_update=zu, **kw)
             bound = convergence_bound(A, method=method, lipschitz=psi, z_update=zu, exact_max_n=0,
-                                      maxiter=300, **kw)
+                                      maxiter=200, **kw)
             assert exact.rho_is_exact and not bound.rho_is_exact
             assert bound.rho >= exact.rho * (1 - 1e-12), (method, psi, zu)
             # ... and it is the comparison-matrix majorant of Theorems 4.2-4.4, not far above it

@@ -565,7 +565,10 @@ def _exact_path(s, A, cond, d, Cmp_A, form, aor_thm43):
     except np.linalg.LinAlgError:
         H_ok = False
     cond["Lm_is_H"] = H_ok
-    if H_ok and (not s.needs_Ainv or cond["A_is_H_plus"] or _is_M(Cmp_A)):
+    same = bool(np.array_equal(Hd, Lmd)) and (not s.needs_Ainv or abs(Cmp_A - A).max() == 0)
+    if H_ok and same:            # Lm (and A) are M-matrices: the majorant is T itself
+        cond["rho_comparison"] = rho
+    elif H_ok and (not s.needs_Ainv or cond["A_is_H_plus"] or _is_M(Cmp_A)):
         Rc = None
         if s.needs_Ainv:
             Rc = np.linalg.inv(Cmp_A.toarray())
