@@ -12,6 +12,7 @@ from scipy.optimize import OptimizeResult
 
 from . import _core
 from ._inputs import as_csr, as_diagonal, as_vector
+from ._scaling import SCALINGS, ScaledCallable, equilibrate, scale_matrix
 
 __all__ = ["solve", "Solver", "Affine", "Result", "Status", "METHODS", "residual", "backends"]
 
@@ -108,32 +109,55 @@ def _iteration_options(opts, *, tol, maxiter, z_update, accelerate, anderson_m, 
     return opts
 
 
-def _make_zeta(zeta, n, index_dtype):
-    """-> (kind, c, B.indptr, B.indices, B.data, callable)."""
+def _make_zeta(zeta, n):
+    """Validate ζ -> (kind, c, B, fn): kind 0 None, 1 constant c, 2 Affine (B canonical CSR, c), 3 callable."""
     if zeta is None:
-        return 0, None, None, None, None, None
+        return 0, None, None, None
     if isinstance(zeta, Affine):
         B = as_csr(zeta.B, "zeta.B")
         if B.shape != (n, n):
             raise ValueError(f"zeta.B must have shape ({n}, {n}), got {B.shape}")
-        c = as_vector(zeta.c, n, "zeta.c") if not np.isscalar(zeta.c) else np.full(n, float(zeta.c))
-        return (2, c, B.indptr.astype(index_dtype, copy=False), B.indices.astype(index_dtype, copy=False),
-                B.data, None)
+        return 2, _constant_vector(zeta.c, n, "zeta.c"), B, None
     if callable(zeta):
-        return 3, None, None, None, None, zeta
-    if np.isscalar(zeta):
-        return 1, np.full(n, float(_scalar(zeta, "zeta"))), None, None, None, None
-    return 1, as_vector(zeta, n, "zeta"), None, None, None, None
+        return 3, None, None, zeta
+    return 1, _constant_vector(zeta, n, "zeta"), None, None
+
+
+def _constant_vector(value, n, name):
+    """A scalar (or 0-d array) broadcast to length n, or a length-n vector; real and finite."""
+    if np.isscalar(value) or (isinstance(value, np.ndarray) and value.ndim == 0):
+        if isinstance(value, np.ndarray):
+            value = value[()]
+        if isinstance(value, (complex, np.complexfloating)):
+            raise TypeError(f"{name} must be real, got {value!r}")
+        return np.full(n, _scalar(value, name))
+    return as_vector(value, n, name)
+
+
+def _scale_choice(scale):
+    if scale is None or scale is False:
+        return None
+    if scale is True:
+        return "both"
+    if isinstance(scale, str) and scale.lower() in SCALINGS:
+        return scale.lower()
+    raise ValueError(f"scale must be False, True, 'rows' or 'both'; got {scale!r}")
+
+
+#: With scaling, at most this many re-solves with a tighter tolerance when the scaled problem
+#: converged but Res in the original variables is still >= tol.
+MAX_REFINEMENTS = 3
 
 
 class Solver:
     """Set up once (splitting, factorizations), then solve ICP(q, A, ζ) for many q and ζ.
 
     ``Solver(A, method=..., **options)`` accepts the set-up options of :func:`solve`
-    (method, omega1, omega2, gamma, phi, alpha, beta, inner) and defaults for the iteration
-    options (tol, maxiter, theta, z_update, accelerate, anderson_m, record_history,
+    (method, omega1, omega2, gamma, phi, alpha, beta, inner, scale) and defaults for the
+    iteration options (tol, maxiter, theta, z_update, accelerate, anderson_m, record_history,
     stall_iterations), each of which :meth:`solve` may override. A is referenced, not
-    copied, when it is canonical float64 CSR: do not modify it while the Solver lives.
+    copied, when it is canonical float64 CSR and ``scale`` is off: do not modify it while the
+    Solver lives.
 
     Typical use: implicit time stepping (the same A every step, warm start from the previous
     solution)::
@@ -145,13 +169,14 @@ class Solver:
 
     def __init__(self, A, *, method="nrmgs", omega1=None, omega2=None, gamma=1.0, phi=None, alpha=None,
                  beta=None, inner="auto", tol=1e-8, maxiter=10000, theta=1.0, z_update="auto",
-                 accelerate="none", anderson_m=5, record_history=False, stall_iterations=100):
+                 accelerate="none", anderson_m=5, record_history=False, stall_iterations=100, scale=False):
         self.A = as_csr(A, "A")
         n = self.A.shape[0]
         if n == 0:
             raise ValueError("A must have at least one row, got shape (0, 0)")
         self.n = n
         self.method = _choice(method, METHODS, "method")
+        self.scale = _scale_choice(scale)
         opts = _core.Options()
         opts.method = getattr(_core.Method, self.method)
         for name, value, positive in (("omega1", omega1, True), ("omega2", omega2, True), ("phi", phi, False)):
@@ -171,17 +196,31 @@ class Solver:
                              "use an NRM-family method to set them")
         if self.method != "two_sweep" and theta != 1.0:
             raise ValueError(f"theta is the relaxation of method 'two_sweep'; method {self.method!r} has none")
-        self._index_dtype = self.A.indices.dtype
+        if self.scale is None:
+            self._dr = self._dc = None
+            A_core = self.A
+        else:
+            self._dr, self._dc = equilibrate(self.A, self.scale)
+            A_core = scale_matrix(self.A, self._dr, self._dc)
+        self._index_dtype = A_core.indices.dtype
         core_cls = _core.SolverI64 if self._index_dtype == np.int64 else _core.SolverI32
         try:
-            self._core = core_cls(self.A.indptr, self.A.indices, self.A.data, n, opts)
+            self._core = core_cls(A_core.indptr, A_core.indices, A_core.data, n, opts)
         except RuntimeError as exc:  # a factorization failed: a property of A and the options
             raise np.linalg.LinAlgError(str(exc)) from None
 
     @property
     def parameters(self) -> dict:
-        """The method's parameters with defaults resolved: omega1, omega2, phi, gamma, alpha, beta, theta, inner."""
+        """The method's parameters with defaults resolved: omega1, omega2, phi, gamma, alpha, beta, theta, inner.
+        With ``scale``, they are those of the scaled problem."""
         return dict(self._core.parameters())
+
+    @property
+    def scaling(self):
+        """(d_r, d_c), the row and column factors of the scaled matrix D_r A D_c, or None."""
+        if self._dr is None:
+            return None
+        return self._dr.copy(), self._dc.copy()
 
     def solve(self, q, zeta=None, *, x0=None, callback=None, **iteration_options) -> Result:
         """Solve ICP(q, A, ζ). See :func:`nrmicp.solve` for the arguments."""
@@ -189,46 +228,144 @@ class Solver:
         unknown = set(iteration_options) - set(self._defaults)
         if unknown:
             raise TypeError(f"Solver.solve() got unexpected keyword argument(s) {sorted(unknown)}; the splitting "
-                            "options (method, omega1, omega2, gamma, phi, alpha, beta, inner) are fixed at set-up")
+                            "options (method, omega1, omega2, gamma, phi, alpha, beta, inner, scale) are fixed at "
+                            "set-up")
         it = dict(self._defaults, **iteration_options)
         if self.method != "two_sweep" and it["theta"] != 1.0:
             raise ValueError(f"theta is the relaxation of method 'two_sweep'; method {self.method!r} has none")
-        opts = _iteration_options(_core.Options(), **it)
+        _iteration_options(_core.Options(), **it)  # validates every iteration option once
+        tol = float(it["tol"])
         qv = as_vector(q, n, "q")
         z0 = None if x0 is None else as_vector(x0, n, "x0")
-        kind, c, bp, bi, bd, fn = _make_zeta(zeta, n, self._index_dtype)
-        if kind == 1 and np.isscalar(zeta):
-            pass
+        kind, c, B, fn = _make_zeta(zeta, n)
+        if callback is not None and not callable(callback):
+            raise TypeError(f"callback must be callable, got {type(callback).__name__}")
+
+        dr, dc = self._dr, self._dc
+        scaled = dr is not None
+        # The problem handed to the core (scaled variables y = D_c⁻¹ z when scaled).
+        if scaled:
+            qs = dr * qv
+            z0s = None if z0 is None else z0 / dc
+            cs = None if c is None else c / dc
+            Bs = None if B is None else scale_matrix(B, 1.0 / dc, dc)
+            fns = None if fn is None else (fn if np.all(dc == 1.0) else ScaledCallable(fn, dc))
+        else:
+            qs, z0s, cs, Bs, fns = qv, z0, c, B, fn
+        if Bs is not None:
+            bp = Bs.indptr.astype(self._index_dtype, copy=False)
+            bi = Bs.indices.astype(self._index_dtype, copy=False)
+            bd = Bs.data
+        else:
+            bp = bi = bd = None
+
         cb = None
         if callback is not None:
-            if not callable(callback):
-                raise TypeError(f"callback must be callable, got {type(callback).__name__}")
-
             def cb(k, z, res):
                 try:
-                    stop = callback(OptimizeResult(z=z, nit=k, residual=res))
+                    stop = callback(OptimizeResult(z=z * dc if scaled else z, nit=k, residual=res))
                 except StopIteration:
                     return True
                 return bool(stop)
 
-        if fn is not None:
-            fn = _check_zeta_callable(fn)
-        d = self._core.solve(qv, kind, c, bp, bi, bd, fn, z0, cb, opts)
-        status = Status(d["status"])
-        if status == Status.ZETA_FAILED:
-            raise ValueError(f"zeta(z) returned non-finite values (NaN or Inf): {d['message']}")
-        return Result(z=d["z"], w=d["w"], success=status == Status.CONVERGED, status=status,
-                      message=d["message"], nit=d["nit"], iterations=d["iterations"], residual=d["residual"],
-                      history=d["history"], timings=d["timings"], method=self.method, inner=d["inner"])
+        # Res is re-measured in the original variables whenever that costs no call of a user ζ
+        # (None, constant, Affine), and always with scaling (then a callable ζ is called once more
+        # per round): success is never declared on the strength of a different residual.
+        verify = kind != 3 or scaled
 
+        def original_residual(z):
+            w = self.A @ z + qv
+            if kind == 0:
+                g = z
+            elif kind == 1:
+                g = z - c
+            elif kind == 2:
+                g = z - (B @ z + c)
+            else:
+                g = z - np.asarray(fn(z), dtype=np.float64)
+            return w, float(np.linalg.norm(np.minimum(w, g)))
 
-def _check_zeta_callable(fn):
-    return fn
+        tol_k, x0k = tol, z0s
+        best = None
+        done_iters = 0
+        rounds = []
+        histories = []
+        timings = None
+        refined = 0
+        while True:
+            opts = _iteration_options(_core.Options(), **dict(it, tol=tol_k))
+            d = self._core.solve(qs, kind, cs, bp, bi, bd, fns, x0k, cb, opts)
+            status = Status(d["status"])
+            if status == Status.ZETA_FAILED:
+                raise ValueError(f"zeta(z) returned non-finite values (NaN or Inf): {d['message']}")
+            z = d["z"] * dc if scaled else d["z"]
+            if verify:
+                w, res = original_residual(z)
+            else:
+                w, res = d["w"], d["residual"]
+            key = res if res == res else math.inf
+            if best is None or key < best[0]:
+                best = (key, z, w, res, done_iters + d["nit"], d)
+            if d["history"] is not None:
+                h = d["history"]
+                histories.append((h["iteration"] + done_iters, h["seconds"], h["residual"]))
+            t = d["timings"]
+            if timings is None:
+                timings = dict(t)
+            else:
+                for name in t:
+                    if name != "setup":
+                        timings[name] += t[name]
+            done_iters += d["iterations"]
+            rounds.append((tol_k, status, res))
+            if status != Status.CONVERGED or res < tol or not verify:
+                break
+            # The core met tol_k on its own residual, but Res(z) >= tol: tighten and re-solve
+            # from where it stopped, at most MAX_REFINEMENTS times.
+            if refined >= MAX_REFINEMENTS:
+                break
+            ratio = res / d["residual"] if d["residual"] > 0 else math.inf
+            new_tol = min(0.5 * tol_k, 0.5 * tol / ratio) if math.isfinite(ratio) else 0.0
+            if not (new_tol >= 1e-300):
+                break
+            tol_k, x0k = new_tol, d["z"]
+            refined += 1
+
+        d_last = d
+        _, z, w, res, nit, d = best
+        last_status = rounds[-1][1]
+        if not verify:
+            status, message = last_status, d_last["message"]
+        elif res < tol:
+            status, message = Status.CONVERGED, "converged: Res < tol"
+            if refined:
+                message += f" (after {refined} re-solve(s) with a tighter tolerance on the scaled problem)"
+        elif last_status == Status.CONVERGED:
+            status = Status.STAGNATED
+            message = (f"stagnated: the {'scaled' if scaled else 'shifted'} problem met its tolerance {tol_k:.3g} "
+                       f"but Res(z) = {res:.3g} >= tol = {tol:.3g} in the original variables"
+                       f"{' after %d re-solve(s)' % refined if refined else ''}; returning the best iterate")
+        else:
+            status = last_status
+            message = f"{d_last['message']}; Res(z) = {res:.3g} in the original variables"
+        history = None
+        if histories:
+            history = {"iteration": np.concatenate([h[0] for h in histories]),
+                       "seconds": np.concatenate([h[1] for h in histories]),
+                       "residual": np.concatenate([h[2] for h in histories])}
+        extra = {}
+        if scaled:
+            extra["scaling"] = {"kind": self.scale, "refinements": refined,
+                                "rounds": [(float(tk), Status(s).name, float(r)) for tk, s, r in rounds]}
+        return Result(z=z, w=w, success=status == Status.CONVERGED, status=status, message=message, nit=nit,
+                      iterations=done_iters, residual=res, history=history, timings=timings, method=self.method,
+                      inner=d["inner"], **extra)
 
 
 def solve(A, q, zeta=None, *, method="nrmgs", tol=1e-8, maxiter=10000, omega1=None, omega2=None, gamma=1.0,
           phi=None, alpha=None, beta=None, theta=1.0, z_update="auto", inner="auto", accelerate="none",
-          anderson_m=5, x0=None, callback=None, record_history=False, stall_iterations=100) -> Result:
+          anderson_m=5, x0=None, callback=None, record_history=False, stall_iterations=100,
+          scale=False) -> Result:
     r"""Solve the implicit complementarity problem ICP(q, A, ζ):
 
     find z with  w = Az + q ≥ 0,  g = z − ζ(z) ≥ 0,  gᵀw = 0   (ζ ≡ 0: the LCP),
@@ -246,6 +383,8 @@ def solve(A, q, zeta=None, *, method="nrmgs", tol=1e-8, maxiter=10000, omega1=No
         the shifted LCP in ``z − c``. ``Affine(B, c)``: ζ(z) = Bz + c, evaluated in C++. A
         callable ``zeta(z) -> ndarray``: called once per iteration with a read-only float64
         array (valid only during the call); exceptions it raises reach the caller unchanged.
+        ζ returning an array of the wrong shape or dtype raises TypeError/ValueError; ζ
+        returning NaN or Inf raises ValueError (the core's status ZETA_FAILED).
     method : str
         ``'nrmgs'`` (default), ``'nrm'``, ``'nrmm'``, ``'nrmaor'``, ``'nrmsor'``, ``'nrmj'``,
         ``'mms'`` (Zheng–Vong baseline), ``'two_sweep'`` (two-sweep baseline). The AOR-type
@@ -284,14 +423,31 @@ def solve(A, q, zeta=None, *, method="nrmgs", tol=1e-8, maxiter=10000, omega1=No
         Keep (iteration, seconds, Res) of every iterate in ``result.history``.
     stall_iterations : int
         STAGNATED when the best Res has not improved for this many iterations.
+    scale : False, True, 'rows' or 'both'
+        Diagonal equilibration for badly scaled problems (default off). 'rows': D_r = 1/max|row|;
+        'both' (= True): Ruiz equilibration of rows and columns. The solver then iterates on
+        ICP(D_r q, D_r A D_c, ζ') in y = D_c⁻¹ z with ζ'(y) = D_c⁻¹ ζ(D_c y) (None stays None, a
+        constant c becomes D_c⁻¹ c, Affine(B, c) becomes Affine(D_c⁻¹ B D_c, D_c⁻¹ c), a callable is
+        wrapped); the factors are powers of two, so scaling is exact. omega1/omega2/phi and the
+        callback's ``residual`` refer to the scaled problem; the callback's ``z`` and the result
+        are in the original variables. Success is decided on Res(z) re-measured in the ORIGINAL
+        variables (a callable ζ is called once more for that): when the scaled solve meets tol but
+        Res(z) >= tol, it is re-solved from there with a tighter tolerance, at most 3 times, and
+        otherwise ends with status STAGNATED (success False) and the best iterate.
+        ``result.scaling`` records the kind, the number of re-solves and each round's
+        (tolerance, status, Res).
 
     Returns
     -------
     Result
         ``z``, ``w``, ``success``, ``status``, ``message``, ``nit``, ``residual``, ``history``,
         ``timings``. A solve that does not converge says so in ``status`` and returns its best iterate.
+        Without a callable ζ, Res(z) is re-measured in numpy in the original variables before
+        success is declared (this matters for a constant obstacle, which the core solves as the
+        shifted LCP), with the same re-solve rule as for ``scale``.
     """
     s = Solver(A, method=method, omega1=omega1, omega2=omega2, gamma=gamma, phi=phi, alpha=alpha, beta=beta,
                inner=inner, tol=tol, maxiter=maxiter, theta=theta, z_update=z_update, accelerate=accelerate,
-               anderson_m=anderson_m, record_history=record_history, stall_iterations=stall_iterations)
+               anderson_m=anderson_m, record_history=record_history, stall_iterations=stall_iterations,
+               scale=scale)
     return s.solve(q, zeta, x0=x0, callback=callback)
