@@ -26,7 +26,7 @@ enum class Method {
 
 /// How z⁽ᵏ⁾ is recovered from the modulus vector x⁽ᵏ⁾.
 enum class ZUpdate {
-  Auto,      ///< Explicit for an LCP (no factorization of A), Solve for an ICP
+  Auto,      ///< Explicit (measured faster and more robust; README "Choosing the z-update")
   Explicit,  ///< z = ζ(z_prev) + Ω1(|x| + x)/γ — no solve with A
   Solve,     ///< A z = Ω2(|x| − x)/γ − q — the paper's Step 1 (a factorization of A)
 };
@@ -66,7 +66,7 @@ struct Options {
   int anderson_m = 5;              ///< Anderson memory (number of past differences kept)
   bool record_history = false;     ///< keep (iteration, seconds, Res) of every iterate
   /// STAGNATED after this many iterations without a better Res whose steps are at rounding level
-  /// (tol below what floating point reaches), or 10× as many with Res above the best (a cycle).
+  /// (tol below what floating point reaches), or 3× as many with Res above the best (a cycle).
   int stall_iterations = 100;
   double divergence_factor = 1e10; ///< DIVERGED when Res exceeds this factor times the best Res seen
 

@@ -44,9 +44,25 @@ Parameters resolve_parameters(const MatrixType& A, const Options& o) {
   p.gamma = o.gamma;
   p.theta = o.theta;
   const bool has_alpha = !std::isnan(o.alpha), has_beta = !std::isnan(o.beta);
+  auto reject = [&](bool given, const char* name, const char* why) {
+    if (given)
+      throw std::invalid_argument(std::string("Options: method '") + to_string(o.method) + "' has no " + name + " (" + why + ")");
+  };
   switch (o.method) {
-    case Method::NRM: p.alpha = 1; p.beta = 1; break;
-    case Method::NRMM: p.alpha = has_alpha ? o.alpha : (n > 0 ? d.mean() : 1.0); p.beta = 1; break;
+    case Method::NRM:
+      reject(has_alpha, "alpha", "M = A; Omega2 = I unless omega2 is given; for Omega2 = alpha*I use 'nrmm'");
+      reject(has_beta, "beta", "M = A");
+      p.alpha = 1; p.beta = 1;
+      break;
+    case Method::NRMM:
+      reject(has_beta, "beta", "M = A; alpha sets Omega2 = alpha*I");
+      if (has_alpha && o.omega2.size())
+        throw std::invalid_argument("Options: method 'nrmm' sets omega2 = alpha*I; give alpha or omega2, not both");
+      p.alpha = has_alpha ? o.alpha : (n > 0 ? d.mean() : 1.0); p.beta = 1;
+      if (!has_alpha && !o.omega2.size() && !(p.alpha > 0))
+        throw std::invalid_argument("Options: method 'nrmm' takes alpha = mean(diag(A)) = " + std::to_string(p.alpha) +
+                                    " by default, which must be > 0; pass alpha (Omega2 = alpha*I) explicitly");
+      break;
     case Method::NRMAOR: case Method::MMS: case Method::TwoSweep:
       p.alpha = has_alpha ? o.alpha : 1.0;
       p.beta = has_beta ? o.beta : p.alpha;
@@ -156,6 +172,7 @@ class Splitting {
     }
     // Lm = Ω2 + ((D − βL)/α + φ)Ω1: diagonal Ω2 + (d/α + φ)Ω1, strictly lower (β/α) a_ij Ω1_j.
     const double a = p.alpha, b = p.beta;
+    lower_scale_ = b / a;
     diagonal_ = p.omega2 + (diagonal(A) / a + p.phi).cwiseProduct(p.omega1);
     for (Eigen::Index i = 0; i < n; ++i)
       if (!(diagonal_[i] != 0) || !std::isfinite(diagonal_[i]))
@@ -219,12 +236,16 @@ class Splitting {
     return "?";
   }
   bool two_sweep() const { return n2_.rows() > 0; }
+  /// Diagonal of Lm (AOR types) and the factor β/α of its strictly lower part (β/α) a_ij Ω1_j.
+  const Vector& left_diagonal() const { return diagonal_; }
+  double lower_scale() const { return lower_scale_; }
   const RowMatrix& n2() const { return n2_; }
 
  private:
   LeftKind kind_ = LeftKind::Factorized;
   InnerSolver<StorageIndex> solver_;
   Vector diagonal_;
+  double lower_scale_ = 0;
   RowMatrix lower_;
   RowMatrix n2_;
 };

@@ -103,6 +103,10 @@ class Problem:
         The effects the scene models, and what it deliberately leaves out.
     lipschitz : float or None
         A Lipschitz constant of ζ in the ∞-norm when known (0 for a constant obstacle).
+    solver_options : dict
+        Options the scene needs from the solver, with the reason in the scene's docstring
+        (e.g. impulse control needs ``z_update='solve'``: its ζ has Lipschitz constant 1, where
+        the default explicit z-update does not converge). :meth:`solve` applies them.
     """
 
     name: str
@@ -115,6 +119,7 @@ class Problem:
     models: tuple = ()
     omits: tuple = ()
     lipschitz: Optional[float] = None
+    solver_options: dict = field(default_factory=dict)
 
     @property
     def n(self) -> int:
@@ -136,10 +141,10 @@ class Problem:
         return float(np.linalg.norm(np.minimum(w, g)))
 
     def solve(self, **options):
-        """``nrmicp.solve(self.A, self.q, self.zeta, **options)`` (imports nrmicp)."""
+        """``nrmicp.solve(self.A, self.q, self.zeta, **self.solver_options, **options)``."""
         import nrmicp
 
-        return nrmicp.solve(self.A, self.q, self.zeta, **options)
+        return nrmicp.solve(self.A, self.q, self.zeta, **{**self.solver_options, **options})
 
 
 from ._exact import solve_exact_obstacle  # noqa: E402
