@@ -1,0 +1,701 @@
+"""Work–precision benchmark: what each extra digit of accuracy costs in time.
+
+    python -m nrmicp bench [--quick] [--scenes ...] [--methods ...] [--z-updates ...]
+                           [--tols ... | --tol-min 1e-12 --tol-max 1e-2] [--size small]
+                           [--repeat 1] [--maxiter 10000] [--out bench-out]
+
+For every scene, method and z-update it sweeps ``tol`` (default 1e-2, 1e-3, …, 1e-12) and
+records, per tol:
+
+- ``seconds``: wall time of one ``nrmicp.solve`` call (set-up, factorizations and iterations;
+  building the scene and its exact reference is excluded), best of ``--repeat`` runs;
+  ``setup_seconds``, ``factorization_seconds`` and ``iteration_seconds`` are the core's own
+  ``result.timings`` of the best run, reported separately;
+- ``iterations`` (``result.nit``), ``residual`` (Res of the returned z), ``status``;
+- ``error`` = max|z − z_exact| when the scene knows its exact discrete solution.
+
+How the numbers are obtained (and why they are not distorted):
+
+- Times come from *separate solves per tol*, with no callback and no history recording, so
+  no Python call per iteration is timed.
+- Errors come from the *same* solves: the iteration does not depend on tol except where it
+  stops, so the z a solve with tol t returns is exactly the first iterate with Res < t —
+  the same z a callback would capture in one long run, without the callback's cost.
+- When a solve does not converge (stagnated, max_iterations, diverged), every smaller tol
+  would run the identical iteration and stop at the same point for the same reason (the
+  stopping tests other than ``Res < tol`` do not involve tol), so those rows reuse that
+  solve and say so in ``reused_from_tol``; this keeps slow failures from being paid 11 times.
+- One extra run per case at the smallest tol with ``record_history=True`` (no callback)
+  gives Res at every iterate: drawn as a faint line behind the markers of the
+  work–precision diagram (where it flattens is the accuracy floor) and, for one scene, the
+  convergence-history figure. Its seconds are the core's clock since the iteration started,
+  shifted by the set-up and factorization time of that run.
+
+Outputs in ``--out`` (default ``bench-out/``): ``work_precision.csv``, ``work_precision.png``
+(y = Res), ``work_precision_error.png`` (y = max|z − z_exact|), ``convergence_history.png``,
+``history.csv`` (the history-scene's iterates) and ``summary.txt`` (also printed): per scene
+and case the seconds and iterations per extra digit (slope of seconds against −log10 tol over
+the converged rows; Theil–Sen, so one noisy timing does not swing it), the best Res reached, and the fastest case at 1e-6 and
+1e-10.
+
+The horizontal line in every panel is the rounding level of the residual,
+eps·‖ |A||z*| + |q| ‖₂ (z* the exact or the best solution): w = Az + q cannot be evaluated much
+more accurately than that, so Res stops decreasing within a small factor of it (rounding errors
+partly cancel, and where the obstacle is active min(w, g) picks g, which is computed more
+accurately) — a scale, not a sharp bound. An iteration that reaches it ends STAGNATED; a tol
+below it cannot be met by any method.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+# --------------------------------------------------------------------------- scenes
+
+#: Scenes of the default sweep, in plotting order.
+DEFAULT_SCENES = ("bai_sym_lcp", "bai_nonsym_lcp", "bai_sym_icp", "bai_nonsym_icp",
+                  "obstacle_2d", "thermoforming_2d", "impulse_control", "american_put")
+#: Further scenes that may be named with --scenes.
+EXTRA_SCENES = ("bai_sym_affine", "obstacle_1d", "thermoforming_1d")
+SCENES = DEFAULT_SCENES + EXTRA_SCENES
+
+#: Default methods: nrmaor and nrmsor with their default parameters (α = β = 1) are nrmgs.
+DEFAULT_METHODS = ("nrm", "nrmm", "nrmgs", "nrmj", "mms", "two_sweep")
+QUICK_METHODS = ("nrmgs", "nrmm")
+QUICK_TOLS = (1e-2, 1e-4, 1e-6, 1e-8)
+#: Target tolerances of the "fastest method" summary.
+TARGETS = (1e-6, 1e-10)
+
+#: Grid parameter per scene and size: m (n = m²) for the 2D scenes and Bai, n for the 1D ones,
+#: n_space (n = n_space − 1) for the American put. 'tiny' is what --quick uses.
+SIZES = {
+    "tiny":   dict(bai=8,   obstacle_2d=8,   thermoforming_2d=8,   impulse_control=33,  american_put=100,
+                   obstacle_1d=63,   thermoforming_1d=63),
+    "small":  dict(bai=64,  obstacle_2d=32,  thermoforming_2d=32,  impulse_control=65,  american_put=1600,
+                   obstacle_1d=255,  thermoforming_1d=255),
+    "medium": dict(bai=128, obstacle_2d=64,  thermoforming_2d=64,  impulse_control=129, american_put=3200,
+                   obstacle_1d=1023, thermoforming_1d=1023),
+    "large":  dict(bai=256, obstacle_2d=128, thermoforming_2d=128, impulse_control=255, american_put=6400,
+                   obstacle_1d=4095, thermoforming_1d=4095),
+}
+# 'small' is chosen so that the default sweep takes about a minute on one core yet every solve
+# takes well over the ~0.1 ms Python overhead of a call: Bai's iteration counts do not grow with
+# n (so n = 4096), while the PDE scenes' grow like h⁻² (so 32 × 32 grids already take ~10³
+# iterations; 'medium' quadruples them).
+
+_LABELS = {
+    "bai_sym_lcp": "Bai, symmetric, LCP",
+    "bai_nonsym_lcp": "Bai, nonsymmetric, LCP",
+    "bai_sym_icp": "Bai, symmetric, ICP ζ = ½ sin z + s",
+    "bai_nonsym_icp": "Bai, nonsymmetric, ICP ζ = ½ sin z + s",
+    "bai_sym_affine": "Bai, symmetric, affine ICP",
+    "obstacle_1d": "obstacle 1D (shifted LCP)",
+    "obstacle_2d": "obstacle 2D membrane (shifted LCP)",
+    "thermoforming_1d": "thermoforming 1D (QVI)",
+    "thermoforming_2d": "thermoforming 2D (nonlocal QVI)",
+    "impulse_control": "impulse control (QVI, Lipschitz 1)",
+    "american_put": "American put, one step (shifted LCP)",
+}
+
+
+def build_scene(name: str, size: str = "small"):
+    """The :class:`nrmicp.scenes.Problem` that the benchmark runs for ``name`` at ``size``."""
+    from . import scenes
+
+    if size not in SIZES:
+        raise ValueError(f"size must be one of {', '.join(SIZES)}; got {size!r}")
+    s = SIZES[size]
+    if name.startswith("bai_"):
+        _, sym, kind = name.split("_")
+        if sym not in ("sym", "nonsym") or kind not in ("lcp", "icp", "affine"):
+            raise ValueError(f"unknown scene {name!r}")
+        return scenes.bai(s["bai"], symmetric=sym == "sym", kind=kind)
+    if name == "obstacle_1d":
+        return scenes.obstacle_1d(s[name])
+    if name == "obstacle_2d":
+        return scenes.obstacle_2d(s[name])
+    if name == "thermoforming_1d":
+        return scenes.thermoforming_1d(s[name])
+    if name == "thermoforming_2d":
+        return scenes.thermoforming_2d(s[name])
+    if name == "impulse_control":
+        return scenes.impulse_control(s[name])
+    if name == "american_put":
+        return scenes.american_put(n_space=s[name])
+    raise ValueError(f"unknown scene {name!r}; choose from {', '.join(SCENES)}")
+
+
+def scene_label(name: str) -> str:
+    return _LABELS.get(name, name)
+
+
+# --------------------------------------------------------------------------- running
+
+CSV_COLUMNS = ("scene", "size", "n", "method", "z_update", "z_update_used", "tol", "status", "converged",
+               "seconds", "setup_seconds", "factorization_seconds", "iteration_seconds", "iterations",
+               "residual", "error", "repeat", "reused_from_tol")
+
+
+@dataclass
+class Case:
+    """One (scene, method, z-update) line of the diagram."""
+    scene: str
+    method: str
+    z_update: str
+    z_update_used: str = ""
+    rows: list = field(default_factory=list)
+    history: dict = None          # iteration, seconds (shifted by set-up), residual
+    history_status: str = ""
+
+    @property
+    def label(self) -> str:
+        return f"{self.method} / {self.z_update_used or self.z_update}"
+
+
+class Progress:
+    """A one-line progress bar on stderr (a line per 10 % when stderr is not a terminal)."""
+
+    def __init__(self, total: int, enabled: bool = True, width: int = 30):
+        self.total, self.done, self.width = max(int(total), 1), 0, width
+        self.enabled = enabled
+        self.tty = enabled and sys.stderr.isatty()
+        self.t0 = time.perf_counter()
+        self._last_decile = -1
+
+    def step(self, k: int = 1, what: str = "") -> None:
+        self.done = min(self.done + k, self.total)
+        if not self.enabled:
+            return
+        frac = self.done / self.total
+        elapsed = time.perf_counter() - self.t0
+        if self.tty:
+            fill = int(round(frac * self.width))
+            bar = "#" * fill + "." * (self.width - fill)
+            sys.stderr.write(f"\r[{bar}] {self.done}/{self.total} {elapsed:6.1f}s {what[:40]:<40}")
+            sys.stderr.flush()
+        else:
+            decile = int(frac * 10)
+            if decile != self._last_decile:
+                self._last_decile = decile
+                sys.stderr.write(f"bench: {100 * frac:3.0f}% ({self.done}/{self.total}, {elapsed:.1f}s)\n")
+                sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.tty:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+
+
+def _z_update_used(problem, z_update: str) -> str:
+    if z_update != "auto":
+        return z_update
+    # a constant obstacle (ndarray) is solved as the shifted LCP: 'auto' is 'explicit' for it too
+    return "explicit" if problem.zeta is None or isinstance(problem.zeta, np.ndarray) else "solve"
+
+
+def _status_name(status) -> str:
+    return getattr(status, "name", str(status)).lower()
+
+
+def _timed_solve(problem, method, z_update, tol, maxiter, repeat):
+    """Best of ``repeat`` solves: (result of the best run, its seconds)."""
+    import nrmicp
+
+    best, best_t = None, math.inf
+    for _ in range(max(1, repeat)):
+        t0 = time.perf_counter()
+        res = nrmicp.solve(problem.A, problem.q, problem.zeta, method=method, tol=tol, maxiter=maxiter,
+                           z_update=z_update)
+        dt = time.perf_counter() - t0
+        if dt < best_t:
+            best, best_t = res, dt
+    return best, best_t
+
+
+def run_case(problem, scene, method, z_update, tols, *, size, maxiter, repeat, history, progress):
+    """All tols of one case, then (if ``history``) one recorded run at the smallest tol."""
+    import nrmicp
+
+    case = Case(scene, method, z_update, _z_update_used(problem, z_update))
+    base = dict(scene=scene, size=size, n=problem.n, method=method, z_update=z_update,
+                z_update_used=case.z_update_used, repeat=repeat)
+    failed = None  # (tol, row) of the first solve that did not converge
+    try:  # one untimed warm-up solve (first-call allocations, library initialisation)
+        nrmicp.solve(problem.A, problem.q, problem.zeta, method=method, tol=max(tols), maxiter=maxiter,
+                     z_update=z_update)
+    except Exception:
+        pass  # the timed solves record it
+    for tol in tols:
+        what = f"{scene} {method} {z_update} tol={tol:.0e}"
+        if failed is not None:
+            row = dict(failed[1], tol=tol, reused_from_tol=failed[0])
+            case.rows.append(row)
+            progress.step(repeat, what)
+            continue
+        try:
+            res, secs = _timed_solve(problem, method, z_update, tol, maxiter, repeat)
+        except Exception as exc:  # a property of the case (e.g. a factorization failed): record it
+            row = dict(base, tol=tol, status=f"error: {type(exc).__name__}: {exc}"[:200], converged=0,
+                       seconds="", setup_seconds="", factorization_seconds="", iteration_seconds="",
+                       iterations="", residual="", error="", reused_from_tol="")
+            case.rows.append(row)
+            failed = (tol, row)
+            progress.step(repeat, what)
+            continue
+        tm = res.timings or {}
+        err = ""
+        if problem.z_exact is not None:
+            err = float(np.max(np.abs(np.asarray(res.z) - problem.z_exact)))
+        row = dict(base, tol=tol, status=_status_name(res.status), converged=int(bool(res.success)),
+                   seconds=secs, setup_seconds=tm.get("setup", ""),
+                   factorization_seconds=tm.get("factorization", ""),
+                   iteration_seconds=tm.get("iterations", ""), iterations=int(res.nit),
+                   residual=float(res.residual), error=err, reused_from_tol="")
+        case.rows.append(row)
+        if not res.success:
+            failed = (tol, row)
+        progress.step(repeat, what)
+    if history:
+        try:
+            res, wall = None, math.inf
+            for _ in range(max(1, repeat)):  # best of repeat, like the timed solves
+                t0 = time.perf_counter()
+                r = nrmicp.solve(problem.A, problem.q, problem.zeta, method=method, tol=min(tols),
+                                 maxiter=maxiter, z_update=z_update, record_history=True)
+                dt = time.perf_counter() - t0
+                if dt < wall:
+                    res, wall = r, dt
+            h = res.history
+            # the core's clock starts with the iteration: shift by everything else in the call
+            # (Python checks, set-up, factorizations, result conversion) so that the last
+            # iterate sits at the run's wall time, on the same axis as the timed solves
+            offset = max(wall - res.timings["iterations"], 0.0)
+            case.history = dict(iteration=np.asarray(h["iteration"]),
+                                seconds=np.asarray(h["seconds"]) + offset,
+                                residual=np.asarray(h["residual"]))
+            case.history_status = _status_name(res.status)
+        except Exception as exc:  # already recorded in the rows
+            case.history_status = f"error: {exc}"
+        progress.step(repeat, f"{scene} {method} {z_update} history")
+    return case
+
+
+def rounding_floor(problem, cases) -> float:
+    """eps·‖|A||z*| + |q|‖₂ with z* = z_exact, else the best z seen (the residual's rounding level)."""
+    z = problem.z_exact
+    if z is None:
+        best = None
+        for c in cases:
+            for r in c.rows:
+                if r["residual"] != "" and (best is None or r["residual"] < best[0]):
+                    best = (r["residual"], c)
+        if best is None:
+            return math.nan
+        z = problem.solve(method=best[1].method, z_update=best[1].z_update, tol=0.0).z
+    absA = abs(problem.A)
+    return float(np.finfo(float).eps * np.linalg.norm(absA @ np.abs(z) + np.abs(problem.q)))
+
+
+# --------------------------------------------------------------------------- analysis
+
+def _fresh_converged(rows):
+    return [r for r in rows if r["converged"] == 1 and r["reused_from_tol"] == ""]
+
+
+def per_digit(rows):
+    """(seconds per digit, iterations per digit): slopes against −log10 tol over the converged rows
+    (Theil–Sen, robust to a stray slow timing), or NaNs with fewer than two."""
+    ok = _fresh_converged(rows)
+    if len(ok) < 2:
+        return math.nan, math.nan
+    d = np.array([-math.log10(r["tol"]) for r in ok])
+    if np.ptp(d) == 0:
+        return math.nan, math.nan
+    return (_theil_sen(d, np.array([r["seconds"] for r in ok], dtype=float)),
+            _theil_sen(d, np.array([r["iterations"] for r in ok], dtype=float)))
+
+
+def _theil_sen(x, y) -> float:
+    """Median of the pairwise slopes: a straight-line fit that one noisy timing cannot swing."""
+    i, j = np.triu_indices(len(x), 1)
+    keep = x[j] != x[i]
+    return float(np.median((y[j] - y[i])[keep] / (x[j] - x[i])[keep]))
+
+
+def best_residual(case) -> float:
+    vals = [r["residual"] for r in case.rows if r["residual"] != ""]
+    if case.history is not None and len(case.history["residual"]):
+        vals.append(float(np.min(case.history["residual"])))
+    vals = [v for v in vals if np.isfinite(v)]
+    return min(vals) if vals else math.nan
+
+
+def _same_iterates(a, b) -> bool:
+    """Two cases whose every row stopped at the same iteration with the same Res."""
+    key = lambda c: [(r["status"], r["iterations"], r["residual"]) for r in c.rows]
+    return bool(a.rows) and key(a) == key(b)
+
+
+def near_ties(cases, row, tol, within=0.10):
+    """Other cases converged at ``tol`` within ``within`` (relative) of ``row``'s seconds."""
+    out = []
+    for c in cases:
+        for r in c.rows:
+            if (r is not row and r["tol"] == tol and r["converged"] == 1
+                    and r["seconds"] <= row["seconds"] * (1 + within)):
+                out.append(c.label)
+    return out
+
+
+def fastest_at(cases, target, tols):
+    """(case, row) converged at the tol closest to ``target`` in log scale with the least seconds."""
+    tols = sorted(set(tols))
+    if not tols:
+        return None, None, None
+    tol = min(tols, key=lambda t: abs(math.log10(t) - math.log10(target)))
+    best = None
+    for c in cases:
+        for r in c.rows:
+            if r["tol"] == tol and r["converged"] == 1 and (best is None or r["seconds"] < best[1]["seconds"]):
+                best = (c, r)
+    return (best[0], best[1], tol) if best else (None, None, tol)
+
+
+def summarize(scene_results, tols) -> str:
+    lines = []
+    for scene, (problem, cases, floor) in scene_results.items():
+        lines.append(f"\n== {scene_label(scene)}: {problem.name}, n = {problem.n}; "
+                     f"rounding level eps*|| |A||z*|+|q| || = {floor:.1e}")
+        lines.append(f"   {'method / z-update':<22} {'s/digit':>9} {'it/digit':>9} {'best Res':>9} "
+                     f"{'smallest tol met':>16}  stopped (first failing tol)")
+        for c in cases:
+            spd, ipd = per_digit(c.rows)
+            met = [r["tol"] for r in c.rows if r["converged"] == 1]
+            stop = next((r for r in c.rows if r["converged"] != 1), None)
+            stop_s = "-" if stop is None else (f"{stop['status']} at tol {stop['tol']:.0e}"
+                                               + (f" (Res {stop['residual']:.1e}, {stop['iterations']} it)"
+                                                  if stop["residual"] != "" else ""))
+            twin = next((o.label for o in cases[:cases.index(c)] if _same_iterates(o, c)), None)
+            lines.append(f"   {c.label:<22} {spd:9.2e} {ipd:9.1f} {best_residual(c):9.1e} "
+                         f"{(f'{min(met):.0e}' if met else 'none'):>16}  {stop_s}"
+                         + (f"  [same iterates as {twin}]" if twin else ""))
+        for target in TARGETS:
+            c, r, tol = fastest_at(cases, target, tols)
+            if tol is None:
+                continue
+            if c is None:
+                lines.append(f"   fastest at tol {tol:.0e}: no case converged")
+            else:
+                ties = near_ties(cases, r, tol)
+                lines.append(f"   fastest at tol {tol:.0e}: {c.label} ({r['seconds'] * 1e3:.2f} ms, "
+                             f"{r['iterations']} it)"
+                             + (f"; within 10 %: {', '.join(ties)}" if ties else ""))
+    return "\n".join(lines).lstrip("\n")
+
+
+# --------------------------------------------------------------------------- plots
+
+_COLORS = {"nrm": "tab:blue", "nrmm": "tab:orange", "nrmaor": "tab:brown", "nrmsor": "tab:pink",
+           "nrmgs": "tab:green", "nrmj": "tab:red", "mms": "tab:purple", "two_sweep": "tab:gray"}
+_MARKERS = {"nrm": "o", "nrmm": "s", "nrmaor": "P", "nrmsor": "X", "nrmgs": "^", "nrmj": "v",
+            "mms": "D", "two_sweep": "*"}
+_LINESTYLES = {"explicit": "-", "solve": "--"}
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig, path, dpi):
+    """Save as PNG, palette-quantized when Pillow is there (a quarter of the bytes, same look)."""
+    fig.savefig(path, dpi=dpi)
+    try:
+        from PIL import Image
+
+        with Image.open(path) as im:
+            small = im.convert("RGB").quantize(colors=256, method=Image.Quantize.MEDIANCUT)
+        small.save(path, optimize=True)
+    except Exception:  # pragma: no cover - keep the full-colour PNG
+        pass
+
+
+def _log_ticks(ax):
+    """Decade labels only (minor-tick labels collide on short log axes)."""
+    from matplotlib.ticker import LogLocator, NullFormatter
+
+    for axis in (ax.xaxis, ax.yaxis):
+        axis.set_major_locator(LogLocator(base=10, numticks=8))
+        axis.set_minor_formatter(NullFormatter())
+
+
+def _case_style(c):
+    return dict(color=_COLORS.get(c.method, "k"), marker=_MARKERS.get(c.method, "o"),
+                linestyle=_LINESTYLES.get(c.z_update_used, ":"))
+
+
+def plot_work_precision(scene_results, path, *, y="residual", tols=(), dpi=110):
+    """One panel per scene: x = seconds (log), y = Res or max|z − z*| (log)."""
+    plt = _pyplot()
+    from matplotlib.lines import Line2D
+
+    names = list(scene_results)
+    ncols = min(4, len(names))
+    nrows = math.ceil(len(names) / ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(4.3 * ncols, 3.6 * nrows + 1.2), squeeze=False)
+    seen_methods, seen_z = {}, set()
+    for ax, scene in zip(axes.flat, names):
+        problem, cases, floor = scene_results[scene]
+        for c in cases:
+            st = _case_style(c)
+            seen_methods.setdefault(c.method, st)
+            seen_z.add(c.z_update_used)
+            if y == "residual" and c.history is not None:
+                hs, hr = c.history["seconds"], c.history["residual"]
+                keep = (hs > 0) & (hr > 0) & np.isfinite(hr)
+                ax.plot(hs[keep], hr[keep], color=st["color"], linestyle=st["linestyle"], lw=0.8, alpha=0.3)
+            fresh = [r for r in c.rows if r["reused_from_tol"] == "" and r["seconds"] != ""]
+            vals = [(r["seconds"], r[y], r["converged"]) for r in fresh
+                    if r[y] != "" and np.isfinite(r[y]) and r[y] > 0]
+            ok = [(s, v) for s, v, conv in vals if conv == 1]
+            bad = [(s, v) for s, v, conv in vals if conv != 1]
+            if ok:
+                xs, ys = zip(*ok)
+                ax.plot(xs, ys, color=st["color"], linestyle=st["linestyle"], marker=st["marker"], ms=5, lw=1.3)
+            if bad:  # the point reached when the solve stopped early: hollow marker
+                xs, ys = zip(*bad)
+                ax.plot(xs, ys, linestyle="none", marker=st["marker"], ms=9, mfc="none", mec=st["color"],
+                        mew=1.6)
+                if ok:  # connect the last converged point to where it stopped
+                    ax.plot([ok[-1][0], xs[0]], [ok[-1][1], ys[0]], color=st["color"], lw=0.8, linestyle=":")
+        if y == "residual":
+            if np.isfinite(floor) and floor > 0:
+                ax.axhline(floor, color="k", lw=0.9, linestyle=":")
+                ax.annotate("rounding level", xy=(0.02, floor), xycoords=("axes fraction", "data"),
+                            xytext=(0, 2), textcoords="offset points", fontsize=7, va="bottom")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        _log_ticks(ax)
+        ax.grid(True, which="major", alpha=0.3)
+        ax.set_title(f"{scene_label(scene)}\nn = {problem.n}", fontsize=9)
+        ax.set_xlabel("seconds per solve (incl. set-up)", fontsize=8)
+        ax.set_ylabel("Res = ‖min(Az+q, z−ζ(z))‖₂" if y == "residual" else "max |z − z_exact|", fontsize=8)
+        ax.tick_params(labelsize=7)
+    for ax in list(axes.flat)[len(names):]:
+        ax.set_visible(False)
+    handles = [Line2D([], [], color=st["color"], marker=st["marker"], linestyle="-", label=m)
+               for m, st in seen_methods.items()]
+    handles += [Line2D([], [], color="k", linestyle=_LINESTYLES[z], label=f"z-update '{z}'")
+                for z in _LINESTYLES if z in seen_z]
+    handles += [Line2D([], [], color="k", marker="o", linestyle="none", label="converged (Res < tol)"),
+                Line2D([], [], color="k", marker="o", mfc="none", ms=9, linestyle="none",
+                       label="stopped early: point reached")]
+    if y == "residual":
+        handles += [Line2D([], [], color="k", lw=0.8, alpha=0.4, label="history of one run (every iterate)"),
+                    Line2D([], [], color="k", lw=0.9, linestyle=":", label="rounding level eps·‖|A||z*|+|q|‖₂")]
+    fig.legend(handles=handles, loc="lower center", ncol=math.ceil(len(handles) / 2), fontsize=8, frameon=False)
+    tl = f"tol = {max(tols):.0e} … {min(tols):.0e}" if tols else ""
+    what = "residual Res reached" if y == "residual" else "true error max|z − z_exact| reached"
+    fig.suptitle(f"nrmicp work–precision: {what} against solve time, {tl} (one marker per tol; "
+                 f"colour: method, line style: z-update)", fontsize=11)
+    fig.tight_layout(rect=(0, 0.75 / (3.6 * nrows + 1.2), 1, 1 - 0.45 / (3.6 * nrows + 1.2)))
+    _save(fig, path, dpi)
+    plt.close(fig)
+
+
+def plot_history(problem, scene, cases, floor, path, tol, dpi=110):
+    """Res against iteration and against seconds for every case of one scene."""
+    plt = _pyplot()
+    from matplotlib.ticker import NullFormatter
+
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 5.0))
+    for c in cases:
+        if c.history is None:
+            continue
+        st = _case_style(c)
+        h = c.history
+        keep = np.isfinite(h["residual"]) & (h["residual"] > 0)
+        lab = f"{c.label} ({c.history_status})"
+        a1.plot(h["iteration"][keep], h["residual"][keep], color=st["color"], linestyle=st["linestyle"], lw=1.2,
+                label=lab)
+        a2.plot(h["seconds"][keep], h["residual"][keep], color=st["color"], linestyle=st["linestyle"], lw=1.2,
+                label=lab)
+    for ax in (a1, a2):
+        ax.set_yscale("log")
+        if np.isfinite(floor) and floor > 0:
+            ax.axhline(floor, color="k", lw=0.9, linestyle=":", label="rounding level eps·‖|A||z*|+|q|‖₂")
+        ax.axhline(tol, color="0.5", lw=0.8, linestyle="-.", label=f"tol = {tol:.0e}")
+        ax.grid(True, which="major", alpha=0.3)
+        ax.set_ylabel("Res = ‖min(Az+q, z−ζ(z))‖₂")
+    a1.set_xscale("symlog", linthresh=10, linscale=0.5)
+    a1.set_xlim(left=0)
+    a1.yaxis.set_minor_formatter(NullFormatter())
+    a1.set_xlabel("iteration (linear up to 10, then log)")
+    a2.set_xscale("log")
+    _log_ticks(a2)
+    a2.set_xlabel("seconds (set-up + iterations)")
+    a1.set_title("Res against iteration", fontsize=10)
+    a2.set_title("Res against time", fontsize=10)
+    handles, labels = a2.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=8, frameon=False)
+    fig.suptitle(f"nrmicp convergence history: {scene_label(scene)}, {problem.name}, n = {problem.n}",
+                 fontsize=11)
+    fig.tight_layout(rect=(0, 0.13, 1, 0.95))
+    _save(fig, path, dpi)
+    plt.close(fig)
+
+
+# --------------------------------------------------------------------------- CLI
+
+def _split(s):
+    return [t.strip() for t in s.replace(";", ",").split(",") if t.strip()]
+
+
+def _tols(args):
+    if args.tols:
+        tols = [float(t) for t in _split(args.tols)]
+    elif args.quick and args.tol_min is None and args.tol_max is None:
+        tols = list(QUICK_TOLS)
+    else:
+        hi = 1e-2 if args.tol_max is None else args.tol_max
+        lo = 1e-12 if args.tol_min is None else args.tol_min
+        if not (0 < lo <= hi):
+            raise SystemExit(f"need 0 < --tol-min <= --tol-max, got {lo}, {hi}")
+        k = int(round(math.log10(hi / lo)))
+        tols = list(np.logspace(math.log10(hi), math.log10(lo), k + 1)) if k > 0 else [hi]
+    if any(not (t > 0) for t in tols):
+        raise SystemExit("every tol must be > 0")
+    return sorted(set(float(f"{t:.6g}") for t in tols), reverse=True)
+
+
+def _parser():
+    import nrmicp
+
+    p = argparse.ArgumentParser(
+        prog="python -m nrmicp bench",
+        description="Work-precision sweep: seconds, iterations, Res and true error against tol for each "
+                    "scene, method and z-update; writes a CSV, PNG diagrams and a text summary.")
+    p.add_argument("--scenes", help=f"comma-separated; default: {','.join(DEFAULT_SCENES)} "
+                                    f"(also: {','.join(EXTRA_SCENES)})")
+    p.add_argument("--methods", help=f"comma-separated from {','.join(nrmicp.METHODS)}; "
+                                     f"default: {','.join(DEFAULT_METHODS)}")
+    p.add_argument("--z-updates", default="auto",
+                   help="comma-separated from auto,explicit,solve (default auto: explicit for an LCP, "
+                        "solve for an ICP)")
+    p.add_argument("--tols", help="comma-separated tolerances (overrides --tol-min/--tol-max)")
+    p.add_argument("--tol-min", type=float, help="smallest tol (default 1e-12); one tol per decade")
+    p.add_argument("--tol-max", type=float, help="largest tol (default 1e-2)")
+    p.add_argument("--size", default=None, choices=tuple(SIZES),
+                   help="problem sizes (default small; --quick: tiny)")
+    p.add_argument("--quick", action="store_true",
+                   help="tiny sizes, tols 1e-2..1e-8 (4), methods nrmgs,nrmm: a smoke run of seconds")
+    p.add_argument("--repeat", type=int, default=1, help="time each solve r times and keep the best (default 1)")
+    p.add_argument("--maxiter", type=int, default=10000, help="iteration cap per solve (default 10000)")
+    p.add_argument("--history-scene", help="scene of the convergence-history figure "
+                                           "(default thermoforming_2d if swept, else the first scene)")
+    p.add_argument("--out", default="bench-out", help="output directory (default bench-out/)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    return p
+
+
+def main(argv=None) -> int:
+    import nrmicp
+
+    args = _parser().parse_args(argv)
+    scenes_ = _split(args.scenes) if args.scenes else list(DEFAULT_SCENES)
+    methods = [m.lower() for m in _split(args.methods)] if args.methods else \
+        list(QUICK_METHODS if args.quick else DEFAULT_METHODS)
+    z_updates = [z.lower() for z in _split(args.z_updates)]
+    size = args.size or ("tiny" if args.quick else "small")
+    for s in scenes_:
+        if s not in SCENES:
+            print(f"unknown scene {s!r}; choose from {', '.join(SCENES)}", file=sys.stderr)
+            return 2
+    for m in methods:
+        if m not in nrmicp.METHODS:
+            print(f"unknown method {m!r}; choose from {', '.join(nrmicp.METHODS)}", file=sys.stderr)
+            return 2
+    for z in z_updates:
+        if z not in ("auto", "explicit", "solve"):
+            print(f"unknown z-update {z!r}; choose from auto, explicit, solve", file=sys.stderr)
+            return 2
+    if args.repeat < 1 or args.maxiter < 1:
+        print("--repeat and --maxiter must be >= 1", file=sys.stderr)
+        return 2
+    tols = _tols(args)
+    hist_scene = args.history_scene or ("thermoforming_2d" if "thermoforming_2d" in scenes_ else scenes_[0])
+    if hist_scene not in scenes_:
+        print(f"--history-scene {hist_scene!r} is not among the swept scenes", file=sys.stderr)
+        return 2
+    os.makedirs(args.out, exist_ok=True)
+
+    t_start = time.perf_counter()
+    print(f"nrmicp {nrmicp.__version__} bench: scenes {','.join(scenes_)}; methods {','.join(methods)}; "
+          f"z-updates {','.join(z_updates)}; size {size}; {len(tols)} tols {tols[0]:.0e}..{tols[-1]:.0e}; "
+          f"repeat {args.repeat}; maxiter {args.maxiter}", flush=True)
+    problems = {}
+    for s in scenes_:  # build first: exact references are not part of any timing
+        problems[s] = build_scene(s, size)
+    n_cases = len(scenes_) * len(methods) * len(z_updates)
+    progress = Progress(n_cases * (len(tols) + 1) * args.repeat, enabled=not args.no_progress)
+    scene_results = {}
+    for s in scenes_:
+        P = problems[s]
+        cases = []
+        for m in methods:
+            for z in z_updates:
+                cases.append(run_case(P, s, m, z, tols, size=size, maxiter=args.maxiter, repeat=args.repeat,
+                                      history=True, progress=progress))
+        scene_results[s] = (P, cases, rounding_floor(P, cases))
+    progress.close()
+
+    csv_path = os.path.join(args.out, "work_precision.csv")
+    with open(csv_path, "w", newline="") as f:
+        wr = csv.DictWriter(f, fieldnames=CSV_COLUMNS)
+        wr.writeheader()
+        for _, cases, _ in scene_results.values():
+            for c in cases:
+                for r in c.rows:
+                    wr.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+    P, hcases, hfloor = scene_results[hist_scene]
+    hist_path = os.path.join(args.out, "history.csv")
+    with open(hist_path, "w", newline="") as f:
+        wr = csv.writer(f)
+        wr.writerow(("scene", "method", "z_update_used", "iteration", "seconds", "residual"))
+        for c in hcases:
+            if c.history is not None:
+                for k, t, r in zip(c.history["iteration"], c.history["seconds"], c.history["residual"]):
+                    wr.writerow((hist_scene, c.method, c.z_update_used, int(k), f"{t:.6g}", f"{r:.6g}"))
+
+    pngs = [os.path.join(args.out, "work_precision.png"), os.path.join(args.out, "work_precision_error.png"),
+            os.path.join(args.out, "convergence_history.png")]
+    plot_work_precision(scene_results, pngs[0], y="residual", tols=tols)
+    with_exact = {s: v for s, v in scene_results.items() if v[0].z_exact is not None}
+    if with_exact:
+        plot_work_precision(with_exact, pngs[1], y="error", tols=tols)
+    else:
+        pngs.pop(1)
+    plot_history(P, hist_scene, hcases, hfloor, pngs[-1], tol=min(tols))
+
+    text = summarize(scene_results, tols)
+    with open(os.path.join(args.out, "summary.txt"), "w") as f:
+        f.write(text + "\n")
+    print(text)
+    print(f"\nwrote {csv_path}, {hist_path}, " + ", ".join(pngs)
+          + f" and summary.txt in {time.perf_counter() - t_start:.1f} s")
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
