@@ -176,6 +176,13 @@ class Solver:
             raise ValueError("A must have at least one row, got shape (0, 0)")
         self.n = n
         self.method = _choice(method, METHODS, "method")
+        # The paper's NRM fixes Omega2 = I, which only suits diag(A) of order 1; say so on failure.
+        self._omega2_hint = ""
+        if self.method == "nrm" and omega2 is None:
+            dmean = float(np.mean(np.abs(self.A.diagonal())))
+            if not 0.1 <= dmean <= 10:
+                self._omega2_hint = (f"; note: method 'nrm' uses the paper's Omega2 = I, while mean |diag(A)| = "
+                                     f"{dmean:.3g}: pass omega2=A.diagonal() or use method 'nrmm' or 'nrmgs'")
         self.scale = _scale_choice(scale)
         opts = _core.Options()
         opts.method = getattr(_core.Method, self.method)
@@ -357,6 +364,8 @@ class Solver:
         if scaled:
             extra["scaling"] = {"kind": self.scale, "refinements": refined,
                                 "rounds": [(float(tk), Status(s).name, float(r)) for tk, s, r in rounds]}
+        if status != Status.CONVERGED and self._omega2_hint:
+            message += self._omega2_hint
         return Result(z=z, w=w, success=status == Status.CONVERGED, status=status, message=message, nit=nit,
                       iterations=done_iters, residual=res, history=history, timings=timings, method=self.method,
                       inner=d["inner"], **extra)
