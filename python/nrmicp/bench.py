@@ -196,8 +196,8 @@ class Progress:
 def _z_update_used(problem, z_update: str) -> str:
     if z_update != "auto":
         return z_update
-    # a constant obstacle (ndarray) is solved as the shifted LCP: 'auto' is 'explicit' for it too
-    return "explicit" if problem.zeta is None or isinstance(problem.zeta, np.ndarray) else "solve"
+    # SPEC: 'auto' is 'explicit' (since the one-pass AOR sweep; before, 'solve' for an ICP)
+    return "explicit"
 
 
 def _status_name(status) -> str:
@@ -591,8 +591,8 @@ def _parser():
     p.add_argument("--methods", help=f"comma-separated from {','.join(nrmicp.METHODS)}; "
                                      f"default: {','.join(DEFAULT_METHODS)}")
     p.add_argument("--z-updates", default="auto",
-                   help="comma-separated from auto,explicit,solve (default auto: explicit for an LCP, "
-                        "solve for an ICP)")
+                   help="comma-separated from auto,explicit,solve (default auto, which is explicit; "
+                        "use explicit,solve to compare the two)")
     p.add_argument("--tols", help="comma-separated tolerances (overrides --tol-min/--tol-max)")
     p.add_argument("--tol-min", type=float, help="smallest tol (default 1e-12); one tol per decade")
     p.add_argument("--tol-max", type=float, help="largest tol (default 1e-2)")
