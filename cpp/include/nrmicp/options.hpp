@@ -66,7 +66,8 @@ struct Options {
   int anderson_m = 5;              ///< Anderson memory (number of past differences kept)
   bool record_history = false;     ///< keep (iteration, seconds, Res) of every iterate
   /// STAGNATED after this many iterations without a better Res whose steps are at rounding level
-  /// (tol below what floating point reaches), or 3× as many with Res above the best (a cycle).
+  /// (tol below what floating point reaches), or after 3 consecutive windows of this many
+  /// iterations whose smallest Res does not improve on the previous windows' (a cycle).
   int stall_iterations = 100;
   double divergence_factor = 1e10; ///< DIVERGED when Res exceeds this factor times the best Res seen
 

@@ -215,7 +215,8 @@ class Solver {
     if (splitting_->two_sweep()) absx_prev = x.cwiseAbs();
 
     double best = std::numeric_limits<double>::infinity(), prev_res = best, last_step = best;
-    int best_k = 0, floor_count = 0, worse_count = 0;
+    int best_k = 0, floor_count = 0, win_count = 0, bad_windows = 0;
+    double win_min = std::numeric_limits<double>::infinity(), win_max = -win_min, prev_win_min = win_min;
     auto last_poll = t_start;
     const bool two_sweep = splitting_->two_sweep();
     res.status = Status::MaxIterations;
@@ -260,24 +261,34 @@ class Solver {
         res.history_residual.push_back(r);
       }
       // Stagnation, two ways. (1) At the rounding floor: Res does not improve while the steps
-      // are at rounding level. (2) No progress: Res stays strictly above the best for
-      // 3 × stall_iterations iterations (a cycle, or a slow divergence). A Res equal to the best does not count:
-      // the iteration can sit on a plateau of bit-identical Res for thousands of steps while x
-      // moves towards the solution (measured on the impulse-control and thermoforming scenes).
+      // are at rounding level. (2) No progress: in 3 consecutive windows of stall_iterations
+      // iterates, the smallest Res of a window is not below the previous window's (a cycle, or a
+      // slow divergence). Windows, not the global best: Res may jump up at first and then fall
+      // steadily (nrmm on the American put). A window of bit-identical Res is neutral: the
+      // iteration can sit on such a plateau for thousands of steps while x moves towards the
+      // solution (measured on the impulse-control and thermoforming scenes).
       // The best iterate is kept by swapping buffers, not copying: z is rewritten by the next
       // z-update, and the step below does not read it.
       const bool improved = r < best;
       if (improved) {
-        best = r; best_k = k; best_z.swap(z); floor_count = 0; worse_count = 0;
+        best = r; best_k = k; best_z.swap(z); floor_count = 0;
       } else if (k > 0) {
         const double xnorm = x.template lpNorm<Eigen::Infinity>();
         floor_count = (last_step <= 1e-8 * (xnorm > 0 ? xnorm : 1.0)) ? floor_count + 1 : 0;
-        if (r > best) ++worse_count;
+      }
+      win_min = std::min(win_min, r);
+      win_max = std::max(win_max, r);
+      if (++win_count == o.stall_iterations) {
+        if (win_max != win_min) bad_windows = (win_min < prev_win_min) ? 0 : bad_windows + 1;
+        prev_win_min = win_min;
+        win_min = std::numeric_limits<double>::infinity();
+        win_max = -win_min;
+        win_count = 0;
       }
       res.iterations = k;
       if (r < o.tol) { res.status = Status::Converged; break; }
       if (!std::isfinite(r) || r > o.divergence_factor * best) { res.status = Status::Diverged; break; }
-      if (floor_count >= o.stall_iterations || worse_count >= 3 * o.stall_iterations) {
+      if (floor_count >= o.stall_iterations || bad_windows >= 3) {
         res.status = Status::Stagnated;
         break;
       }
