@@ -196,8 +196,9 @@ class Progress:
 def _z_update_used(problem, z_update: str) -> str:
     if z_update != "auto":
         return z_update
-    # SPEC: 'auto' is 'explicit' (since the one-pass AOR sweep; before, 'solve' for an ICP)
-    return "explicit"
+    # 'auto' is 'explicit' (SPEC), unless the scene says it needs another z-update
+    # (impulse control: Lipschitz-1 ζ, where only 'solve' converges; Problem.solver_options).
+    return getattr(problem, "solver_options", {}).get("z_update", "explicit")
 
 
 def _status_name(status) -> str:
@@ -212,7 +213,7 @@ def _timed_solve(problem, method, z_update, tol, maxiter, repeat):
     for _ in range(max(1, repeat)):
         t0 = time.perf_counter()
         res = nrmicp.solve(problem.A, problem.q, problem.zeta, method=method, tol=tol, maxiter=maxiter,
-                           z_update=z_update)
+                           z_update=_z_update_used(problem, z_update))
         dt = time.perf_counter() - t0
         if dt < best_t:
             best, best_t = res, dt
@@ -229,7 +230,7 @@ def run_case(problem, scene, method, z_update, tols, *, size, maxiter, repeat, h
     failed = None  # (tol, row) of the first solve that did not converge
     try:  # one untimed warm-up solve (first-call allocations, library initialisation)
         nrmicp.solve(problem.A, problem.q, problem.zeta, method=method, tol=max(tols), maxiter=maxiter,
-                     z_update=z_update)
+                     z_update=case.z_update_used)
     except Exception:
         pass  # the timed solves record it
     for tol in tols:
@@ -268,7 +269,7 @@ def run_case(problem, scene, method, z_update, tols, *, size, maxiter, repeat, h
             for _ in range(max(1, repeat)):  # best of repeat, like the timed solves
                 t0 = time.perf_counter()
                 r = nrmicp.solve(problem.A, problem.q, problem.zeta, method=method, tol=min(tols),
-                                 maxiter=maxiter, z_update=z_update, record_history=True)
+                                 maxiter=maxiter, z_update=case.z_update_used, record_history=True)
                 dt = time.perf_counter() - t0
                 if dt < wall:
                     res, wall = r, dt
@@ -298,7 +299,7 @@ def rounding_floor(problem, cases) -> float:
                     best = (r["residual"], c)
         if best is None:
             return math.nan
-        z = problem.solve(method=best[1].method, z_update=best[1].z_update, tol=0.0).z
+        z = problem.solve(method=best[1].method, z_update=best[1].z_update_used or best[1].z_update, tol=0.0).z
     absA = abs(problem.A)
     return float(np.finfo(float).eps * np.linalg.norm(absA @ np.abs(z) + np.abs(problem.q)))
 
