@@ -42,7 +42,8 @@ def demo(argv=None) -> int:
                          r.inner))
         print(_table(rows, ("method", "status", "iterations", "seconds", "Res", "max|z-z*|", "left solve")))
     print("\nDefaults: Omega1 = I; Omega2 = diag(A) for the AOR types, I for nrm (the paper's), "
-          "alpha*I for nrmm; phi = 0; z-update 'explicit' for the LCP, 'solve' (the paper's) for the ICP.")
+          "alpha*I for nrmm; phi = 0; z-update 'explicit' (no solve with A), except 'solve' (the paper's) "
+          "for nrm on the ICP. nrm with the paper's Omega2 = I is slow when diag(A) is far from 1 (here 8).")
     return 0
 
 

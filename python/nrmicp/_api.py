@@ -416,10 +416,11 @@ def solve(A, q, zeta=None, *, method="nrmgs", tol=1e-8, maxiter=10000, omega1=No
         Relaxation of the two-sweep method only.
     z_update : {'auto', 'explicit', 'solve'}
         How z is recovered from the modulus vector: 'solve' is the paper's Step 1 (a solve with A,
-        factorized once); 'explicit' needs no solve with A. 'auto' (= 'explicit'): measured 4-10x
-        faster on ICPs at equal iteration counts and convergent on unshifted-Laplacian ICPs where
-        'solve' stagnates; use 'solve' when ζ has Lipschitz constant about 1 (e.g. impulse control),
-        where only 'solve' converged. An LCP never factorizes A unless 'solve' is asked for.
+        factorized once); 'explicit' needs no solve with A. 'auto' = 'explicit' (measured 4-10x
+        faster on ICPs at equal iteration counts, and convergent on unshifted-Laplacian and
+        thermoforming ICPs where 'solve' stagnates), except 'solve' for method 'nrm' with the
+        paper's Ω2 = I on an ICP (there only 'solve' converged). Use 'solve' when ζ has Lipschitz
+        constant about 1 (impulse control). An LCP never factorizes A unless 'solve' is asked for.
     inner : {'auto', 'cholmod', 'umfpack', 'eigen_llt', 'eigen_lu'}
         Factorization for Ω2 + (A + φ)Ω1 (nrm, nrmm) and for A ('solve' z-update). 'auto':
         CHOLMOD when symmetric positive definite, else UMFPACK (Eigen's solvers without SuiteSparse).

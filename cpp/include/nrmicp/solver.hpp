@@ -119,9 +119,12 @@ class Solver {
     const Eigen::Index n = A_.rows();
     const bool lcp = zeta.kind() == ZetaKind::None;
     // Auto = Explicit: measured faster (no solve with A: 4-10x on ICPs at equal iteration
-    // counts) and more robust (it converged on unshifted-Laplacian ICPs where Solve did not);
-    // Solve is the paper's and is needed when ζ's Lipschitz constant is about 1 (README).
-    const ZUpdate zu = o.z_update == ZUpdate::Auto ? ZUpdate::Explicit : o.z_update;
+    // counts) and more robust (it converged on unshifted-Laplacian and thermoforming ICPs where
+    // Solve stagnated). Except the paper's NRM (Ω2 = I, far from diag A) on an ICP: there
+    // Explicit stagnated on Bai's ICPs and Solve converged (~145 iterations). Solve is also
+    // needed when ζ's Lipschitz constant is about 1 (README).
+    const bool paper_nrm_icp = !lcp && options_.method == Method::NRM && options_.omega2.size() == 0;
+    const ZUpdate zu = o.z_update != ZUpdate::Auto ? o.z_update : (paper_nrm_icp ? ZUpdate::Solve : ZUpdate::Explicit);
     Result res;
     Timings& tm = res.timings;
     if (zu == ZUpdate::Solve) {
