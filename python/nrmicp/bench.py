@@ -193,12 +193,17 @@ class Progress:
             sys.stderr.flush()
 
 
-def _z_update_used(problem, z_update: str) -> str:
+def _z_update_used(problem, z_update: str, method: str = "") -> str:
     if z_update != "auto":
         return z_update
-    # 'auto' is 'explicit' (SPEC), unless the scene says it needs another z-update
-    # (impulse control: Lipschitz-1 ζ, where only 'solve' converges; Problem.solver_options).
-    return getattr(problem, "solver_options", {}).get("z_update", "explicit")
+    # A scene may say it needs a z-update (impulse control: Lipschitz-1 ζ, only 'solve'
+    # converges; Problem.solver_options). Otherwise SPEC's 'auto': explicit, except 'solve' for
+    # nrm (paper's Omega2 = I) on an ICP with a non-constant ζ.
+    needed = getattr(problem, "solver_options", {}).get("z_update")
+    if needed:
+        return needed
+    icp = problem.zeta is not None and not isinstance(problem.zeta, np.ndarray)
+    return "solve" if (method == "nrm" and icp) else "explicit"
 
 
 def _status_name(status) -> str:
@@ -213,7 +218,7 @@ def _timed_solve(problem, method, z_update, tol, maxiter, repeat):
     for _ in range(max(1, repeat)):
         t0 = time.perf_counter()
         res = nrmicp.solve(problem.A, problem.q, problem.zeta, method=method, tol=tol, maxiter=maxiter,
-                           z_update=_z_update_used(problem, z_update))
+                           z_update=_z_update_used(problem, z_update, method))
         dt = time.perf_counter() - t0
         if dt < best_t:
             best, best_t = res, dt
@@ -224,7 +229,7 @@ def run_case(problem, scene, method, z_update, tols, *, size, maxiter, repeat, h
     """All tols of one case, then (if ``history``) one recorded run at the smallest tol."""
     import nrmicp
 
-    case = Case(scene, method, z_update, _z_update_used(problem, z_update))
+    case = Case(scene, method, z_update, _z_update_used(problem, z_update, method))
     base = dict(scene=scene, size=size, n=problem.n, method=method, z_update=z_update,
                 z_update_used=case.z_update_used, repeat=repeat)
     failed = None  # (tol, row) of the first solve that did not converge
