@@ -240,7 +240,7 @@ class Solver {
       if constexpr (row_major) {
         detail::ScopedTimer t(tm.spmv);  // the sweep is the product with A (and the triangular solve)
         return detail::aor_sweep(A_, z, lcp ? nullptr : &zeta_z, lcp ? nullptr : &zhat, q, om1, om2,
-                                 splitting_->left_diagonal(), splitting_->lower_scale(), gamma, x, z_next, dx,
+                                 splitting_->left_inverse_diagonal(), splitting_->lower_scale(), gamma, x, z_next, dx,
                                  last_step);
       } else {
         return std::numeric_limits<double>::quiet_NaN();  // unreachable: sweep needs row-major

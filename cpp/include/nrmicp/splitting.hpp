@@ -179,6 +179,7 @@ class Splitting {
     for (Eigen::Index i = 0; i < n; ++i)
       if (!(diagonal_[i] != 0) || !std::isfinite(diagonal_[i]))
         throw std::invalid_argument("Splitting: the left matrix has a zero diagonal entry at " + std::to_string(i));
+    inverse_diagonal_ = diagonal_.cwiseInverse();
     const bool lower = (b != 0);
     kind_ = lower ? LeftKind::Lower : LeftKind::Diagonal;
     if (lower) {
@@ -246,13 +247,14 @@ class Splitting {
   bool two_sweep() const { return n2_.rows() > 0; }
   /// Diagonal of Lm (AOR types) and the factor β/α of its strictly lower part (β/α) a_ij Ω1_j.
   const Vector& left_diagonal() const { return diagonal_; }
+  const Vector& left_inverse_diagonal() const { return inverse_diagonal_; }
   double lower_scale() const { return lower_scale_; }
   const RowMatrix& n2() const { return n2_; }
 
  private:
   LeftKind kind_ = LeftKind::Factorized;
   InnerSolver<StorageIndex> solver_;
-  Vector diagonal_;
+  Vector diagonal_, inverse_diagonal_;
   double lower_scale_ = 0;
   const RowMatrix& lower() const {
     std::call_once(lower_once_, [this] { build_lower_(lower_); });
