@@ -229,6 +229,7 @@ def main_run(args):
                 ("nrmgs", "nrmgs", {}, "SPEC defaults"),
                 ("nrmsor", "nrmsor", dict(alpha=tuned["alpha_default"]),
                  f"alpha={tuned['alpha_default']} (tuned), Omega2=D"),
+                ("nrmgs+aa", "nrmgs", dict(accelerate="anderson"), "accelerate='anderson' (m=5); no scipy twin"),
                 ("nrm", "nrm", {}, "SPEC defaults (Omega1=Omega2=I)"),
                 ("nrmm", "nrmm", dict(alpha=math.sqrt(info["lmin"] * info["lmax"])),
                  f"alpha=sqrt(lmin*lmax)={math.sqrt(info['lmin'] * info['lmax']):.4g}"),
@@ -286,8 +287,8 @@ def main_run(args):
                             nit_ref = o["nit"]
                         log(f"  [{target:g}] nrmicp {label:10s} nit={o['nit']:7d} "
                             f"t={o['seconds']:.3f}s res={o['res']:.2e} {st}")
-                    # ---- plain scipy, same method
-                    for form in args.scipy_forms:
+                    # ---- plain scipy, same method (Anderson has no plain-scipy twin)
+                    for form in ([] if kw.get("accelerate") else args.scipy_forms):
                         peer = "scipy" if form == "defect" else "scipy-paper"
                         key = (scene, target, f"{peer}:{label}")
                         sk = should_skip(key)
@@ -519,7 +520,7 @@ def main(argv=None):
     ap.add_argument("--scenes", nargs="+", default=["obstacle0", "bai4"],
                     choices=["obstacle0", "bai4"])
     ap.add_argument("--methods", nargs="+",
-                    default=["nrmgs", "nrmsor", "nrm", "nrmm"])
+                    default=["nrmgs", "nrmsor", "nrmgs+aa", "nrm", "nrmm"])
     ap.add_argument("--peers", nargs="+",
                     default=["psor", "osqp", "clarabel", "piqp", "proxsuite"])
     ap.add_argument("--scipy-forms", nargs="+", default=["defect"],

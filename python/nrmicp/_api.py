@@ -40,7 +40,9 @@ class Result(OptimizeResult):
     ``success``, ``status`` (:class:`Status`), ``message``, ``nit`` (iterations to reach ``z``),
     ``residual`` (Res(z) = ‖min(Az+q, z−ζ(z))‖₂), ``history`` (dict of arrays ``iteration``,
     ``seconds``, ``residual``; None unless ``record_history``), ``timings`` (dict of seconds:
-    ``setup``, ``factorization``, ``iterations``, ``zeta``, ``spmv``, ``inner_solve``, ``total``),
+    ``setup``, ``factorization``, ``iterations``, ``zeta``, ``spmv``, ``inner_solve``, ``total``;
+    ``factorization`` is part of ``setup``, and for the AOR-type methods the one-pass sweep,
+    product and forward substitution together, counts as ``spmv``),
     ``method``, ``inner`` (the solver used for the left matrix).
     """
 
@@ -418,8 +420,9 @@ def solve(A, q, zeta=None, *, method="nrmgs", tol=1e-8, maxiter=10000, omega1=No
         How z is recovered from the modulus vector: 'solve' is the paper's Step 1 (a solve with A,
         factorized once); 'explicit' needs no solve with A. 'auto' = 'explicit' (measured 4-10x
         faster on ICPs at equal iteration counts, and convergent on unshifted-Laplacian and
-        thermoforming ICPs where 'solve' stagnates), except 'solve' for method 'nrm' with the
-        paper's Ω2 = I on an ICP (there only 'solve' converged). Use 'solve' when ζ has Lipschitz
+        thermoforming ICPs where 'solve' stagnates), except 'solve' on an ICP for method 'nrm' with
+        the paper's Ω2 = I (there only 'solve' converged) and for the baseline 'mms' (whose
+        definition, Zheng–Vong, includes it). Use 'solve' when ζ has Lipschitz
         constant about 1 (impulse control). An LCP never factorizes A unless 'solve' is asked for.
     inner : {'auto', 'cholmod', 'umfpack', 'eigen_llt', 'eigen_lu'}
         Factorization for Ω2 + (A + φ)Ω1 (nrm, nrmm) and for A ('solve' z-update). 'auto':

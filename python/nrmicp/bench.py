@@ -197,13 +197,13 @@ def _z_update_used(problem, z_update: str, method: str = "") -> str:
     if z_update != "auto":
         return z_update
     # A scene may say it needs a z-update (impulse control: Lipschitz-1 ζ, only 'solve'
-    # converges; Problem.solver_options). Otherwise SPEC's 'auto': explicit, except 'solve' for
-    # nrm (paper's Omega2 = I) on an ICP with a non-constant ζ.
+    # converges; Problem.solver_options). Otherwise SPEC's 'auto': explicit, except 'solve' on an
+    # ICP with a non-constant ζ for nrm (paper's Omega2 = I) and the baseline mms.
     needed = getattr(problem, "solver_options", {}).get("z_update")
     if needed:
         return needed
     icp = problem.zeta is not None and not isinstance(problem.zeta, np.ndarray)
-    return "solve" if (method == "nrm" and icp) else "explicit"
+    return "solve" if (method in ("nrm", "mms") and icp) else "explicit"
 
 
 def _status_name(status) -> str:

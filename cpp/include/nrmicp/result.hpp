@@ -36,7 +36,8 @@ struct Timings {
   double factorization = 0;  ///< sparse factorizations (Lm and, when needed, A)
   double iterations = 0;     ///< the iteration loop of this solve
   double zeta = 0;           ///< evaluating ζ
-  double spmv = 0;           ///< products with A (and ζ's B, two-sweep's N2)
+  double spmv = 0;           ///< products with A (and ζ's B, two-sweep's N2); for the AOR types on a
+                             ///< row-major A the one-pass sweep (product + forward substitution) is here
   double inner_solve = 0;    ///< solves with Lm and A (factor or triangular)
   double total = 0;          ///< this solve, from entry to return
 };

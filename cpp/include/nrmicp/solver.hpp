@@ -122,9 +122,11 @@ class Solver {
     // counts) and more robust (it converged on unshifted-Laplacian and thermoforming ICPs where
     // Solve stagnated). Except the paper's NRM (Ω2 = I, far from diag A) on an ICP: there
     // Explicit stagnated on Bai's ICPs and Solve converged (~145 iterations). Solve is also
-    // needed when ζ's Lipschitz constant is about 1 (README).
-    const bool paper_nrm_icp = !lcp && options_.method == Method::NRM && options_.omega2.size() == 0;
-    const ZUpdate zu = o.z_update != ZUpdate::Auto ? o.z_update : (paper_nrm_icp ? ZUpdate::Solve : ZUpdate::Explicit);
+    // needed when ζ's Lipschitz constant is about 1 (README). MMS is the Zheng–Vong baseline,
+    // whose definition includes the Solve update: Auto keeps it (else it equals NRMGS).
+    const bool paper_update = !lcp && ((options_.method == Method::NRM && options_.omega2.size() == 0) ||
+                                       options_.method == Method::MMS);
+    const ZUpdate zu = o.z_update != ZUpdate::Auto ? o.z_update : (paper_update ? ZUpdate::Solve : ZUpdate::Explicit);
     Result res;
     Timings& tm = res.timings;
     if (zu == ZUpdate::Solve) {
@@ -228,7 +230,7 @@ class Solver {
     // per iteration (detail/sweep.hpp): it returns Res(z⁽ᵏ⁾) and has already made x⁽ᵏ⁺¹⁾ and
     // z⁽ᵏ⁺¹⁾ (in z_next), which are simply not used when the loop stops at k.
     const bool sweep = row_major && is_aor_type(options_.method) && !two_sweep && !anderson &&
-                       zu == ZUpdate::Explicit;
+                       params_.theta == 1 && zu == ZUpdate::Explicit;
     Vector z_next;
     if (sweep) z_next.resize(n);
     auto run_sweep = [&]() -> double {
@@ -239,7 +241,7 @@ class Solver {
       }
       if constexpr (row_major) {
         detail::ScopedTimer t(tm.spmv);  // the sweep is the product with A (and the triangular solve)
-        return detail::aor_sweep(A_, z, lcp ? nullptr : &zeta_z, lcp ? nullptr : &zhat, q, om1, om2,
+        return detail::aor_sweep(A_, z, lcp ? nullptr : &zeta_z, lcp ? nullptr : &zhat, q, om1, omega1_is_identity, om2,
                                  splitting_->left_inverse_diagonal(), splitting_->lower_scale(), gamma, x, z_next, dx,
                                  last_step);
       } else {

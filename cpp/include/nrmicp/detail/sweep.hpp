@@ -16,12 +16,14 @@ namespace nrmicp::detail {
 /// Computes Res(z⁽ᵏ⁾) (returned), x ← x⁽ᵏ⁺¹⁾ and z_next ← z⁽ᵏ⁺¹⁾; `step` = max|x⁽ᵏ⁺¹⁾ − x⁽ᵏ⁾|.
 /// For an LCP pass zeta_z = zhat = nullptr (then ẑ = z); for an ICP, zeta_z = ζ(z⁽ᵏ⁾) and
 /// zhat = ζ(z⁽ᵏ⁾) + Ω1(|x| + x)/γ; lm_inverse_diagonal = 1 / diag(Lm). `dx` is workspace of length n.
-template <typename MatrixType>
-double aor_sweep(const MatrixType& A, const Eigen::VectorXd& z, const Eigen::VectorXd* zeta_z,
-                 const Eigen::VectorXd* zhat, const Eigen::VectorXd& q, const Eigen::VectorXd& omega1,
-                 const Eigen::VectorXd& omega2, const Eigen::VectorXd& lm_inverse_diagonal, double lower_scale,
-                 double gamma, Eigen::VectorXd& x, Eigen::VectorXd& z_next, Eigen::VectorXd& dx, double& step) {
+/// `OmegaOneIsIdentity`: Ω1 = I (the default), so Ω1 is not read: the sweep is bandwidth-bound.
+template <bool OmegaOneIsIdentity, typename MatrixType>
+double aor_sweep_impl(const MatrixType& A, const Eigen::VectorXd& z, const Eigen::VectorXd* zeta_z,
+                      const Eigen::VectorXd* zhat, const Eigen::VectorXd& q, const Eigen::VectorXd& omega1,
+                      const Eigen::VectorXd& omega2, const Eigen::VectorXd& lm_inverse_diagonal, double lower_scale,
+                      double gamma, Eigen::VectorXd& x, Eigen::VectorXd& z_next, Eigen::VectorXd& dx, double& step) {
   static_assert(MatrixType::IsRowMajor, "aor_sweep needs a row-major matrix");
+  auto om1 = [&](Eigen::Index j) { if constexpr (OmegaOneIsIdentity) return 1.0; else return omega1[j]; };
   const Eigen::Index n = A.rows();
   const double inv_gamma = 1.0 / gamma;
   double res2 = 0, max_step = 0;
@@ -32,7 +34,7 @@ double aor_sweep(const MatrixType& A, const Eigen::VectorXd& z, const Eigen::Vec
       const double a = it.value();
       az += a * z[j];
       if (zhat) azhat += a * (*zhat)[j];
-      if (j < i) lower += a * omega1[j] * dx[j];
+      if (j < i) lower += a * om1(j) * dx[j];
     }
     const double wi = az + q[i];
     const double gi = zeta_z ? z[i] - (*zeta_z)[i] : z[i];
@@ -47,10 +49,23 @@ double aor_sweep(const MatrixType& A, const Eigen::VectorXd& z, const Eigen::Vec
     const double xn = xi + d;
     x[i] = xn;
     max_step = std::max(max_step, std::abs(d));
-    z_next[i] = (zeta_z ? (*zeta_z)[i] : 0.0) + omega1[i] * (std::abs(xn) + xn) * inv_gamma;
+    z_next[i] = (zeta_z ? (*zeta_z)[i] : 0.0) + om1(i) * (std::abs(xn) + xn) * inv_gamma;
   }
   step = max_step;
   return std::sqrt(res2);
+}
+
+template <typename MatrixType>
+double aor_sweep(const MatrixType& A, const Eigen::VectorXd& z, const Eigen::VectorXd* zeta_z,
+                 const Eigen::VectorXd* zhat, const Eigen::VectorXd& q, const Eigen::VectorXd& omega1,
+                 bool omega1_is_identity, const Eigen::VectorXd& omega2, const Eigen::VectorXd& lm_inverse_diagonal,
+                 double lower_scale, double gamma, Eigen::VectorXd& x, Eigen::VectorXd& z_next, Eigen::VectorXd& dx,
+                 double& step) {
+  if (omega1_is_identity)
+    return aor_sweep_impl<true>(A, z, zeta_z, zhat, q, omega1, omega2, lm_inverse_diagonal, lower_scale, gamma, x,
+                                z_next, dx, step);
+  return aor_sweep_impl<false>(A, z, zeta_z, zhat, q, omega1, omega2, lm_inverse_diagonal, lower_scale, gamma, x,
+                               z_next, dx, step);
 }
 
 }  // namespace nrmicp::detail
