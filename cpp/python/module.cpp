@@ -182,6 +182,21 @@ void bind_solver(py::module_& m, const char* name) {
       .def("parameters", &PySolver<I>::parameters);
 }
 
+// Sorted column indices without duplicates in every row, and indptr consistent with them.
+template <typename I>
+bool csr_is_canonical(const py::array& indptr, const py::array& indices) {
+  const I* p = checked_data<I>(indptr, "A.indptr");
+  const I* j = checked_data<I>(indices, "A.indices");
+  const py::ssize_t rows = indptr.shape(0) - 1, nnz = indices.shape(0);
+  if (rows < 0 || p[0] != 0 || p[rows] != nnz) return false;
+  for (py::ssize_t r = 0; r < rows; ++r) {
+    if (p[r + 1] < p[r]) return false;
+    for (I k = p[r] + 1; k < p[r + 1]; ++k)
+      if (j[k] <= j[k - 1]) return false;
+  }
+  return true;
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_core, m) {
@@ -225,6 +240,10 @@ PYBIND11_MODULE(_core, m) {
   bind_solver<std::int32_t>(m, "SolverI32");
   bind_solver<std::int64_t>(m, "SolverI64");
 
+  m.def("csr_is_canonical", [](const py::array& indptr, const py::array& indices) {
+    return indices.dtype().is(py::dtype::of<std::int64_t>()) ? csr_is_canonical<std::int64_t>(indptr, indices)
+                                                              : csr_is_canonical<std::int32_t>(indptr, indices);
+  });
   m.def("backends", [] {
     py::dict d;
     d["cholmod"] = nrmicp::have_cholmod();

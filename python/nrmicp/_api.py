@@ -278,9 +278,11 @@ class Solver:
                 return bool(stop)
 
         # Res is re-measured in the original variables whenever that costs no call of a user ζ
-        # (None, constant, Affine), and always with scaling (then a callable ζ is called once more
-        # per round): success is never declared on the strength of a different residual.
-        verify = kind != 3 or scaled
+        # (constant: the core iterated the shifted LCP; Affine), and always with scaling (then a
+        # callable ζ is called once more per round): success is never declared on the strength of
+        # a different residual. An unscaled LCP needs no re-check: the core's Res is already
+        # min(Az + q, z) of the returned z in the original variables.
+        verify = kind in (1, 2) or scaled
 
         def original_residual(z):
             w = self.A @ z + qv

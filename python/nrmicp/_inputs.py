@@ -78,9 +78,14 @@ def as_csr(A, name: str = "A", *, square: bool = True) -> sp.csr_matrix:
 
 
 def _is_canonical(M: sp.csr_matrix) -> bool:
-    # Checks sortedness and duplicates directly (scipy's cached flag may be stale).
+    # Checks sortedness and duplicates directly (scipy's cached flag may be stale); one pass in
+    # C++ for the index types the core takes (the numpy version below costs ~13 ms at nnz = 5e6).
     if M.nnz == 0:
         return True
+    if M.indices.dtype == M.indptr.dtype and M.indices.dtype in (np.int32, np.int64) \
+            and M.indices.flags.c_contiguous and M.indptr.flags.c_contiguous:
+        from . import _core
+        return bool(_core.csr_is_canonical(M.indptr, M.indices))
     d = np.diff(M.indices)
     row_starts = M.indptr[1:-1]
     mask = np.ones(d.shape, dtype=bool)

@@ -33,6 +33,7 @@ Eigen::VectorXd diagonal(const MatrixType& A) {
 /// The method's parameters with every default resolved (docs/SPEC.md).
 struct Parameters {
   Eigen::VectorXd omega1, omega2, phi;
+  Eigen::VectorXd diagonal;  ///< diag(A), computed once
   double gamma = 1, alpha = 1, beta = 1, theta = 1;
 };
 
@@ -41,8 +42,9 @@ struct Parameters {
 template <typename MatrixType>
 Parameters resolve_parameters(const MatrixType& A, const Options& o) {
   const Eigen::Index n = A.rows();
-  const Eigen::VectorXd d = diagonal(A);
   Parameters p;
+  p.diagonal = diagonal(A);
+  const Eigen::VectorXd& d = p.diagonal;
   p.gamma = o.gamma;
   p.theta = o.theta;
   const bool has_alpha = !std::isnan(o.alpha), has_beta = !std::isnan(o.beta);
@@ -175,7 +177,7 @@ class Splitting {
     // Lm = Ω2 + ((D − βL)/α + φ)Ω1: diagonal Ω2 + (d/α + φ)Ω1, strictly lower (β/α) a_ij Ω1_j.
     const double a = p.alpha, b = p.beta;
     lower_scale_ = b / a;
-    diagonal_ = p.omega2 + (diagonal(A) / a + p.phi).cwiseProduct(p.omega1);
+    diagonal_ = p.omega2 + (p.diagonal / a + p.phi).cwiseProduct(p.omega1);
     for (Eigen::Index i = 0; i < n; ++i)
       if (!(diagonal_[i] != 0) || !std::isfinite(diagonal_[i]))
         throw std::invalid_argument("Splitting: the left matrix has a zero diagonal entry at " + std::to_string(i));
