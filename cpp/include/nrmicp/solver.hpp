@@ -228,10 +228,11 @@ class Solver {
 
     // The AOR-type members with the explicit update on a row-major A run as one sweep over A
     // per iteration (detail/sweep.hpp): it returns Res(z⁽ᵏ⁾) and has already made x⁽ᵏ⁺¹⁾ and
-    // z⁽ᵏ⁺¹⁾ (in z_next), which are simply not used when the loop stops at k.
-    const bool sweep = row_major && is_aor_type(options_.method) && !two_sweep && !anderson &&
-                       params_.theta == 1 && zu == ZUpdate::Explicit;
-    Vector z_next;
+    // z⁽ᵏ⁺¹⁾ (in z_next), which are simply not used when the loop stops at k. With Anderson,
+    // the sweep's plain step is mixed and z is recomputed from the mixed x.
+    const bool sweep = row_major && is_aor_type(options_.method) && !two_sweep && params_.theta == 1 &&
+                       zu == ZUpdate::Explicit;
+    Vector z_next, x_before;
     if (sweep) z_next.resize(n);
     auto run_sweep = [&]() -> double {
       if (!lcp) {
@@ -250,13 +251,15 @@ class Solver {
     };
 
     for (int k = 0;; ++k) {
+      if (sweep && anderson) x_before = x;  // the sweep advances x in place
       double r = sweep ? run_sweep() : evaluate();
       if (aa_pending && zeta_ok && !(r < prev_res)) {
         // Safeguard: the accelerated step did not reduce Res; take the plain step instead.
         x = x_plain;
         aa->reset();
         compute_z();
-        r = evaluate();
+        if (sweep) x_before = x;
+        r = sweep ? run_sweep() : evaluate();
       }
       aa_pending = false;
       if (!zeta_ok) { res.status = Status::ZetaFailed; res.iterations = k; break; }
@@ -307,7 +310,18 @@ class Solver {
       if (k >= o.maxiter) { res.status = Status::MaxIterations; break; }
       prev_res = r;
       if (sweep) {  // x⁽ᵏ⁺¹⁾ is made; take z⁽ᵏ⁺¹⁾
-        z.swap(z_next);
+        if (!anderson) {
+          z.swap(z_next);
+          continue;
+        }
+        // Anderson on the sweep: its workspace dx is exactly the plain step x⁽ᵏ⁺¹⁾ − x⁽ᵏ⁾.
+        x_plain = x;
+        aa->step(x_before, dx, x_next);
+        last_step = (x_next - x_before).template lpNorm<Eigen::Infinity>();
+        x.swap(x_next);
+        aa_pending = true;
+        if (!lcp) zeta_prev.swap(zeta_z);  // ζ(z⁽ᵏ⁾) for the explicit update
+        compute_z();
         continue;
       }
 
