@@ -31,7 +31,7 @@ def demo(argv=None) -> int:
           + ", ".join(k for k, v in nrmicp.backends().items() if v))
     for kind in ("lcp", "icp"):
         P = scenes.bai(args.m, symmetric=not args.nonsymmetric, kind=kind)
-        print(f"\n{P.description}" + ("" if kind == "lcp" else f"; zeta(z) = {0.5}*sin(z) + s (a Python callable)"))
+        print(f"\n{P.description}" + ("" if kind == "lcp" else " (zeta is a Python callable)"))
         rows = []
         for method in nrmicp.METHODS:
             t0 = time.perf_counter()
@@ -42,8 +42,9 @@ def demo(argv=None) -> int:
                          r.inner))
         print(_table(rows, ("method", "status", "iterations", "seconds", "Res", "max|z-z*|", "left solve")))
     print("\nDefaults: Omega1 = I; Omega2 = diag(A) for the AOR types, I for nrm (the paper's), "
-          "alpha*I for nrmm; phi = 0; z-update 'explicit' (no solve with A), except 'solve' (the paper's) "
-          "for nrm on the ICP. nrm with the paper's Omega2 = I is slow when diag(A) is far from 1 (here 8).")
+          "alpha*I for nrmm; phi = 0.\nz-update 'explicit' (no solve with A), except 'solve' (the paper's) on the "
+          "ICP for nrm and the baseline mms.\nnrm with the paper's Omega2 = I is slow when diag(A) is far from 1 "
+          "(here 8).")
     return 0
 
 
