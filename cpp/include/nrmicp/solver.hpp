@@ -28,8 +28,6 @@
 
 namespace nrmicp {
 
-/// Res(z) = ‖min(w, g)‖₂ with w = Az + q, g = z − ζ(z).
-inline double residual(const Eigen::VectorXd& w, const Eigen::VectorXd& g) { return w.cwiseMin(g).norm(); }
 
 /// Set-up (splitting, factorization) once; solve(q, ζ) many times.
 /// `A` is held by reference: it must outlive the Solver (as with Eigen's solvers).
