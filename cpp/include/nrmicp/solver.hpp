@@ -148,14 +148,18 @@ class Solver {
       detail::ScopedTimer t(tm.zeta);
       zeta_ok = zeta.eval(v, out);
     };
+    // out = ζ-part + Ω1(|x| + x)/γ (no ζ-part for an LCP): the explicit z-update and ẑ.
+    auto from_modulus = [&](const Vector* zeta_part, Vector& out) {
+      if (zeta_part) {
+        for (Eigen::Index i = 0; i < n; ++i) out[i] = (*zeta_part)[i] + om1[i] * (std::abs(x[i]) + x[i]) / gamma;
+      } else {
+        for (Eigen::Index i = 0; i < n; ++i) out[i] = om1[i] * (std::abs(x[i]) + x[i]) / gamma;
+      }
+    };
     // z from x (and, for the explicit update, ζ of the previous z).
     auto compute_z = [&]() {
       if (zu == ZUpdate::Explicit) {
-        if (lcp) {
-          for (Eigen::Index i = 0; i < n; ++i) z[i] = om1[i] * (std::abs(x[i]) + x[i]) / gamma;
-        } else {
-          for (Eigen::Index i = 0; i < n; ++i) z[i] = zeta_prev[i] + om1[i] * (std::abs(x[i]) + x[i]) / gamma;
-        }
+        from_modulus(lcp ? nullptr : &zeta_prev, z);
       } else {
         for (Eigen::Index i = 0; i < n; ++i) tmp[i] = om2[i] * (std::abs(x[i]) - x[i]) / gamma - q[i];
         detail::ScopedTimer t(tm.inner_solve);
@@ -236,7 +240,7 @@ class Solver {
       if (!lcp) {
         eval_zeta(z, zeta_z);
         if (!zeta_ok) return std::numeric_limits<double>::quiet_NaN();
-        for (Eigen::Index i = 0; i < n; ++i) zhat[i] = zeta_z[i] + om1[i] * (std::abs(x[i]) + x[i]) / gamma;
+        from_modulus(&zeta_z, zhat);
       }
       if constexpr (row_major) {
         detail::ScopedTimer t(tm.spmv);  // the sweep is the product with A (and the triangular solve)
@@ -327,7 +331,7 @@ class Solver {
       if (!fused) {
         const Vector* Azh = &Az;  // LCP, explicit update: ẑ = z exactly, no second product
         if (!(lcp && zu == ZUpdate::Explicit)) {
-          for (Eigen::Index i = 0; i < n; ++i) zhat[i] = zeta_z[i] + om1[i] * (std::abs(x[i]) + x[i]) / gamma;
+          from_modulus(&zeta_z, zhat);
           spmv(zhat, Azhat);
           Azh = &Azhat;
         }
@@ -351,42 +355,17 @@ class Solver {
         last_step = (x_next - x).template lpNorm<Eigen::Infinity>();
         x.swap(x_next);
         aa_pending = true;
-      }
-      if (!lcp) zeta_prev.swap(zeta_z);  // ζ(z⁽ᵏ⁾) for the explicit update of z⁽ᵏ⁺¹⁾
-      if (anderson || zu != ZUpdate::Explicit) {
-        if (!anderson) {
-          double step = 0;
-          for (Eigen::Index i = 0; i < n; ++i) {
-            const double d = theta * dx[i];
-            x[i] += d;
-            step = std::max(step, std::abs(d));
-          }
-          last_step = step;
-        }
-        compute_z();
-      } else {  // x += θ dx and the explicit z-update in one pass (Ω1 = I: one vector fewer to read)
+      } else {
         double step = 0;
-        const double inv_gamma = 1.0 / gamma;
-        auto update = [&](auto omega1_at, auto zeta_at) {
-          for (Eigen::Index i = 0; i < n; ++i) {
-            const double d = theta * dx[i];
-            const double xi = x[i] + d;
-            x[i] = xi;
-            step = std::max(step, std::abs(d));
-            z[i] = zeta_at(i) + omega1_at(i) * (std::abs(xi) + xi) * inv_gamma;
-          }
-        };
-        auto zero = [](Eigen::Index) { return 0.0; };
-        auto zeta_at = [&](Eigen::Index i) { return zeta_prev[i]; };
-        auto unit = [](Eigen::Index) { return 1.0; };
-        auto omega1_at = [&](Eigen::Index i) { return om1[i]; };
-        if (omega1_is_identity) {
-          if (lcp) update(unit, zero); else update(unit, zeta_at);
-        } else {
-          if (lcp) update(omega1_at, zero); else update(omega1_at, zeta_at);
+        for (Eigen::Index i = 0; i < n; ++i) {
+          const double d = theta * dx[i];
+          x[i] += d;
+          step = std::max(step, std::abs(d));
         }
         last_step = step;
       }
+      if (!lcp) zeta_prev.swap(zeta_z);  // ζ(z⁽ᵏ⁾) for the explicit update of z⁽ᵏ⁺¹⁾
+      compute_z();
     }
 
     tm.iterations = detail::ScopedTimer::seconds_since(t_start);
