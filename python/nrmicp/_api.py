@@ -11,7 +11,7 @@ import scipy.sparse as sp
 from scipy.optimize import OptimizeResult
 
 from . import _core
-from ._inputs import as_csr, as_diagonal, as_vector
+from ._inputs import as_constant, as_csr, as_diagonal, as_vector
 from ._scaling import SCALINGS, ScaledCallable, equilibrate, scale_matrix
 
 __all__ = ["solve", "Solver", "Affine", "Result", "Status", "METHODS", "residual", "backends"]
@@ -119,21 +119,10 @@ def _make_zeta(zeta, n):
         B = as_csr(zeta.B, "zeta.B")
         if B.shape != (n, n):
             raise ValueError(f"zeta.B must have shape ({n}, {n}), got {B.shape}")
-        return 2, _constant_vector(zeta.c, n, "zeta.c"), B, None
+        return 2, as_constant(zeta.c, n, "zeta.c"), B, None
     if callable(zeta):
         return 3, None, None, zeta
-    return 1, _constant_vector(zeta, n, "zeta"), None, None
-
-
-def _constant_vector(value, n, name):
-    """A scalar (or 0-d array) broadcast to length n, or a length-n vector; real and finite."""
-    if np.isscalar(value) or (isinstance(value, np.ndarray) and value.ndim == 0):
-        if isinstance(value, np.ndarray):
-            value = value[()]
-        if isinstance(value, (complex, np.complexfloating)):
-            raise TypeError(f"{name} must be real, got {value!r}")
-        return np.full(n, _scalar(value, name))
-    return as_vector(value, n, name)
+    return 1, as_constant(zeta, n, "zeta"), None, None
 
 
 def _scale_choice(scale):

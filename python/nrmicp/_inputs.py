@@ -6,7 +6,7 @@ import warnings
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["as_csr", "as_vector", "as_diagonal", "ConversionWarning"]
+__all__ = ["as_csr", "as_vector", "as_constant", "as_diagonal", "ConversionWarning"]
 
 
 class ConversionWarning(sp.SparseEfficiencyWarning):
@@ -119,17 +119,26 @@ def as_vector(v, n: int, name: str) -> np.ndarray:
     return arr
 
 
+def as_constant(value, n: int, name: str) -> np.ndarray:
+    """A real scalar (broadcast to length n; a 0-d array counts as one) or a length-n vector
+    -> float64 vector, finite. Raises TypeError/ValueError naming `name`."""
+    if np.isscalar(value) or (isinstance(value, np.ndarray) and value.ndim == 0):
+        v = value[()] if isinstance(value, np.ndarray) else value
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
+            raise TypeError(f"{name} must be a real number or a length-{n} vector, got {value!r}")
+        if not np.isfinite(v):
+            raise ValueError(f"{name} must be finite, got {value!r}")
+        return np.full(n, float(v))
+    return as_vector(value, n, name)
+
+
 def as_diagonal(v, n: int, name: str, *, positive: bool) -> np.ndarray | None:
-    """None, a scalar (times I) or a length-n vector -> float64 vector (or None)."""
+    """None, a scalar (times I) or a length-n vector -> float64 vector (or None), checked > 0
+    (`positive`) or >= 0."""
     if v is None:
         return None
-    if np.isscalar(v) or (isinstance(v, np.ndarray) and v.ndim == 0):
-        if isinstance(v, (bool, np.bool_)) or not np.isreal(v):
-            raise TypeError(f"{name} must be a real number or a length-{n} vector, got {v!r}")
-        arr = np.full(n, float(v))
-    else:
-        arr = as_vector(v, n, name).copy()
-    bad = ~np.isfinite(arr) | ((arr <= 0) if positive else (arr < 0))
+    arr = as_constant(v, n, name)
+    bad = (arr <= 0) if positive else (arr < 0)
     if np.any(bad):
         i = int(np.flatnonzero(bad)[0])
         raise ValueError(f"{name}[{i}] = {arr[i]}; {name} must be finite and {'> 0' if positive else '>= 0'}")
