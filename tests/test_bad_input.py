@@ -280,9 +280,9 @@ def test_callback_stop_iteration(scale):
     A, q = _problem(20)
     seen = []
 
-    def cb(r):
-        seen.append(r.nit)
-        if r.nit >= 2:
+    def cb(intermediate_result):
+        seen.append(intermediate_result.nit)
+        if intermediate_result.nit >= 2:
             raise StopIteration
 
     res = nrmicp.solve(A, q, callback=cb, scale=scale, tol=1e-300)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import enum
+import inspect
 import math
 from dataclasses import dataclass
 from typing import Any, Callable
@@ -32,6 +33,17 @@ class Status(enum.IntEnum):
     CALLBACK_STOP = 4   #: the callback raised StopIteration or returned True
     ZETA_FAILED = 5     #: zeta(z) returned non-finite values
 
+    # An IntEnum (compares and indexes like the core's int codes) that prints its name:
+    # str(), format() and f-strings give 'CONVERGED', repr() 'Status.CONVERGED'.
+    def __str__(self) -> str:
+        return self.name
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}.{self.name}"
+
+    def __format__(self, spec: str) -> str:
+        return format(self.name, spec)
+
 
 class Result(OptimizeResult):
     """Result of a solve (a scipy ``OptimizeResult``).
@@ -44,7 +56,13 @@ class Result(OptimizeResult):
     ``factorization`` is part of ``setup``, and for the AOR-type methods the one-pass sweep,
     product and forward substitution together, counts as ``spmv``),
     ``method``, ``inner`` (the solver used for the left matrix).
+    ``x`` is an alias of ``z`` (scipy's name for the solution).
     """
+
+    @property
+    def x(self) -> np.ndarray:
+        """The solution z (scipy's ``OptimizeResult.x``)."""
+        return self["z"]
 
 
 @dataclass(frozen=True)
@@ -133,6 +151,30 @@ def _scale_choice(scale):
     if isinstance(scale, str) and scale.lower() in SCALINGS:
         return scale.lower()
     raise ValueError(f"scale must be False, True, 'rows' or 'both'; got {scale!r}")
+
+
+def _core_callback(callback: Callable, dc: np.ndarray | None) -> Callable[[int, np.ndarray, float], bool]:
+    """The core's per-iterate hook (k, z, Res) -> stop?, calling ``callback`` by scipy's rule:
+    a callback whose only parameter is named ``intermediate_result`` receives a :class:`Result`
+    with ``z`` (= ``x``), ``nit`` and ``residual``; any other callback receives the iterate z
+    alone (``callback(xk)``). Raising StopIteration (or returning True) stops the solve.
+    ``dc``: column scaling, mapping the core's z back to the original variables."""
+    try:
+        params = set(inspect.signature(callback).parameters)
+    except (TypeError, ValueError):  # a builtin without a signature: the plain form
+        params = set()
+    wants_result = params == {"intermediate_result"}
+
+    def hook(k: int, z: np.ndarray, res: float) -> bool:
+        zk = z * dc if dc is not None else z  # a fresh array: the core passes a copy
+        try:
+            stop = callback(intermediate_result=Result(z=zk, nit=k, residual=res)) if wants_result \
+                else callback(zk)
+        except StopIteration:
+            return True
+        return bool(stop)
+
+    return hook
 
 
 #: With scaling, at most this many re-solves with a tighter tolerance when the scaled problem
@@ -257,14 +299,7 @@ class Solver:
         else:
             bp = bi = bd = None
 
-        cb = None
-        if callback is not None:
-            def cb(k, z, res):
-                try:
-                    stop = callback(OptimizeResult(z=z * dc if scaled else z, nit=k, residual=res))
-                except StopIteration:
-                    return True
-                return bool(stop)
+        cb = None if callback is None else _core_callback(callback, dc if scaled else None)
 
         # Res is re-measured in the original variables whenever that costs no call of a user ζ
         # (constant: the core iterated the shifted LCP; Affine), and always with scaling (then a
@@ -423,8 +458,10 @@ def solve(A, q, zeta=None, *, method="nrmgs", tol=1e-8, maxiter=10000, omega1=No
     x0 : array_like (n,), optional
         Initial guess for z (warm start); default zeros.
     callback : callable, optional
-        ``callback(intermediate_result)`` after each iterate with ``z``, ``nit``, ``residual``;
-        raise StopIteration (or return True) to stop: status CALLBACK_STOP.
+        Called after each iterate, by scipy's rule: ``callback(intermediate_result)`` (the only
+        parameter named exactly so) receives a :class:`Result` with ``z`` (alias ``x``), ``nit``
+        and ``residual``; any other callable is called as ``callback(zk)`` with the iterate.
+        Raise StopIteration (or return True) to stop: status CALLBACK_STOP.
     record_history : bool
         Keep (iteration, seconds, Res) of every iterate in ``result.history``.
     stall_iterations : int

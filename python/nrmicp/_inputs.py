@@ -1,6 +1,8 @@
 """Validation and conversion of user input. Nothing the user passed is ever mutated."""
 from __future__ import annotations
 
+import os
+import sys
 import warnings
 
 import numpy as np
@@ -14,8 +16,16 @@ class ConversionWarning(sp.SparseEfficiencyWarning):
     canonical float64 CSR with int32/int64 indices and float64 C-contiguous vectors)."""
 
 
-def _warn(msg: str) -> None:
-    warnings.warn(msg, ConversionWarning, stacklevel=4)
+_PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__)) + os.sep
+
+
+def _warn(msg: str, category: type = ConversionWarning) -> None:
+    """warnings.warn attributed to the user's line: the first frame outside this package
+    (however deep the call, e.g. solve() -> Solver() -> as_csr())."""
+    frame, level = sys._getframe(0), 1
+    while frame is not None and frame.f_code.co_filename.startswith(_PACKAGE_DIR):
+        frame, level = frame.f_back, level + 1
+    warnings.warn(msg, category, stacklevel=level)
 
 
 def as_csr(A, name: str = "A", *, square: bool = True) -> sp.csr_matrix:

@@ -1,0 +1,118 @@
+"""scipy.optimize's conventions, which users of nrmicp already know: ``res.x``, readable
+status names, warnings attributed to the caller's line, and the callback rule
+(``callback(intermediate_result)`` or ``callback(xk)``; StopIteration stops)."""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import nrmicp
+from nrmicp import scenes
+
+
+def _lcp(m=6):
+    P = scenes.bai(m)
+    return P.A, P.q
+
+
+def test_x_is_an_alias_of_z():
+    A, q = _lcp()
+    res = nrmicp.solve(A, q)
+    assert res.x is res.z
+    assert nrmicp.residual(A, q, res.x) < 1e-8
+
+
+@pytest.mark.parametrize("status", list(nrmicp.Status))
+def test_status_prints_its_name(status):
+    assert str(status) == status.name
+    assert f"{status}" == status.name
+    assert f"{status:>20}" == status.name.rjust(20)
+    assert repr(status) == f"Status.{status.name}"
+    assert status == int(status) and isinstance(status, int)  # still an IntEnum
+
+
+def test_status_of_a_result_prints_converged():
+    A, q = _lcp()
+    assert str(nrmicp.solve(A, q).status) == "CONVERGED"
+
+
+def test_conversion_warning_points_at_the_callers_line():
+    A, q = _lcp()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        nrmicp.solve(A.tocsc(), q); line = _line()  # noqa: E702  (the warning's line)
+    conv = [w for w in caught if issubclass(w.category, nrmicp.ConversionWarning)]
+    assert conv, [str(w.message) for w in caught]
+    for w in conv:
+        assert w.filename == __file__, w.filename
+        assert w.lineno == line
+
+
+def test_conversion_warning_from_solver_points_at_the_callers_line():
+    A, q = _lcp()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        nrmicp.Solver(A.toarray()); line = _line()  # noqa: E702
+    conv = [w for w in caught if issubclass(w.category, nrmicp.ConversionWarning)]
+    assert conv and all((w.filename, w.lineno) == (__file__, line) for w in conv)
+
+
+def _line():
+    """The line number of the caller's line."""
+    import sys
+    return sys._getframe(1).f_lineno
+
+
+def test_callback_named_intermediate_result_gets_the_result():
+    A, q = _lcp()
+    seen = []
+
+    def cb(intermediate_result):
+        seen.append((intermediate_result.nit, intermediate_result.residual, intermediate_result.x.copy()))
+
+    res = nrmicp.solve(A, q, callback=cb)
+    assert [k for k, _, _ in seen] == list(range(len(seen)))
+    assert 0 < len(seen) <= res.nit + 1
+    for _, r, x in seen:  # each is the iterate with its Res, recomputed in numpy
+        assert nrmicp.residual(A, q, x) == pytest.approx(r, rel=1e-9, abs=1e-13)
+
+
+@pytest.mark.parametrize("scale", [False, "both"])
+def test_other_callbacks_get_the_iterate(scale):
+    A, q = _lcp()
+    iterates = []
+    res = nrmicp.solve(A, q, callback=lambda xk: iterates.append(np.array(xk)), scale=scale)
+    assert all(isinstance(x, np.ndarray) and x.shape == (A.shape[0],) for x in iterates)
+    assert iterates and nrmicp.residual(A, q, iterates[-1]) < 1e-3
+
+
+def test_callback_with_another_parameter_name_gets_the_iterate():
+    A, q = _lcp()
+    got = []
+
+    def cb(res):  # named 'res', not 'intermediate_result': scipy calls it with xk
+        got.append(type(res))
+
+    nrmicp.solve(A, q, callback=cb)
+    assert got and all(t is np.ndarray for t in got)
+
+
+@pytest.mark.parametrize("form", ["xk", "intermediate_result"])
+def test_stop_iteration_stops(form):
+    A, q = _lcp()
+    calls = []
+
+    def plain(xk):
+        calls.append(1)
+        if len(calls) == 3:
+            raise StopIteration
+
+    def named(intermediate_result):
+        plain(intermediate_result.x)
+
+    res = nrmicp.solve(A, q, tol=1e-300, callback=plain if form == "xk" else named)
+    assert res.status == nrmicp.Status.CALLBACK_STOP and not res.success
+    assert len(calls) == 3
