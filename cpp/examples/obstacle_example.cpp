@@ -33,7 +33,8 @@ int main() {
   const auto r = nrmicp::solve(A, q, nrmicp::Zeta<int>::constant(psi), opt);
   int contact = 0;
   for (int i = 0; i < n; ++i) contact += (r.z[i] - psi[i] < 1e-9);
-  std::printf("status: %s\niterations: %d\nRes: %.3e\ncontact points: %d of %d\n", r.message.c_str(), r.nit,
-              r.residual, contact, n);
+  std::printf("status: %s\niterations: %d\nRes: %.3e\ncontact points: %d of %d\ncholmod: %s, umfpack: %s\n",
+              r.message.c_str(), r.nit, r.residual, contact, n, nrmicp::have_cholmod() ? "yes" : "no",
+              nrmicp::have_umfpack() ? "yes" : "no");
   return r.success() && contact > 0 && contact < n ? 0 : 1;
 }

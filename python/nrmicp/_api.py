@@ -75,9 +75,26 @@ class Affine:
         return self.B @ z + self.c
 
 
-def backends() -> dict:
-    """Which inner solvers this build has: {'cholmod': bool, 'umfpack': bool, 'eigen_llt': True, 'eigen_lu': True}."""
-    return dict(_core.backends())
+_WHY_MISSING = {
+    "disabled": "disabled at build time (NRMICP_USE_SUITESPARSE=OFF)",
+    "not found": "not found at build time (install libsuitesparse-dev, then rebuild nrmicp)",
+}
+
+
+def backends(why: bool = False) -> dict[str, bool] | dict[str, str]:
+    """Which inner solvers this build has: ``{'cholmod': bool, 'umfpack': bool, 'eigen_llt': True,
+    'eigen_lu': True}``. With ``why=True`` the values say why instead: ``'compiled in'``,
+    ``'disabled at build time (NRMICP_USE_SUITESPARSE=OFF)'`` or ``'not found at build time ...'``
+    (recorded by CMake when the module was configured)."""
+    have = {name: bool(v) for name, v in _core.backends().items()}
+    if not why:
+        return have
+    try:
+        from ._build_info import BACKENDS as recorded
+    except ImportError:  # a module built outside CMake's install step
+        recorded = {}
+    return {name: "compiled in" if ok else _WHY_MISSING.get(recorded.get(name, ""), "not compiled in")
+            for name, ok in have.items()}
 
 
 def residual(A, q, z, zeta=None) -> float:
