@@ -1,9 +1,11 @@
-"""Command line: ``python -m nrmicp demo`` and ``python -m nrmicp bench``."""
+"""Command line: ``nrmicp demo`` and ``nrmicp bench`` (or ``python -m nrmicp ...``)."""
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
+from typing import Optional
 
 import numpy as np
 
@@ -16,12 +18,12 @@ def _table(rows, headers):
     return "\n".join(out)
 
 
-def demo(argv=None) -> int:
+def demo(argv: Optional[list[str]] = None, prog: str = "python -m nrmicp demo") -> int:
     """Every method on Bai's problem (LCP and ICP, known solution): iterations, seconds, Res."""
     import nrmicp
     from nrmicp import scenes
 
-    p = argparse.ArgumentParser(prog="python -m nrmicp demo", description=demo.__doc__)
+    p = argparse.ArgumentParser(prog=prog, description=demo.__doc__)
     p.add_argument("--m", type=int, default=256, help="grid side: n = m*m (default 256, n = 65,536)")
     p.add_argument("--tol", type=float, default=1e-8)
     p.add_argument("--nonsymmetric", action="store_true", help="Bai's nonsymmetric matrix")
@@ -48,21 +50,44 @@ def demo(argv=None) -> int:
     return 0
 
 
-def main(argv=None) -> int:
+_COMMANDS = {"demo": "every method on a built-in problem (Bai's test matrices)",
+             "bench": "work-precision sweep: time and iterations against tol, CSV and PNG"}
+
+
+def prog_name(argv0: Optional[str] = None) -> str:
+    """The command as the user typed it: 'nrmicp' for the installed script, 'python -m nrmicp'."""
+    base = os.path.basename(sys.argv[0] if argv0 is None else argv0)
+    return "python -m nrmicp" if base in ("__main__.py", "-m", "-c", "") else base
+
+
+def _parser(prog: str) -> argparse.ArgumentParser:
+    import nrmicp
+
+    p = argparse.ArgumentParser(
+        prog=prog, formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="nrmicp: modulus-based solvers for sparse implicit complementarity problems.",
+        epilog="commands:\n" + "\n".join(f"  {c:<6} {h}" for c, h in _COMMANDS.items())
+               + f"\n\n'{prog} COMMAND --help' describes a command's options.")
+    p.add_argument("--version", action="version", version=f"nrmicp {nrmicp.__version__}")
+    p.add_argument("command", choices=tuple(_COMMANDS), help="what to run")
+    p.add_argument("args", nargs=argparse.REMAINDER, help="options of the command")
+    return p
+
+
+def main(argv: Optional[list[str]] = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    if not argv or argv[0] in ("-h", "--help"):
-        print("usage: python -m nrmicp {demo,bench} [options]\n\n"
-              "  demo   every method on a built-in problem (Bai's test matrices)\n"
-              "  bench  work-precision sweep: time and iterations against tol, CSV and PNG")
-        return 0
-    cmd, rest = argv[0], argv[1:]
-    if cmd == "demo":
-        return demo(rest)
-    if cmd == "bench":
-        from . import bench
-        return bench.main(rest)
-    print(f"unknown command {cmd!r}; use demo or bench", file=sys.stderr)
-    return 2
+    prog = prog_name()
+    parser = _parser(prog)
+    if not argv:  # nothing asked: say how to ask, and fail (as argparse does for a missing argument)
+        parser.print_usage(sys.stderr)
+        print(f"{prog}: error: a command is required ({', '.join(_COMMANDS)}); see '{prog} --help'",
+              file=sys.stderr)
+        return 2
+    ns = parser.parse_args(argv)
+    if ns.command == "demo":
+        return demo(ns.args, prog=f"{prog} demo")
+    from . import bench
+    return bench.main(ns.args, prog=f"{prog} bench")
 
 
 if __name__ == "__main__":

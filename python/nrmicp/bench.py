@@ -54,6 +54,7 @@ import os
 import sys
 import time
 from dataclasses import dataclass, field
+from typing import Optional
 
 import numpy as np
 
@@ -585,11 +586,11 @@ def _tols(args):
     return sorted(set(float(f"{t:.6g}") for t in tols), reverse=True)
 
 
-def _parser():
+def _parser(prog: str = "python -m nrmicp bench"):
     import nrmicp
 
     p = argparse.ArgumentParser(
-        prog="python -m nrmicp bench",
+        prog=prog,
         description="Work-precision sweep: seconds, iterations, Res and true error against tol for each "
                     "scene, method and z-update; writes a CSV, PNG diagrams and a text summary.")
     p.add_argument("--scenes", help=f"comma-separated; default: {','.join(DEFAULT_SCENES)} "
@@ -615,10 +616,10 @@ def _parser():
     return p
 
 
-def main(argv=None) -> int:
+def main(argv: Optional[list[str]] = None, prog: str = "python -m nrmicp bench") -> int:
     import nrmicp
 
-    args = _parser().parse_args(argv)
+    args = _parser(prog).parse_args(argv)
     scenes_ = _split(args.scenes) if args.scenes else list(DEFAULT_SCENES)
     methods = [m.lower() for m in _split(args.methods)] if args.methods else \
         list(QUICK_METHODS if args.quick else DEFAULT_METHODS)
