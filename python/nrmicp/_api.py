@@ -5,7 +5,9 @@ import enum
 import inspect
 import math
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any, Callable, Optional, Union
+
+from numpy.typing import ArrayLike
 
 import numpy as np
 import scipy.sparse as sp
@@ -16,6 +18,13 @@ from ._inputs import as_constant, as_csr, as_diagonal, as_vector
 from ._scaling import SCALINGS, ScaledCallable, equilibrate, scale_matrix
 
 __all__ = ["solve", "Solver", "Affine", "Result", "Status", "METHODS", "residual", "backends"]
+
+#: What ``A`` may be: a scipy.sparse matrix or a dense 2-D array.
+MatrixLike = Any
+#: What ``zeta`` may be: None (LCP), a constant, :class:`Affine`, or a callable z -> ζ(z).
+ZetaLike = Union[None, float, ArrayLike, "Affine", Callable[[np.ndarray], ArrayLike]]
+#: A diagonal parameter (omega1, omega2, phi): a scalar (times I) or a length-n vector.
+DiagonalLike = Union[None, float, ArrayLike]
 
 #: The methods, in the order of the paper: the NRM family, then the baselines.
 METHODS = ("nrm", "nrmm", "nrmaor", "nrmsor", "nrmgs", "nrmj", "mms", "two_sweep")
@@ -68,10 +77,10 @@ class Result(OptimizeResult):
 @dataclass(frozen=True)
 class Affine:
     """ζ(z) = B z + c, evaluated in C++ (no Python call per iteration)."""
-    B: Any
-    c: Any
+    B: MatrixLike
+    c: Union[float, ArrayLike]
 
-    def __call__(self, z):
+    def __call__(self, z: np.ndarray) -> np.ndarray:
         return self.B @ z + self.c
 
 
@@ -81,7 +90,7 @@ _WHY_MISSING = {
 }
 
 
-def backends(why: bool = False) -> dict[str, bool] | dict[str, str]:
+def backends(why: bool = False) -> Union[dict[str, bool], dict[str, str]]:
     """Which inner solvers this build has: ``{'cholmod': bool, 'umfpack': bool, 'eigen_llt': True,
     'eigen_lu': True}``. With ``why=True`` the values say why instead: ``'compiled in'``,
     ``'disabled at build time (NRMICP_USE_SUITESPARSE=OFF)'`` or ``'not found at build time ...'``
@@ -97,7 +106,7 @@ def backends(why: bool = False) -> dict[str, bool] | dict[str, str]:
             for name, ok in have.items()}
 
 
-def residual(A, q, z, zeta=None) -> float:
+def residual(A: MatrixLike, q: ArrayLike, z: ArrayLike, zeta: ZetaLike = None) -> float:
     """Res(z) = ‖min(Az + q, z − ζ(z))‖₂, computed in numpy (independent of the C++ core)."""
     z = np.asarray(z, dtype=float)
     w = A @ z + q
@@ -170,7 +179,7 @@ def _scale_choice(scale):
     raise ValueError(f"scale must be False, True, 'rows' or 'both'; got {scale!r}")
 
 
-def _core_callback(callback: Callable, dc: np.ndarray | None) -> Callable[[int, np.ndarray, float], bool]:
+def _core_callback(callback: Callable[..., Any], dc: Optional[np.ndarray]) -> Callable[[int, np.ndarray, float], bool]:
     """The core's per-iterate hook (k, z, Res) -> stop?, calling ``callback`` by scipy's rule:
     a callback whose only parameter is named ``intermediate_result`` receives a :class:`Result`
     with ``z`` (= ``x``), ``nit`` and ``residual``; any other callback receives the iterate z
@@ -217,9 +226,12 @@ class Solver:
             res = s.solve(q_k, zeta=payoff, x0=res.z if k else None)
     """
 
-    def __init__(self, A, *, method="nrmgs", omega1=None, omega2=None, gamma=1.0, phi=None, alpha=None,
-                 beta=None, inner="auto", tol=1e-8, maxiter=10000, theta=1.0, z_update="auto",
-                 accelerate="none", anderson_m=5, record_history=False, stall_iterations=100, scale=False):
+    def __init__(self, A: MatrixLike, *, method: str = "nrmgs", omega1: DiagonalLike = None,
+                 omega2: DiagonalLike = None, gamma: float = 1.0, phi: DiagonalLike = None,
+                 alpha: Optional[float] = None, beta: Optional[float] = None, inner: str = "auto",
+                 tol: float = 1e-8, maxiter: int = 10000, theta: float = 1.0, z_update: str = "auto",
+                 accelerate: Optional[str] = "none", anderson_m: int = 5, record_history: bool = False,
+                 stall_iterations: int = 100, scale: Union[bool, str] = False) -> None:
         self.A = as_csr(A, "A")
         n = self.A.shape[0]
         if n == 0:
@@ -267,19 +279,20 @@ class Solver:
             raise np.linalg.LinAlgError(str(exc)) from None
 
     @property
-    def parameters(self) -> dict:
+    def parameters(self) -> dict[str, Any]:
         """The method's parameters with defaults resolved: omega1, omega2, phi, gamma, alpha, beta, theta, inner.
         With ``scale``, they are those of the scaled problem."""
         return dict(self._core.parameters())
 
     @property
-    def scaling(self):
+    def scaling(self) -> Optional[tuple[np.ndarray, np.ndarray]]:
         """(d_r, d_c), the row and column factors of the scaled matrix D_r A D_c, or None."""
         if self._dr is None:
             return None
         return self._dr.copy(), self._dc.copy()
 
-    def solve(self, q, zeta=None, *, x0=None, callback=None, **iteration_options) -> Result:
+    def solve(self, q: ArrayLike, zeta: ZetaLike = None, *, x0: Optional[ArrayLike] = None,
+              callback: Optional[Callable[..., Any]] = None, **iteration_options: Any) -> Result:
         """Solve ICP(q, A, ζ). See :func:`nrmicp.solve` for the arguments."""
         n = self.n
         unknown = set(iteration_options) - set(self._defaults)
@@ -416,10 +429,12 @@ class Solver:
                       inner=d["inner"], **extra)
 
 
-def solve(A, q, zeta=None, *, method="nrmgs", tol=1e-8, maxiter=10000, omega1=None, omega2=None, gamma=1.0,
-          phi=None, alpha=None, beta=None, theta=1.0, z_update="auto", inner="auto", accelerate="none",
-          anderson_m=5, x0=None, callback=None, record_history=False, stall_iterations=100,
-          scale=False) -> Result:
+def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "nrmgs", tol: float = 1e-8,
+          maxiter: int = 10000, omega1: DiagonalLike = None, omega2: DiagonalLike = None, gamma: float = 1.0,
+          phi: DiagonalLike = None, alpha: Optional[float] = None, beta: Optional[float] = None,
+          theta: float = 1.0, z_update: str = "auto", inner: str = "auto", accelerate: Optional[str] = "none",
+          anderson_m: int = 5, x0: Optional[ArrayLike] = None, callback: Optional[Callable[..., Any]] = None,
+          record_history: bool = False, stall_iterations: int = 100, scale: Union[bool, str] = False) -> Result:
     r"""Solve the implicit complementarity problem ICP(q, A, ζ):
 
     find z with  w = Az + q ≥ 0,  g = z − ζ(z) ≥ 0,  gᵀw = 0   (ζ ≡ 0: the LCP),

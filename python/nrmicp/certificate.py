@@ -54,6 +54,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 import math
 import numbers
+from typing import Any, Optional
 
 import numpy as np
 import scipy.sparse as sp
@@ -422,9 +423,10 @@ def _mmatrix_solver(C, name, triangular):
 # ---------------------------------------------------------------------------------------------
 
 
-def convergence_bound(A, *, method="nrmgs", lipschitz=0.0, omega1=None, omega2=None, gamma=1.0,
-                      phi=None, alpha=None, beta=None, theta=1.0, z_update="auto",
-                      exact_max_n=2000, tol=1e-10, maxiter=1000) -> Certificate:
+def convergence_bound(A: Any, *, method: str = "nrmgs", lipschitz: Any = 0.0, omega1: Any = None,
+                      omega2: Any = None, gamma: float = 1.0, phi: Any = None, alpha: Optional[float] = None,
+                      beta: Optional[float] = None, theta: float = 1.0, z_update: str = "auto",
+                      exact_max_n: int = 2000, tol: float = 1e-10, maxiter: int = 1000) -> Certificate:
     """Evaluate the paper's sufficient conditions for convergence of Method 3.1 from any x0.
 
     The conditions are SUFFICIENT, NOT NECESSARY: a problem that is not certified may still
