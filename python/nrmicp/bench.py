@@ -34,9 +34,13 @@ How the numbers are obtained (and why they are not distorted):
 Outputs in ``--out`` (default ``bench-out/``): ``work_precision.csv``, ``work_precision.png``
 (y = Res), ``work_precision_error.png`` (y = max|z − z_exact|), ``convergence_history.png``,
 ``history.csv`` (the history-scene's iterates) and ``summary.txt`` (also printed): per scene
-and case the seconds and iterations per extra digit (slope of seconds against −log10 tol over
-the converged rows; Theil–Sen, so one noisy timing does not swing it), the best Res reached, and the fastest case at 1e-6 and
-1e-10.
+and case the iterations per extra digit (Theil–Sen slope of the iteration count against
+−log10 tol over the converged rows) and the seconds per digit (that times the seconds per
+iteration of the longest converged run, on the core's clock; "noise" when that run is too
+short to time), the best Res reached, and the fastest case at 1e-6 and 1e-10. The CSV and the
+summary are written before any figure, and record nrmicp's version and backends, the numpy,
+scipy and Python versions, the CPU model and the cores. Without matplotlib the run ends after
+them with a line saying that ``pip install nrmicp[plot]`` draws the figures.
 
 The horizontal line in every panel is the rounding level of the residual,
 eps·‖ |A||z*| + |q| ‖₂ (z* the exact or the best solution): w = Az + q cannot be evaluated much
@@ -51,6 +55,7 @@ import argparse
 import csv
 import math
 import os
+import platform
 import sys
 import time
 from dataclasses import dataclass, field
@@ -139,9 +144,45 @@ def scene_label(name: str) -> str:
 
 # --------------------------------------------------------------------------- running
 
+#: Where and with what the numbers were taken: repeated in every row of the CSV (so the file
+#: stays one plain table) and on the first line of summary.txt.
+ENV_COLUMNS = ("nrmicp", "backends", "numpy", "scipy", "python", "cpu", "cores")
 CSV_COLUMNS = ("scene", "size", "n", "method", "z_update", "z_update_used", "tol", "status", "converged",
                "seconds", "setup_seconds", "factorization_seconds", "iteration_seconds", "iterations",
-               "residual", "error", "repeat", "reused_from_tol")
+               "residual", "error", "repeat", "reused_from_tol") + ENV_COLUMNS
+
+
+def _cpu_model() -> str:
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.lower().startswith(("model name", "hardware", "cpu model")):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or "unknown"
+
+
+def environment() -> dict:
+    """nrmicp's version and backends, numpy/scipy/Python versions, CPU model and cores."""
+    import scipy
+
+    import nrmicp
+
+    try:
+        usable = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        usable = os.cpu_count()
+    return dict(nrmicp=nrmicp.__version__,
+                backends="+".join(k for k, v in nrmicp.backends().items() if v),
+                numpy=np.__version__, scipy=scipy.__version__, python=platform.python_version(),
+                cpu=f"{_cpu_model()} ({platform.system()} {platform.machine()})",
+                cores=f"{usable} usable of {os.cpu_count()}")
+
+
+def environment_line(env: dict) -> str:
+    return (f"nrmicp {env['nrmicp']} (backends {env['backends']}); numpy {env['numpy']}, scipy {env['scipy']}, "
+            f"Python {env['python']}; {env['cpu']}, {env['cores']} cores")
 
 
 @dataclass
@@ -316,17 +357,32 @@ def _fresh_converged(rows):
     return [r for r in rows if r["converged"] == 1 and r["reused_from_tol"] == ""]
 
 
+#: Below this much iteration time (core clock) in the longest converged run of a case, its
+#: seconds per digit are reported as noise: the sweep is too short to tell.
+MIN_TIMED_SECONDS = 5e-5
+
+
 def per_digit(rows):
-    """(seconds per digit, iterations per digit): slopes against −log10 tol over the converged rows
-    (Theil–Sen, robust to a stray slow timing), or NaNs with fewer than two."""
+    """(seconds per digit, iterations per digit), or NaN where they cannot be told.
+
+    Iterations per digit: Theil–Sen slope of the iteration count against −log10 tol over the
+    converged rows (deterministic numbers). Seconds per digit: iterations per digit times the
+    seconds per iteration of the longest converged run (its ``iteration_seconds``, the core's
+    clock, over its iterations). Fitting wall times of separate solves instead lets the per-call
+    overhead and a stray slow solve decide the slope: on the --quick sizes it came out negative.
+    Seconds per digit are NaN ("noise") when that run's iterations took < MIN_TIMED_SECONDS."""
     ok = _fresh_converged(rows)
     if len(ok) < 2:
         return math.nan, math.nan
     d = np.array([-math.log10(r["tol"]) for r in ok])
     if np.ptp(d) == 0:
         return math.nan, math.nan
-    return (_theil_sen(d, np.array([r["seconds"] for r in ok], dtype=float)),
-            _theil_sen(d, np.array([r["iterations"] for r in ok], dtype=float)))
+    ipd = _theil_sen(d, np.array([r["iterations"] for r in ok], dtype=float))
+    longest = max(ok, key=lambda r: r["iterations"])
+    t_iter = longest["iteration_seconds"]
+    if longest["iterations"] < 1 or t_iter == "" or not t_iter >= MIN_TIMED_SECONDS:
+        return math.nan, ipd
+    return ipd * t_iter / longest["iterations"], ipd
 
 
 def _theil_sen(x, y) -> float:
@@ -375,8 +431,12 @@ def fastest_at(cases, target, tols):
     return (best[0], best[1], tol) if best else (None, None, tol)
 
 
-def summarize(scene_results, tols) -> str:
+def summarize(scene_results, tols, env=None) -> str:
     lines = []
+    if env:
+        lines.append(environment_line(env))
+        lines.append("s/digit = it/digit x seconds per iteration of the longest converged run (core clock); "
+                     f"'noise': that run iterated < {MIN_TIMED_SECONDS * 1e6:.0f} us, too short to tell")
     for scene, (problem, cases, floor) in scene_results.items():
         lines.append(f"\n== {scene_label(scene)}: {problem.name}, n = {problem.n}; "
                      f"rounding level eps*|| |A||z*|+|q| || = {floor:.1e}")
@@ -390,7 +450,8 @@ def summarize(scene_results, tols) -> str:
                                                + (f" (Res {stop['residual']:.1e}, {stop['iterations']} it)"
                                                   if stop["residual"] != "" else ""))
             twin = next((o.label for o in cases[:cases.index(c)] if _same_iterates(o, c)), None)
-            lines.append(f"   {c.label:<22} {spd:9.2e} {ipd:9.1f} {best_residual(c):9.1e} "
+            spd_s = "noise" if math.isnan(spd) and not math.isnan(ipd) else f"{spd:.2e}"
+            lines.append(f"   {c.label:<22} {spd_s:>9} {ipd:9.1f} {best_residual(c):9.1e} "
                          f"{(f'{min(met):.0e}' if met else 'none'):>16}  {stop_s}"
                          + (f"  [same iterates as {twin}]" if twin else ""))
         for target in TARGETS:
@@ -667,6 +728,7 @@ def main(argv: Optional[list[str]] = None, prog: str = "python -m nrmicp bench")
         scene_results[s] = (P, cases, rounding_floor(P, cases))
     progress.close()
 
+    env = environment()
     csv_path = os.path.join(args.out, "work_precision.csv")
     with open(csv_path, "w", newline="") as f:
         wr = csv.DictWriter(f, fieldnames=CSV_COLUMNS)
@@ -674,7 +736,7 @@ def main(argv: Optional[list[str]] = None, prog: str = "python -m nrmicp bench")
         for _, cases, _ in scene_results.values():
             for c in cases:
                 for r in c.rows:
-                    wr.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+                    wr.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in dict(r, **env).items()})
     P, hcases, hfloor = scene_results[hist_scene]
     hist_path = os.path.join(args.out, "history.csv")
     with open(hist_path, "w", newline="") as f:
@@ -684,7 +746,20 @@ def main(argv: Optional[list[str]] = None, prog: str = "python -m nrmicp bench")
             if c.history is not None:
                 for k, t, r in zip(c.history["iteration"], c.history["seconds"], c.history["residual"]):
                     wr.writerow((hist_scene, c.method, c.z_update_used, int(k), f"{t:.6g}", f"{r:.6g}"))
+    # The numbers first: a missing or failing matplotlib must not cost the sweep.
+    summary_path = os.path.join(args.out, "summary.txt")
+    text = summarize(scene_results, tols, env)
+    with open(summary_path, "w") as f:
+        f.write(text + "\n")
+    print(text)
+    written = [csv_path, hist_path, summary_path]
 
+    try:
+        _pyplot()
+    except ImportError:
+        print(f"\nwrote {', '.join(written)} in {time.perf_counter() - t_start:.1f} s. No figures: matplotlib "
+              "is not installed; pip install nrmicp[plot] (or matplotlib) draws them.")
+        return 0
     pngs = [os.path.join(args.out, "work_precision.png"), os.path.join(args.out, "work_precision_error.png"),
             os.path.join(args.out, "convergence_history.png")]
     plot_work_precision(scene_results, pngs[0], y="residual", tols=tols)
@@ -694,13 +769,7 @@ def main(argv: Optional[list[str]] = None, prog: str = "python -m nrmicp bench")
     else:
         pngs.pop(1)
     plot_history(P, hist_scene, hcases, hfloor, pngs[-1], tol=min(tols))
-
-    text = summarize(scene_results, tols)
-    with open(os.path.join(args.out, "summary.txt"), "w") as f:
-        f.write(text + "\n")
-    print(text)
-    print(f"\nwrote {csv_path}, {hist_path}, " + ", ".join(pngs)
-          + f" and summary.txt in {time.perf_counter() - t_start:.1f} s")
+    print(f"\nwrote {', '.join(written + pngs)} in {time.perf_counter() - t_start:.1f} s")
     return 0
 
 
