@@ -183,10 +183,10 @@ def solve(A, q, method="nrmgs", *, tol=1e-8, maxiter=10000, x0=None, time_limit=
 
 
 if __name__ == "__main__":  # tiny self-check
+    from nrmicp.scenes.bai import bai_matrix  # Bai's matrix, mu = 4
+
     m = 30
-    T = sp.diags([-1.0, 8.0, -1.0], [-1, 0, 1], shape=(m, m))
-    A = sp.kron(sp.identity(m), T) + sp.kron(sp.diags([-1.0, -1.0], [-1, 1], shape=(m, m)),
-                                             sp.identity(m))
+    A = bai_matrix(m)
     rng = np.random.default_rng(0)
     q = rng.standard_normal(m * m)
     for meth in ("nrmgs", "nrmsor", "nrmj", "nrm", "nrmm"):

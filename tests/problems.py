@@ -1,13 +1,9 @@
 """Test problems with a known solution: Bai's matrices, as LCP and as ICP.
 
-Bai's matrices (n = m*m, m x m blocks):
-
-    A = Â + mu*I,  Â = blocktridiag(-I, S, -I),             S = tridiag(-1, 4, -1)      (symmetric)
-                   Â = blocktridiag(-1.5 I, S, -0.5 I),     S = tridiag(-1.5, 4, -0.5)  (nonsymmetric)
-
-blocktridiag(lower, diagonal, upper) / tridiag(sub, diagonal, super).  With mu = 4 the
-diagonal of A is 8 and A is strictly diagonally dominant (a P-matrix), so every problem
-below has exactly one solution.
+Bai's matrices (n = m*m) are the scene's, nrmicp.scenes.bai.bai_matrix (its docstring gives
+them). With mu = 4 the diagonal of A is 8 and A is strictly diagonally dominant (a P-matrix),
+so every problem below has exactly one solution. The known solutions here are random (the
+scene's are periodic), so the tests see other active sets than the scene.
 
 Known solution.  Pick z*, and a split of the indices into an "active" set, where
 g*_i = z*_i - zeta(z*)_i = 0 and w*_i > 0, and an "inactive" set, where g*_i > 0 and w*_i = 0.
@@ -25,26 +21,12 @@ from typing import Callable, Optional
 import numpy as np
 import scipy.sparse as sp
 
+from nrmicp.scenes.bai import bai_matrix
+
 
 def tridiag(m, sub, diag, sup):
     """m x m tridiagonal matrix with constant sub-, main and super-diagonal."""
     return sp.diags([np.full(m - 1, sub), np.full(m, diag), np.full(m - 1, sup)], [-1, 0, 1])
-
-
-def bai_matrix(m, symmetric=True, mu=4.0):
-    """Bai's test matrix A = Â + mu*I of size n = m*m, as CSR (float64, sorted indices)."""
-    if symmetric:
-        S = tridiag(m, -1.0, 4.0, -1.0)
-        T = tridiag(m, -1.0, 0.0, -1.0)      # block pattern: -I below and above the diagonal
-    else:
-        S = tridiag(m, -1.5, 4.0, -0.5)
-        T = tridiag(m, -1.5, 0.0, -0.5)      # -1.5 I below, -0.5 I above the diagonal
-    I = sp.identity(m)
-    A = sp.kron(I, S) + sp.kron(T, I) + mu * sp.identity(m * m)
-    A = sp.csr_matrix(A, dtype=np.float64)
-    A.sum_duplicates()
-    A.sort_indices()
-    return A
 
 
 @dataclass
@@ -75,7 +57,7 @@ def known_solution_parts(n, seed=0):
 
 def make_lcp(m, symmetric=True, seed=0):
     """LCP(q, A) (zeta = 0): z* = g*."""
-    A = bai_matrix(m, symmetric)
+    A = bai_matrix(m, symmetric=symmetric)
     n = A.shape[0]
     _, g_star, w_star = known_solution_parts(n, seed)
     z_star = g_star.copy()
@@ -86,7 +68,7 @@ def make_lcp(m, symmetric=True, seed=0):
 
 def make_icp(m, symmetric=True, c=0.1, seed=0):
     """ICP(q, A, zeta) with zeta(z) = c*sin(z) + s and a known solution z*."""
-    A = bai_matrix(m, symmetric)
+    A = bai_matrix(m, symmetric=symmetric)
     n = A.shape[0]
     _, g_star, w_star = known_solution_parts(n, seed)
     rng = np.random.default_rng(seed + 1)
@@ -122,7 +104,7 @@ class ConstantZeta:
 
 def make_affine_icp(m, symmetric=True, c=0.1, seed=0):
     """ICP with zeta(z) = B z + s, B = c * tridiag(0.5, 0, 0.5) (so ||B||_inf <= c)."""
-    A = bai_matrix(m, symmetric)
+    A = bai_matrix(m, symmetric=symmetric)
     n = A.shape[0]
     _, g_star, w_star = known_solution_parts(n, seed)
     rng = np.random.default_rng(seed + 2)
@@ -137,7 +119,7 @@ def make_affine_icp(m, symmetric=True, c=0.1, seed=0):
 
 def make_obstacle_icp(m, symmetric=True, seed=0):
     """ICP with a constant obstacle zeta(z) = s."""
-    A = bai_matrix(m, symmetric)
+    A = bai_matrix(m, symmetric=symmetric)
     n = A.shape[0]
     _, g_star, w_star = known_solution_parts(n, seed)
     rng = np.random.default_rng(seed + 3)

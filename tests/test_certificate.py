@@ -28,6 +28,8 @@ if _path.exists():
 else:
     from nrmicp.certificate import Certificate, convergence_bound
 
+from nrmicp.scenes.bai import bai_matrix  # noqa: E402
+
 try:
     import nrmicp as _nrmicp
     _HAVE_SOLVE = callable(getattr(_nrmicp, "solve", None))
@@ -84,21 +86,9 @@ NOT_CERTIFIED = "not certified (sufficient condition only)"
 # problems
 
 
-def tridiag(m, sub, diag, sup):
-    return sp.diags([np.full(m - 1, sub), np.full(m, diag), np.full(m - 1, sup)], [-1, 0, 1])
-
-
 def bai(m, symmetric=True, mu=4.0):
-    """A = Â + mu I, Â = blocktridiag(-I, S, -I), S = tridiag(-1, 4, -1) (symmetric), or
-    Â = blocktridiag(-1.5 I, S, -0.5 I), S = tridiag(-1.5, 4, -0.5) (nonsymmetric)."""
-    I = sp.identity(m)
-    if symmetric:
-        S, lo, up = tridiag(m, -1.0, 4.0, -1.0), -1.0, -1.0
-    else:
-        S, lo, up = tridiag(m, -1.5, 4.0, -0.5), -1.5, -0.5
-    blocks = sp.kron(I, S) + sp.kron(sp.diags([np.ones(m - 1)], [-1]), lo * I) \
-        + sp.kron(sp.diags([np.ones(m - 1)], [1]), up * I)
-    return sp.csr_matrix(blocks + mu * sp.identity(m * m))
+    """Bai's matrix of the scene (nrmicp.scenes.bai.bai_matrix)."""
+    return bai_matrix(m, mu=mu, symmetric=symmetric)
 
 
 def flipped(A, seed=0):

@@ -39,6 +39,7 @@ import pytest
 import scipy.sparse as sp
 
 import nrmicp
+from nrmicp.scenes.bai import bai_matrix
 
 TOL = 1e-8
 
@@ -57,9 +58,8 @@ def lap2d(m):
 
 
 def bai(m, mu=4.0):
-    S = sp.diags([-np.ones(m - 1), 4 * np.ones(m), -np.ones(m - 1)], [-1, 0, 1])
-    T = sp.diags([-np.ones(m - 1), -np.ones(m - 1)], [-1, 1])
-    return sp.csr_matrix(sp.kron(sp.identity(m), S) + sp.kron(T, sp.identity(m)) + mu * sp.identity(m * m))
+    """Bai's symmetric matrix of the scene."""
+    return bai_matrix(m, mu=mu)
 
 
 def convection(m, p, upwind):
