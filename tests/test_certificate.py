@@ -200,12 +200,13 @@ def tiny_iteration(A, q, zeta, method, x0, z_update="solve", zprev=None, maxiter
 def test_exact_rho_matches_brute_force_on_bai(m, symmetric):
     A = bai(m, symmetric)
     for method in METHODS:
-        for psi in (0.0, 0.1):
-            c = convergence_bound(A, method=method, lipschitz=psi)
+        # the brute force knows the two-sweep recursion with the paper's z-update only
+        for psi, zu in ((0.0, "solve"), (0.1, "solve"), (0.1, "explicit"))[:2 if method == "two_sweep" else 3]:
+            c = convergence_bound(A, method=method, lipschitz=psi, z_update=zu)
             assert isinstance(c, Certificate)
             assert c.rho_is_exact
-            ref = brute_rho(A, method, psi)
-            assert c.rho == pytest.approx(ref, rel=1e-9, abs=1e-12), (method, psi)
+            ref = brute_rho(A, method, psi, z_update=zu)
+            assert c.rho == pytest.approx(ref, rel=1e-9, abs=1e-12), (method, psi, zu)
             assert c.certified == (ref < 1)
             assert c.conditions["A_is_H_plus"]
             if method != "two_sweep":
@@ -233,7 +234,7 @@ def test_exact_rho_matches_brute_force_nondefault_parameters(symmetric):
             ref = brute_rho(A, method, psi, z_update=zu, **kw)
             assert c.rho == pytest.approx(ref, rel=1e-9, abs=1e-12), (method, kw, psi, zu)
     for theta in (0.7, 1.0, 1.3):
-        c = convergence_bound(A, method="two_sweep", lipschitz=0.1, theta=theta, alpha=1.1)
+        c = convergence_bound(A, method="two_sweep", lipschitz=0.1, theta=theta, alpha=1.1, z_update="solve")
         assert c.rho == pytest.approx(brute_rho(A, "two_sweep", 0.1, theta=theta, alpha=1.1), rel=1e-9)
 
 
@@ -254,14 +255,14 @@ def test_theorem_4_3():
     """nrmj (alpha=1, beta=0, Omega2=D): Theorem 4.3's matrix is T itself; and whenever
     Theorem 4.3 holds for an AOR pair, rho(T) < 1 (it is a consequence of Theorem 4.1)."""
     A = bai(6, False)
-    for psi in (0.0, 0.1, 0.3):
-        c = convergence_bound(A, method="nrmj", lipschitz=psi)
+    for psi in (0.0, 0.1, 0.3):  # Theorem 4.3 is stated for the paper's z-update
+        c = convergence_bound(A, method="nrmj", lipschitz=psi, z_update="solve")
         assert c.conditions["thm43_rho"] == pytest.approx(c.rho, rel=1e-9)
     held = 0
     for alpha in (0.5, 0.8, 1.0, 1.3, 1.8):
         for beta in (0.0, 0.5, 1.0, 1.5):
             for psi in (0.0, 0.1):
-                c = convergence_bound(A, method="nrmaor", alpha=alpha, beta=beta, lipschitz=psi)
+                c = convergence_bound(A, method="nrmaor", alpha=alpha, beta=beta, lipschitz=psi, z_update="solve")
                 cond = c.conditions
                 assert cond["omega2_ge_D_omega1"]
                 assert cond["thm43_lhs"] == pytest.approx(max(alpha, beta) * cond["thm43_rho"])
@@ -437,3 +438,22 @@ def test_package_exports_certificate():
     assert callable(_nrmicp.convergence_bound)
     c = _nrmicp.convergence_bound(bai(4), method="nrmgs")
     assert c.certified and c.rho < 1
+
+
+@pytest.mark.skipif(not _HAVE_SOLVE, reason="nrmicp.solve (the compiled core) is not importable")
+@pytest.mark.parametrize("method,kw", [("nrm", {}), ("nrm", dict(omega2=8.0)), ("nrmm", {}), ("nrmaor", {}),
+                                       ("nrmsor", {}), ("nrmgs", {}), ("nrmj", {}), ("mms", {}),
+                                       ("two_sweep", {})])
+def test_auto_z_update_is_the_one_solve_runs(method, kw):
+    """The certificate checks the iteration the solver runs: with z_update='auto', solve's
+    iterates are bit for bit those of the z-update the certificate names, and not the other's."""
+    from nrmicp import scenes
+
+    P = scenes.bai(4, kind="icp", c=0.1)
+    zu = convergence_bound(P.A, method=method, lipschitz=0.1, **kw).conditions["z_update"]
+    assert zu in ("solve", "explicit")
+    other = {"solve": "explicit", "explicit": "solve"}[zu]
+    run = {z: _nrmicp.solve(P.A, P.q, P.zeta, method=method, z_update=z, tol=1e-12, maxiter=8, **kw)
+           for z in ("auto", zu, other)}
+    assert np.array_equal(run["auto"].z, run[zu].z) and run["auto"].nit == run[zu].nit
+    assert not np.array_equal(run["auto"].z, run[other].z)

@@ -32,7 +32,8 @@ is not certified).  ``certified=False`` means "no guarantee", never "diverges".
 Notes on the theory (derived here, checked numerically in tests/test_certificate.py):
 
 * Theorem 4.1's |A^-1| term comes from the paper's z-update ``A z = Omega2(|x| - x)/gamma - q``
-  (z_update="solve", the default of nrmicp.solve for an ICP).  For an LCP (Psi = 0) both
+  (z_update="solve"; nrmicp.solve's 'auto' picks it on an ICP only for the paper's nrm, with
+  Omega2 = I, and for mms, and 'explicit' otherwise: see _auto_z_update).  For an LCP (Psi = 0) both
   z-updates produce the same x-iterates and the term vanishes.  For z_update="explicit"
   (z = zeta(z_prev) + Omega1(|x| + x)/gamma) with Psi != 0 the error obeys the two-block
   recursion  e' <= K(P + 2|A| Psi Omega1) e + K |A| Psi^2 f,  f' <= 2 Omega1 e + Psi f
@@ -195,11 +196,21 @@ class _Setup:
     pass
 
 
+def _auto_z_update(method, omega2_given):
+    """The z-update that nrmicp.solve's z_update='auto' runs on an ICP (the rule of Solver::iterate
+    in cpp/include/nrmicp/solver.hpp; tests/test_certificate.py checks that they agree):
+    'solve' for the paper's nrm (Omega2 = I, i.e. omega2 not given) and the baseline mms,
+    'explicit' otherwise."""
+    return "solve" if method == "mms" or (method == "nrm" and not omega2_given) else "explicit"
+
+
 def _setup(A, method, omega1, omega2, gamma, phi, alpha, beta, theta, lipschitz, z_update):
     if not isinstance(method, str) or method not in _METHODS:
         raise ValueError(f"method must be one of {', '.join(_METHODS)}; got {method!r}")
     if z_update not in ("auto", "solve", "explicit"):
         raise ValueError(f"z_update must be 'auto', 'solve' or 'explicit', got {z_update!r}")
+    if z_update == "auto":
+        z_update = _auto_z_update(method, omega2 is not None)
     s = _Setup()
     s.A = A
     n = s.n = A.shape[0]
@@ -270,7 +281,7 @@ def _setup(A, method, omega1, omega2, gamma, phi, alpha, beta, theta, lipschitz,
     if s.psi_zero:
         s.z_update = "any (LCP: Psi = 0)"
     else:
-        s.z_update = "solve" if z_update == "auto" else z_update
+        s.z_update = z_update
 
     # --- splitting
     Dm = sp.diags(d)
@@ -447,9 +458,10 @@ def convergence_bound(A: Any, *, method: str = "nrmgs", lipschitz: Any = 0.0, om
         nrmsor: beta = alpha (default 1); nrmgs: 1, 1; nrmj: 1, 0); for nrmm alpha sets
         Omega2 = alpha I (default: mean of diag A; an explicit omega2 takes precedence).
     theta : two-sweep relaxation in (0, 2].
-    z_update : 'auto' (= 'solve' when Psi != 0, as nrmicp.solve does for an ICP), 'solve'
-        (the paper's Step 1, Theorem 4.1 as printed) or 'explicit' (block recursion, see the
-        module docstring).  Irrelevant for an LCP.
+    z_update : 'auto' (the z-update nrmicp.solve's 'auto' runs: 'solve' for nrm with the paper's
+        Omega2 = I and for mms, 'explicit' otherwise), 'solve' (the paper's Step 1, Theorem 4.1
+        as printed) or 'explicit' (block recursion, see the module docstring).  Irrelevant for
+        an LCP.
     exact_max_n : when the error-propagation matrix has order <= exact_max_n (n, or 2n for
         two_sweep and for the explicit z-update of an ICP), rho(T) is computed exactly with dense
         numpy (inverses, eigenvalues).  Otherwise an upper bound is computed matrix-free.
