@@ -36,8 +36,8 @@ Outputs in ``--out`` (default ``bench-out/``): ``work_precision.csv``, ``work_pr
 ``history.csv`` (the history-scene's iterates) and ``summary.txt`` (also printed): per scene
 and case the iterations per extra digit (Theil–Sen slope of the iteration count against
 −log10 tol over the converged rows) and the seconds per digit (that times the seconds per
-iteration of the longest converged run, on the core's clock; "noise" when that run is too
-short to time), the best Res reached, and the fastest case at 1e-6 and 1e-10. The CSV and the
+iteration, the least over the converged runs on the core's clock; "noise" when they are all
+too short to time), the best Res reached, and the fastest case at 1e-6 and 1e-10. The CSV and the
 summary are written before any figure, and record nrmicp's version and backends, the numpy,
 scipy and Python versions, the CPU model and the cores. Without matplotlib the run ends after
 them with a line saying that ``pip install nrmicp[plot]`` draws the figures.
@@ -357,8 +357,8 @@ def _fresh_converged(rows):
     return [r for r in rows if r["converged"] == 1 and r["reused_from_tol"] == ""]
 
 
-#: Below this much iteration time (core clock) in the longest converged run of a case, its
-#: seconds per digit are reported as noise: the sweep is too short to tell.
+#: Converged runs whose iterations took less than this (core clock) are too short to time; when
+#: a case has none longer, its seconds per digit are reported as noise.
 MIN_TIMED_SECONDS = 5e-5
 
 
@@ -367,10 +367,11 @@ def per_digit(rows):
 
     Iterations per digit: Theil–Sen slope of the iteration count against −log10 tol over the
     converged rows (deterministic numbers). Seconds per digit: iterations per digit times the
-    seconds per iteration of the longest converged run (its ``iteration_seconds``, the core's
-    clock, over its iterations). Fitting wall times of separate solves instead lets the per-call
-    overhead and a stray slow solve decide the slope: on the --quick sizes it came out negative.
-    Seconds per digit are NaN ("noise") when that run's iterations took < MIN_TIMED_SECONDS."""
+    seconds per iteration, the least ``iteration_seconds / iterations`` (core clock) over the
+    converged runs that iterated at least MIN_TIMED_SECONDS (timing noise only ever adds time,
+    so the least is the least disturbed). Fitting wall times of separate solves instead lets the
+    per-call overhead and a stray slow solve decide the slope: on the --quick sizes it came out
+    negative. Seconds per digit are NaN ("noise") when no run iterated that long."""
     ok = _fresh_converged(rows)
     if len(ok) < 2:
         return math.nan, math.nan
@@ -378,11 +379,12 @@ def per_digit(rows):
     if np.ptp(d) == 0:
         return math.nan, math.nan
     ipd = _theil_sen(d, np.array([r["iterations"] for r in ok], dtype=float))
-    longest = max(ok, key=lambda r: r["iterations"])
-    t_iter = longest["iteration_seconds"]
-    if longest["iterations"] < 1 or t_iter == "" or not t_iter >= MIN_TIMED_SECONDS:
+    per_iteration = [r["iteration_seconds"] / r["iterations"] for r in ok
+                     if r["iterations"] >= 1 and r["iteration_seconds"] != ""
+                     and r["iteration_seconds"] >= MIN_TIMED_SECONDS]
+    if not per_iteration:
         return math.nan, ipd
-    return ipd * t_iter / longest["iterations"], ipd
+    return ipd * min(per_iteration), ipd
 
 
 def _theil_sen(x, y) -> float:
@@ -435,8 +437,8 @@ def summarize(scene_results, tols, env=None) -> str:
     lines = []
     if env:
         lines.append(environment_line(env))
-        lines.append("s/digit = it/digit x seconds per iteration of the longest converged run (core clock); "
-                     f"'noise': that run iterated < {MIN_TIMED_SECONDS * 1e6:.0f} us, too short to tell")
+        lines.append("s/digit = it/digit x least seconds per iteration of the converged runs (core clock); "
+                     f"'noise': none iterated {MIN_TIMED_SECONDS * 1e6:.0f} us, too short to tell")
     for scene, (problem, cases, floor) in scene_results.items():
         lines.append(f"\n== {scene_label(scene)}: {problem.name}, n = {problem.n}; "
                      f"rounding level eps*|| |A||z*|+|q| || = {floor:.1e}")
