@@ -31,6 +31,7 @@ def test_status_prints_its_name(status):
     assert f"{status}" == status.name
     assert f"{status:>20}" == status.name.rjust(20)
     assert repr(status) == f"Status.{status.name}"
+    assert f"{status:d}" == str(int(status)) and "%d" % status == str(int(status))
     assert status == int(status) and isinstance(status, int)  # still an IntEnum
 
 

@@ -7,10 +7,9 @@ import math
 from dataclasses import dataclass
 from typing import Any, Callable, Optional, Union
 
-from numpy.typing import ArrayLike
-
 import numpy as np
 import scipy.sparse as sp
+from numpy.typing import ArrayLike
 from scipy.optimize import OptimizeResult
 
 from . import _core
@@ -43,7 +42,8 @@ class Status(enum.IntEnum):
     ZETA_FAILED = 5     #: zeta(z) returned non-finite values
 
     # An IntEnum (compares and indexes like the core's int codes) that prints its name:
-    # str(), format() and f-strings give 'CONVERGED', repr() 'Status.CONVERGED'.
+    # str(), format() and f-strings give 'CONVERGED' (a numeric spec such as ':d' the code),
+    # repr() 'Status.CONVERGED'.
     def __str__(self) -> str:
         return self.name
 
@@ -51,6 +51,8 @@ class Status(enum.IntEnum):
         return f"{type(self).__name__}.{self.name}"
 
     def __format__(self, spec: str) -> str:
+        if spec and spec[-1] in "bcdoxXneEfFgG%":  # a numeric format asks for the code
+            return format(int(self), spec)
         return format(self.name, spec)
 
 
