@@ -3,6 +3,7 @@
 
 #include <Eigen/Core>
 
+#include <map>
 #include <string>
 #include <vector>
 
@@ -56,6 +57,8 @@ struct Result {
   std::vector<double> history_seconds;
   std::vector<double> history_residual;
   Timings timings;
+  /// Counts a step kind reports beyond the iterations (e.g. linear solves), by name.
+  std::map<std::string, long long> counters;
   bool success() const { return status == Status::Converged; }
 };
 

@@ -247,8 +247,7 @@ class Splitting {
     return "?";
   }
   bool two_sweep() const { return n2_.rows() > 0; }
-  /// Diagonal of Lm (AOR types) and the factor β/α of its strictly lower part (β/α) a_ij Ω1_j.
-  const Vector& left_diagonal() const { return diagonal_; }
+  /// 1 / diag(Lm) (AOR types) and the factor β/α of its strictly lower part (β/α) a_ij Ω1_j.
   const Vector& left_inverse_diagonal() const { return inverse_diagonal_; }
   double lower_scale() const { return lower_scale_; }
   const RowMatrix& n2() const { return n2_; }
