@@ -72,7 +72,15 @@ def residual(A, q, z, zeta=None) -> float:
         g = z - np.asarray(zeta(z), dtype=float)
     else:
         g = z - np.asarray(zeta, dtype=float)
-    return float(np.linalg.norm(np.minimum(w, g)))
+    return _norm(np.minimum(w, g))
+
+
+def _norm(m) -> float:
+    """‖m‖₂ without overflow or underflow (scaled by max |mᵢ|)."""
+    big = float(np.max(np.abs(m), initial=0.0))
+    if not (0.0 < big < math.inf):
+        return float(np.linalg.norm(m))
+    return big * float(np.linalg.norm(m / big))
 
 
 def _choice(value, allowed, name):
@@ -192,8 +200,6 @@ class Solver:
         if self.method in ("mms", "two_sweep") and (omega1 is not None or phi is not None):
             raise ValueError(f"method {self.method!r} fixes omega1 = I and phi = 0; "
                              "use an NRM-family method to set them")
-        if self.method != "two_sweep" and theta != 1.0:
-            raise ValueError(f"theta is the relaxation of method 'two_sweep'; method {self.method!r} has none")
         if self.scale is None:
             self._dr = self._dc = None
             A_core = self.A
@@ -209,7 +215,7 @@ class Solver:
 
     @property
     def parameters(self) -> dict:
-        """The method's parameters with defaults resolved: omega1, omega2, phi, gamma, alpha, beta, theta, inner.
+        """The method's parameters with defaults resolved: omega1, omega2, phi, gamma, alpha, beta, inner.
         With ``scale``, they are those of the scaled problem."""
         return dict(self._core.parameters())
 
@@ -229,8 +235,6 @@ class Solver:
                             "options (method, omega1, omega2, gamma, phi, alpha, beta, inner, scale) are fixed at "
                             "set-up")
         it = dict(self._defaults, **iteration_options)
-        if self.method != "two_sweep" and it["theta"] != 1.0:
-            raise ValueError(f"theta is the relaxation of method 'two_sweep'; method {self.method!r} has none")
         _iteration_options(_core.Options(), **it)  # validates every iteration option once
         tol = float(it["tol"])
         qv = as_vector(q, n, "q")
@@ -283,7 +287,7 @@ class Solver:
                 g = z - (B @ z + c)
             else:
                 g = z - np.asarray(fn(z), dtype=np.float64)
-            return w, float(np.linalg.norm(np.minimum(w, g)))
+            return w, _norm(np.minimum(w, g))
 
         tol_k, x0k = tol, z0s
         best = None

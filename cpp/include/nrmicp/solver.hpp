@@ -90,7 +90,8 @@ class Solver {
 
   /// Solves ICP(q, A, ζ) from the initial guess z0 (zeros when null). The iteration fields of
   /// `iteration_options` (tol, maxiter, z_update, accelerate, anderson_m, theta, record_history,
-  /// stall_iterations, divergence_factor) override the constructor's; the splitting stays.
+  /// stall_iterations, divergence_factor) override the constructor's; the splitting (method and
+  /// its parameters) stays, and the merged options are checked against it.
   Result solve(const Vector& q, const Zeta<StorageIndex>& zeta = Zeta<StorageIndex>::none(),
                const Vector* z0 = nullptr, const Callback& callback = {}, const Poll& poll = {},
                const Options* iteration_options = nullptr) const {
@@ -98,13 +99,13 @@ class Solver {
     const Eigen::Index n = A_.rows();
     Options o = options_;
     if (iteration_options) {
-      iteration_options->check(n);
       o.tol = iteration_options->tol; o.maxiter = iteration_options->maxiter;
       o.z_update = iteration_options->z_update; o.accelerate = iteration_options->accelerate;
       o.anderson_m = iteration_options->anderson_m; o.theta = iteration_options->theta;
       o.record_history = iteration_options->record_history;
       o.stall_iterations = iteration_options->stall_iterations;
       o.divergence_factor = iteration_options->divergence_factor;
+      o.check(n);
     }
     if (q.size() != n) throw std::invalid_argument("Solver::solve: q has length " + std::to_string(q.size()) + ", expected n = " + std::to_string(n));
     if (z0 && z0->size() != n) throw std::invalid_argument("Solver::solve: x0 has length " + std::to_string(z0->size()) + ", expected n = " + std::to_string(n));
@@ -173,7 +174,7 @@ class Solver {
     }
     run_steps(ctx, s, monitor, o);
     res.timings.iterations = monitor.seconds();
-    monitor.finish(s.z);
+    monitor.finish(z0 ? *z0 : Vector::Zero(A_.rows()));
     Vector Az(A_.rows());
     ctx.spmv(res.z, Az);  // w of the returned iterate (honest even if it is not the last one)
     res.w = Az + q;
@@ -186,16 +187,16 @@ class Solver {
                  const Options& o) const {
     const bool two_sweep = splitting_->two_sweep();
     if constexpr (MatrixType::IsRowMajor) {
-      if (is_aor_type(options_.method) && !two_sweep && params_.theta == 1 && ctx.zu == ZUpdate::Explicit) {
+      if (is_aor_type(options_.method) && !two_sweep && ctx.zu == ZUpdate::Explicit) {
         detail::SweepStep<MatrixType> step(ctx, *splitting_);
         return run(step, ctx, s, monitor, o);
       }
     }
     if (two_sweep) {
-      detail::TwoSweepStep<MatrixType> step(ctx, *splitting_, params_.theta, s);
+      detail::TwoSweepStep<MatrixType> step(ctx, *splitting_, o.theta, s);
       return run(step, ctx, s, monitor, o);
     }
-    detail::SplittingStep<MatrixType> step(ctx, *splitting_, params_.theta);
+    detail::SplittingStep<MatrixType> step(ctx, *splitting_);
     run(step, ctx, s, monitor, o);
   }
 

@@ -26,6 +26,7 @@ struct Iterate {
   Vector zeta_prev;          ///< ζ(z⁽ᵏ⁻¹⁾), read by the explicit z-update (zero for an LCP)
   double step = std::numeric_limits<double>::infinity();  ///< max|x⁽ᵏ⁺¹⁾ − x⁽ᵏ⁾| of the last step
   bool zeta_ok = true;       ///< false once ζ returned non-finite values
+  bool finite = true;        ///< false once z became non-finite (ζ is then not called: the iteration diverged)
 };
 
 /// The problem ICP(q, A, ζ) with the resolved parameters and z-update, and the timers of this
@@ -54,9 +55,14 @@ class Context {
     ScopedTimer t(tm.spmv);
     out.noalias() = A * v;
   }
-  /// out = ζ(v); clears s.zeta_ok when ζ fails. Nothing to do for an LCP.
+  /// out = ζ(v); clears s.zeta_ok when ζ fails. Nothing to do for an LCP. ζ is never handed a
+  /// non-finite v: that is the iteration's failure, not ζ's (s.finite is cleared instead).
   void eval_zeta(Iterate& s, const Vector& v, Vector& out) const {
     if (lcp()) return;
+    if (!v.allFinite()) {
+      s.finite = false;
+      return;
+    }
     ScopedTimer t(tm.zeta);
     s.zeta_ok = zeta.eval(v, out);
   }
@@ -88,15 +94,25 @@ class Context {
     if (!lcp()) s.zeta_prev.swap(s.zeta_z);
     z_update(s);
   }
-  /// Res(z) = ‖min(Az + q, z − ζ(z))‖₂ from Az (and ζ(z); null for an LCP).
-  double residual(const Vector& Az, const Vector& z, const Vector* zeta_z) const {
+  /// Res(z) = ‖min(Az + q, z − ζ(z))‖₂ of s.z from Az (ζ(z) in s.zeta_z for an ICP).
+  double residual(const Vector& Az, const Iterate& s) {
     ResidualSum res;
-    if (zeta_z) {
-      for (Eigen::Index i = 0; i < n(); ++i) res.add(Az[i] + q[i], z[i] - (*zeta_z)[i]);
+    if (!lcp()) {
+      for (Eigen::Index i = 0; i < n(); ++i) res.add(Az[i] + q[i], s.z[i] - s.zeta_z[i]);
     } else {
-      for (Eigen::Index i = 0; i < n(); ++i) res.add(Az[i] + q[i], z[i]);
+      for (Eigen::Index i = 0; i < n(); ++i) res.add(Az[i] + q[i], s.z[i]);
     }
-    return res.norm();
+    return residual_norm(res, s);
+  }
+  /// Res from the sum of squares a pass accumulated for s.z (and s.zeta_z): its square root, or
+  /// Res recomputed with a scaled norm when the plain sum overflowed or underflowed.
+  double residual_norm(const ResidualSum& sum, const Iterate& s) {
+    if (sum.plain_is_accurate()) return std::sqrt(sum.sum);
+    Vector Az(n());
+    spmv(s.z, Az);
+    work_.resize(n());
+    for (Eigen::Index i = 0; i < n(); ++i) work_[i] = std::min(Az[i] + q[i], lcp() ? s.z[i] : s.z[i] - s.zeta_z[i]);
+    return stable_norm(work_);
   }
   /// x⁽⁰⁾ = γ/2 (Ω1⁻¹(z0 − ζ(z0)) − Ω2⁻¹(Az0 + q)) and z⁽⁰⁾ from it; false when ζ(z0) failed
   /// (then s.z = z0).

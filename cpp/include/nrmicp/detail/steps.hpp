@@ -43,13 +43,18 @@ class SweepStep : public StepBase {
     const bool lcp = ctx_.lcp();
     if (!lcp) {
       ctx_.eval_zeta(s, s.z, s.zeta_z);
-      if (!s.zeta_ok) return std::numeric_limits<double>::quiet_NaN();
+      if (!s.zeta_ok || !s.finite) return std::numeric_limits<double>::quiet_NaN();
       ctx_.from_modulus(&s.zeta_z, s.x, zhat_);
     }
     const Parameters& p = ctx_.p;
-    ScopedTimer t(ctx_.tm.spmv);  // the sweep is the product with A (and the triangular solve)
-    return aor_sweep(ctx_.A, s.z, lcp ? nullptr : &s.zeta_z, lcp ? nullptr : &zhat_, ctx_.q, p.omega1,
-                     omega1_is_identity_, p.omega2, inverse_diagonal_, lower_scale_, p.gamma, s.x, z_next_, dx_, s.step);
+    ResidualSum res;
+    {
+      ScopedTimer t(ctx_.tm.spmv);  // the sweep is the product with A (and the triangular solve)
+      res = aor_sweep(ctx_.A, s.z, lcp ? nullptr : &s.zeta_z, lcp ? nullptr : &zhat_, ctx_.q, p.omega1,
+                      omega1_is_identity_, p.omega2, inverse_diagonal_, lower_scale_, p.gamma, s.x, z_next_, dx_,
+                      s.step);
+    }
+    return ctx_.residual_norm(res, s);
   }
   void move_x(Iterate&) {}  // done by the sweep
   void update_z(Iterate& s) { s.z.swap(z_next_); }
@@ -64,7 +69,7 @@ class SweepStep : public StepBase {
   Vector z_next_, dx_, zhat_;
 };
 
-/// One step of Method 3.1 with any splitting: rhs = Ω2(|x| − x) − γ(A ẑ + q), x += θ Lm⁻¹ rhs.
+/// One step of Method 3.1 with any splitting: rhs = Ω2(|x| − x) − γ(A ẑ + q), x += Lm⁻¹ rhs.
 /// For an LCP with the explicit z-update on a row-major A, evaluate computes the product, Res
 /// and rhs in one pass (ẑ = z there): the iteration is memory-bound.
 template <typename MatrixType>
@@ -72,8 +77,8 @@ class SplittingStep : public StepBase {
  public:
   using Vector = Eigen::VectorXd;
   using StorageIndex = typename MatrixType::StorageIndex;
-  SplittingStep(Context<MatrixType>& ctx, const Splitting<StorageIndex>& sp, double theta)
-      : ctx_(ctx), sp_(sp), theta_(theta),
+  SplittingStep(Context<MatrixType>& ctx, const Splitting<StorageIndex>& sp)
+      : ctx_(ctx), sp_(sp),
         fused_(MatrixType::IsRowMajor && ctx.lcp() && ctx.zu == ZUpdate::Explicit),
         Az_(ctx.n()), rhs_(ctx.n()), dx_(ctx.n()) {}
 
@@ -81,15 +86,16 @@ class SplittingStep : public StepBase {
     if (fused_) return evaluate_fused(s);
     ctx_.spmv(s.z, Az_);
     ctx_.eval_zeta(s, s.z, s.zeta_z);
-    return ctx_.residual(Az_, s.z, ctx_.lcp() ? nullptr : &s.zeta_z);
+    if (!s.zeta_ok || !s.finite) return std::numeric_limits<double>::quiet_NaN();
+    return ctx_.residual(Az_, s);
   }
   void move_x(Iterate& s) {
     make_rhs(s);
     solve_left();
-    relax(s);
+    relax(s, 1.0);
   }
   void update_z(Iterate& s) { ctx_.next_z(s); }
-  /// θ Lm⁻¹ rhs of the last step.
+  /// x⁽ᵏ⁺¹⁾ − x⁽ᵏ⁾ of the last step.
   const Vector& dx() const { return dx_; }
 
  protected:
@@ -97,16 +103,18 @@ class SplittingStep : public StepBase {
     if constexpr (MatrixType::IsRowMajor) {
       const Vector &q = ctx_.q, &om2 = ctx_.p.omega2, &x = s.x, &z = s.z;
       const double gamma = ctx_.p.gamma;
-      ScopedTimer t(ctx_.tm.spmv);
       ResidualSum res;
-      for (Eigen::Index i = 0; i < ctx_.n(); ++i) {
-        double a = 0;
-        for (typename MatrixType::InnerIterator it(ctx_.A, i); it; ++it) a += it.value() * z[it.index()];
-        const double wi = a + q[i];
-        res.add(wi, z[i]);
-        rhs_[i] = om2[i] * (std::abs(x[i]) - x[i]) - gamma * wi;
+      {
+        ScopedTimer t(ctx_.tm.spmv);
+        for (Eigen::Index i = 0; i < ctx_.n(); ++i) {
+          double a = 0;
+          for (typename MatrixType::InnerIterator it(ctx_.A, i); it; ++it) a += it.value() * z[it.index()];
+          const double wi = a + q[i];
+          res.add(wi, z[i]);
+          rhs_[i] = om2[i] * (std::abs(x[i]) - x[i]) - gamma * wi;
+        }
       }
-      return res.norm();
+      return ctx_.residual_norm(res, s);
     }
     return std::numeric_limits<double>::quiet_NaN();  // unreachable: fused_ needs row-major
   }
@@ -129,10 +137,10 @@ class SplittingStep : public StepBase {
     sp_.solve(rhs_, dx_);
   }
   // dx ← θ dx, x += dx, s.step = ‖dx‖∞.
-  void relax(Iterate& s) {
+  void relax(Iterate& s, double theta) {
     double step = 0;
     for (Eigen::Index i = 0; i < ctx_.n(); ++i) {
-      const double d = theta_ * dx_[i];
+      const double d = theta * dx_[i];
       dx_[i] = d;
       s.x[i] += d;
       step = std::max(step, std::abs(d));
@@ -142,7 +150,6 @@ class SplittingStep : public StepBase {
 
   Context<MatrixType>& ctx_;
   const Splitting<StorageIndex>& sp_;
-  const double theta_;
   const bool fused_;
   Vector Az_, Azhat_, zhat_, rhs_, dx_;
 };
@@ -156,7 +163,7 @@ class TwoSweepStep : public SplittingStep<MatrixType> {
  public:
   TwoSweepStep(Context<MatrixType>& ctx, const Splitting<typename Base::StorageIndex>& sp, double theta,
                const Iterate& s)
-      : Base(ctx, sp, theta), absx_prev_(s.x.cwiseAbs()) {}
+      : Base(ctx, sp), theta_(theta), absx_prev_(s.x.cwiseAbs()) {}
 
   void move_x(Iterate& s) {
     this->make_rhs(s);
@@ -167,10 +174,11 @@ class TwoSweepStep : public SplittingStep<MatrixType> {
       absx_prev_.swap(absx_);
     }
     this->solve_left();
-    this->relax(s);
+    this->relax(s, theta_);
   }
 
  private:
+  const double theta_;
   Eigen::VectorXd absx_prev_, absx_;
 };
 

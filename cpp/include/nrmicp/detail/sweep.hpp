@@ -15,12 +15,12 @@
 
 namespace nrmicp::detail {
 
-/// Computes Res(z⁽ᵏ⁾) (returned), x ← x⁽ᵏ⁺¹⁾ and z_next ← z⁽ᵏ⁺¹⁾; `step` = max|x⁽ᵏ⁺¹⁾ − x⁽ᵏ⁾|.
+/// Computes Res(z⁽ᵏ⁾)² (returned as its ResidualSum), x ← x⁽ᵏ⁺¹⁾ and z_next ← z⁽ᵏ⁺¹⁾; `step` = max|x⁽ᵏ⁺¹⁾ − x⁽ᵏ⁾|.
 /// For an LCP pass zeta_z = zhat = nullptr (then ẑ = z); for an ICP, zeta_z = ζ(z⁽ᵏ⁾) and
 /// zhat = ζ(z⁽ᵏ⁾) + Ω1(|x| + x)/γ; lm_inverse_diagonal = 1 / diag(Lm). `dx` is workspace of length n.
 /// `OmegaOneIsIdentity`: Ω1 = I (the default), so Ω1 is not read: the sweep is bandwidth-bound.
 template <bool OmegaOneIsIdentity, typename MatrixType>
-double aor_sweep_impl(const MatrixType& A, const Eigen::VectorXd& z, const Eigen::VectorXd* zeta_z,
+ResidualSum aor_sweep_impl(const MatrixType& A, const Eigen::VectorXd& z, const Eigen::VectorXd* zeta_z,
                       const Eigen::VectorXd* zhat, const Eigen::VectorXd& q, const Eigen::VectorXd& omega1,
                       const Eigen::VectorXd& omega2, const Eigen::VectorXd& lm_inverse_diagonal, double lower_scale,
                       double gamma, Eigen::VectorXd& x, Eigen::VectorXd& z_next, Eigen::VectorXd& dx, double& step) {
@@ -54,11 +54,11 @@ double aor_sweep_impl(const MatrixType& A, const Eigen::VectorXd& z, const Eigen
     z_next[i] = (zeta_z ? (*zeta_z)[i] : 0.0) + om1(i) * (std::abs(xn) + xn) * inv_gamma;
   }
   step = max_step;
-  return res.norm();
+  return res;
 }
 
 template <typename MatrixType>
-double aor_sweep(const MatrixType& A, const Eigen::VectorXd& z, const Eigen::VectorXd* zeta_z,
+ResidualSum aor_sweep(const MatrixType& A, const Eigen::VectorXd& z, const Eigen::VectorXd* zeta_z,
                  const Eigen::VectorXd* zhat, const Eigen::VectorXd& q, const Eigen::VectorXd& omega1,
                  bool omega1_is_identity, const Eigen::VectorXd& omega2, const Eigen::VectorXd& lm_inverse_diagonal,
                  double lower_scale, double gamma, Eigen::VectorXd& x, Eigen::VectorXd& z_next, Eigen::VectorXd& dx,
