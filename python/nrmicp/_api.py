@@ -432,7 +432,10 @@ def solve(A, q, zeta=None, *, method="nrmgs", tol=1e-8, maxiter=10000, omega1=No
     record_history : bool
         Keep (iteration, seconds, Res) of every iterate in ``result.history``.
     stall_iterations : int
-        STAGNATED when the best Res has not improved for this many iterations.
+        The window of the no-progress rules: STAGNATED when Res stops improving at rounding level
+        for this many iterations, when 3 consecutive windows of this many iterations bring no lower
+        Res, or when the best Res has not improved for 10 windows and, at the rate Res falls, would
+        not be reached again within maxiter (README "What a solve returns").
     scale : False, True, 'rows' or 'both'
         Diagonal equilibration for badly scaled problems (default off). 'rows': D_r = 1/max|row|;
         'both' (= True): Ruiz equilibration of rows and columns. The solver then iterates on
