@@ -143,3 +143,81 @@ def test_subnormal_matrix_diagonal_is_rejected_naming_A():
     A = scenes.bai(4).A
     with pytest.raises(ValueError, match=r"A\[0,0\]"):
         nrmicp.solve(1e-320 * A, -np.ones(A.shape[0]))
+
+
+# ---- one fact in one place: names, statuses and the 'auto' rule come from the core ---------
+
+def test_python_lists_are_the_cores():
+    from nrmicp import _core
+    assert nrmicp.METHODS == tuple(_core.Method.__members__)
+    assert [s.name for s in nrmicp.Status] == list(_core.Status.__members__)
+    assert [int(s) for s in nrmicp.Status] == [int(v) for v in _core.Status.__members__.values()]
+    assert _core.status_message(int(nrmicp.Status.CONVERGED)).startswith("converged")
+    with pytest.raises(ValueError, match="status"):
+        _core.status_message(99)
+
+
+@pytest.mark.parametrize("method", nrmicp.METHODS)
+@pytest.mark.parametrize("kind", ["lcp", "icp"])
+def test_resolved_z_update_is_what_auto_does(method, kind):
+    """The core answers 'what does auto mean here' (bench.py asks it): the same iterates."""
+    from nrmicp import _core
+    P = make_problem(kind, 6, True)
+    used = _core.resolved_z_update(getattr(_core.Method, method), False, P.zeta is not None)
+    auto = nrmicp.solve(P.A, P.q, P.zeta, method=method, maxiter=5, tol=1e-300)
+    explicit = nrmicp.solve(P.A, P.q, P.zeta, method=method, maxiter=5, tol=1e-300, z_update=used)
+    np.testing.assert_array_equal(auto.z, explicit.z)
+    other = "solve" if used == "explicit" else "explicit"
+    different = nrmicp.solve(P.A, P.q, P.zeta, method=method, maxiter=5, tol=1e-300, z_update=other)
+    if kind == "icp":  # for an LCP the z-updates agree on the solution only
+        assert not np.array_equal(auto.z, different.z)
+
+
+# ---- progress: verbose= --------------------------------------------------------------------
+
+def test_silent_by_default(capsys, caplog):
+    P = make_problem("lcp", 8, True)
+    with caplog.at_level("DEBUG", logger="nrmicp"):
+        nrmicp.solve(P.A, P.q)
+    assert capsys.readouterr().err == ""
+    assert not [r for r in caplog.records if r.name == "nrmicp"]
+
+
+def test_verbose_logs_first_iterate_and_final_status(caplog):
+    P = make_problem("lcp", 8, True)
+    with caplog.at_level("INFO", logger="nrmicp"):
+        res = nrmicp.Solver(P.A).solve(P.q, verbose=1)
+    lines = [r.getMessage() for r in caplog.records if r.name == "nrmicp"]
+    assert res.success
+    assert "iteration       0" in lines[0] and "Res" in lines[0]
+    assert "converged" in lines[-1] and f"({res.iterations} iterations" in lines[-1]
+
+
+def test_verbose_reports_by_time_not_per_iteration(caplog):
+    P = scenes.obstacle_2d(32)
+    with caplog.at_level("INFO", logger="nrmicp"):
+        res = nrmicp.solve(P.A, P.q, P.zeta, method="nrmgs", maxiter=2000, tol=1e-300, verbose=1)
+    lines = [r for r in caplog.records if r.name == "nrmicp"]
+    assert res.iterations > 100
+    assert 2 <= len(lines) < res.iterations / 10
+
+
+def test_verbose_prints_to_stderr_when_logging_is_not_configured(capsys):
+    from nrmicp import _api
+    P = make_problem("lcp", 8, True)
+    saved = _api.logger.propagate
+    _api.logger.propagate = False  # as if no handler were configured anywhere
+    try:
+        nrmicp.solve(P.A, P.q, verbose=1)
+    finally:
+        _api.logger.propagate = saved
+    err = capsys.readouterr().err
+    assert "nrmicp nrmgs: iteration       0" in err and "converged" in err
+
+
+def test_verbose_must_be_a_nonnegative_whole_number():
+    P = make_problem("lcp", 4, True)
+    with pytest.raises(ValueError, match="verbose"):
+        nrmicp.solve(P.A, P.q, verbose=-1)
+    with pytest.raises(TypeError, match="verbose"):
+        nrmicp.solve(P.A, P.q, verbose=0.5)

@@ -2,7 +2,9 @@
 from __future__ import annotations
 
 import enum
+import logging
 import math
+import sys
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -16,21 +18,17 @@ from ._scaling import SCALINGS, ScaledCallable, equilibrate, scale_matrix
 
 __all__ = ["solve", "Solver", "Affine", "Result", "Status", "METHODS", "residual", "backends"]
 
+# The option names and the statuses are defined once, in the C++ core (options.hpp, result.hpp).
 #: The methods, in the order of the paper: the NRM family, then the baselines.
-METHODS = ("nrm", "nrmm", "nrmaor", "nrmsor", "nrmgs", "nrmj", "mms", "two_sweep")
-Z_UPDATES = ("auto", "explicit", "solve")
-INNERS = ("auto", "cholmod", "umfpack", "eigen_llt", "eigen_lu")
-ACCELERATIONS = ("none", "anderson")
+METHODS = tuple(_core.Method.__members__)
+Z_UPDATES = tuple(_core.ZUpdate.__members__)
+INNERS = tuple(_core.Inner.__members__)
+ACCELERATIONS = tuple(_core.Accelerate.__members__)
 
-
-class Status(enum.IntEnum):
-    """Why a solve ended. Only CONVERGED means success."""
-    CONVERGED = 0       #: Res(z) < tol
-    MAX_ITERATIONS = 1  #: maxiter iterations without reaching tol
-    DIVERGED = 2        #: Res became non-finite or grew without bound
-    STAGNATED = 3       #: Res stopped decreasing before reaching tol (e.g. tol below rounding)
-    CALLBACK_STOP = 4   #: the callback raised StopIteration or returned True
-    ZETA_FAILED = 5     #: zeta(z) returned non-finite values
+#: Why a solve ended (CONVERGED, MAX_ITERATIONS, DIVERGED, STAGNATED, CALLBACK_STOP, ZETA_FAILED);
+#: only CONVERGED means success. ``nrmicp._core.status_message(code)`` says what each means.
+Status = enum.IntEnum("Status", [(name, int(v)) for name, v in _core.Status.__members__.items()],
+                      module=__name__)
 
 
 class Result(OptimizeResult):
@@ -107,15 +105,46 @@ def _scalar(value, name, *, low=None, low_inclusive=False, high=None, allow_none
 
 
 def _iteration_options(opts, *, tol, maxiter, z_update, accelerate, anderson_m, theta, record_history,
-                       stall_iterations):
-    opts.tol = _scalar(tol, "tol", low=0)
-    opts.maxiter = _scalar(maxiter, "maxiter", low=0, low_inclusive=True, integer=True)
+                       stall_iterations, verbose=0):
+    """Fill the iteration fields of a core Options, checking types here; values are checked by
+    the core (Options.check), which knows the rules."""
+    opts.tol = _scalar(tol, "tol")
+    opts.maxiter = _scalar(maxiter, "maxiter", integer=True)
     opts.z_update = getattr(_core.ZUpdate, _choice(z_update, Z_UPDATES, "z_update"))
     opts.accelerate = getattr(_core.Accelerate, _choice(accelerate or "none", ACCELERATIONS, "accelerate"))
-    opts.anderson_m = _scalar(anderson_m, "anderson_m", low=1, low_inclusive=True, high=100, integer=True)
-    opts.theta = _scalar(theta, "theta", low=0, high=2)
+    opts.anderson_m = _scalar(anderson_m, "anderson_m", integer=True)
+    opts.theta = _scalar(theta, "theta")
     opts.record_history = bool(record_history)
-    opts.stall_iterations = _scalar(stall_iterations, "stall_iterations", low=1, low_inclusive=True, integer=True)
+    opts.stall_iterations = _scalar(stall_iterations, "stall_iterations", integer=True)
+    opts.verbose = _scalar(verbose, "verbose", integer=True)
+    return opts
+
+
+#: Progress lines of solves with ``verbose > 0`` go to this logger (level INFO).
+logger = logging.getLogger("nrmicp")
+
+
+def _log_progress(line):
+    """One progress line: to the 'nrmicp' logger, and to stderr when logging is not configured
+    (no handler would show an INFO record), as scipy/OSQP print their progress."""
+    logger.info(line)
+    if not logger.hasHandlers():
+        print(line, file=sys.stderr, flush=True)
+
+
+def _progress_hook(method, n):
+    """The core calls this every `verbose` seconds (not every iteration), and once at the end."""
+    def report(k, res, best, seconds, message):
+        if message:
+            _log_progress(f"nrmicp {method}: {message} ({k} iterations, {seconds:.2f} s)")
+        else:
+            _log_progress(f"nrmicp {method}: iteration {k:>7d}  Res {res:.3e}  best {best:.3e}  {seconds:9.2f} s")
+    return report
+
+
+def _checked(opts, n):
+    """opts after the core's Options.check (ValueError naming the field)."""
+    opts.check(n)
     return opts
 
 
@@ -154,7 +183,7 @@ class Solver:
     ``Solver(A, method=..., **options)`` accepts the set-up options of :func:`solve`
     (method, omega1, omega2, gamma, phi, alpha, beta, inner, scale) and defaults for the
     iteration options (tol, maxiter, theta, z_update, accelerate, anderson_m, record_history,
-    stall_iterations), each of which :meth:`solve` may override. A is referenced, not
+    stall_iterations, verbose), each of which :meth:`solve` may override. A is referenced, not
     copied, when it is canonical float64 CSR and ``scale`` is off: do not modify it while the
     Solver lives.
 
@@ -168,7 +197,8 @@ class Solver:
 
     def __init__(self, A, *, method="nrmgs", omega1=None, omega2=None, gamma=1.0, phi=None, alpha=None,
                  beta=None, inner="auto", tol=1e-8, maxiter=10000, theta=1.0, z_update="auto",
-                 accelerate="none", anderson_m=5, record_history=False, stall_iterations=100, scale=False):
+                 accelerate="none", anderson_m=5, record_history=False, stall_iterations=100, scale=False,
+                 verbose=0):
         self.A = as_csr(A, "A")
         n = self.A.shape[0]
         if n == 0:
@@ -189,14 +219,14 @@ class Solver:
             vec = as_diagonal(value, n, name, positive=positive)
             if vec is not None:
                 setattr(opts, name, vec)
-        opts.gamma = _scalar(gamma, "gamma", low=0)
-        opts.alpha = math.nan if alpha is None else _scalar(alpha, "alpha", low=0)
-        opts.beta = math.nan if beta is None else _scalar(beta, "beta", low=0, low_inclusive=True)
+        opts.gamma = _scalar(gamma, "gamma")
+        opts.alpha = math.nan if alpha is None else _scalar(alpha, "alpha")
+        opts.beta = math.nan if beta is None else _scalar(beta, "beta")
         opts.inner = getattr(_core.Inner, _choice(inner, INNERS, "inner"))
         self._defaults = dict(tol=tol, maxiter=maxiter, theta=theta, z_update=z_update, accelerate=accelerate,
                               anderson_m=anderson_m, record_history=record_history,
-                              stall_iterations=stall_iterations)
-        _iteration_options(opts, **self._defaults)
+                              stall_iterations=stall_iterations, verbose=verbose)
+        _checked(_iteration_options(opts, **self._defaults), n)
         if self.method in ("mms", "two_sweep") and (omega1 is not None or phi is not None):
             raise ValueError(f"method {self.method!r} fixes omega1 = I and phi = 0; "
                              "use an NRM-family method to set them")
@@ -235,7 +265,9 @@ class Solver:
                             "options (method, omega1, omega2, gamma, phi, alpha, beta, inner, scale) are fixed at "
                             "set-up")
         it = dict(self._defaults, **iteration_options)
-        _iteration_options(_core.Options(), **it)  # validates every iteration option once
+        checked = _iteration_options(_core.Options(), **it)
+        checked.method = getattr(_core.Method, self.method)
+        _checked(checked, n)  # validates every iteration option once, against this method
         tol = float(it["tol"])
         qv = as_vector(q, n, "q")
         z0 = None if x0 is None else as_vector(x0, n, "x0")
@@ -298,7 +330,8 @@ class Solver:
         refined = 0
         while True:
             opts = _iteration_options(_core.Options(), **dict(it, tol=tol_k))
-            d = self._core.solve(qs, kind, cs, bp, bi, bd, fns, x0k, cb, opts)
+            d = self._core.solve(qs, kind, cs, bp, bi, bd, fns, x0k, cb, opts,
+                                 _progress_hook(self.method, n) if opts.verbose > 0 else None)
             status = Status(d["status"])
             if status == Status.ZETA_FAILED:
                 raise ValueError(f"zeta(z) returned non-finite values (NaN or Inf): {d['message']}")
@@ -341,7 +374,7 @@ class Solver:
         if not verify:
             status, message = last_status, d_last["message"]
         elif res < tol:
-            status, message = Status.CONVERGED, "converged: Res < tol"
+            status, message = Status.CONVERGED, _core.status_message(int(Status.CONVERGED))
             if refined:
                 message += f" (after {refined} re-solve(s) with a tighter tolerance on the scaled problem)"
         elif last_status == Status.CONVERGED:
@@ -371,7 +404,7 @@ class Solver:
 def solve(A, q, zeta=None, *, method="nrmgs", tol=1e-8, maxiter=10000, omega1=None, omega2=None, gamma=1.0,
           phi=None, alpha=None, beta=None, theta=1.0, z_update="auto", inner="auto", accelerate="none",
           anderson_m=5, x0=None, callback=None, record_history=False, stall_iterations=100,
-          scale=False) -> Result:
+          scale=False, verbose=0) -> Result:
     r"""Solve the implicit complementarity problem ICP(q, A, ζ):
 
     find z with  w = Az + q ≥ 0,  g = z − ζ(z) ≥ 0,  gᵀw = 0   (ζ ≡ 0: the LCP),
@@ -436,6 +469,11 @@ def solve(A, q, zeta=None, *, method="nrmgs", tol=1e-8, maxiter=10000, omega1=No
         for this many iterations, when 3 consecutive windows of this many iterations bring no lower
         Res, or when the best Res has not improved for 10 windows and, at the rate Res falls, would
         not be reached again within maxiter (README "What a solve returns").
+    verbose : int >= 0
+        0 (default): silent. k > 0: a progress line (iteration, Res, best Res, elapsed seconds) at
+        the first iterate, then about every k seconds, and a final line with the status. Lines go
+        to the ``logging`` logger ``"nrmicp"`` at level INFO, and to stderr when logging is not
+        configured. The C++ loop decides when to report: there is no per-iteration Python call.
     scale : False, True, 'rows' or 'both'
         Diagonal equilibration for badly scaled problems (default off). 'rows': D_r = 1/max|row|;
         'both' (= True): Ruiz equilibration of rows and columns. The solver then iterates on
@@ -462,5 +500,5 @@ def solve(A, q, zeta=None, *, method="nrmgs", tol=1e-8, maxiter=10000, omega1=No
     s = Solver(A, method=method, omega1=omega1, omega2=omega2, gamma=gamma, phi=phi, alpha=alpha, beta=beta,
                inner=inner, tol=tol, maxiter=maxiter, theta=theta, z_update=z_update, accelerate=accelerate,
                anderson_m=anderson_m, record_history=record_history, stall_iterations=stall_iterations,
-               scale=scale)
+               scale=scale, verbose=verbose)
     return s.solve(q, zeta, x0=x0, callback=callback)

@@ -84,6 +84,9 @@ struct Options {
   /// DIVERGED when Res exceeds this factor times the best Res seen, or the modulus vector x grows
   /// by this factor while Res does not improve.
   double divergence_factor = 1e10;
+  /// Progress report: 0 silent; k > 0 calls the solve's progress hook at the first iterate, then
+  /// whenever k seconds have passed since the last report, and once at the end.
+  int verbose = 0;
 
   /// Throws std::invalid_argument naming the offending field, its value and what is accepted.
   void check(Eigen::Index n) const {
@@ -122,6 +125,7 @@ struct Options {
     if (anderson_m < 1 || anderson_m > 100) fail("anderson_m must lie in [1, 100], got " + std::to_string(anderson_m));
     if (stall_iterations < 1) fail("stall_iterations must be >= 1, got " + std::to_string(stall_iterations));
     if (!(divergence_factor > 1)) fail("divergence_factor must be > 1, got " + num(divergence_factor));
+    if (verbose < 0) fail("verbose must be >= 0 (seconds between progress lines; 0: silent), got " + std::to_string(verbose));
   }
 };
 
@@ -141,5 +145,53 @@ inline const char* to_string(Method m) {
 
 /// True for the members whose M is the AOR lower-triangular part (no factorization of Lm).
 inline bool is_aor_type(Method m) { return m != Method::NRM && m != Method::NRMM; }
+
+inline const char* to_string(ZUpdate z) {
+  switch (z) {
+    case ZUpdate::Auto: return "auto";
+    case ZUpdate::Explicit: return "explicit";
+    case ZUpdate::Solve: return "solve";
+  }
+  return "?";
+}
+
+inline const char* to_string(Inner k) {
+  switch (k) {
+    case Inner::Auto: return "auto";
+    case Inner::Cholmod: return "cholmod";
+    case Inner::Umfpack: return "umfpack";
+    case Inner::EigenLLT: return "eigen_llt";
+    case Inner::EigenLU: return "eigen_lu";
+  }
+  return "?";
+}
+
+inline const char* to_string(Accelerate a) {
+  switch (a) {
+    case Accelerate::None: return "none";
+    case Accelerate::Anderson: return "anderson";
+  }
+  return "?";
+}
+
+/// Every value of each option enum, in declaration order (the Python bindings list these).
+inline constexpr Method all_methods[] = {Method::NRM,   Method::NRMM, Method::NRMAOR, Method::NRMSOR,
+                                         Method::NRMGS, Method::NRMJ, Method::MMS,    Method::TwoSweep};
+inline constexpr ZUpdate all_z_updates[] = {ZUpdate::Auto, ZUpdate::Explicit, ZUpdate::Solve};
+inline constexpr Inner all_inners[] = {Inner::Auto, Inner::Cholmod, Inner::Umfpack, Inner::EigenLLT, Inner::EigenLU};
+inline constexpr Accelerate all_accelerations[] = {Accelerate::None, Accelerate::Anderson};
+
+/// The z-update a solve uses. Auto = Explicit: measured faster (no solve with A: 4-10x on ICPs
+/// at equal iteration counts) and more robust (it converged on unshifted-Laplacian and
+/// thermoforming ICPs where Solve stagnated). Except the paper's NRM (Ω2 = I, far from diag A)
+/// on an ICP (ζ not constant): there Explicit stagnated on Bai's ICPs and Solve converged (~145
+/// iterations). Solve is also needed when ζ's Lipschitz constant is about 1 (README). MMS is the
+/// Zheng–Vong baseline, whose definition includes the Solve update: Auto keeps it on an ICP
+/// (else it equals NRMGS).
+inline ZUpdate resolve_z_update(ZUpdate asked, Method method, bool omega2_given, bool icp) {
+  if (asked != ZUpdate::Auto) return asked;
+  const bool paper_update = icp && ((method == Method::NRM && !omega2_given) || method == Method::MMS);
+  return paper_update ? ZUpdate::Solve : ZUpdate::Explicit;
+}
 
 }  // namespace nrmicp

@@ -67,6 +67,8 @@ class Solver {
   using Callback = detail::Callback;
   /// Called about every 50 ms during a solve; may throw to abort (e.g. on Ctrl-C).
   using Poll = detail::Poll;
+  /// Progress lines (Options::verbose > 0): (k, Res, best Res, seconds, final message or empty).
+  using Progress = detail::Progress;
 
   Solver(const MatrixType& A, Options options) : A_(A), options_(std::move(options)) {
     if (A.rows() != A.cols())
@@ -94,7 +96,7 @@ class Solver {
   /// its parameters) stays, and the merged options are checked against it.
   Result solve(const Vector& q, const Zeta<StorageIndex>& zeta = Zeta<StorageIndex>::none(),
                const Vector* z0 = nullptr, const Callback& callback = {}, const Poll& poll = {},
-               const Options* iteration_options = nullptr) const {
+               const Options* iteration_options = nullptr, const Progress& progress = {}) const {
     const auto t0 = std::chrono::steady_clock::now();
     const Eigen::Index n = A_.rows();
     Options o = options_;
@@ -105,6 +107,7 @@ class Solver {
       o.record_history = iteration_options->record_history;
       o.stall_iterations = iteration_options->stall_iterations;
       o.divergence_factor = iteration_options->divergence_factor;
+      o.verbose = iteration_options->verbose;
       o.check(n);
     }
     if (q.size() != n) throw std::invalid_argument("Solver::solve: q has length " + std::to_string(q.size()) + ", expected n = " + std::to_string(n));
@@ -117,10 +120,10 @@ class Solver {
       q_shift.noalias() += A_ * zeta.c();
       // y0 = z0 − c (z0 = 0 by default), so that the iterates are exactly those of the ICP.
       const Vector y0 = z0 ? Vector(*z0 - zeta.c()) : Vector(-zeta.c());
-      r = iterate(q_shift, Zeta<StorageIndex>::none(), &y0, callback, poll, o, zeta.c());
+      r = iterate(q_shift, Zeta<StorageIndex>::none(), &y0, {callback, poll, progress}, o, zeta.c());
       r.z += zeta.c();
     } else {
-      r = iterate(q, zeta, z0, callback, poll, o, Vector());
+      r = iterate(q, zeta, z0, {callback, poll, progress}, o, Vector());
     }
     r.timings.setup = setup_seconds_;
     r.timings.factorization += setup_factorization_;
@@ -137,24 +140,17 @@ class Solver {
     a_solver_.compute(ColMatrix(A_), options_.inner, "A (for the z-update 'solve')");
   }
 
-  // Auto = Explicit: measured faster (no solve with A: 4-10x on ICPs at equal iteration
-  // counts) and more robust (it converged on unshifted-Laplacian and thermoforming ICPs where
-  // Solve stagnated). Except the paper's NRM (Ω2 = I, far from diag A) on an ICP: there
-  // Explicit stagnated on Bai's ICPs and Solve converged (~145 iterations). Solve is also
-  // needed when ζ's Lipschitz constant is about 1 (README). MMS is the Zheng–Vong baseline,
-  // whose definition includes the Solve update: Auto keeps it (else it equals NRMGS).
-  ZUpdate resolved_z_update(ZUpdate asked, bool lcp) const {
-    if (asked != ZUpdate::Auto) return asked;
-    const bool paper_update = !lcp && ((options_.method == Method::NRM && options_.omega2.size() == 0) ||
-                                       options_.method == Method::MMS);
-    return paper_update ? ZUpdate::Solve : ZUpdate::Explicit;
-  }
-
   // One solve of ICP(q, A, ζ) by Method 3.1. `shift` is the constant obstacle (only to report
   // z to the callback), or empty.
-  Result iterate(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0, const Callback& callback,
-                 const Poll& poll, const Options& o, const Vector& shift) const {
-    const ZUpdate zu = resolved_z_update(o.z_update, zeta.kind() == ZetaKind::None);
+  struct Hooks {
+    const Callback& callback;
+    const Poll& poll;
+    const Progress& progress;
+  };
+  Result iterate(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0, const Hooks& hooks,
+                 const Options& o, const Vector& shift) const {
+    const ZUpdate zu = resolve_z_update(o.z_update, options_.method, options_.omega2.size() > 0,
+                                        zeta.kind() != ZetaKind::None);
     Result res;
     if (zu == ZUpdate::Solve) {
       const double before = a_factorization_;
@@ -162,7 +158,7 @@ class Solver {
       res.timings.factorization += a_factorization_ - before;  // only if this solve paid for it
     }
     detail::Context<MatrixType> ctx(A_, q, zeta, params_, zu, a_solver_, res.timings);
-    detail::Monitor monitor(o, callback, poll, shift, res, A_.rows());
+    detail::Monitor monitor(o, hooks.callback, hooks.poll, hooks.progress, shift, res, A_.rows());
     detail::Iterate s;
     if (!ctx.start(z0, s)) {
       res.status = Status::ZetaFailed;

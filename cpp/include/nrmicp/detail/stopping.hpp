@@ -23,6 +23,9 @@ namespace nrmicp::detail {
 using Callback = std::function<bool(int, const Eigen::VectorXd&, double)>;
 /// Called about every 50 ms during a solve; may throw to abort (e.g. on Ctrl-C).
 using Poll = std::function<void()>;
+/// Progress report (Options::verbose): (k, Res of iterate k, best Res, seconds, message); the
+/// message is empty while iterating and the result's message at the end.
+using Progress = std::function<void(int, double, double, double, const std::string&)>;
 
 class Monitor {
  public:
@@ -31,10 +34,10 @@ class Monitor {
 
   /// `shift`: the constant obstacle c when the core iterates the shifted LCP in y = z − c (the
   /// callback sees z = y + c), else empty.
-  Monitor(const Options& o, const Callback& callback, const Poll& poll, const Vector& shift, Result& res,
-          Eigen::Index n)
-      : o_(o), callback_(callback), poll_(poll), shift_(shift), res_(res), best_z_(n), t_start_(clock::now()),
-        last_poll_(t_start_) {
+  Monitor(const Options& o, const Callback& callback, const Poll& poll, const Progress& progress,
+          const Vector& shift, Result& res, Eigen::Index n)
+      : o_(o), callback_(callback), poll_(poll), progress_(o.verbose > 0 ? progress : Progress()), shift_(shift),
+        res_(res), best_z_(n), t_start_(clock::now()), last_poll_(t_start_), last_report_(t_start_) {
     res_.status = Status::MaxIterations;
   }
 
@@ -56,6 +59,10 @@ class Monitor {
     if (poll_ && ScopedTimer::seconds_since(last_poll_) > 0.05) {
       poll_();
       last_poll_ = clock::now();
+    }
+    if (progress_ && (k == 0 || ScopedTimer::seconds_since(last_report_) >= o_.verbose)) {
+      progress_(k, r, best_, seconds(), std::string());
+      last_report_ = clock::now();
     }
     if (k >= o_.maxiter) return finish_with(Status::MaxIterations, k);
     return false;
@@ -83,6 +90,7 @@ class Monitor {
     if (res_.status != Status::Converged && res_.status != Status::ZetaFailed)
       res_.message += "; returning the best iterate (iteration " + std::to_string(best_k_) + ")";
     if (res_.status == Status::ZetaFailed) res_.message += " at iteration " + std::to_string(res_.iterations);
+    if (progress_) progress_(res_.iterations, res_.residual, res_.residual, seconds(), res_.message);
   }
 
  private:
@@ -170,6 +178,7 @@ class Monitor {
   const Options& o_;
   const Callback& callback_;
   const Poll& poll_;
+  const Progress progress_;
   const Vector& shift_;
   Result& res_;
   Vector best_z_;
@@ -180,7 +189,7 @@ class Monitor {
   double x_scale_ = 0, x_ref_ = 0;
   double last_r_ = std::numeric_limits<double>::quiet_NaN();
   double win_min_ = std::numeric_limits<double>::infinity(), win_max_ = -win_min_, prev_win_min_ = win_min_;
-  clock::time_point t_start_, last_poll_;
+  clock::time_point t_start_, last_poll_, last_report_;
 };
 
 }  // namespace nrmicp::detail
