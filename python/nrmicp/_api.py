@@ -74,10 +74,15 @@ def residual(A, q, z, zeta=None) -> float:
 
 
 def _norm(m) -> float:
-    """‖m‖₂ without overflow or underflow (scaled by max |mᵢ|)."""
+    """‖m‖₂ without overflow or underflow: numpy's plain norm where its sum of squares is safe,
+    else scaled by max |mᵢ|."""
+    with np.errstate(over="ignore", under="ignore"):
+        plain = float(np.linalg.norm(m))
+    if 1e-140 < plain < 1e150:
+        return plain
     big = float(np.max(np.abs(m), initial=0.0))
     if not (0.0 < big < math.inf):
-        return float(np.linalg.norm(m))
+        return plain
     return big * float(np.linalg.norm(m / big))
 
 
