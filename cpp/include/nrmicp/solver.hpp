@@ -92,7 +92,7 @@ class Solver {
 
   /// Solves ICP(q, A, ζ) from the initial guess z0 (zeros when null). The iteration fields of
   /// `iteration_options` (tol, maxiter, z_update, accelerate, anderson_m, theta, record_history,
-  /// stall_iterations, divergence_factor) override the constructor's; the splitting (method and
+  /// stall_iterations, divergence_factor, verbose) override the constructor's; the splitting (method and
   /// its parameters) stays, and the merged options are checked against it.
   Result solve(const Vector& q, const Zeta<StorageIndex>& zeta = Zeta<StorageIndex>::none(),
                const Vector* z0 = nullptr, const Callback& callback = {}, const Poll& poll = {},
@@ -140,13 +140,14 @@ class Solver {
     a_solver_.compute(ColMatrix(A_), options_.inner, "A (for the z-update 'solve')");
   }
 
-  // One solve of ICP(q, A, ζ) by Method 3.1. `shift` is the constant obstacle (only to report
-  // z to the callback), or empty.
+  // What the caller hooks into a solve (any may be empty).
   struct Hooks {
     const Callback& callback;
     const Poll& poll;
     const Progress& progress;
   };
+  // One solve of ICP(q, A, ζ) by Method 3.1. `shift` is the constant obstacle (only to report
+  // z to the callback), or empty.
   Result iterate(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0, const Hooks& hooks,
                  const Options& o, const Vector& shift) const {
     const ZUpdate zu = resolve_z_update(o.z_update, options_.method, options_.omega2.size() > 0,
@@ -178,7 +179,8 @@ class Solver {
   }
 
   // Picks the step for the method: the one-pass sweep for the AOR-type members with the explicit
-  // update on a row-major A, the two-sweep step, or the generic splitting step.
+  // update on a row-major A, the two-sweep step, or the generic splitting step. A new step kind
+  // (e.g. a Newton member) is one more branch here.
   void run_steps(detail::Context<MatrixType>& ctx, detail::Iterate& s, detail::Monitor& monitor,
                  const Options& o) const {
     const bool two_sweep = splitting_->two_sweep();
