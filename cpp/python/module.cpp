@@ -85,7 +85,8 @@ class PySolver {
   void build(const Options& o) { solver_.emplace(A_, o); }
 
   py::dict solve(py::array q, int zeta_kind, py::object zeta_c, py::object b_indptr, py::object b_indices,
-                 py::object b_data, py::object zeta_fn, py::object z0, py::object callback, const Options& it) {
+                 py::object b_data, py::object zeta_fn, py::object z0, py::object callback, const Options& it,
+                 py::object progress) {
     using Z = nrmicp::Zeta<I>;
     const Eigen::Index n = A_.rows();
     Eigen::VectorXd qv = to_vector(q, "q");
@@ -116,10 +117,17 @@ class PySolver {
       py::gil_scoped_acquire gil;
       if (PyErr_CheckSignals() != 0) throw py::error_already_set();
     };
+    typename nrmicp::Solver<CsrMap<I>>::Progress report;  // called every `verbose` seconds, not per iteration
+    if (!progress.is_none()) {
+      report = [&progress](int k, double res, double best, double seconds, const std::string& message) {
+        py::gil_scoped_acquire gil;
+        progress(k, res, best, seconds, message);
+      };
+    }
     nrmicp::Result r;
     {
       py::gil_scoped_release release;
-      r = solver_->solve(qv, zeta, z0v ? &*z0v : nullptr, cb, poll, &it);
+      r = solver_->solve(qv, zeta, z0v ? &*z0v : nullptr, cb, poll, &it, report);
     }
     py::dict d;
     d["z"] = py::array_t<double>(r.z.size(), r.z.data());
@@ -130,6 +138,7 @@ class PySolver {
     d["iterations"] = r.iterations;
     d["residual"] = r.residual;
     d["inner"] = r.inner;
+    d["counters"] = r.counters;  // what a step kind counts beyond iterations (e.g. linear solves)
     if (it.record_history) {
       py::dict h;
       h["iteration"] = py::array_t<int>(r.history_iteration.size(), r.history_iteration.data());
@@ -155,7 +164,7 @@ class PySolver {
     const auto& p = solver_->parameters();
     py::dict d;
     d["omega1"] = p.omega1; d["omega2"] = p.omega2; d["phi"] = p.phi;
-    d["gamma"] = p.gamma; d["alpha"] = p.alpha; d["beta"] = p.beta; d["theta"] = p.theta;
+    d["gamma"] = p.gamma; d["alpha"] = p.alpha; d["beta"] = p.beta;
     d["inner"] = std::string(solver_->inner_name());
     return d;
   }
@@ -178,8 +187,14 @@ void bind_solver(py::module_& m, const char* name) {
            py::arg("indptr"), py::arg("indices"), py::arg("data"), py::arg("n"), py::arg("options"))
       .def("solve", &PySolver<I>::solve, py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("b_indptr"),
            py::arg("b_indices"), py::arg("b_data"), py::arg("zeta_fn"), py::arg("x0"), py::arg("callback"),
-           py::arg("options"))
+           py::arg("options"), py::arg("progress") = py::none())
       .def("parameters", &PySolver<I>::parameters);
+}
+
+template <typename E, std::size_t N, typename Name>
+void bind_enum(py::module_& m, const char* name, const E (&values)[N], Name name_of) {
+  py::enum_<E> e(m, name);
+  for (E v : values) e.value(name_of(v), v);
 }
 
 // Sorted column indices without duplicates in every row, and indptr consistent with them.
@@ -201,20 +216,23 @@ bool csr_is_canonical(const py::array& indptr, const py::array& indices) {
 
 PYBIND11_MODULE(_core, m) {
   m.doc() = "nrmicp C++ core (internal: use the nrmicp package)";
-  py::enum_<nrmicp::Method>(m, "Method")
-      .value("nrm", nrmicp::Method::NRM).value("nrmm", nrmicp::Method::NRMM)
-      .value("nrmaor", nrmicp::Method::NRMAOR).value("nrmsor", nrmicp::Method::NRMSOR)
-      .value("nrmgs", nrmicp::Method::NRMGS).value("nrmj", nrmicp::Method::NRMJ)
-      .value("mms", nrmicp::Method::MMS).value("two_sweep", nrmicp::Method::TwoSweep);
-  py::enum_<nrmicp::ZUpdate>(m, "ZUpdate")
-      .value("auto", nrmicp::ZUpdate::Auto).value("explicit", nrmicp::ZUpdate::Explicit)
-      .value("solve", nrmicp::ZUpdate::Solve);
-  py::enum_<nrmicp::Inner>(m, "Inner")
-      .value("auto", nrmicp::Inner::Auto).value("cholmod", nrmicp::Inner::Cholmod)
-      .value("umfpack", nrmicp::Inner::Umfpack).value("eigen_llt", nrmicp::Inner::EigenLLT)
-      .value("eigen_lu", nrmicp::Inner::EigenLU);
-  py::enum_<nrmicp::Accelerate>(m, "Accelerate")
-      .value("none", nrmicp::Accelerate::None).value("anderson", nrmicp::Accelerate::Anderson);
+  // The names come from the C++ core (options.hpp, result.hpp); Python derives its lists from these.
+  bind_enum(m, "Method", nrmicp::all_methods, [](nrmicp::Method v) { return nrmicp::to_string(v); });
+  bind_enum(m, "ZUpdate", nrmicp::all_z_updates, [](nrmicp::ZUpdate v) { return nrmicp::to_string(v); });
+  bind_enum(m, "Inner", nrmicp::all_inners, [](nrmicp::Inner v) { return nrmicp::to_string(v); });
+  bind_enum(m, "Accelerate", nrmicp::all_accelerations, [](nrmicp::Accelerate v) { return nrmicp::to_string(v); });
+  bind_enum(m, "Status", nrmicp::all_statuses, [](nrmicp::Status v) { return nrmicp::status_name(v); });
+  m.def("status_message", [](int code) {
+    for (nrmicp::Status s : nrmicp::all_statuses)
+      if (static_cast<int>(s) == code) return std::string(nrmicp::to_string(s));
+    throw py::value_error("unknown status code " + std::to_string(code));
+  }, py::arg("code"), "What a status code means (the start of a result's message).");
+  m.def("is_aor_type", &nrmicp::is_aor_type, py::arg("method"),
+        "True for the methods whose left matrix is triangular or diagonal (no factorization).");
+  m.def("resolved_z_update", [](nrmicp::Method method, bool omega2_given, bool is_icp) {
+    return std::string(nrmicp::to_string(nrmicp::resolve_z_update(nrmicp::ZUpdate::Auto, method, omega2_given, is_icp)));
+  }, py::arg("method"), py::arg("omega2_given"), py::arg("is_icp"),
+     "The z-update 'auto' means for this method (is_icp: a zeta that is not None or constant).");
 
   py::class_<Options>(m, "Options")
       .def(py::init<>())
@@ -235,6 +253,7 @@ PYBIND11_MODULE(_core, m) {
       .def_readwrite("record_history", &Options::record_history)
       .def_readwrite("stall_iterations", &Options::stall_iterations)
       .def_readwrite("divergence_factor", &Options::divergence_factor)
+      .def_readwrite("verbose", &Options::verbose)
       .def("check", &Options::check, py::arg("n"));
 
   bind_solver<std::int32_t>(m, "SolverI32");

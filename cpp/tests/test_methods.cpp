@@ -9,8 +9,6 @@
 using namespace nrmicp;
 
 namespace {
-const Method all_methods[] = {Method::NRM, Method::NRMM, Method::NRMAOR, Method::NRMSOR,
-                              Method::NRMGS, Method::NRMJ, Method::MMS, Method::TwoSweep};
 
 Options tuned(Method m) {
   Options o;

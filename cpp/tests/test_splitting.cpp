@@ -6,8 +6,6 @@
 using namespace nrmicp;
 
 namespace {
-const Method all_methods[] = {Method::NRM, Method::NRMM, Method::NRMAOR, Method::NRMSOR,
-                              Method::NRMGS, Method::NRMJ, Method::MMS, Method::TwoSweep};
 
 Options options_for(Method m, Eigen::Index n) {
   Options o;

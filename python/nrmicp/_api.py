@@ -3,7 +3,9 @@ from __future__ import annotations
 
 import enum
 import inspect
+import logging
 import math
+import sys
 from dataclasses import dataclass
 from typing import Any, Callable, Optional, Union
 
@@ -25,25 +27,18 @@ ZetaLike = Union[None, float, ArrayLike, "Affine", Callable[[np.ndarray], ArrayL
 #: A diagonal parameter (omega1, omega2, phi): a scalar (times I) or a length-n vector.
 DiagonalLike = Union[None, float, ArrayLike]
 
+# The option names and the statuses are defined once, in the C++ core (options.hpp, result.hpp).
 #: The methods, in the order of the paper: the NRM family, then the baselines.
-METHODS = ("nrm", "nrmm", "nrmaor", "nrmsor", "nrmgs", "nrmj", "mms", "two_sweep")
-Z_UPDATES = ("auto", "explicit", "solve")
-INNERS = ("auto", "cholmod", "umfpack", "eigen_llt", "eigen_lu")
-ACCELERATIONS = ("none", "anderson")
+METHODS = tuple(_core.Method.__members__)
+Z_UPDATES = tuple(_core.ZUpdate.__members__)
+INNERS = tuple(_core.Inner.__members__)
+ACCELERATIONS = tuple(_core.Accelerate.__members__)
 
+class _NamedIntEnum(enum.IntEnum):
+    """An IntEnum (compares and indexes like the core's int codes) that prints its name:
+    str(), format() and f-strings give 'CONVERGED' (a numeric spec such as ':d' the code),
+    repr() 'Status.CONVERGED'."""
 
-class Status(enum.IntEnum):
-    """Why a solve ended. Only CONVERGED means success."""
-    CONVERGED = 0       #: Res(z) < tol
-    MAX_ITERATIONS = 1  #: maxiter iterations without reaching tol
-    DIVERGED = 2        #: Res became non-finite or grew without bound
-    STAGNATED = 3       #: Res stopped decreasing before reaching tol (e.g. tol below rounding)
-    CALLBACK_STOP = 4   #: the callback raised StopIteration or returned True
-    ZETA_FAILED = 5     #: zeta(z) returned non-finite values
-
-    # An IntEnum (compares and indexes like the core's int codes) that prints its name:
-    # str(), format() and f-strings give 'CONVERGED' (a numeric spec such as ':d' the code),
-    # repr() 'Status.CONVERGED'.
     def __str__(self) -> str:
         return self.name
 
@@ -54,6 +49,13 @@ class Status(enum.IntEnum):
         if spec and spec[-1] in "bcdoxXneEfFgG%":  # a numeric format asks for the code
             return format(int(self), spec)
         return format(self.name, spec)
+
+
+#: Why a solve ended (CONVERGED, MAX_ITERATIONS, DIVERGED, STAGNATED, CALLBACK_STOP, ZETA_FAILED);
+#: only CONVERGED means success. ``nrmicp._core.status_message(code)`` says what each means.
+#: The members come from the C++ core (result.hpp), the one place they are defined.
+Status = _NamedIntEnum("Status", [(name, int(v)) for name, v in _core.Status.__members__.items()],
+                       module=__name__)
 
 
 class Result(OptimizeResult):
@@ -118,7 +120,20 @@ def residual(A: MatrixLike, q: ArrayLike, z: ArrayLike, zeta: ZetaLike = None) -
         g = z - np.asarray(zeta(z), dtype=float)
     else:
         g = z - np.asarray(zeta, dtype=float)
-    return float(np.linalg.norm(np.minimum(w, g)))
+    return _norm(np.minimum(w, g))
+
+
+def _norm(m) -> float:
+    """‖m‖₂ without overflow or underflow: numpy's plain norm where its sum of squares is safe,
+    else scaled by max |mᵢ|."""
+    with np.errstate(over="ignore", under="ignore"):
+        plain = float(np.linalg.norm(m))
+    if 1e-140 < plain < 1e150:
+        return plain
+    big = float(np.max(np.abs(m), initial=0.0))
+    if not (0.0 < big < math.inf):
+        return plain
+    return big * float(np.linalg.norm(m / big))
 
 
 def _choice(value, allowed, name):
@@ -145,15 +160,46 @@ def _scalar(value, name, *, low=None, low_inclusive=False, high=None, allow_none
 
 
 def _iteration_options(opts, *, tol, maxiter, z_update, accelerate, anderson_m, theta, record_history,
-                       stall_iterations):
-    opts.tol = _scalar(tol, "tol", low=0)
-    opts.maxiter = _scalar(maxiter, "maxiter", low=0, low_inclusive=True, integer=True)
+                       stall_iterations, verbose=0):
+    """Fill the iteration fields of a core Options, checking types here; values are checked by
+    the core (Options.check), which knows the rules."""
+    opts.tol = _scalar(tol, "tol")
+    opts.maxiter = _scalar(maxiter, "maxiter", integer=True)
     opts.z_update = getattr(_core.ZUpdate, _choice(z_update, Z_UPDATES, "z_update"))
     opts.accelerate = getattr(_core.Accelerate, _choice(accelerate or "none", ACCELERATIONS, "accelerate"))
-    opts.anderson_m = _scalar(anderson_m, "anderson_m", low=1, low_inclusive=True, high=100, integer=True)
-    opts.theta = _scalar(theta, "theta", low=0, high=2)
+    opts.anderson_m = _scalar(anderson_m, "anderson_m", integer=True)
+    opts.theta = _scalar(theta, "theta")
     opts.record_history = bool(record_history)
-    opts.stall_iterations = _scalar(stall_iterations, "stall_iterations", low=1, low_inclusive=True, integer=True)
+    opts.stall_iterations = _scalar(stall_iterations, "stall_iterations", integer=True)
+    opts.verbose = _scalar(verbose, "verbose", integer=True)
+    return opts
+
+
+#: Progress lines of solves with ``verbose > 0`` go to this logger (level INFO).
+logger = logging.getLogger("nrmicp")
+
+
+def _log_progress(line):
+    """One progress line: to the 'nrmicp' logger, and to stderr when logging is not configured
+    (no handler would show an INFO record), as scipy/OSQP print their progress."""
+    logger.info(line)
+    if not logger.hasHandlers():
+        print(line, file=sys.stderr, flush=True)
+
+
+def _progress_hook(method, n):
+    """The core calls this every `verbose` seconds (not every iteration), and once at the end."""
+    def report(k, res, best, seconds, message):
+        if message:
+            _log_progress(f"nrmicp {method}: {message} ({k} iterations, {seconds:.2f} s)")
+        else:
+            _log_progress(f"nrmicp {method}: iteration {k:>7d}  Res {res:.3e}  best {best:.3e}  {seconds:9.2f} s")
+    return report
+
+
+def _checked(opts, n):
+    """opts after the core's Options.check (ValueError naming the field)."""
+    opts.check(n)
     return opts
 
 
@@ -216,7 +262,7 @@ class Solver:
     ``Solver(A, method=..., **options)`` accepts the set-up options of :func:`solve`
     (method, omega1, omega2, gamma, phi, alpha, beta, inner, scale) and defaults for the
     iteration options (tol, maxiter, theta, z_update, accelerate, anderson_m, record_history,
-    stall_iterations), each of which :meth:`solve` may override. A is referenced, not
+    stall_iterations, verbose), each of which :meth:`solve` may override. A is referenced, not
     copied, when it is canonical float64 CSR and ``scale`` is off: do not modify it while the
     Solver lives.
 
@@ -233,7 +279,7 @@ class Solver:
                  alpha: Optional[float] = None, beta: Optional[float] = None, inner: str = "auto",
                  tol: float = 1e-8, maxiter: int = 10000, theta: float = 1.0, z_update: str = "auto",
                  accelerate: Optional[str] = "none", anderson_m: int = 5, record_history: bool = False,
-                 stall_iterations: int = 100, scale: Union[bool, str] = False) -> None:
+                 stall_iterations: int = 100, scale: Union[bool, str] = False, verbose: int = 0) -> None:
         self.A = as_csr(A, "A")
         n = self.A.shape[0]
         if n == 0:
@@ -254,19 +300,17 @@ class Solver:
             vec = as_diagonal(value, n, name, positive=positive)
             if vec is not None:
                 setattr(opts, name, vec)
-        opts.gamma = _scalar(gamma, "gamma", low=0)
-        opts.alpha = math.nan if alpha is None else _scalar(alpha, "alpha", low=0)
-        opts.beta = math.nan if beta is None else _scalar(beta, "beta", low=0, low_inclusive=True)
+        opts.gamma = _scalar(gamma, "gamma")
+        opts.alpha = math.nan if alpha is None else _scalar(alpha, "alpha")
+        opts.beta = math.nan if beta is None else _scalar(beta, "beta")
         opts.inner = getattr(_core.Inner, _choice(inner, INNERS, "inner"))
         self._defaults = dict(tol=tol, maxiter=maxiter, theta=theta, z_update=z_update, accelerate=accelerate,
                               anderson_m=anderson_m, record_history=record_history,
-                              stall_iterations=stall_iterations)
-        _iteration_options(opts, **self._defaults)
+                              stall_iterations=stall_iterations, verbose=verbose)
+        _checked(_iteration_options(opts, **self._defaults), n)
         if self.method in ("mms", "two_sweep") and (omega1 is not None or phi is not None):
             raise ValueError(f"method {self.method!r} fixes omega1 = I and phi = 0; "
                              "use an NRM-family method to set them")
-        if self.method != "two_sweep" and theta != 1.0:
-            raise ValueError(f"theta is the relaxation of method 'two_sweep'; method {self.method!r} has none")
         if self.scale is None:
             self._dr = self._dc = None
             A_core = self.A
@@ -282,7 +326,7 @@ class Solver:
 
     @property
     def parameters(self) -> dict[str, Any]:
-        """The method's parameters with defaults resolved: omega1, omega2, phi, gamma, alpha, beta, theta, inner.
+        """The method's parameters with defaults resolved: omega1, omega2, phi, gamma, alpha, beta, inner.
         With ``scale``, they are those of the scaled problem."""
         return dict(self._core.parameters())
 
@@ -303,9 +347,9 @@ class Solver:
                             "options (method, omega1, omega2, gamma, phi, alpha, beta, inner, scale) are fixed at "
                             "set-up")
         it = dict(self._defaults, **iteration_options)
-        if self.method != "two_sweep" and it["theta"] != 1.0:
-            raise ValueError(f"theta is the relaxation of method 'two_sweep'; method {self.method!r} has none")
-        _iteration_options(_core.Options(), **it)  # validates every iteration option once
+        checked = _iteration_options(_core.Options(), **it)
+        checked.method = getattr(_core.Method, self.method)
+        _checked(checked, n)  # validates every iteration option once, against this method
         tol = float(it["tol"])
         qv = as_vector(q, n, "q")
         z0 = None if x0 is None else as_vector(x0, n, "x0")
@@ -350,7 +394,7 @@ class Solver:
                 g = z - (B @ z + c)
             else:
                 g = z - np.asarray(fn(z), dtype=np.float64)
-            return w, float(np.linalg.norm(np.minimum(w, g)))
+            return w, _norm(np.minimum(w, g))
 
         tol_k, x0k = tol, z0s
         best = None
@@ -361,7 +405,8 @@ class Solver:
         refined = 0
         while True:
             opts = _iteration_options(_core.Options(), **dict(it, tol=tol_k))
-            d = self._core.solve(qs, kind, cs, bp, bi, bd, fns, x0k, cb, opts)
+            d = self._core.solve(qs, kind, cs, bp, bi, bd, fns, x0k, cb, opts,
+                                 _progress_hook(self.method, n) if opts.verbose > 0 else None)
             status = Status(d["status"])
             if status == Status.ZETA_FAILED:
                 raise ValueError(f"zeta(z) returned non-finite values (NaN or Inf): {d['message']}")
@@ -404,7 +449,7 @@ class Solver:
         if not verify:
             status, message = last_status, d_last["message"]
         elif res < tol:
-            status, message = Status.CONVERGED, "converged: Res < tol"
+            status, message = Status.CONVERGED, _core.status_message(int(Status.CONVERGED))
             if refined:
                 message += f" (after {refined} re-solve(s) with a tighter tolerance on the scaled problem)"
         elif last_status == Status.CONVERGED:
@@ -436,7 +481,8 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
           phi: DiagonalLike = None, alpha: Optional[float] = None, beta: Optional[float] = None,
           theta: float = 1.0, z_update: str = "auto", inner: str = "auto", accelerate: Optional[str] = "none",
           anderson_m: int = 5, x0: Optional[ArrayLike] = None, callback: Optional[Callable[..., Any]] = None,
-          record_history: bool = False, stall_iterations: int = 100, scale: Union[bool, str] = False) -> Result:
+          record_history: bool = False, stall_iterations: int = 100, scale: Union[bool, str] = False,
+          verbose: int = 0) -> Result:
     r"""Solve the implicit complementarity problem ICP(q, A, ζ):
 
     find z with  w = Az + q ≥ 0,  g = z − ζ(z) ≥ 0,  gᵀw = 0   (ζ ≡ 0: the LCP),
@@ -499,7 +545,15 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
     record_history : bool
         Keep (iteration, seconds, Res) of every iterate in ``result.history``.
     stall_iterations : int
-        STAGNATED when the best Res has not improved for this many iterations.
+        The window of the no-progress rules: STAGNATED when Res stops improving at rounding level
+        for this many iterations, when 3 consecutive windows of this many iterations bring no lower
+        Res, or when the best Res has not improved for 10 windows and, at the rate Res falls, would
+        not be reached again within maxiter (README "What a solve returns").
+    verbose : int >= 0
+        0 (default): silent. k > 0: a progress line (iteration, Res, best Res, elapsed seconds) at
+        the first iterate, then about every k seconds, and a final line with the status. Lines go
+        to the ``logging`` logger ``"nrmicp"`` at level INFO, and to stderr when logging is not
+        configured. The C++ loop decides when to report: there is no per-iteration Python call.
     scale : False, True, 'rows' or 'both'
         Diagonal equilibration for badly scaled problems (default off). 'rows': D_r = 1/max|row|;
         'both' (= True): Ruiz equilibration of rows and columns. The solver then iterates on
@@ -526,5 +580,5 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
     s = Solver(A, method=method, omega1=omega1, omega2=omega2, gamma=gamma, phi=phi, alpha=alpha, beta=beta,
                inner=inner, tol=tol, maxiter=maxiter, theta=theta, z_update=z_update, accelerate=accelerate,
                anderson_m=anderson_m, record_history=record_history, stall_iterations=stall_iterations,
-               scale=scale)
+               scale=scale, verbose=verbose)
     return s.solve(q, zeta, x0=x0, callback=callback)

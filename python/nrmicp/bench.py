@@ -244,8 +244,12 @@ def _z_update_used(problem, z_update: str, method: str = "") -> str:
     needed = getattr(problem, "solver_options", {}).get("z_update")
     if needed:
         return needed
+    from . import _core
     icp = problem.zeta is not None and not isinstance(problem.zeta, np.ndarray)
-    return "solve" if (method in ("nrm", "mms") and icp) else "explicit"
+    omega2_given = "omega2" in getattr(problem, "solver_options", {})
+    if method not in _core.Method.__members__:
+        return "explicit"  # no method named (callers always name one)
+    return _core.resolved_z_update(getattr(_core.Method, method), omega2_given, icp)
 
 
 def _status_name(status) -> str:

@@ -88,16 +88,7 @@ class InnerSolver {
   const ColMatrix& matrix() const { return impl_->matrix(); }
   const char* name() const { return impl_ ? impl_->name : "none"; }
 
-  static const char* name_of(Inner k) {
-    switch (k) {
-      case Inner::Auto: return "auto";
-      case Inner::Cholmod: return "cholmod";
-      case Inner::Umfpack: return "umfpack";
-      case Inner::EigenLLT: return "eigen_llt";
-      case Inner::EigenLU: return "eigen_lu";
-    }
-    return "?";
-  }
+  static const char* name_of(Inner k) { return to_string(k); }
 
  private:
   struct Base {

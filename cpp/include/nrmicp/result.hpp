@@ -3,6 +3,7 @@
 
 #include <Eigen/Core>
 
+#include <map>
 #include <string>
 #include <vector>
 
@@ -17,6 +18,22 @@ enum class Status {
   ZetaFailed = 5,     ///< ζ(z) returned non-finite values
 };
 
+/// The status's name, as Python's nrmicp.Status spells it.
+inline const char* status_name(Status s) {
+  switch (s) {
+    case Status::Converged: return "CONVERGED";
+    case Status::MaxIterations: return "MAX_ITERATIONS";
+    case Status::Diverged: return "DIVERGED";
+    case Status::Stagnated: return "STAGNATED";
+    case Status::CallbackStop: return "CALLBACK_STOP";
+    case Status::ZetaFailed: return "ZETA_FAILED";
+  }
+  return "?";
+}
+inline constexpr Status all_statuses[] = {Status::Converged,  Status::MaxIterations, Status::Diverged,
+                                          Status::Stagnated,  Status::CallbackStop,  Status::ZetaFailed};
+
+/// What the status means (the start of Result::message).
 inline const char* to_string(Status s) {
   switch (s) {
     case Status::Converged: return "converged: Res < tol";
@@ -56,6 +73,8 @@ struct Result {
   std::vector<double> history_seconds;
   std::vector<double> history_residual;
   Timings timings;
+  /// Counts a step kind reports beyond the iterations (e.g. linear solves), by name.
+  std::map<std::string, long long> counters;
   bool success() const { return status == Status::Converged; }
 };
 
