@@ -6,6 +6,8 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <string>
+#include <vector>
 
 using namespace nrmicp;
 
@@ -138,4 +140,26 @@ TEST_CASE("subnormal parameters are rejected by name") {
   BaiLcp P;
   const RowMat tiny = 1e-320 * P.A;
   CHECK_THROWS_WITH_AS(Solver<RowMat>(tiny, Options()), doctest::Contains("A[0,0]"), std::invalid_argument);
+}
+
+TEST_CASE("the progress hook: silent at verbose = 0; first iterate and final status at verbose > 0") {
+  BaiLcp P;
+  std::vector<int> ks;
+  std::vector<std::string> messages;
+  const Solver<RowMat>::Progress hook = [&](int k, double res, double best, double, const std::string& message) {
+    CHECK(best <= res);
+    ks.push_back(k);
+    messages.push_back(message);
+  };
+  Options o;
+  const Result quiet = Solver<RowMat>(P.A, o).solve(P.q, Zeta<int>::none(), nullptr, {}, {}, &o, hook);
+  CHECK(ks.empty());
+  o.verbose = 1;
+  const Result r = Solver<RowMat>(P.A, o).solve(P.q, Zeta<int>::none(), nullptr, {}, {}, &o, hook);
+  REQUIRE(ks.size() >= 2);
+  CHECK(ks.front() == 0);
+  CHECK(messages.front().empty());
+  CHECK(ks.back() == r.iterations);
+  CHECK(messages.back() == r.message);
+  CHECK(r.z == quiet.z);
 }
