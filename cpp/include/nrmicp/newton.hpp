@@ -263,6 +263,9 @@ class Newton {
                                   std::to_string(A.cols()));
     options_.check(A.rows());
     const auto t0 = std::chrono::steady_clock::now();
+    Options o = options_;
+    o.method = Method::Newton;
+    params_ = resolve_parameters(A_, o);
     finest_ = std::make_unique<detail::NewtonLevel<MatrixType>>(A_, options_);
     Eigen::Index rows = A.rows();
     for (std::size_t l = 0; l < P_.size(); ++l) {
@@ -290,6 +293,10 @@ class Newton {
   }
 
   const Options& options() const { return options_; }
+  /// Ω1, Ω2 (of the active-set test x > 0 ⇔ (z − ζ)/Ω1 > w/Ω2) and γ with defaults resolved.
+  const Parameters& parameters() const { return params_; }
+  /// The inner solver of the reduced systems ("none" before the first solve).
+  const char* inner_name() const { return finest_->inner_name(); }
   /// Number of levels (1 without prolongations).
   int levels() const { return 1 + static_cast<int>(coarse_.size()); }
 
@@ -524,6 +531,7 @@ class Newton {
 
   const MatrixType& A_;
   Options options_;
+  Parameters params_;
   std::vector<RowMatrix> P_;
   std::vector<std::unique_ptr<RowMatrix>> coarse_matrices_;
   std::unique_ptr<Level> finest_;
