@@ -74,10 +74,27 @@ struct CallableZeta {
   }
 };
 
+// ∂ζ given by a Python callable returning canonical CSR arrays (indptr, indices, data) with the
+// index type I (the Python layer converts the user's matrix); called with the GIL taken.
+template <typename I>
+struct CallableJacobian {
+  py::object fn;
+  bool operator()(const Eigen::VectorXd& z, typename nrmicp::Zeta<I>::RowMatrix& J) {
+    py::gil_scoped_acquire gil;
+    const py::tuple t = fn(py::array_t<double>(z.size(), z.data())).template cast<py::tuple>();
+    const py::array ip = t[0].cast<py::array>(), ix = t[1].cast<py::array>(), dv = t[2].cast<py::array>();
+    const Eigen::Index n = z.size();
+    if (ip.shape(0) != n + 1) throw py::value_error("zeta_jacobian(z) must return an n-by-n matrix");
+    J = CsrMap<I>(n, n, dv.shape(0), checked_data<I>(ip, "zeta_jacobian.indptr"),
+                  checked_data<I>(ix, "zeta_jacobian.indices"), checked_data<double>(dv, "zeta_jacobian.data"));
+    return true;
+  }
+};
+
 // ζ from the Python layer's (kind, c, B, fn): 0 none, 1 constant c, 2 Affine(B, c), 3 callable.
 template <typename I>
 nrmicp::Zeta<I> make_zeta(Eigen::Index n, int zeta_kind, py::object zeta_c, py::object b_indptr, py::object b_indices,
-                          py::object b_data, py::object zeta_fn) {
+                          py::object b_data, py::object zeta_fn, py::object jacobian_fn = py::none()) {
   using Z = nrmicp::Zeta<I>;
   switch (zeta_kind) {
     case 0: return Z::none();
@@ -88,7 +105,11 @@ nrmicp::Zeta<I> make_zeta(Eigen::Index n, int zeta_kind, py::object zeta_c, py::
                   checked_data<double>(bd, "zeta.B.data"));
       return Z::affine(typename Z::RowMatrix(B), to_vector(zeta_c.cast<py::array>(), "zeta.c"));
     }
-    case 3: return Z::functor(CallableZeta{zeta_fn, std::make_shared<py::array_t<double>>()});
+    case 3: {
+      typename Z::Jacobian jac;
+      if (!jacobian_fn.is_none()) jac = CallableJacobian<I>{jacobian_fn};
+      return Z::functor(CallableZeta{zeta_fn, std::make_shared<py::array_t<double>>()}, jac);
+    }
     default: throw py::value_error("unknown zeta kind");
   }
 }
@@ -237,12 +258,13 @@ class PyNewton {
   void build(const Options& o, std::vector<typename Core::RowMatrix> P) { newton_.emplace(A_, o, std::move(P)); }
 
   py::dict solve(py::array q, int zeta_kind, py::object zeta_c, py::object b_indptr, py::object b_indices,
-                 py::object b_data, py::object zeta_fn, py::object z0, py::object callback, const Options& it) {
+                 py::object b_data, py::object zeta_fn, py::object z0, py::object callback, const Options& it,
+                 py::object zeta_jacobian) {
     const Eigen::Index n = A_.rows();
     Eigen::VectorXd qv = to_vector(q, "q");
     std::optional<Eigen::VectorXd> z0v;
     if (!z0.is_none()) z0v = to_vector(z0.cast<py::array>(), "x0");
-    const auto zeta = make_zeta<I>(n, zeta_kind, zeta_c, b_indptr, b_indices, b_data, zeta_fn);
+    const auto zeta = make_zeta<I>(n, zeta_kind, zeta_c, b_indptr, b_indices, b_data, zeta_fn, zeta_jacobian);
     const auto cb = make_callback(callback);
     nrmicp::Result r;
     {
@@ -250,6 +272,19 @@ class PyNewton {
       r = newton_->solve(qv, zeta, z0v ? &*z0v : nullptr, cb, poll_signals, &it);
     }
     return result_dict(r, it.record_history);
+  }
+  // One Newton step from z (polish).
+  py::dict polish(py::array q, int zeta_kind, py::object zeta_c, py::object b_indptr, py::object b_indices,
+                  py::object b_data, py::object zeta_fn, py::array z, double tol) {
+    const Eigen::Index n = A_.rows();
+    Eigen::VectorXd qv = to_vector(q, "q"), zv = to_vector(z, "z");
+    const auto zeta = make_zeta<I>(n, zeta_kind, zeta_c, b_indptr, b_indices, b_data, zeta_fn);
+    nrmicp::Result r;
+    {
+      py::gil_scoped_release release;
+      r = newton_->polish(qv, zeta, zv, tol);
+    }
+    return result_dict(r, false);
   }
   int levels() const { return newton_->levels(); }
   py::dict parameters() const {
@@ -281,7 +316,9 @@ void bind_newton(py::module_& m, const char* name) {
            py::arg("prolongations"))
       .def("solve", &PyNewton<I>::solve, py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("b_indptr"),
            py::arg("b_indices"), py::arg("b_data"), py::arg("zeta_fn"), py::arg("x0"), py::arg("callback"),
-           py::arg("options"))
+           py::arg("options"), py::arg("zeta_jacobian") = py::none())
+      .def("polish", &PyNewton<I>::polish, py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"),
+           py::arg("b_indptr"), py::arg("b_indices"), py::arg("b_data"), py::arg("zeta_fn"), py::arg("z"), py::arg("tol"))
       .def_property_readonly("levels", &PyNewton<I>::levels)
       .def("parameters", &PyNewton<I>::parameters);
 }

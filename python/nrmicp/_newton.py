@@ -89,7 +89,7 @@ def polisher(solver):
     return solver._polisher or None
 
 
-def polish(solver, problem, z, res, it, original_residual, dc):
+def polish(solver, problem, z, res, original_residual, dc):
     """One Newton step from z on its active set (``polish=True``). Returns (z, w, Res) when it
     lowered Res (measured in the original variables), else None.
 
@@ -98,13 +98,10 @@ def polish(solver, problem, z, res, it, original_residual, dc):
     core = solver._core if solver.method == "newton" else polisher(solver)
     if core is None or not np.isfinite(res):
         return None
-    opts = _core.Options()
-    opts.method = _core.Method.newton
-    opts.tol = np.finfo(float).tiny  # exactly one step, whatever the member's tol
-    opts.maxiter = 1
     z0 = z / dc if dc is not None else z
     qs, kind, cs, bp, bi, bd, fns = problem
-    d = core.solve(qs, kind, cs, bp, bi, bd, fns, np.ascontiguousarray(z0), None, opts)
+    # tol = tiny: the step is taken whatever the member's tol
+    d = core.polish(qs, kind, cs, bp, bi, bd, fns, np.ascontiguousarray(z0), np.finfo(float).tiny)
     zp = d["z"] * dc if dc is not None else d["z"]
     wp, rp = original_residual(zp)
     if not rp < res:
@@ -117,3 +114,30 @@ def result_fields(d) -> dict:
     return {"linear_solves": int(d["linear_solves"]), "fallback_sweeps": int(d["fallback_sweeps"]),
             "outer_iterations": int(d["outer_iterations"]), "level_steps": list(d["level_steps"]),
             "level_seconds": list(d["level_seconds"]), "path": d["path"]}
+
+
+def jacobian_argument(zeta_jacobian, solver, kind, dc) -> dict:
+    """The core's ``zeta_jacobian`` keyword: a wrapper returning canonical CSR arrays with the
+    core's index type (in the scaled variables y = D_c⁻¹ z: J' = D_c⁻¹ J(D_c y) D_c)."""
+    if zeta_jacobian is None:
+        return {}
+    if not callable(zeta_jacobian):
+        raise TypeError(f"zeta_jacobian must be callable, got {type(zeta_jacobian).__name__}")
+    if solver.method != "newton" or kind != 3:
+        raise ValueError("zeta_jacobian is used by method 'newton' with a callable zeta only")
+    import scipy.sparse as sp
+    from ._inputs import as_csr
+
+    n, idx = solver.n, solver._index_dtype
+
+    def jac(y):
+        z = y * dc if dc is not None else y
+        J = as_csr(zeta_jacobian(z), "zeta_jacobian(z)")
+        if J.shape != (n, n):
+            raise ValueError(f"zeta_jacobian(z) must return an ({n}, {n}) matrix, got shape {J.shape}")
+        if dc is not None:
+            J = sp.csr_matrix(sp.diags(1.0 / dc) @ J @ sp.diags(dc))
+            J.sort_indices()
+        return J.indptr.astype(idx), J.indices.astype(idx), np.ascontiguousarray(J.data, dtype=np.float64)
+
+    return {"zeta_jacobian": jac}
