@@ -201,7 +201,7 @@ class PySolver {
     const auto& p = solver_->parameters();
     py::dict d;
     d["omega1"] = p.omega1; d["omega2"] = p.omega2; d["phi"] = p.phi;
-    d["gamma"] = p.gamma; d["alpha"] = p.alpha; d["beta"] = p.beta; d["theta"] = p.theta;
+    d["gamma"] = p.gamma; d["alpha"] = p.alpha; d["beta"] = p.beta;
     d["inner"] = std::string(solver_->inner_name());
     return d;
   }

@@ -74,7 +74,15 @@ def residual(A, q, z, zeta=None) -> float:
         g = z - np.asarray(zeta(z), dtype=float)
     else:
         g = z - np.asarray(zeta, dtype=float)
-    return float(np.linalg.norm(np.minimum(w, g)))
+    return _norm(np.minimum(w, g))
+
+
+def _norm(m) -> float:
+    """‖m‖₂ without overflow or underflow (scaled by max |mᵢ|)."""
+    big = float(np.max(np.abs(m), initial=0.0))
+    if not (0.0 < big < math.inf):
+        return float(np.linalg.norm(m))
+    return big * float(np.linalg.norm(m / big))
 
 
 def _choice(value, allowed, name):
@@ -195,8 +203,6 @@ class Solver:
         if self.method in ("mms", "two_sweep") and (omega1 is not None or phi is not None):
             raise ValueError(f"method {self.method!r} fixes omega1 = I and phi = 0; "
                              "use an NRM-family method to set them")
-        if self.method != "two_sweep" and theta != 1.0:
-            raise ValueError(f"theta is the relaxation of method 'two_sweep'; method {self.method!r} has none")
         if self.scale is None:
             self._dr = self._dc = None
             A_core = self.A
@@ -219,7 +225,7 @@ class Solver:
 
     @property
     def parameters(self) -> dict:
-        """The method's parameters with defaults resolved: omega1, omega2, phi, gamma, alpha, beta, theta, inner.
+        """The method's parameters with defaults resolved: omega1, omega2, phi, gamma, alpha, beta, inner.
         With ``scale``, they are those of the scaled problem."""
         return dict(self._core.parameters())
 
@@ -244,8 +250,6 @@ class Solver:
                             "options (method, omega1, omega2, gamma, phi, alpha, beta, inner, scale) are fixed at "
                             "set-up")
         it = dict(self._defaults, **iteration_options)
-        if self.method != "two_sweep" and it["theta"] != 1.0:
-            raise ValueError(f"theta is the relaxation of method 'two_sweep'; method {self.method!r} has none")
         _iteration_options(_core.Options(), **it)  # validates every iteration option once
         tol = float(it["tol"])
         qv = as_vector(q, n, "q")
@@ -299,7 +303,7 @@ class Solver:
                 g = z - (B @ z + c)
             else:
                 g = z - np.asarray(fn(z), dtype=np.float64)
-            return w, float(np.linalg.norm(np.minimum(w, g)))
+            return w, _norm(np.minimum(w, g))
 
         tol_k, x0k = tol, z0s
         best = None
@@ -460,7 +464,10 @@ def solve(A, q, zeta=None, *, method="nrmgs", tol=1e-8, maxiter=10000, omega1=No
     record_history : bool
         Keep (iteration, seconds, Res) of every iterate in ``result.history``.
     stall_iterations : int
-        STAGNATED when the best Res has not improved for this many iterations.
+        The window of the no-progress rules: STAGNATED when Res stops improving at rounding level
+        for this many iterations, when 3 consecutive windows of this many iterations bring no lower
+        Res, or when the best Res has not improved for 10 windows and, at the rate Res falls, would
+        not be reached again within maxiter (README "What a solve returns").
     scale : False, True, 'rows' or 'both'
         Diagonal equilibration for badly scaled problems (default off). 'rows': D_r = 1/max|row|;
         'both' (= True): Ruiz equilibration of rows and columns. The solver then iterates on
