@@ -22,6 +22,7 @@ enum class Method {
   NRMJ,      ///< NRMAOR with α = 1, β = 0; Lm diagonal
   MMS,       ///< Zheng–Vong modified modulus splitting: AOR splitting, Ω1 = I, φ = 0
   TwoSweep,  ///< two-sweep modulus method (Wu–Li form), M1 = (D − βL)/α, M2 = D − U, relaxation θ
+  Newton,    ///< semismooth Newton on the modulus equation (newton.hpp): one reduced linear solve per step
 };
 
 /// How z⁽ᵏ⁾ is recovered from the modulus vector x⁽ᵏ⁾.
@@ -113,6 +114,7 @@ inline const char* to_string(Method m) {
     case Method::NRMJ: return "nrmj";
     case Method::MMS: return "mms";
     case Method::TwoSweep: return "two_sweep";
+    case Method::Newton: return "newton";
   }
   return "?";
 }

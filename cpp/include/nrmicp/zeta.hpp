@@ -36,6 +36,7 @@ class Zeta {
 
   ZetaKind kind() const { return kind_; }
   const Vector& c() const { return c_; }
+  const RowMatrix& B() const { return B_; }
 
   /// Checks the sizes against n; throws std::invalid_argument naming the mismatch.
   void check(Eigen::Index n) const {
