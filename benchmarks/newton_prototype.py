@@ -45,7 +45,7 @@ def active_set_newton(A, q, y, tol, maxiter, inner="splu", rtol=1e-10):
         if inactive.size:
             AII = A[inactive][:, inactive]
             b = -q[inactive]
-            rt = min(rtol, 0.1 * tol / max(np.linalg.norm(b), 1e-300))
+            rt = min(rtol, 0.1 * tol / max(np.linalg.norm(b), 1e-300)) if tol > 0 else rtol
             y[inactive] = _inner_solve(AII, b, None, inner, rt)
         prev = active
     return y, steps, res
