@@ -228,3 +228,39 @@ def test_stationary_nrm_member_solves_the_cycling_p_matrix():
     result = nrmicp.solve(problem.A, problem.q, method="nrmgs", tol=1e-12)
     assert result.success
     assert np.allclose(result.z, problem.z_exact, atol=1e-10)
+
+
+# ------------------------------------------------------------------ method="newton" on these scenes
+
+def newton(problem, **kw):
+    nrmicp = pytest.importorskip("nrmicp")
+    if "newton" not in nrmicp.METHODS:
+        pytest.skip("this build has no method='newton'")
+    return nrmicp.solve(problem.A, problem.q, problem.zeta, method="newton", tol=1e-10, **kw)
+
+
+def test_newton_falls_back_on_the_cycling_p_matrix_and_gets_the_exact_solution():
+    problem = scenes.p_matrix_cycling(8)
+    result = newton(problem, hierarchy=None)
+    assert result.success and result.fallback_sweeps > 0 and "fallback" in result.path
+    assert np.abs(result.z - problem.z_exact).max() <= 1e-10
+
+
+@pytest.mark.parametrize("build", [lambda: scenes.convection_diffusion_obstacle(31),
+                                   lambda: scenes.obstacle_3d(11)],
+                         ids=["convection_diffusion", "obstacle_3d"])
+@pytest.mark.parametrize("hierarchy", [None, "amg", "geometric"])
+def test_newton_reproduces_the_policy_iteration_solution(build, hierarchy):
+    problem = build()
+    h = problem.prolongations() if hierarchy == "geometric" else hierarchy
+    result = newton(problem, hierarchy=h)
+    assert result.success
+    assert np.abs(result.z - problem.z_exact).max() <= 1e-10 * max(1.0, np.abs(problem.z_exact).max())
+
+
+def test_nested_newton_on_the_nonsymmetric_m_matrix_needs_few_finest_steps():
+    # measured: cold 23 steps at m = 63, nested (RS-AMG) 3
+    problem = scenes.convection_diffusion_obstacle(63, exact=False)
+    nested, cold = newton(problem, hierarchy="amg"), newton(problem, hierarchy=None)
+    assert nested.success and cold.success
+    assert nested.nit <= 5 < cold.nit
