@@ -24,7 +24,8 @@ solvers the wall time is the final run's, CPU time includes the eps tuning):
 
 A peer whose time, extrapolated from its smaller sizes (power law), exceeds --budget is
 skipped at that size and marked so; one that failed or timed out is skipped at larger sizes.
-The prototype's SuperLU (splu) is not run above n = 1.1e6 (its fill needs > 10 GB there).
+The prototype's SuperLU (splu) is not run above n = 1.1e6 in 2D and 1.5e5 in 3D (its fill
+needs > 10 GB there).
 
 Other sections (in this process): thermoforming 1D/2D (total linear solves of newton against
 iterations of nrmgs ± Anderson), the American put march (Newton steps per time step,
@@ -55,7 +56,7 @@ PEERS = ["newton-amg", "newton-geo", "newton-cold", "nrmgs+aa", "psor", "piqp", 
          "proto-amg", "proto-geo", "proto-amg-cg"]
 # exponent p of time ~ n^p used to extrapolate before a peer has two sizes
 DEFAULT_P = {"newton-cold": 2.5, "nrmgs+aa": 2.0, "psor": 1.6, "piqp": 1.5, "osqp": 2.0}
-SPLU_MAX_N = 1_100_000
+SPLU_MAX_N = {"2d": 1_100_000, "3d": 150_000}   # SuperLU's fill: > 10 GB beyond (2D 4M, 3D 1M)
 
 
 # ----------------------------------------------------------------------------- child side
@@ -186,7 +187,7 @@ def obstacle_section(args, log):
                     row["status"] = "not installed"
                 elif peer in dead:
                     row["status"] = dead[peer]
-                elif peer in ("proto-amg", "proto-geo") and n > SPLU_MAX_N:
+                elif peer in ("proto-amg", "proto-geo") and n > SPLU_MAX_N[dim]:
                     row["status"] = "skipped (splu fill > 10 GB)"
                 elif est is not None and est > args.budget:
                     row["status"] = f"skipped (est. {est:.0f} s > budget {args.budget:.0f} s)"
