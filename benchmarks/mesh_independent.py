@@ -54,8 +54,11 @@ GRIDS = {"2d": [127, 255, 511, 1023, 2047], "3d": [47, 103]}
 QUICK_GRIDS = {"2d": [127, 255], "3d": [23]}
 PEERS = ["newton-amg", "newton-geo", "newton-cold", "nrmgs+aa", "psor", "piqp", "osqp",
          "proto-amg", "proto-geo", "proto-amg-cg"]
-# exponent p of time ~ n^p used to extrapolate before a peer has two sizes
-DEFAULT_P = {"newton-cold": 2.5, "nrmgs+aa": 2.0, "psor": 1.6, "piqp": 1.5, "osqp": 2.0}
+# exponent p of time ~ n^p used to extrapolate before a peer has two sizes; in 3D a sparse
+# Cholesky factorization costs ~n^2 flops (nested dissection), hence the "3d" entries
+DEFAULT_P = {"newton-cold": 2.5, "nrmgs+aa": 2.0, "psor": 1.6, "piqp": 1.5, "osqp": 2.0,
+             "3d": {"newton-amg": 2.0, "newton-geo": 2.0, "newton-cold": 2.5, "piqp": 2.0,
+                    "proto-amg": 2.0, "proto-geo": 2.0}}
 SPLU_MAX_N = {"2d": 1_100_000, "3d": 150_000}   # SuperLU's fill: > 10 GB beyond (2D 4M, 3D 1M)
 
 
@@ -110,7 +113,8 @@ def run_peer(peer, dim, m, tol, budget, eps_start=None):
         r = nrmicp.solve(A, q, method="newton", hierarchy=hier, tol=tol, maxiter=1000)
         z = r.z
         out.update(status=r.status.name.lower(), steps=int(r.nit), solves=int(r.linear_solves),
-                   note=f"path={r.path}; levels={len(r.level_steps)}; level_steps={r.level_steps}")
+                   note=f"path={r.path}; level_steps={r.level_steps}; level_seconds="
+                        f"{[round(t, 2) for t in r.level_seconds]}")
     elif peer == "nrmgs+aa":
         r = nrmicp.solve(A, q, method="nrmgs", accelerate="anderson", tol=tol, maxiter=200_000)
         z = r.z
@@ -182,7 +186,8 @@ def obstacle_section(args, log):
             for peer in args.peers:
                 row = dict(section="obstacle", case=f"obstacle_{dim}", m=m, n=n, peer=peer,
                            target=args.tol, load=round(os.getloadavg()[0], 2))
-                est = estimate(hist.get(peer, []), n, DEFAULT_P.get(peer, 1.3))
+                p_default = DEFAULT_P[dim].get(peer) if dim in DEFAULT_P else None
+                est = estimate(hist.get(peer, []), n, p_default or DEFAULT_P.get(peer, 1.3))
                 if not available(peer):
                     row["status"] = "not installed"
                 elif peer in dead:
