@@ -23,6 +23,7 @@ enum class Method {
   NRMJ,      ///< NRMAOR with α = 1, β = 0; Lm diagonal
   MMS,       ///< Zheng–Vong modified modulus splitting: AOR splitting, Ω1 = I, φ = 0
   TwoSweep,  ///< two-sweep modulus method (Wu–Li form), M1 = (D − βL)/α, M2 = D − U, relaxation θ
+  Newton,    ///< semismooth Newton on the modulus equation (newton.hpp): one reduced linear solve per step
 };
 
 /// How z⁽ᵏ⁾ is recovered from the modulus vector x⁽ᵏ⁾.
@@ -139,6 +140,7 @@ inline const char* to_string(Method m) {
     case Method::NRMJ: return "nrmj";
     case Method::MMS: return "mms";
     case Method::TwoSweep: return "two_sweep";
+    case Method::Newton: return "newton";
   }
   return "?";
 }
@@ -176,7 +178,8 @@ inline const char* to_string(Accelerate a) {
 
 /// Every value of each option enum, in declaration order (the Python bindings list these).
 inline constexpr Method all_methods[] = {Method::NRM,   Method::NRMM, Method::NRMAOR, Method::NRMSOR,
-                                         Method::NRMGS, Method::NRMJ, Method::MMS,    Method::TwoSweep};
+                                         Method::NRMGS, Method::NRMJ, Method::MMS,    Method::TwoSweep,
+                                         Method::Newton};
 inline constexpr ZUpdate all_z_updates[] = {ZUpdate::Auto, ZUpdate::Explicit, ZUpdate::Solve};
 inline constexpr Inner all_inners[] = {Inner::Auto, Inner::Cholmod, Inner::Umfpack, Inner::EigenLLT, Inner::EigenLU};
 inline constexpr Accelerate all_accelerations[] = {Accelerate::None, Accelerate::Anderson};

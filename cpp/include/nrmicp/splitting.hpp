@@ -78,11 +78,11 @@ Parameters resolve_parameters(const MatrixType& A, const Options& o) {
       if (has_beta && o.beta != p.alpha)
         throw std::invalid_argument("Options: method 'nrmsor' has beta = alpha; do not set beta (or use 'nrmaor')");
       break;
-    case Method::NRMGS: case Method::NRMJ:
+    case Method::NRMGS: case Method::NRMJ: case Method::Newton:
       if (has_alpha || has_beta)
         throw std::invalid_argument(std::string("Options: method '") + to_string(o.method) +
                                     "' fixes alpha and beta; use 'nrmaor' to choose them");
-      p.alpha = 1; p.beta = (o.method == Method::NRMGS) ? 1 : 0;
+      p.alpha = 1; p.beta = (o.method == Method::NRMJ) ? 0 : 1;
       break;
   }
   const bool fixed_omega1_phi = (o.method == Method::MMS || o.method == Method::TwoSweep);
