@@ -180,7 +180,7 @@ def obstacle_section(args, log):
     grids = QUICK_GRIDS if args.quick else GRIDS
     for dim in args.dims:
         hist, dead, qp_eps = {}, {}, {}
-        for m in grids[dim]:
+        for m in args.m or grids[dim]:
             n = m ** (2 if dim == "2d" else 3)
             log(f"\n== obstacle {dim} m={m} n={n}  (load {os.getloadavg()[0]:.1f})")
             for peer in args.peers:
@@ -394,6 +394,8 @@ def main():
     ap.add_argument("--sections", nargs="+", default=["obstacle", "thermoforming", "american", "impulse"])
     ap.add_argument("--dims", nargs="+", default=["2d", "3d"])
     ap.add_argument("--peers", nargs="+", default=PEERS)
+    ap.add_argument("--m", nargs="+", type=int, help="grid sides instead of the defaults "
+                    f"(2d: {GRIDS['2d']}, 3d: {GRIDS['3d']})")
     ap.add_argument("--budget", type=float, default=600.0, help="seconds per peer and size (extrapolated)")
     ap.add_argument("--tol", type=float, default=TOL)
     args = ap.parse_args()
