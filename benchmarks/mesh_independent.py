@@ -180,7 +180,7 @@ def obstacle_section(args, log):
     grids = QUICK_GRIDS if args.quick else GRIDS
     for dim in args.dims:
         hist, dead, qp_eps = {}, {}, {}
-        for m in grids[dim]:
+        for m in args.m or grids[dim]:
             n = m ** (2 if dim == "2d" else 3)
             log(f"\n== obstacle {dim} m={m} n={n}  (load {os.getloadavg()[0]:.1f})")
             for peer in args.peers:
@@ -265,51 +265,66 @@ def thermoforming_section(args, log):
     return rows
 
 
-def american_section(args, log):
-    from nrmicp import scenes
-    rows = []
-    sizes = [800, 1600, 3200, 6400] if not args.quick else [800, 1600]
-    for n_space in sizes:
-        log(f"\n== american put n_space={n_space}, 100 time steps")
-        for peer, kw in [("newton", dict(method="newton")),
-                         ("nrmgs+aa", dict(method="nrmgs", accelerate="anderson"))]:
-            price, info = scenes.american_put_price(100.0, n_space=n_space, n_time=100, tol=args.tol,
-                                                    full_output=True, **kw)
-            nit = info["nit"]
-            row = dict(section="american", case="american_put", n=n_space - 1, peer=peer,
-                       status="converged" if info["success"] else "not converged",
-                       steps=float(nit.mean()), solves=int(nit.sum()), seconds=info["seconds"],
-                       res=float(info["residual"].max()), load=round(os.getloadavg()[0], 2),
-                       note=f"price={price:.6f}; steps after the first: mean {nit[1:].mean():.2f}, "
-                            f"max {nit[1:].max()}; first {nit[0]}")
-            rows.append(row)
-            log(f"  {peer:10s} {row['status']} steps/step={row['steps']:.2f} t={row['seconds']:.2f}s {row['note']}")
-        rows.append(_american_prototype(n_space, args.tol))
-        log(f"  prototype  {rows[-1]['status']} steps/step={rows[-1]['steps']:.2f} t={rows[-1]['seconds']:.2f}s "
-            f"{rows[-1]['note']}")
-    return rows
-
-
-def _american_prototype(n_space, tol):
-    """The same march with the prototype's active-set Newton (splu), warm-started from the
-    previous time step: the hand-assembled peer."""
-    import newton_prototype as proto
+def _march(n_space, step):
+    """The American-put march (S0 = K = 100, 100 steps, Rannacher 2): ``step(m, q, v)`` solves
+    one LCP warm-started from v and returns (v_new, finest steps, linear solves, ok)."""
+    from scipy.interpolate import CubicSpline
     from nrmicp.scenes.american import _March
     m = _March(400.0, 100.0, 0.05, 0.2, 1.0, n_space, 100, 2)
     t0 = time.perf_counter()
-    v, nit, ok = m.payoff.copy(), [], True
+    v, nit, solves, ok = m.payoff.copy(), [], [], True
     for kind in m.steps():
-        q = m.q(kind, v) + m.A @ m.payoff          # the LCP in y = v − payoff
-        y, k, res = proto.active_set_newton(m.A, q, np.maximum(v - m.payoff, 0.0), tol, 200)
-        v = y + m.payoff
+        v, k, ls, good = step(m, m.q(kind, v), v)
         nit.append(k)
-        ok = ok and res < tol
-    nit = np.array(nit)
-    return dict(section="american", case="american_put", n=n_space - 1, peer="prototype",
-                status="converged" if ok else "not converged", steps=float(nit.mean()),
-                solves=int(nit.sum()), seconds=time.perf_counter() - t0, res=float("nan"),
-                load=round(os.getloadavg()[0], 2),
-                note=f"steps after the first: mean {nit[1:].mean():.2f}, max {nit[1:].max()}; first {nit[0]}")
+        solves.append(ls)
+        ok = ok and good
+    seconds = time.perf_counter() - t0
+    price = float(CubicSpline(m.S, m.full(v))(100.0))
+    return np.array(nit), np.array(solves), ok, seconds, price
+
+
+def american_section(args, log):
+    import nrmicp
+    import newton_prototype as proto
+    rows = []
+    sizes = [800, 1600, 3200, 6400] if not args.quick else [800, 1600]
+    makers = [("newton (hierarchy=auto)", dict(method="newton")),
+              ("newton (x0 warm start, hierarchy=None)", dict(method="newton", hierarchy=None)),
+              ("newton (hierarchy=amg)", dict(method="newton", hierarchy="amg")),
+              ("nrmgs+aa", dict(method="nrmgs", accelerate="anderson", maxiter=100_000)),
+              ("prototype (warm start)", None)]
+
+    def proto_step(m, q, v):
+        # the LCP in y = v − payoff, warm-started from the previous step
+        y, k, res = proto.active_set_newton(m.A, q + m.A @ m.payoff, np.maximum(v - m.payoff, 0.0),
+                                            args.tol, 200)
+        return y + m.payoff, k, k, res < args.tol
+
+    for n_space in sizes:
+        log(f"\n== american put n_space={n_space}, 100 time steps")
+        for peer, kw in makers:
+            cache = {}
+
+            def step(m, q, v, kw=kw, cache=cache):       # one Solver for the whole march
+                if kw is None:
+                    return proto_step(m, q, v)
+                if "s" not in cache:
+                    cache["s"] = nrmicp.Solver(m.A, **kw)
+                r = cache["s"].solve(q, zeta=m.payoff, x0=v, tol=args.tol)
+                return (np.asarray(r.z, dtype=float).copy(), int(r.nit),
+                        int(getattr(r, "linear_solves", r.nit)), bool(r.success))
+
+            nit, solves, ok, seconds, price = _march(n_space, step)
+            row = dict(section="american", case="american_put", n=n_space - 1, peer=peer,
+                       status="converged" if ok else "not converged", steps=float(nit.mean()),
+                       solves=float(solves.mean()), seconds=seconds, res=float("nan"),
+                       load=round(os.getloadavg()[0], 2),
+                       note=f"price={price:.6f}; after the first time step: steps {nit[1:].mean():.2f} "
+                            f"(max {nit[1:].max()}), linear solves {solves[1:].mean():.2f}; first {nit[0]}")
+            rows.append(row)
+            log(f"  {peer:40s} {row['status']} steps/step={row['steps']:.2f} solves/step={row['solves']:.2f} "
+                f"t={row['seconds']:.2f}s {row['note']}")
+    return rows
 
 
 def impulse_section(args, log):
@@ -370,7 +385,8 @@ def markdown(rows, meta):
             out.append(f"| {n:,} | " + " | ".join(cells.get(p, "") for p in peers) + " |")
         out.append("")
     for sec, title in [("thermoforming", "Thermoforming: Newton steps / linear solves (total) and nrmgs iterations"),
-                       ("american", "American put, 100 time steps: Newton steps per time step (mean)"),
+                       ("american", "American put, 100 time steps: per time step (mean), Newton steps on the finest "
+                                    "level and linear solves on all levels (nrmgs+aa: iterations)"),
                        ("impulse", "Impulse control")]:
         rs = [r for r in rows if r["section"] == sec]
         if not rs:
@@ -379,9 +395,10 @@ def markdown(rows, meta):
                 "|---|---|---|---|---|---|---|---|---|---|"]
         for r in rs:
             steps = f"{r['steps']:.2f}" if isinstance(r.get("steps"), float) else r.get("steps")
+            solves = f"{r['solves']:.2f}" if isinstance(r.get("solves"), float) else r.get("solves", "")
             err = f"{r['err']:.1e}" if r.get("err") is not None else ""
             out.append(f"| {r['case']} | {r['n']:,} | {r['peer']} | {r['status']} | {steps} | "
-                       f"{r.get('solves', '')} | {r['seconds']:.2f} | {r['res']:.1e} | {err} | {r.get('note', '')} |")
+                       f"{solves} | {r['seconds']:.2f} | {r['res']:.1e} | {err} | {r.get('note', '')} |")
         out.append("")
     return "\n".join(out)
 
@@ -394,6 +411,8 @@ def main():
     ap.add_argument("--sections", nargs="+", default=["obstacle", "thermoforming", "american", "impulse"])
     ap.add_argument("--dims", nargs="+", default=["2d", "3d"])
     ap.add_argument("--peers", nargs="+", default=PEERS)
+    ap.add_argument("--m", nargs="+", type=int, help="grid sides instead of the defaults "
+                    f"(2d: {GRIDS['2d']}, 3d: {GRIDS['3d']})")
     ap.add_argument("--budget", type=float, default=600.0, help="seconds per peer and size (extrapolated)")
     ap.add_argument("--tol", type=float, default=TOL)
     args = ap.parse_args()
