@@ -157,7 +157,8 @@ def test_python_lists_are_the_cores():
         _core.status_message(99)
 
 
-@pytest.mark.parametrize("method", nrmicp.METHODS)
+# newton has no z-update to choose: it recovers z from its linear solves (it rejects z_update).
+@pytest.mark.parametrize("method", [m for m in nrmicp.METHODS if m != "newton"])
 @pytest.mark.parametrize("kind", ["lcp", "icp"])
 def test_resolved_z_update_is_what_auto_does(method, kind):
     """The core answers 'what does auto mean here' (bench.py asks it): the same iterates."""
