@@ -11,6 +11,15 @@
 
 namespace nrmicp {
 
+namespace detail {
+/// A number in a message: %g-style, so that 1e-7 is not "-0.000000" (std::to_string's %f).
+inline std::string format_number(double v) {
+  std::ostringstream s;
+  s << v;
+  return s.str();
+}
+}  // namespace detail
+
 /// The members of the family (paper §3) and the baselines it is compared with (§2).
 /// Each fixes the splitting A = M − N; see docs/SPEC.md for the table.
 enum class Method {
@@ -74,7 +83,7 @@ struct Options {
   /// Throws std::invalid_argument naming the offending field, its value and what is accepted.
   void check(Eigen::Index n) const {
     auto fail = [](const std::string& msg) { throw std::invalid_argument("Options: " + msg); };
-    auto num = [](double v) { std::ostringstream s; s << v; return s.str(); };
+    auto num = [](double v) { return detail::format_number(v); };
     if (!(tol > 0) || !std::isfinite(tol)) fail("tol must be a finite number > 0, got " + num(tol));
     if (maxiter < 0) fail("maxiter must be >= 0, got " + std::to_string(maxiter));
     if (!(gamma > 0) || !std::isfinite(gamma)) fail("gamma must be a finite number > 0, got " + num(gamma));
