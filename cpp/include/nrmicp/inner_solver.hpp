@@ -113,8 +113,7 @@ template <typename StorageIndex>
 void check_cholmod(int status, bool has_factor, const std::string& what) {
   using R = FactorizationError::Reason;
   if (status == CHOLMOD_OUT_OF_MEMORY)
-    throw FactorizationError(R::OutOfMemory, "InnerSolver: CHOLMOD ran out of memory factorizing " + what +
-                                                 detail::index_hint<StorageIndex>());
+    throw FactorizationError(R::OutOfMemory, "InnerSolver: CHOLMOD ran out of memory factorizing " + what);
   if (status == CHOLMOD_TOO_LARGE)
     throw FactorizationError(R::IndexOverflow, "InnerSolver: the CHOLMOD factor of " + what +
                                                    " overflows its integer type" + detail::index_hint<StorageIndex>());
