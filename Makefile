@@ -8,7 +8,7 @@ PIP_PKGS = "numpy>=1.23" "scipy>=1.9" "pybind11>=2.12" "scikit-build-core>=0.8" 
            "pytest>=7" "hypothesis>=6" ninja "cmake>=3.18"
 SUDO    := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: demo test deps install ctest pytest bench clean
+.PHONY: demo test deps install ctest pytest sanitize bench clean
 
 demo: install
 	$(PY) -m nrmicp demo
@@ -34,6 +34,23 @@ ctest: deps
 
 pytest:
 	$(PY) -m pytest -q tests
+
+# The C++ tests and the Python module built with ASan + UBSan (a separate build, imported through
+# PYTHONPATH with libasan preloaded; CPython's own allocations are not leak-checked), then the
+# bad-input, robustness and fuzz tests run against it. SANITIZE_FUZZ_EXAMPLES sets the fuzz slice.
+SANITIZE_FUZZ_EXAMPLES ?= 300
+sanitize: deps
+	cmake -S . -B $(BUILD)/sanitize -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DNRMICP_SANITIZE=ON \
+	  -DNRMICP_BUILD_PYTHON=ON -DNRMICP_BUILD_TESTS=ON -DPython_EXECUTABLE=$$($(PY) -c 'import sys; print(sys.executable)') \
+	  -Dpybind11_DIR=$$($(PY) -m pybind11 --cmakedir)
+	cmake --build $(BUILD)/sanitize
+	ctest --test-dir $(BUILD)/sanitize --output-on-failure -E consumer_find_package
+	rm -rf $(BUILD)/sanitize/pkg && mkdir -p $(BUILD)/sanitize/pkg && cp -r python/nrmicp $(BUILD)/sanitize/pkg/ \
+	  && cp $(BUILD)/sanitize/_core*.so $(BUILD)/sanitize/pkg/nrmicp/
+	LD_PRELOAD=$$($(CXX) -print-file-name=libasan.so) ASAN_OPTIONS=detect_leaks=0 \
+	  UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 PYTHONPATH=$(BUILD)/sanitize/pkg NRMICP_SANITIZE=1 \
+	  NRMICP_FUZZ_EXAMPLES=$(SANITIZE_FUZZ_EXAMPLES) $(PY) -m pytest -q -p no:cacheprovider \
+	  tests/test_bad_input.py tests/test_robustness.py tests/test_fuzz.py
 
 bench: install
 	$(PY) -m nrmicp bench

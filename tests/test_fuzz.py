@@ -18,7 +18,7 @@ import warnings
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 import nrmicp
@@ -218,6 +218,7 @@ def test_fuzz_oracle(case):
             res = nrmicp.solve(A, q, zeta, x0=x0, **opts)
     except (TypeError, ValueError) as exc:  # numpy.linalg.LinAlgError is a ValueError
         msg = str(exc)
+        event(f"{'corrupt input' if case['corrupt'] else 'valid input'}: {type(exc).__name__}")
         if case["corrupt"] is not None:
             name = case["corrupt"][0]
             assert name in msg, f"corrupt {case['corrupt']} -> {type(exc).__name__}: {msg}"
@@ -226,12 +227,14 @@ def test_fuzz_oracle(case):
             assert any(s in msg for s in ("A[", "A (", "A is", "left matrix", "omega2", "alpha", "zeta")), msg
             if "zeta" in msg and case["zkind"] in ("callable", "callable_f32"):
                 assert KNOWN_ZETA_BLAME in msg, msg
+                event("valid input: callable zeta blamed for a non-finite iterate (item 6)")
         assert_unchanged(before, [A, q, x0, case["B"], case["c"],
                                   *(opts.get(k) for k in ("omega1", "omega2", "phi"))])
         return
     assert case["corrupt"] is None, f"corrupt {case['corrupt']} was accepted: {res.message}"
     assert_unchanged(before, [A, q, x0, case["B"], case["c"], *(opts.get(k) for k in ("omega1", "omega2", "phi"))])
     assert isinstance(res.status, nrmicp.Status)
+    event(f"valid input: {res.status.name}")
     assert np.all(np.isfinite(res.z)), res.message
     if res.success:
         true_res, slack = oracle_residual(A, q, res.z, zeta_ref)
