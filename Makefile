@@ -36,7 +36,8 @@ pytest:
 	$(PY) -m pytest -q tests
 
 # The Python module built with ASan + UBSan (a separate build, imported through PYTHONPATH with
-# libasan preloaded; CPython's own allocations are not leak-checked), then the bad-input,
+# libasan preloaded, and libstdc++ too: ASan's __cxa_throw interceptor needs it at start-up;
+# CPython's own allocations are not leak-checked), then the bad-input,
 # robustness and fuzz tests run against it. SANITIZE_FUZZ_EXAMPLES sets the fuzz slice.
 # (The C++ tests with the sanitizers: README "Layout", -DNRMICP_SANITIZE=ON.)
 SANITIZE_FUZZ_EXAMPLES ?= 300
@@ -47,7 +48,7 @@ sanitize: deps
 	cmake --build $(BUILD)/sanitize --target _core
 	rm -rf $(BUILD)/sanitize/pkg && mkdir -p $(BUILD)/sanitize/pkg && cp -r python/nrmicp $(BUILD)/sanitize/pkg/ \
 	  && cp $(BUILD)/sanitize/_core*.so $(BUILD)/sanitize/pkg/nrmicp/
-	LD_PRELOAD=$$($(CXX) -print-file-name=libasan.so) ASAN_OPTIONS=detect_leaks=0 \
+	LD_PRELOAD="$$($(CXX) -print-file-name=libasan.so) $$($(CXX) -print-file-name=libstdc++.so)" ASAN_OPTIONS=detect_leaks=0 \
 	  UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 PYTHONPATH=$(BUILD)/sanitize/pkg NRMICP_SANITIZE=1 \
 	  NRMICP_FUZZ_EXAMPLES=$(SANITIZE_FUZZ_EXAMPLES) $(PY) -m pytest -q -p no:cacheprovider \
 	  tests/test_bad_input.py tests/test_robustness.py tests/test_fuzz.py
