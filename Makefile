@@ -15,7 +15,7 @@ SHELL   := /bin/bash
 export PIP_ROOT_USER_ACTION := ignore
 PIP     = $(PY) -m pip install -q --disable-pip-version-check
 
-.PHONY: demo test deps install ctest pytest bench clean
+.PHONY: demo test deps install ctest pytest sanitize bench clean
 
 demo: install
 	$(PY) -m nrmicp demo
@@ -45,6 +45,24 @@ ctest: deps
 
 pytest:
 	$(PY) -m pytest -q tests
+
+# The Python module built with ASan + UBSan (a separate build, imported through PYTHONPATH with
+# libasan preloaded, and libstdc++ too: ASan's __cxa_throw interceptor needs it at start-up;
+# CPython's own allocations are not leak-checked), then the bad-input,
+# robustness and fuzz tests run against it. SANITIZE_FUZZ_EXAMPLES sets the fuzz slice.
+# (The C++ tests with the sanitizers: README "Layout", -DNRMICP_SANITIZE=ON.)
+SANITIZE_FUZZ_EXAMPLES ?= 300
+sanitize: deps
+	cmake -S . -B $(BUILD)/sanitize -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DNRMICP_SANITIZE=ON \
+	  -DNRMICP_BUILD_PYTHON=ON -DNRMICP_BUILD_TESTS=OFF -DPython_EXECUTABLE=$$($(PY) -c 'import sys; print(sys.executable)') \
+	  -Dpybind11_DIR=$$($(PY) -m pybind11 --cmakedir)
+	cmake --build $(BUILD)/sanitize --target _core
+	rm -rf $(BUILD)/sanitize/pkg && mkdir -p $(BUILD)/sanitize/pkg && cp -r python/nrmicp $(BUILD)/sanitize/pkg/ \
+	  && cp $(BUILD)/sanitize/_core*.so $(BUILD)/sanitize/pkg/nrmicp/
+	LD_PRELOAD="$$($(CXX) -print-file-name=libasan.so) $$($(CXX) -print-file-name=libstdc++.so)" ASAN_OPTIONS=detect_leaks=0 \
+	  UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 PYTHONPATH=$(BUILD)/sanitize/pkg NRMICP_SANITIZE=1 \
+	  NRMICP_FUZZ_EXAMPLES=$(SANITIZE_FUZZ_EXAMPLES) $(PY) -m pytest -q -p no:cacheprovider \
+	  tests/test_bad_input.py tests/test_robustness.py tests/test_fuzz.py
 
 bench: install
 	$(PY) -m nrmicp bench

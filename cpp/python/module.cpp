@@ -8,13 +8,19 @@
 
 #include <nrmicp/nrmicp.hpp>
 
+#include <algorithm>
 #include <cstdint>
 #include <cstring>
+#include <exception>
 #include <functional>
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
+#if defined(__GLIBCXX__)
+#include <cxxabi.h>
+#endif
 
 namespace py = pybind11;
 using nrmicp::Options;
@@ -24,9 +30,15 @@ namespace {
 template <typename I>
 using CsrMap = Eigen::Map<const Eigen::SparseMatrix<double, Eigen::RowMajor, I>>;
 
+// dtypes compare by kind, size and byte order (np.longlong is int64; metadata is ignored).
+template <typename T>
+bool has_dtype(const py::array& a) {
+  return a.dtype().equal(py::dtype::of<T>());
+}
+
 template <typename T>
 const T* checked_data(const py::array& a, const char* what) {
-  if (!a.dtype().is(py::dtype::of<T>()))
+  if (!has_dtype<T>(a))
     throw py::type_error(std::string(what) + " has dtype " + std::string(py::str(a.dtype())) + ", expected " +
                          std::string(py::str(py::dtype::of<T>())));
   if (a.ndim() != 1 || !(a.flags() & py::array::c_style))
@@ -39,11 +51,53 @@ Eigen::VectorXd to_vector(const py::array& a, const char* what) {
   return Eigen::Map<const Eigen::VectorXd>(p, a.shape(0));
 }
 
-// ζ given by a Python callable: called with the GIL taken, on a read-only float64 array that
-// is allocated once per solve (ζ must not keep it: its contents change every iteration).
+// Takes the GIL back after without_gil(). In a finalizing interpreter this ends the thread
+// (pthread_exit: a forced unwind); a pending error holding Python objects is then leaked on
+// purpose, as freeing it would need the GIL that this thread can no longer take.
+inline void take_gil_back(PyThreadState* state, std::exception_ptr& error) {
+#if defined(__GLIBCXX__)
+  try {
+    PyEval_RestoreThread(state);
+  } catch (abi::__forced_unwind&) {
+    new std::exception_ptr(std::move(error));  // leaked: see above
+    throw;
+  }
+#else
+  PyEval_RestoreThread(state);
+#endif
+}
+
+// Runs f() with the GIL released. Not an RAII guard such as py::gil_scoped_release: taking the
+// GIL back in a finalizing interpreter (a daemon thread still solving at exit) ends the thread
+// by a forced unwind, which must not start inside a destructor (std::terminate: SIGABRT at exit).
+template <typename F>
+auto without_gil(F&& f) -> decltype(f()) {
+  std::optional<decltype(f())> out;
+  std::exception_ptr error;
+  PyThreadState* state = PyEval_SaveThread();
+  try {
+    out.emplace(f());
+#if defined(__GLIBCXX__)
+  } catch (abi::__forced_unwind&) {
+    throw;  // f() took the GIL in a finalizing interpreter: the thread is ending
+#endif
+  } catch (...) {
+    error = std::current_exception();
+  }
+  take_gil_back(state, error);
+  if (error) std::rethrow_exception(error);
+  return std::move(*out);
+}
+
+// ζ given by a Python callable, as an nrmicp._zeta.CheckedZeta: its `fn` is called with the GIL
+// taken, on a read-only float64 array allocated once per solve (ζ must not keep it: its contents
+// change every iteration). A float64 vector of length n is copied as is; anything else goes to
+// CheckedZeta.output, which converts it or raises naming zeta (the rules live there only).
 struct CallableZeta {
-  py::object fn;
+  py::object checked, fn;
   std::shared_ptr<py::array_t<double>> zbuf;
+
+  CallableZeta(py::object z) : checked(z), fn(z.attr("fn")), zbuf(std::make_shared<py::array_t<double>>()) {}
 
   bool operator()(const double* z, double* out, Eigen::Index n) {
     py::gil_scoped_acquire gil;
@@ -52,25 +106,26 @@ struct CallableZeta {
       py::detail::array_proxy(zbuf->ptr())->flags &= ~py::detail::npy_api::NPY_ARRAY_WRITEABLE_;
     }
     std::memcpy(const_cast<double*>(zbuf->data()), z, sizeof(double) * n);
-    py::object r = fn(*zbuf);
-    if (py::isinstance<py::array>(r)) {
-      const char kind = py::array(r).dtype().kind();
-      if (kind != 'f' && kind != 'i' && kind != 'u')
-        throw py::type_error("zeta(z) returned an array of dtype " + std::string(py::str(py::array(r).dtype())) +
-                             "; expected a real floating-point array of shape (" + std::to_string(n) + ",)");
+    py::object r;
+    try {
+      r = fn(*zbuf);
+    } catch (py::error_already_set& e) {
+      if (!e.matches(PyExc_ValueError)) throw;
+      py::object msg = checked.attr("read_only_message")(e.value());  // a write into z names zeta
+      if (msg.is_none()) throw;
+      py::raise_from(e, PyExc_ValueError, msg.cast<std::string>().c_str());
+      throw py::error_already_set();
     }
-    auto arr = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(r);
-    if (!arr)
-      throw py::type_error("zeta(z) must return a float64 array of shape (" + std::to_string(n) + ",), got " +
-                           std::string(py::str(py::type::of(r).attr("__name__"))));
-    if (arr.ndim() != 1 || arr.shape(0) != n) {
-      std::string shape = "(";
-      for (py::ssize_t d = 0; d < arr.ndim(); ++d) shape += std::to_string(arr.shape(d)) + (d + 1 < arr.ndim() ? ", " : "");
-      shape += arr.ndim() == 1 ? ",)" : ")";
-      throw py::value_error("zeta(z) must return an array of shape (" + std::to_string(n) + ",), got shape " + shape);
-    }
-    std::memcpy(out, arr.data(), sizeof(double) * n);
+    if (!is_vector<double>(r, n)) r = checked.attr("output")(r);
+    std::memcpy(out, py::array(r).data(), sizeof(double) * n);
     return true;  // finiteness is checked by the core (status ZetaFailed)
+  }
+
+  template <typename T>
+  static bool is_vector(const py::object& r, Eigen::Index n) {
+    if (!py::isinstance<py::array>(r)) return false;
+    const auto a = py::reinterpret_borrow<py::array>(r);
+    return has_dtype<T>(a) && a.ndim() == 1 && a.shape(0) == n && (a.flags() & py::array::c_style);
   }
 };
 
@@ -108,7 +163,7 @@ nrmicp::Zeta<I> make_zeta(Eigen::Index n, int zeta_kind, py::object zeta_c, py::
     case 3: {
       typename Z::Jacobian jac;
       if (!jacobian_fn.is_none()) jac = CallableJacobian<I>{jacobian_fn};
-      return Z::functor(CallableZeta{zeta_fn, std::make_shared<py::array_t<double>>()}, jac);
+      return Z::functor(CallableZeta(zeta_fn), jac);
     }
     default: throw py::value_error("unknown zeta kind");
   }
@@ -190,6 +245,8 @@ class PySolver {
            checked_data<double>(data, "A.data")) {
     if (indptr.shape(0) != n + 1) throw py::value_error("A.indptr must have length n + 1");
     if (indices.shape(0) != data.shape(0)) throw py::value_error("A.indices and A.data differ in length");
+    if (A_.outerIndexPtr()[0] != 0 || A_.outerIndexPtr()[n] != data.shape(0))  // the rest: check_compressed
+      throw py::value_error("A.indptr must run from 0 to nnz = len(A.data)");
   }
   void build(const Options& o) { solver_.emplace(A_, o); }
 
@@ -203,11 +260,8 @@ class PySolver {
     const auto zeta = make_zeta<I>(n, zeta_kind, zeta_c, b_indptr, b_indices, b_data, zeta_fn);
     const auto cb = make_callback(callback);
     const auto report = make_progress(progress);
-    nrmicp::Result r;
-    {
-      py::gil_scoped_release release;
-      r = solver_->solve(qv, zeta, z0v ? &*z0v : nullptr, cb, poll_signals, &it, report);
-    }
+    nrmicp::Result r =
+        without_gil([&] { return solver_->solve(qv, zeta, z0v ? &*z0v : nullptr, cb, poll_signals, &it, report); });
     return result_dict(r, it.record_history);
   }
 
@@ -231,8 +285,7 @@ void bind_solver(py::module_& m, const char* name) {
   py::class_<PySolver<I>>(m, name)
       .def(py::init([](py::array indptr, py::array indices, py::array data, Eigen::Index n, const Options& o) {
              auto s = std::make_unique<PySolver<I>>(indptr, indices, data, n);
-             py::gil_scoped_release release;  // factorization may take a while
-             s->build(o);
+             without_gil([&] { s->build(o); return true; });  // factorization may take a while
              return s;
            }),
            py::arg("indptr"), py::arg("indices"), py::arg("data"), py::arg("n"), py::arg("options"))
@@ -280,11 +333,9 @@ class PyNewton {
     if (!z0.is_none()) z0v = to_vector(z0.cast<py::array>(), "x0");
     const auto zeta = make_zeta<I>(n, zeta_kind, zeta_c, b_indptr, b_indices, b_data, zeta_fn, zeta_jacobian);
     const auto cb = make_callback(callback);
-    nrmicp::Result r;
-    {
-      py::gil_scoped_release release;
-      r = newton_->solve(qv, zeta, z0v ? &*z0v : nullptr, cb, poll_signals, &it, make_progress(progress));
-    }
+    const auto report = make_progress(progress);
+    nrmicp::Result r =
+        without_gil([&] { return newton_->solve(qv, zeta, z0v ? &*z0v : nullptr, cb, poll_signals, &it, report); });
     return result_dict(r, it.record_history);
   }
   // One Newton step from z (polish).
@@ -293,11 +344,7 @@ class PyNewton {
     const Eigen::Index n = A_.rows();
     Eigen::VectorXd qv = to_vector(q, "q"), zv = to_vector(z, "z");
     const auto zeta = make_zeta<I>(n, zeta_kind, zeta_c, b_indptr, b_indices, b_data, zeta_fn);
-    nrmicp::Result r;
-    {
-      py::gil_scoped_release release;
-      r = newton_->polish(qv, zeta, zv, tol);
-    }
+    nrmicp::Result r = without_gil([&] { return newton_->polish(qv, zeta, zv, tol); });
     return result_dict(r, false);
   }
   int levels() const { return newton_->levels(); }
@@ -322,8 +369,7 @@ void bind_newton(py::module_& m, const char* name) {
                        const py::list& prolongations) {
              auto s = std::make_unique<PyNewton<I>>(indptr, indices, data, n);
              auto P = PyNewton<I>::prolongations(prolongations);
-             py::gil_scoped_release release;  // coarse operators PᵀAP
-             s->build(o, std::move(P));
+             without_gil([&] { s->build(o, std::move(P)); return true; });  // coarse operators PᵀAP, factorizations
              return s;
            }),
            py::arg("indptr"), py::arg("indices"), py::arg("data"), py::arg("n"), py::arg("options"),
@@ -343,25 +389,58 @@ void bind_enum(py::module_& m, const char* name, const E (&values)[N], Name name
   for (E v : values) e.value(name_of(v), v);
 }
 
-// Sorted column indices without duplicates in every row, and indptr consistent with them.
+// A compressed sparse structure (CSR: outer = rows, inner = columns; CSC the other way) checked
+// before anything reads it: indptr has outer + 1 entries, starts at 0, never decreases and ends
+// at nnz <= the number of stored indices and values; every index lies in [0, inner). One pass in
+// 64-bit arithmetic. Throws ValueError naming `name`. Returns whether the indices are also sorted
+// without duplicates in every row (canonical: nothing to sort or sum).
 template <typename I>
-bool csr_is_canonical(const py::array& indptr, const py::array& indices) {
-  const I* p = checked_data<I>(indptr, "A.indptr");
-  const I* j = checked_data<I>(indices, "A.indices");
-  const py::ssize_t rows = indptr.shape(0) - 1, nnz = indices.shape(0);
-  if (rows < 0 || p[0] != 0 || p[rows] != nnz) return false;
-  for (py::ssize_t r = 0; r < rows; ++r) {
-    if (p[r + 1] < p[r]) return false;
-    for (I k = p[r] + 1; k < p[r + 1]; ++k)
-      if (j[k] <= j[k - 1]) return false;
+bool check_compressed(const py::array& indptr, const py::array& indices, py::ssize_t n_data, py::ssize_t outer,
+                      py::ssize_t inner, const std::string& name) {
+  const I* p = checked_data<I>(indptr, (name + ".indptr").c_str());
+  const I* j = checked_data<I>(indices, (name + ".indices").c_str());
+  auto fail = [&](const std::string& msg) { throw py::value_error(name + " is not a valid sparse matrix: " + msg); };
+  if (indptr.shape(0) != outer + 1)
+    fail(name + ".indptr has length " + std::to_string(indptr.shape(0)) + ", expected " + std::to_string(outer + 1));
+  const std::int64_t stored = std::min<std::int64_t>(indices.shape(0), n_data);
+  if (p[0] != 0) fail(name + ".indptr[0] = " + std::to_string(p[0]) + ", expected 0");
+  bool canonical = true;
+  for (py::ssize_t r = 0; r < outer; ++r) {
+    const std::int64_t begin = p[r], end = p[r + 1];
+    if (end < begin)
+      fail(name + ".indptr decreases at " + std::to_string(r + 1) + " (" + std::to_string(begin) + " -> " +
+           std::to_string(end) + ")");
+    if (end > stored)
+      fail(name + ".indptr[" + std::to_string(r + 1) + "] = " + std::to_string(end) + " exceeds the " +
+           std::to_string(stored) + " stored entries (len of " + name + ".indices and " + name + ".data)");
+    for (std::int64_t k = begin; k < end; ++k) {
+      const std::int64_t c = j[k];
+      if (c < 0 || c >= inner)
+        fail(name + ".indices[" + std::to_string(k) + "] = " + std::to_string(c) + " is outside [0, " +
+             std::to_string(inner) + ")");
+      if (k > begin && c <= j[k - 1]) canonical = false;
+    }
   }
-  return true;
+  return canonical;
 }
 
 }  // namespace
 
 PYBIND11_MODULE(_core, m) {
   m.doc() = "nrmicp C++ core (internal: use the nrmicp package)";
+  // A failed factorization is the same exception at set-up and in a lazy one during solve().
+  py::register_exception_translator([](std::exception_ptr p) {
+    try {
+      if (p) std::rethrow_exception(p);
+    } catch (const nrmicp::FactorizationError& e) {
+      if (e.reason() == nrmicp::FactorizationError::Reason::OutOfMemory) {
+        PyErr_SetString(PyExc_MemoryError, e.what());
+      } else {
+        const py::object linalg_error = py::module_::import("numpy.linalg").attr("LinAlgError");
+        PyErr_SetString(linalg_error.ptr(), e.what());
+      }
+    }
+  });
   // The names come from the C++ core (options.hpp, result.hpp); Python derives its lists from these.
   bind_enum(m, "Method", nrmicp::all_methods, [](nrmicp::Method v) { return nrmicp::to_string(v); });
   bind_enum(m, "ZUpdate", nrmicp::all_z_updates, [](nrmicp::ZUpdate v) { return nrmicp::to_string(v); });
@@ -407,10 +486,11 @@ PYBIND11_MODULE(_core, m) {
   bind_newton<std::int32_t>(m, "NewtonI32");
   bind_newton<std::int64_t>(m, "NewtonI64");
 
-  m.def("csr_is_canonical", [](const py::array& indptr, const py::array& indices) {
-    return indices.dtype().is(py::dtype::of<std::int64_t>()) ? csr_is_canonical<std::int64_t>(indptr, indices)
-                                                              : csr_is_canonical<std::int32_t>(indptr, indices);
-  });
+  m.def("check_compressed", [](const py::array& indptr, const py::array& indices, py::ssize_t n_data,
+                                py::ssize_t outer, py::ssize_t inner, const std::string& name) {
+    return has_dtype<std::int64_t>(indices) ? check_compressed<std::int64_t>(indptr, indices, n_data, outer, inner, name)
+                                            : check_compressed<std::int32_t>(indptr, indices, n_data, outer, inner, name);
+  }, py::arg("indptr"), py::arg("indices"), py::arg("n_data"), py::arg("outer"), py::arg("inner"), py::arg("name"));
   m.def("backends", [] {
     py::dict d;
     d["cholmod"] = nrmicp::have_cholmod();

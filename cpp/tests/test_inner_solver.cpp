@@ -3,7 +3,10 @@
 
 #include <doctest/doctest.h>
 
+#include <cstdint>
+#include <limits>
 #include <string>
+#include <utility>
 #include <vector>
 
 using namespace nrmicp;
@@ -51,3 +54,67 @@ TEST_CASE("a singular matrix is a clear error") {
   CHECK_THROWS_WITH_AS(s.compute(Z, Inner::Auto, "the test matrix"), doctest::Contains("the test matrix"),
                        std::runtime_error);
 }
+
+TEST_CASE("a matrix with an empty row or column is rejected before any backend sees it") {
+  // Eigen's SparseLU did not return on an all-zero matrix (n >= 21); CHOLMOD's analysis of it
+  // left Eigen's wrapper a null factor.
+  testing::SpMat<> Z(30, 30);
+  testing::SpMat<> C = testing::bai(6, 4.0, true);
+  C.prune([](Eigen::Index, Eigen::Index col, double) { return col != 7; });  // column 7 empty
+  for (const auto* M : {&Z, &C}) {
+    std::vector<Inner> kinds{Inner::Auto, Inner::EigenLU, Inner::EigenLLT};
+    if (have_cholmod()) kinds.push_back(Inner::Cholmod);
+    if (have_umfpack()) kinds.push_back(Inner::Umfpack);
+    for (Inner k : kinds) {
+      CAPTURE(InnerSolver<int>::name_of(k));
+      InnerSolver<int> s;
+      try {
+        s.compute(*M, k, "the test matrix");
+        FAIL("no exception");
+      } catch (const FactorizationError& e) {
+        CHECK(e.reason() == FactorizationError::Reason::Singular);
+        CHECK(std::string(e.what()).find("the test matrix is singular") != std::string::npos);
+      }
+    }
+  }
+}
+
+TEST_CASE("64-bit indices are needed exactly when the entries overflow the index type") {
+  const std::int64_t max32 = std::numeric_limits<std::int32_t>::max();
+  CHECK_FALSE(detail::needs_wide_indices<std::int32_t>(max32));
+  CHECK(detail::needs_wide_indices<std::int32_t>(max32 + 1));
+  CHECK_FALSE(detail::needs_wide_indices<std::int64_t>(max32 + 1));
+}
+
+#if defined(NRMICP_HAVE_CHOLMOD)
+TEST_CASE("CHOLMOD failures are reported as what they are, not as 'singular'") {
+  using R = FactorizationError::Reason;
+  auto reason = [](int status, bool has_factor) {
+    try {
+      detail::check_cholmod<int>(status, has_factor, "M");
+    } catch (const FactorizationError& e) {
+      return std::make_pair(e.reason(), std::string(e.what()));
+    }
+    return std::make_pair(R::Singular, std::string("no exception"));
+  };
+  CHECK(reason(CHOLMOD_OUT_OF_MEMORY, true).first == R::OutOfMemory);
+  const auto overflow = reason(CHOLMOD_TOO_LARGE, true);
+  CHECK(overflow.first == R::IndexOverflow);
+  CHECK(overflow.second.find("int64") != std::string::npos);
+  CHECK(reason(CHOLMOD_OK, false).first == R::Failed);  // analysis made no factor
+  CHECK_NOTHROW(detail::check_cholmod<int>(CHOLMOD_NOT_POSDEF, true, "M"));
+}
+#endif
+
+#if defined(NRMICP_HAVE_UMFPACK)
+TEST_CASE("UMFPACK out of memory is a memory error that points at 64-bit indices") {
+  try {
+    detail::check_umfpack<int>(UMFPACK_ERROR_out_of_memory, "M");
+    FAIL("no exception");
+  } catch (const FactorizationError& e) {
+    CHECK(e.reason() == FactorizationError::Reason::OutOfMemory);
+    CHECK(std::string(e.what()).find("int64") != std::string::npos);
+  }
+  CHECK_NOTHROW(detail::check_umfpack<int>(UMFPACK_WARNING_singular_matrix, "M"));
+}
+#endif

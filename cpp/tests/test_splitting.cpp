@@ -73,3 +73,24 @@ TEST_CASE("a zero diagonal with the default Omega2 = diag(A) is a clear error") 
   o.method = Method::NRMGS;
   CHECK_THROWS_WITH_AS(resolve_parameters(A, o), doctest::Contains("omega2 = diag(A)"), std::invalid_argument);
 }
+
+TEST_CASE("the NRM left matrix switches to 64-bit indices when nnz(A) + n overflows the index type") {
+  // The rule at its real threshold is tested in test_inner_solver.cpp; here the switch itself,
+  // with the limit lowered so that a small problem crosses it.
+  const auto A = testing::bai(5, 4.0, false);
+  const Eigen::Index n = A.rows();
+  for (Method m : {Method::NRM, Method::NRMM}) {
+    CAPTURE(to_string(m));
+    const auto p = resolve_parameters(A, options_for(m, n));
+    const std::int64_t entries = A.nonZeros() + n;
+    Splitting<int> narrow(A, m, p, Inner::Auto, entries);  // at the limit: fits
+    Splitting<int> wide(A, m, p, Inner::Auto, entries - 1);
+    CHECK_FALSE(narrow.wide_indices());
+    CHECK(wide.wide_indices());
+    CHECK((Eigen::MatrixXd(wide.left_matrix()) - Eigen::MatrixXd(narrow.left_matrix())).norm() == 0.0);
+    Eigen::VectorXd r1 = Eigen::VectorXd::LinSpaced(n, -1.0, 1.0), r2 = r1, x1, x2;
+    narrow.solve(r1, x1);
+    wide.solve(r2, x2);
+    CHECK((x1 - x2).norm() <= 1e-13 * x1.norm());
+  }
+}

@@ -18,6 +18,7 @@ from . import _core
 from ._inputs import as_constant, as_csr, as_diagonal, as_vector
 from ._scaling import SCALINGS, ScaledCallable, equilibrate, scale_matrix
 from . import _newton
+from ._zeta import CheckedZeta
 
 __all__ = ["solve", "Solver", "Affine", "Result", "Status", "METHODS", "residual", "backends"]
 
@@ -118,7 +119,7 @@ def residual(A: MatrixLike, q: ArrayLike, z: ArrayLike, zeta: ZetaLike = None) -
     if zeta is None:
         g = z
     elif callable(zeta):
-        g = z - np.asarray(zeta(z), dtype=float)
+        g = z - CheckedZeta(zeta, z.shape[0])(z)
     else:
         g = z - np.asarray(zeta, dtype=float)
     return _norm(np.minimum(w, g))
@@ -143,9 +144,15 @@ def _choice(value, allowed, name):
     return value.lower()
 
 
+#: Integer options are a C++ int.
+_INT_MAX = 2**31 - 1
+
+
 def _scalar(value, name, *, low=None, low_inclusive=False, high=None, allow_none=False, integer=False):
     if value is None and allow_none:
         return None
+    if integer and high is None:
+        high = _INT_MAX
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise TypeError(f"{name} must be a {'whole ' if integer else ''}number, got {value!r}")
     if integer and int(value) != value:
@@ -328,10 +335,9 @@ class Solver:
             return
         _newton.check_no_hierarchy(hierarchy, self.method)
         core_cls = _core.SolverI64 if self._index_dtype == np.int64 else _core.SolverI32
-        try:
-            self._core = core_cls(A_core.indptr, A_core.indices, A_core.data, n, opts)
-        except RuntimeError as exc:  # a factorization failed: a property of A and the options
-            raise np.linalg.LinAlgError(str(exc)) from None
+        # A failed factorization raises numpy.linalg.LinAlgError (MemoryError when out of memory),
+        # here or in a lazy one during solve().
+        self._core = core_cls(A_core.indptr, A_core.indices, A_core.data, n, opts)
 
     @property
     def parameters(self) -> dict[str, Any]:
@@ -376,14 +382,16 @@ class Solver:
         dr, dc = self._dr, self._dc
         scaled = dr is not None
         # The problem handed to the core (scaled variables y = D_c⁻¹ z when scaled).
+        checked = None if fn is None else CheckedZeta(fn, n)  # read-only input, checked output: one per solve
         if scaled:
             qs = dr * qv
             z0s = None if z0 is None else z0 / dc
             cs = None if c is None else c / dc
             Bs = None if B is None else scale_matrix(B, 1.0 / dc, dc)
-            fns = None if fn is None else (fn if np.all(dc == 1.0) else ScaledCallable(fn, dc))
+            fns = None if fn is None else (checked if np.all(dc == 1.0) else
+                                           CheckedZeta(ScaledCallable(checked, dc), n))
         else:
-            qs, z0s, cs, Bs, fns = qv, z0, c, B, fn
+            qs, z0s, cs, Bs, fns = qv, z0, c, B, checked
         if Bs is not None:
             bp = Bs.indptr.astype(self._index_dtype, copy=False)
             bi = Bs.indices.astype(self._index_dtype, copy=False)
@@ -409,7 +417,7 @@ class Solver:
             elif kind == 2:
                 g = z - (B @ z + c)
             else:
-                g = z - np.asarray(fn(z), dtype=np.float64)
+                g = z - checked(z)  # on a read-only copy: ζ never sees (or writes into) the result
             return w, _norm(np.minimum(w, g))
 
         tol_k, x0k = tol, z0s
@@ -425,7 +433,7 @@ class Solver:
             d = self._core.solve(qs, kind, cs, bp, bi, bd, fns, x0k, cb, opts, **core_kw)
             status = Status(d["status"])
             if status == Status.ZETA_FAILED:
-                raise ValueError(f"zeta(z) returned non-finite values (NaN or Inf): {d['message']}")
+                raise ValueError(f"{d['message']} (NaN or Inf)")
             z = d["z"] * dc if scaled else d["z"]
             if verify:
                 w, res = original_residual(z)

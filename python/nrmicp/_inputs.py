@@ -32,8 +32,9 @@ def as_csr(A, name: str = "A", *, square: bool = True) -> sp.csr_matrix:
     """Return A as canonical float64 CSR (sorted indices, no duplicates), int32 or int64
     indices. Canonical float64 CSR is returned as-is (zero-copy); anything else is copied
     with a ConversionWarning. Raises TypeError/ValueError naming `name`."""
+    canonical = None  # unknown
     if sp.issparse(A):
-        M = A
+        M, canonical = _check_structure(A, name)
         if M.format != "csr":
             _warn(f"{name}: converting {M.format.upper()} to CSR (copy); pass CSR to avoid it")
             M = M.tocsr()
@@ -72,7 +73,10 @@ def as_csr(A, name: str = "A", *, square: bool = True) -> sp.csr_matrix:
             _warn(f"{name}: converting index arrays to {np.dtype(idx).name} (copy)")
         M = sp.csr_matrix((M.data, M.indices.astype(idx), M.indptr.astype(idx)), shape=M.shape)
         copied = True
-    if not _is_canonical(M):
+        canonical = None
+    if canonical is None:
+        canonical = _is_canonical(M, name)
+    if not canonical:
         if not copied:
             _warn(f"{name}: sorting indices / summing duplicate entries (copy)")
             M = M.copy()
@@ -87,22 +91,57 @@ def as_csr(A, name: str = "A", *, square: bool = True) -> sp.csr_matrix:
     return M
 
 
-def _is_canonical(M: sp.csr_matrix) -> bool:
-    # Checks sortedness and duplicates directly (scipy's cached flag may be stale); one pass in
-    # C++ for the index types the core takes (the numpy version below costs ~13 ms at nnz = 5e6).
-    if M.nnz == 0:
-        return True
-    if M.indices.dtype == M.indptr.dtype and M.indices.dtype in (np.int32, np.int64) \
-            and M.indices.flags.c_contiguous and M.indptr.flags.c_contiguous:
+def _index_arrays(M, name: str):
+    """M.indptr and M.indices in one index type the core reads (int32 or int64, contiguous):
+    the arrays themselves when they already are, else int64 copies."""
+    ip, ix = M.indptr, M.indices
+    for part, arr in (("indptr", ip), ("indices", ix)):
+        if arr.ndim != 1 or arr.dtype.kind not in "iu":
+            raise TypeError(f"{name}.{part} must be a 1-D integer array, got dtype {arr.dtype} and shape {arr.shape}")
+    if ip.dtype == ix.dtype and ix.dtype in (np.int32, np.int64) and ip.flags.c_contiguous \
+            and ix.flags.c_contiguous:
+        return ip, ix
+    return np.ascontiguousarray(ip, dtype=np.int64), np.ascontiguousarray(ix, dtype=np.int64)
+
+
+def _check_structure(M, name: str):
+    """Validate a sparse matrix's index structure before scipy or the core reads it (a bad
+    indptr or an out-of-range index makes them read out of bounds: wrong results or a segfault).
+    -> (M, canonical): canonical says whether a CSR matrix has sorted indices without
+    duplicates (None for other formats). Raises ValueError naming `name`."""
+    fmt = M.format
+    if fmt in ("csr", "csc"):
+        ip, ix = _index_arrays(M, name)
+        outer, inner = M.shape if fmt == "csr" else M.shape[::-1]
         from . import _core
-        return bool(_core.csr_is_canonical(M.indptr, M.indices))
-    d = np.diff(M.indices)
-    row_starts = M.indptr[1:-1]
-    mask = np.ones(d.shape, dtype=bool)
-    # positions where a new row starts are allowed to decrease
-    starts = row_starts[(row_starts > 0) & (row_starts < M.nnz)] - 1
-    mask[starts] = False
-    return bool(np.all(d[mask] > 0))
+        canonical = _core.check_compressed(ip, ix, len(M.data), outer, inner, name)
+        nnz = int(ip[-1])
+        if nnz < len(M.indices) or nnz < len(M.data):  # unused storage at the end, as scipy's prune()
+            M = type(M)((M.data[:nnz], M.indices[:nnz], M.indptr), shape=M.shape)
+        return M, (canonical if fmt == "csr" else None)
+    if fmt == "coo":
+        row, col = M.row, M.col
+        if not len(row) == len(col) == len(M.data):
+            raise ValueError(f"{name} is not a valid sparse matrix: {name}.row, {name}.col and {name}.data "
+                             f"differ in length ({len(row)}, {len(col)}, {len(M.data)})")
+        for part, idx, dim in (("row", row, M.shape[0]), ("col", col, M.shape[1])):
+            if len(idx) and (idx.min() < 0 or idx.max() >= dim):
+                bad = int(np.flatnonzero((idx < 0) | (idx >= dim))[0])
+                raise ValueError(f"{name} is not a valid sparse matrix: {name}.{part}[{bad}] = {idx[bad]} is "
+                                 f"outside [0, {dim})")
+        return M, None
+    if hasattr(M, "check_format"):  # BSR: scipy's own full check
+        try:
+            M.check_format(full_check=True)
+        except ValueError as exc:
+            raise ValueError(f"{name} is not a valid sparse matrix: {exc}") from None
+    return M, None
+
+
+def _is_canonical(M: sp.csr_matrix, name: str) -> bool:
+    # Checks sortedness and duplicates directly (scipy's cached flag may be stale), in the same
+    # C++ pass as the structure.
+    return _check_structure(M, name)[1]
 
 
 def as_vector(v, n: int, name: str) -> np.ndarray:

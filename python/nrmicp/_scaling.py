@@ -80,24 +80,12 @@ def scale_matrix(A: sp.csr_matrix, dr: np.ndarray, dc: np.ndarray) -> sp.csr_mat
 
 
 class ScaledCallable:
-    """ζ'(y) = D_c⁻¹ ζ(D_c y) for a user callable ζ; checks the shape of what ζ returns
-    (with the core's wording) and lets every exception ζ raises through unchanged."""
+    """ζ'(y) = D_c⁻¹ ζ(D_c y) for a user callable ζ given as a CheckedZeta (nrmicp._zeta), which
+    hands ζ a read-only copy and checks its output; ζ's exceptions pass through unchanged."""
 
-    def __init__(self, fn, dc: np.ndarray):
-        self.fn = fn
+    def __init__(self, zeta, dc: np.ndarray):
+        self.zeta = zeta
         self.dc = dc
 
     def __call__(self, y):
-        n = self.dc.shape[0]
-        r = self.fn(self.dc * y)
-        arr = r if isinstance(r, np.ndarray) else None
-        if arr is not None and arr.dtype.kind not in "fiu":
-            raise TypeError(f"zeta(z) returned an array of dtype {arr.dtype}; expected a real floating-point "
-                            f"array of shape ({n},)")
-        try:
-            arr = np.asarray(r, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise TypeError(f"zeta(z) must return a float64 array of shape ({n},), got {type(r).__name__}") from None
-        if arr.shape != (n,):
-            raise ValueError(f"zeta(z) must return an array of shape ({n},), got shape {arr.shape}")
-        return arr / self.dc
+        return self.zeta(self.dc * y) / self.dc

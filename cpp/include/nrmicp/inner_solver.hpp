@@ -15,12 +15,32 @@
 #include <Eigen/UmfPackSupport>
 #endif
 
+#include <cstdint>
+#include <limits>
 #include <memory>
 #include <stdexcept>
 #include <string>
 #include <type_traits>
+#include <vector>
 
 namespace nrmicp {
+
+/// A factorization failed. The Python module raises MemoryError for OutOfMemory and
+/// numpy.linalg.LinAlgError for the others; the message names the matrix.
+class FactorizationError : public std::runtime_error {
+ public:
+  enum class Reason {
+    Singular,       ///< singular (or, for a Cholesky backend, not positive definite)
+    OutOfMemory,    ///< the backend ran out of memory
+    IndexOverflow,  ///< the factor does not fit the backend's integer type
+    Failed,         ///< any other failure the backend reports
+  };
+  FactorizationError(Reason reason, const std::string& message) : std::runtime_error(message), reason_(reason) {}
+  Reason reason() const { return reason_; }
+
+ private:
+  Reason reason_;
+};
 
 /// Which backends this build has.
 inline bool have_cholmod() {
@@ -53,6 +73,69 @@ bool has_positive_diagonal(const SpMat& M) {
   return (M.diagonal().array() > 0).all();
 }
 
+/// "row i" or "column j" of a compressed column-major M that has no nonzero value, else "".
+/// Such a matrix is singular whatever its values: no factorization is attempted (Eigen's
+/// SparseLU does not return on an all-zero matrix).
+template <typename ColMatrix>
+std::string empty_row_or_column(const ColMatrix& M) {
+  std::vector<char> row_used(static_cast<std::size_t>(M.rows()), 0);
+  Eigen::Index empty_col = -1;
+  for (Eigen::Index j = 0; j < M.cols(); ++j) {
+    bool used = false;
+    for (typename ColMatrix::InnerIterator it(M, j); it; ++it)
+      if (it.value() != 0) { used = true; row_used[static_cast<std::size_t>(it.row())] = 1; }
+    if (!used && empty_col < 0) empty_col = j;
+  }
+  for (Eigen::Index i = 0; i < M.rows(); ++i)
+    if (!row_used[static_cast<std::size_t>(i)]) return "row " + std::to_string(i);
+  return empty_col < 0 ? std::string() : "column " + std::to_string(empty_col);
+}
+
+/// Whether a matrix with `entries` stored entries needs wider indices than StorageIndex has
+/// (`limit` is a parameter for tests only).
+template <typename StorageIndex>
+bool needs_wide_indices(std::int64_t entries, std::int64_t limit = std::numeric_limits<StorageIndex>::max()) {
+  return entries > limit;
+}
+
+/// What to tell a user whose 32-bit indices are too small for a factor.
+template <typename StorageIndex>
+std::string index_hint() {
+  return sizeof(StorageIndex) < 8 ? "; with 32-bit indices the factor is limited to 2^31 - 1 entries: pass A with "
+                                    "int64 indices (A.indices and A.indptr as np.int64) for the 64-bit backend"
+                                  : "";
+}
+
+#if defined(NRMICP_HAVE_CHOLMOD)
+/// Throws FactorizationError for a failure status of CHOLMOD (or a factor it did not make);
+/// warnings (not positive definite) pass.
+template <typename StorageIndex>
+void check_cholmod(int status, bool has_factor, const std::string& what) {
+  using R = FactorizationError::Reason;
+  if (status == CHOLMOD_OUT_OF_MEMORY)
+    throw FactorizationError(R::OutOfMemory, "InnerSolver: CHOLMOD ran out of memory factorizing " + what);
+  if (status == CHOLMOD_TOO_LARGE)
+    throw FactorizationError(R::IndexOverflow, "InnerSolver: the CHOLMOD factor of " + what +
+                                                   " overflows its integer type" + detail::index_hint<StorageIndex>());
+  if (status < 0 || !has_factor)
+    throw FactorizationError(R::Failed, "InnerSolver: CHOLMOD failed on " + what + " (status " +
+                                            std::to_string(status) + ")");
+}
+#endif
+#if defined(NRMICP_HAVE_UMFPACK)
+/// Throws FactorizationError for a failure status of UMFPACK; warnings (singular) pass.
+template <typename StorageIndex>
+void check_umfpack(int status, const std::string& what) {
+  using R = FactorizationError::Reason;
+  if (status == UMFPACK_ERROR_out_of_memory)
+    throw FactorizationError(R::OutOfMemory, "InnerSolver: UMFPACK ran out of memory factorizing " + what +
+                                                 detail::index_hint<StorageIndex>());
+  if (status < 0)
+    throw FactorizationError(R::Failed, "InnerSolver: UMFPACK failed on " + what + " (status " +
+                                            std::to_string(status) + ")");
+}
+#endif
+
 }  // namespace detail
 
 /// Factorizes a sparse matrix once and solves with it many times. Keeps its own copy of the
@@ -67,18 +150,25 @@ class InnerSolver {
   /// solvers without SuiteSparse). `what` names the matrix in error messages.
   void compute(ColMatrix M, Inner kind, const std::string& what) {
     M.makeCompressed();
+    const std::string empty = detail::empty_row_or_column(M);
+    if (!empty.empty())
+      throw FactorizationError(FactorizationError::Reason::Singular,
+                               "InnerSolver: " + what + " is singular: its " + empty +
+                                   " has no nonzero entry (every factorization fails on it)");
     if (kind == Inner::Auto) {
       const bool spd_candidate = detail::is_symmetric(M) && detail::has_positive_diagonal(M);
       if (spd_candidate) {
         // Cholesky fails cleanly on an indefinite matrix; fall back to LU then.
-        if (try_compute(M, have_cholmod() ? Inner::Cholmod : Inner::EigenLLT)) return;
+        if (try_compute(M, have_cholmod() ? Inner::Cholmod : Inner::EigenLLT, what)) return;
       }
-      if (try_compute(M, have_umfpack() ? Inner::Umfpack : Inner::EigenLU)) return;
-      throw std::runtime_error("InnerSolver: factorization of " + what + " failed (the matrix is singular)");
+      if (try_compute(M, have_umfpack() ? Inner::Umfpack : Inner::EigenLU, what)) return;
+      throw FactorizationError(FactorizationError::Reason::Singular,
+                               "InnerSolver: factorization of " + what + " failed (the matrix is singular)");
     }
-    if (!try_compute(M, kind))
-      throw std::runtime_error("InnerSolver: " + std::string(name_of(kind)) + " factorization of " + what +
-                               " failed (singular, or not positive definite for a Cholesky backend)");
+    if (!try_compute(M, kind, what))
+      throw FactorizationError(FactorizationError::Reason::Singular,
+                               "InnerSolver: " + std::string(name_of(kind)) + " factorization of " + what +
+                                   " failed (singular, or not positive definite for a Cholesky backend)");
   }
 
   /// x = M⁻¹ b.
@@ -97,53 +187,77 @@ class InnerSolver {
     virtual void solve(const Vector& b, Vector& x) const = 0;
     virtual const ColMatrix& matrix() const = 0;
   };
+#if defined(NRMICP_HAVE_CHOLMOD)
+  // Eigen's CHOLMOD wrapper dereferences a factor that cholmod_analyze failed to make: the
+  // status is checked here between the two phases.
+  struct CholmodLLT : Eigen::CholmodSupernodalLLT<ColMatrix, Eigen::Lower> {
+    bool has_factor() const { return this->m_cholmodFactor != nullptr; }
+  };
+  static bool factorize(CholmodLLT& s, const ColMatrix& M, const std::string& what) {
+    s.cholmod().print = 0;  // CHOLMOD prints warnings to stdout; a library must not
+    s.analyzePattern(M);
+    detail::check_cholmod<StorageIndex>(s.cholmod().status, s.has_factor(), what);
+    s.factorize(M);
+    detail::check_cholmod<StorageIndex>(s.cholmod().status, true, what);
+    return s.info() == Eigen::Success;  // not positive definite: a warning status
+  }
+#endif
+#if defined(NRMICP_HAVE_UMFPACK)
+  struct UmfpackLU : Eigen::UmfPackLU<ColMatrix> {
+    int status() const { return static_cast<int>(this->m_fact_errorCode); }
+  };
+  static bool factorize(UmfpackLU& s, const ColMatrix& M, const std::string& what) {
+    s.analyzePattern(M);
+    detail::check_umfpack<StorageIndex>(s.status(), what);
+    s.factorize(M);
+    detail::check_umfpack<StorageIndex>(s.status(), what);
+    return s.status() == UMFPACK_OK;  // UMFPACK_WARNING_singular_matrix: singular
+  }
+#endif
+  // Eigen's own solvers: failures are numerical (out of memory throws std::bad_alloc).
+  template <typename EigenSolver>
+  static bool factorize(EigenSolver& s, const ColMatrix& M, const std::string&) {
+    s.compute(M);
+    return s.info() == Eigen::Success;
+  }
+
   template <typename EigenSolver>
   struct Impl : Base {
     ColMatrix mat;  // the solver refers to it
     EigenSolver solver;
-    bool compute(ColMatrix M) {
-      mat = std::move(M);
-#if defined(NRMICP_HAVE_CHOLMOD)
-      // CHOLMOD prints its warnings (e.g. "not positive definite") to stdout; we report
-      // failures ourselves, and a library must not write to the user's terminal.
-      if constexpr (std::is_base_of_v<Eigen::CholmodBase<ColMatrix, Eigen::Lower, EigenSolver>, EigenSolver>)
-        solver.cholmod().print = 0;
-#endif
-      solver.compute(mat);
-      return solver.info() == Eigen::Success;
-    }
     void solve(const Vector& b, Vector& x) const override { x = solver.solve(b); }
     const ColMatrix& matrix() const override { return mat; }
   };
 
   template <typename EigenSolver>
-  bool emplace(const ColMatrix& M, Inner k) {
+  bool emplace(const ColMatrix& M, Inner k, const std::string& what) {
     auto p = std::make_unique<Impl<EigenSolver>>();
     p->name = name_of(k);
-    if (!p->compute(M)) return false;
+    p->mat = M;
+    if (!factorize(p->solver, p->mat, what)) return false;
     impl_ = std::move(p);
     return true;
   }
 
-  bool try_compute(const ColMatrix& M, Inner k) {
+  bool try_compute(const ColMatrix& M, Inner k, const std::string& what) {
     switch (k) {
       case Inner::Cholmod:
 #if defined(NRMICP_HAVE_CHOLMOD)
-        return emplace<Eigen::CholmodSupernodalLLT<ColMatrix, Eigen::Lower>>(M, k);
+        return emplace<CholmodLLT>(M, k, what);
 #else
         throw std::invalid_argument("inner = 'cholmod' but this build has no CHOLMOD (SuiteSparse was not found)");
 #endif
       case Inner::Umfpack:
 #if defined(NRMICP_HAVE_UMFPACK)
-        return emplace<Eigen::UmfPackLU<ColMatrix>>(M, k);
+        return emplace<UmfpackLU>(M, k, what);
 #else
         throw std::invalid_argument("inner = 'umfpack' but this build has no UMFPACK (SuiteSparse was not found)");
 #endif
       case Inner::EigenLLT:
-        return emplace<Eigen::SimplicialLLT<ColMatrix, Eigen::Lower, Eigen::AMDOrdering<StorageIndex>>>(M, k);
+        return emplace<Eigen::SimplicialLLT<ColMatrix, Eigen::Lower, Eigen::AMDOrdering<StorageIndex>>>(M, k, what);
       case Inner::EigenLU:
         // COLAMD: AMD ordering took 450 s at n = 250,000 on this machine, COLAMD 2.5 s.
-        return emplace<Eigen::SparseLU<ColMatrix, Eigen::COLAMDOrdering<StorageIndex>>>(M, k);
+        return emplace<Eigen::SparseLU<ColMatrix, Eigen::COLAMDOrdering<StorageIndex>>>(M, k, what);
       case Inner::Auto: break;
     }
     return false;

@@ -12,7 +12,9 @@
 
 #include <cfloat>
 #include <cmath>
+#include <cstdint>
 #include <functional>
+#include <limits>
 #include <mutex>
 #include <stdexcept>
 #include <string>
@@ -158,22 +160,21 @@ class Splitting {
   using ColMatrix = Eigen::SparseMatrix<double, Eigen::ColMajor, StorageIndex>;
   using RowMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, StorageIndex>;
 
+  /// `index_limit`: for tests only (the size above which Lm gets 64-bit indices).
   template <typename MatrixType>
-  Splitting(const MatrixType& A, Method method, const Parameters& p, Inner inner) {
+  Splitting(const MatrixType& A, Method method, const Parameters& p, Inner inner,
+            std::int64_t index_limit = std::numeric_limits<StorageIndex>::max()) {
     using Triplet = Eigen::Triplet<double, StorageIndex>;
     const Eigen::Index n = A.rows();
     std::vector<Triplet> t;
     if (!is_aor_type(method)) {
-      // Lm = Ω2 + (A + φ)Ω1
       kind_ = LeftKind::Factorized;
-      t.reserve(A.nonZeros() + n);
-      for (Eigen::Index k = 0; k < A.outerSize(); ++k)
-        for (typename MatrixType::InnerIterator it(A, k); it; ++it)
-          t.emplace_back(it.row(), it.col(), it.value() * p.omega1[it.col()]);
-      for (Eigen::Index i = 0; i < n; ++i) t.emplace_back(i, i, p.omega2[i] + p.phi[i] * p.omega1[i]);
-      ColMatrix Lm(n, n);
-      Lm.setFromTriplets(t.begin(), t.end());  // sums duplicates: the diagonal of A joins its shift
-      solver_.compute(std::move(Lm), inner, "the left matrix Omega2 + (A + phi) Omega1");
+      // Lm has up to nnz + n entries: past 2^31 − 1 an int32 A gets a left matrix with 64-bit indices.
+      wide_ = detail::needs_wide_indices<StorageIndex>(std::int64_t(A.nonZeros()) + n, index_limit);
+      if (wide_)
+        factorize_left(A, p, inner, wide_solver_);
+      else
+        factorize_left(A, p, inner, solver_);
       return;
     }
     // Lm = Ω2 + ((D − βL)/α + φ)Ω1: diagonal Ω2 + (d/α + φ)Ω1, strictly lower (β/α) a_ij Ω1_j.
@@ -221,7 +222,9 @@ class Splitting {
   /// x = Lm⁻¹ r (r is overwritten for the triangular kinds).
   void solve(Vector& r, Vector& x) const {
     switch (kind_) {
-      case LeftKind::Factorized: solver_.solve(r, x); return;
+      case LeftKind::Factorized:
+        if (wide_) wide_solver_.solve(r, x); else solver_.solve(r, x);
+        return;
       case LeftKind::Diagonal: x = r.cwiseQuotient(diagonal_); return;
       case LeftKind::Lower:
         lower().template triangularView<Eigen::Lower>().solveInPlace(r);
@@ -231,11 +234,13 @@ class Splitting {
   }
 
   LeftKind kind() const { return kind_; }
+  /// Whether Lm (NRM, NRMM) was built with 64-bit indices because nnz(A) + n overflows StorageIndex.
+  bool wide_indices() const { return wide_; }
 
   /// Lm as a sparse matrix (built on demand: for tests and inspection).
   ColMatrix left_matrix() const {
     switch (kind_) {
-      case LeftKind::Factorized: return solver_.matrix();
+      case LeftKind::Factorized: return wide_ ? ColMatrix(wide_solver_.matrix()) : solver_.matrix();
       case LeftKind::Lower: return ColMatrix(lower());
       case LeftKind::Diagonal: break;
     }
@@ -246,7 +251,7 @@ class Splitting {
   }
   const char* inner_name() const {
     switch (kind_) {
-      case LeftKind::Factorized: return solver_.name();
+      case LeftKind::Factorized: return wide_ ? wide_solver_.name() : solver_.name();
       case LeftKind::Lower: return "forward_substitution";
       case LeftKind::Diagonal: return "diagonal";
     }
@@ -259,8 +264,26 @@ class Splitting {
   const RowMatrix& n2() const { return n2_; }
 
  private:
+  // Lm = Ω2 + (A + φ)Ω1, assembled with index type Index and factorized.
+  template <typename MatrixType, typename Index>
+  static void factorize_left(const MatrixType& A, const Parameters& p, Inner inner, InnerSolver<Index>& solver) {
+    using Triplet = Eigen::Triplet<double, Index>;
+    const Eigen::Index n = A.rows();
+    std::vector<Triplet> t;
+    t.reserve(static_cast<std::size_t>(A.nonZeros() + n));
+    for (Eigen::Index k = 0; k < A.outerSize(); ++k)
+      for (typename MatrixType::InnerIterator it(A, k); it; ++it)
+        t.emplace_back(it.row(), it.col(), it.value() * p.omega1[it.col()]);
+    for (Eigen::Index i = 0; i < n; ++i) t.emplace_back(i, i, p.omega2[i] + p.phi[i] * p.omega1[i]);
+    Eigen::SparseMatrix<double, Eigen::ColMajor, Index> Lm(n, n);
+    Lm.setFromTriplets(t.begin(), t.end());  // sums duplicates: the diagonal of A joins its shift
+    solver.compute(std::move(Lm), inner, "the left matrix Omega2 + (A + phi) Omega1");
+  }
+
   LeftKind kind_ = LeftKind::Factorized;
+  bool wide_ = false;
   InnerSolver<StorageIndex> solver_;
+  InnerSolver<std::int64_t> wide_solver_;  // Lm when wide_
   Vector diagonal_, inverse_diagonal_;
   double lower_scale_ = 0;
   const RowMatrix& lower() const {

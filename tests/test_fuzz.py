@@ -1,0 +1,246 @@
+"""Fuzz: random problems and options through the Python API, against an oracle that does not
+trust the library:
+
+- no crash and no hang (every solve is bounded by maxiter);
+- success=True only when Res(z), recomputed here in numpy from the original data and the test's
+  own ζ, is below tol (up to rounding in computing Res itself);
+- z finite for finite input; the caller's arrays unmodified;
+- corrupt input -> TypeError/ValueError whose message names the corrupted argument.
+
+A few hundred cases in CI (deterministic); NRMICP_FUZZ_EXAMPLES=N runs N random cases, e.g.
+``NRMICP_FUZZ_EXAMPLES=5000 python -m pytest -q tests/test_fuzz.py``.
+"""
+from __future__ import annotations
+
+import os
+import warnings
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from hypothesis import HealthCheck, event, given, settings
+from hypothesis import strategies as st
+
+import nrmicp
+
+_LONG_RUN = int(os.environ.get("NRMICP_FUZZ_EXAMPLES", "0"))
+FUZZ = settings(max_examples=_LONG_RUN or 300, deadline=None, derandomize=not _LONG_RUN, database=None,
+                suppress_health_check=list(HealthCheck))
+
+METHODS = ["nrm", "nrmm", "nrmaor", "nrmsor", "nrmgs", "nrmj", "mms", "two_sweep"]
+EPS = np.finfo(float).eps
+
+#: (argument named in the error, how the input is corrupted)
+CORRUPTIONS = [
+    ("A", "index out of range"), ("A", "negative index"), ("A", "indptr beyond nnz"), ("A", "indptr not from 0"),
+    ("A", "nan entry"), ("A", "complex"), ("A", "not square"), ("q", "nan"), ("q", "wrong length"),
+    ("q", "strings"), ("x0", "inf"), ("x0", "wrong length"), ("zeta", "wrong length"), ("zeta", "nan constant"),
+    ("zeta", "returns None"), ("zeta", "returns strings"), ("zeta", "returns complex"),
+    ("zeta", "returns wrong shape"), ("zeta", "writes into z"), ("zeta.B", "index out of range"),
+    ("omega1", "negative"), ("omega2", "zero"), ("phi", "negative"), ("maxiter", "beyond int32"),
+    ("maxiter", "negative"), ("tol", "nan"), ("method", "unknown"), ("gamma", "string"),
+]
+
+
+def random_matrix(rng, n, kind, scale):
+    density = rng.uniform(0.1, 1.0)
+    R = sp.random(n, n, density=density, random_state=rng, data_rvs=lambda k: rng.standard_normal(k))
+    R = sp.csr_matrix(R)
+    if kind == "hplus":  # strictly diagonally dominant: every method converges
+        R.setdiag(0)
+        R.eliminate_zeros()
+        R = R + sp.diags(abs(R).sum(axis=1).A1 + rng.uniform(0.5, 2.0, n))
+    elif kind == "posdiag":  # positive diagonal, otherwise anything
+        R.setdiag(rng.uniform(0.1, 3.0, n))
+    elif kind == "singular":
+        R = sp.csr_matrix(R.toarray() * (rng.uniform(size=(1, n)) > 0.3))  # some empty columns
+    R = sp.csr_matrix(R * scale)
+    R.sort_indices()
+    return R
+
+
+@st.composite
+def cases(draw):
+    seed = draw(st.integers(0, 2**32 - 1))
+    rng = np.random.default_rng(seed)
+    n = draw(st.integers(1, 12))
+    corrupt = draw(st.sampled_from(CORRUPTIONS)) if draw(st.integers(0, 3)) == 0 else None
+    # a corrupted case is otherwise valid, so that the error can only be about the corruption
+    kind = "hplus" if corrupt else draw(st.sampled_from(["hplus", "hplus", "posdiag", "random", "singular"]))
+    scale = 10.0 ** draw(st.sampled_from([0, 0, -8, 8, -100, 100]))
+    A = random_matrix(rng, n, kind, scale)
+    if draw(st.booleans()):
+        A = sp.csr_matrix((A.data, A.indices.astype(np.int64), A.indptr.astype(np.int64)), shape=A.shape)
+    q = rng.uniform(-1, 1, n) * scale
+    zkind = draw(st.sampled_from(["none", "constant", "affine", "callable", "callable_f32"]))
+    c = rng.uniform(-1, 1, n)
+    B = sp.csr_matrix(0.1 * sp.random(n, n, density=0.4, random_state=rng))
+    opts = dict(method=draw(st.sampled_from(METHODS)), maxiter=draw(st.sampled_from([0, 1, 50, 300])),
+                tol=draw(st.sampled_from([1e-8, 1e-12, 1e-3])) * scale,
+                z_update=draw(st.sampled_from(["auto", "explicit", "solve"])),
+                accelerate=draw(st.sampled_from(["none", "anderson"])),
+                scale=draw(st.sampled_from([False, "rows", "both"])),
+                inner=draw(st.sampled_from(["auto", "auto", "umfpack", "cholmod", "eigen_lu", "eigen_llt"])),
+                stall_iterations=draw(st.sampled_from([5, 100])))
+    if corrupt or (opts["inner"] in ("cholmod", "umfpack") and not nrmicp.backends()[opts["inner"]]):
+        opts["inner"] = "auto"  # (a forced Cholesky of a nonsymmetric A would fail before the corruption is seen)
+    if opts["method"] in ("nrmaor", "nrmsor") and draw(st.booleans()):
+        opts["alpha"] = draw(st.floats(0.5, 1.5))
+    if opts["method"] == "two_sweep" and draw(st.booleans()):
+        opts["theta"] = draw(st.floats(0.3, 1.5))
+    if opts["method"] not in ("mms", "two_sweep") and draw(st.booleans()):
+        opts["omega1"] = rng.uniform(0.5, 2.0, n)
+        opts["phi"] = rng.uniform(0.0, 1.0, n)
+    if draw(st.booleans()):
+        opts["omega2"] = np.abs(A.diagonal()) + scale * rng.uniform(0.1, 1.0, n)
+    x0 = rng.uniform(0, 1, n) if draw(st.booleans()) else None
+    return dict(A=A, q=q, zkind=zkind, c=c, B=B, x0=x0, opts=opts, corrupt=corrupt, rng=rng)
+
+
+def make_zeta(zkind, c, B):
+    """(zeta to pass, the test's own ζ for the oracle)."""
+    if zkind == "none":
+        return None, lambda z: np.zeros_like(z)
+    if zkind == "constant":
+        return c, lambda z: c
+    if zkind == "affine":
+        return nrmicp.Affine(B, c), lambda z: B @ z + c
+    if zkind == "callable":
+        f = lambda z: 0.05 * np.sin(z) + c  # noqa: E731
+        return f, f
+    f = lambda z: (0.05 * np.sin(z) + c).astype(np.float32)  # noqa: E731
+    return f, lambda z: f(z).astype(np.float64)
+
+
+def apply_corruption(case, zeta):
+    """Corrupt one argument in place of the case (copies: the snapshot is taken after)."""
+    name, how = case["corrupt"]
+    A, n, opts = case["A"], case["A"].shape[0], case["opts"]
+    if name == "A":
+        if how == "index out of range":
+            A.indices[-1] = n + 3
+        elif how == "negative index":
+            A.indices[0] = -1
+        elif how == "indptr beyond nnz":
+            A.indptr[-1] = A.nnz + 5
+        elif how == "indptr not from 0":
+            A.indptr[0] = 1
+        elif how == "nan entry":
+            A.data[0] = np.nan
+        elif how == "complex":
+            case["A"] = A.astype(complex)
+        elif how == "not square":
+            case["A"] = sp.csr_matrix(sp.vstack([A, sp.csr_matrix((1, n))]))
+    elif name == "q":
+        case["q"] = {"nan": np.r_[case["q"][:-1], np.nan], "wrong length": np.ones(n + 1),
+                     "strings": np.array(["1"] * n)}[how]
+    elif name == "x0":
+        case["x0"] = np.full(n, np.inf) if how == "inf" else np.zeros(n + 2)
+    elif name == "zeta":
+        zeta = {"wrong length": np.ones(n + 1), "nan constant": np.full(n, np.nan),
+                "returns None": lambda z: None, "returns strings": lambda z: ["0.5"] * n,
+                "returns complex": lambda z: z + 1j, "returns wrong shape": lambda z: np.zeros((n, 2)),
+                "writes into z": _writes_into_z}[how]
+    elif name == "zeta.B":
+        B = case["B"].copy() if case["B"].nnz else sp.csr_matrix(np.eye(n))
+        B.indices[0] = n + 7
+        zeta = nrmicp.Affine(B, case["c"])
+    elif name in ("omega1", "omega2", "phi"):
+        opts[name] = np.full(n, {"negative": -1.0, "zero": 0.0}[how])
+        if name in ("omega1", "phi"):
+            opts["method"] = "nrmgs"
+    elif name == "maxiter":
+        opts["maxiter"] = 2**31 if how == "beyond int32" else -1
+    elif name == "tol":
+        opts["tol"] = np.nan
+    elif name == "method":
+        opts["method"] = "newton?"
+    elif name == "gamma":
+        opts["gamma"] = "1"
+    return zeta
+
+
+def _writes_into_z(z):
+    z[0] = 0.0
+    return np.zeros_like(z)
+
+
+def snapshot(*objs):
+    out = []
+    for o in objs:
+        if sp.issparse(o):
+            out.append((o.data.copy(), o.indices.copy(), o.indptr.copy()))
+        elif isinstance(o, np.ndarray):
+            out.append(o.copy())
+        else:
+            out.append(None)
+    return out
+
+
+def assert_unchanged(before, objs):
+    for b, o in zip(before, objs):
+        if b is None:
+            continue
+        if isinstance(b, tuple):
+            for x, y in zip(b, (o.data, o.indices, o.indptr)):
+                np.testing.assert_array_equal(x, y)
+        else:
+            np.testing.assert_array_equal(b, o)
+
+
+def oracle_residual(A, q, z, zeta_ref):
+    """Res(z) from the original data in numpy, and a bound on the rounding in computing it."""
+    Ad = A.toarray()
+    w = Ad @ z + q
+    zz = zeta_ref(z)
+    g = z - zz
+    res = float(np.linalg.norm(np.minimum(w, g)))
+    slack = 64 * EPS * float(np.linalg.norm(np.abs(Ad) @ np.abs(z) + np.abs(q) + np.abs(z) + np.abs(zz)))
+    return res, slack
+
+
+#: Failures owned by the solver-loop rewrite (issue 9 items 6 and 7), tolerated here until it lands:
+#: a diverging iterate handed to a callable ζ ends as "zeta(z) returned non-finite values".
+KNOWN_ZETA_BLAME = "returned non-finite values"
+
+
+@FUZZ
+@given(case=cases())
+def test_fuzz_oracle(case):
+    zeta, zeta_ref = make_zeta(case["zkind"], case["c"], case["B"])
+    if case["corrupt"] is not None:
+        zeta = apply_corruption(case, zeta)
+    A, q, x0, opts = case["A"], case["q"], case["x0"], case["opts"]
+    before = snapshot(A, q, x0, case["B"], case["c"], *(opts.get(k) for k in ("omega1", "omega2", "phi")))
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            res = nrmicp.solve(A, q, zeta, x0=x0, **opts)
+    except (TypeError, ValueError) as exc:  # numpy.linalg.LinAlgError is a ValueError
+        msg = str(exc)
+        event(f"{'corrupt input' if case['corrupt'] else 'valid input'}: {type(exc).__name__}")
+        if case["corrupt"] is not None:
+            name = case["corrupt"][0]
+            assert name in msg, f"corrupt {case['corrupt']} -> {type(exc).__name__}: {msg}"
+        else:  # valid input that the method cannot take: still a clear error naming what
+            assert isinstance(exc, (ValueError, np.linalg.LinAlgError)), msg
+            assert any(s in msg for s in ("A[", "A (", "A is", "left matrix", "omega2", "alpha", "zeta")), msg
+            if "zeta" in msg and case["zkind"] in ("callable", "callable_f32"):
+                assert KNOWN_ZETA_BLAME in msg, msg
+                event("valid input: callable zeta blamed for a non-finite iterate (item 6)")
+        assert_unchanged(before, [A, q, x0, case["B"], case["c"],
+                                  *(opts.get(k) for k in ("omega1", "omega2", "phi"))])
+        return
+    assert case["corrupt"] is None, f"corrupt {case['corrupt']} was accepted: {res.message}"
+    assert_unchanged(before, [A, q, x0, case["B"], case["c"], *(opts.get(k) for k in ("omega1", "omega2", "phi"))])
+    assert isinstance(res.status, nrmicp.Status)
+    event(f"valid input: {res.status.name}")
+    assert np.all(np.isfinite(res.z)), res.message
+    if res.success:
+        true_res, slack = oracle_residual(A, q, res.z, zeta_ref)
+        assert true_res < opts["tol"] + slack, (res.residual, true_res, opts["tol"], res.message)
+
+
+def test_fuzz_reports_its_size():
+    # The long run's size is whatever NRMICP_FUZZ_EXAMPLES says; CI runs the deterministic 300.
+    assert FUZZ.max_examples == (_LONG_RUN or 300)

@@ -1,0 +1,319 @@
+"""Regression tests for what an adversarial run found (issue 9): corrupt sparse structure, failed
+factorizations, threads at interpreter exit, a ζ that writes into its input or returns the
+wrong thing, dtype checks, int32 limits. Each test names its item."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+import warnings
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import nrmicp
+
+
+def tridiag(n=4):
+    return sp.csr_matrix(4.0 * sp.identity(n) - sp.eye(n, k=1) - sp.eye(n, k=-1))
+
+
+def run_script(code, timeout=60, sigint_after=None):
+    """Run `code` in a fresh interpreter -> (returncode, stdout, stderr). With `sigint_after`, send
+    SIGINT once the script printed that line."""
+    proc = subprocess.Popen([sys.executable, "-c", textwrap.dedent(code)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    try:
+        if sigint_after is not None:
+            line = proc.stdout.readline().strip()
+            assert line == sigint_after, (line, proc.stderr.read() if proc.poll() is not None else "")
+            time.sleep(0.3)
+            proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=timeout)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    return proc.returncode, out, err
+
+
+# ---- item 1: the sparse structure is validated before anything reads it ----------------------
+
+
+def _corrupt(fmt, part, pos, value, index_dtype=np.int32):
+    A = tridiag().asformat(fmt)
+    A = type(A)((A.data, A.indices.astype(index_dtype), A.indptr.astype(index_dtype)), shape=A.shape)
+    getattr(A, part)[pos] = value
+    return A
+
+
+@pytest.mark.parametrize("fmt", ["csr", "csc"])
+@pytest.mark.parametrize("index_dtype", [np.int32, np.int64])
+@pytest.mark.parametrize("part,pos,value", [
+    ("indices", 1, 4),            # just past the last column: was CONVERGED from memory outside A
+    ("indices", 1, 10**8),        # far outside: was a segfault
+    ("indices", 3, -1),
+    ("indptr", 2, 100),           # was a segfault inside scipy's sort_indices
+    ("indptr", 2, 1),             # decreasing
+    ("indptr", 0, 1),             # does not start at 0
+    ("indptr", -1, 2**31 - 1),    # INT32_MAX: p[r] + 1 overflowed in the canonical check
+])
+def test_item1_corrupt_structure_is_a_value_error_naming_A(fmt, index_dtype, part, pos, value):
+    A = _corrupt(fmt, part, pos, value, index_dtype)
+    before = (A.data.copy(), A.indices.copy(), A.indptr.copy())
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(ValueError, match=r"A is not a valid sparse matrix: A\.(indices|indptr)"):
+            nrmicp.solve(A, -np.ones(4))
+    for b, a in zip(before, (A.data, A.indices, A.indptr)):
+        np.testing.assert_array_equal(b, a)
+
+
+def test_item1_corrupt_zeta_B_names_zeta_B():
+    B = 0.1 * tridiag()
+    B.indices[1] = 7
+    with pytest.raises(ValueError, match=r"zeta\.B is not a valid sparse matrix"):
+        nrmicp.solve(tridiag(), -np.ones(4), nrmicp.Affine(B, np.zeros(4)))
+
+
+def test_item1_corrupt_coo_names_A():
+    A = tridiag().tocoo()
+    A.row[2] = 9
+    with pytest.raises(ValueError, match=r"A is not a valid sparse matrix: A\.row\[2\] = 9"):
+        nrmicp.solve(A, -np.ones(4))
+
+
+def test_item1_trailing_unused_storage_is_ignored_like_scipy():
+    A = tridiag()
+    nnz = A.nnz
+    A2 = sp.csr_matrix((np.r_[A.data, 7.0], np.r_[A.indices, 99].astype(A.indices.dtype), A.indptr.copy()),
+                       shape=A.shape)
+    assert A2.indptr[-1] == nnz
+    np.testing.assert_allclose(nrmicp.solve(A2, -np.ones(4)).z, nrmicp.solve(A, -np.ones(4)).z)
+
+
+# ---- items 2, 3, 8: failed factorizations ------------------------------------------------------
+
+
+@pytest.mark.parametrize("inner", ["auto", "cholmod", "umfpack", "eigen_llt", "eigen_lu"])
+def test_item2_3_zero_matrix_is_rejected_before_factorizing(inner):
+    if inner in ("cholmod", "umfpack") and not nrmicp.backends()[inner]:
+        pytest.skip(f"no {inner} in this build")
+    # A subprocess: on the old code CHOLMOD segfaulted and Eigen's SparseLU never returned.
+    code = f"""
+        import numpy as np, scipy.sparse as sp, nrmicp
+        try:
+            nrmicp.Solver(sp.csr_matrix((30, 30)), method="nrmgs", omega2=1.0, inner={inner!r}, z_update="solve")
+        except np.linalg.LinAlgError as e:
+            print("LinAlgError:", e)
+    """
+    rc, out, err = run_script(code, timeout=30)
+    assert rc == 0, err
+    assert "LinAlgError: InnerSolver: A (for the z-update 'solve') is singular: its row 0 has no nonzero" in out
+
+
+def test_item2_out_of_memory_in_cholmod_is_a_memory_error():
+    if not nrmicp.backends()["cholmod"]:
+        pytest.skip("no CHOLMOD in this build")
+    if os.environ.get("NRMICP_SANITIZE"):
+        pytest.skip("under ASan (make sanitize) an address-space cap cannot work: its shadow memory is reserved")
+    # 3D Laplacian, n = 15,625, under an address-space cap 30 MB above what the process uses:
+    # CHOLMOD's factor does not fit. The old code ignored CHOLMOD's status (a silent wrong factor).
+    code = """
+        import resource, numpy as np, scipy.sparse as sp, nrmicp
+        m = 25
+        T = sp.diags([-np.ones(m - 1), 2 * np.ones(m), -np.ones(m - 1)], [-1, 0, 1])
+        I = sp.identity(m)
+        A = sp.csr_matrix(sp.kron(sp.kron(I, I), T) + sp.kron(sp.kron(I, T), I) + sp.kron(sp.kron(T, I), I))
+        used = int(open("/proc/self/statm").read().split()[0]) * resource.getpagesize()
+        resource.setrlimit(resource.RLIMIT_AS, (used + 30 * 2**20, resource.RLIM_INFINITY))
+        try:
+            nrmicp.Solver(A, method="nrm", inner="cholmod")
+            print("no error")
+        except MemoryError as e:
+            print("MemoryError:", e)
+    """
+    rc, out, err = run_script(code)
+    assert rc == 0, err
+    assert "MemoryError:" in out, out
+
+
+def test_item8_singular_A_is_a_linalg_error_at_setup_and_in_a_lazy_factorization():
+    A = sp.csr_matrix(np.array([[1.0, 1.0], [1.0, 1.0]]))  # singular, no empty row or column
+    with pytest.raises(np.linalg.LinAlgError, match=r"A \(for the z-update 'solve'\)"):
+        nrmicp.Solver(A, z_update="solve")
+    s = nrmicp.Solver(A)  # explicit update: A is not factorized at set-up
+    with pytest.raises(np.linalg.LinAlgError, match=r"A \(for the z-update 'solve'\)"):
+        s.solve(-np.ones(2), lambda z: 0.1 * z, z_update="solve")
+
+
+def test_item8_singular_left_matrix_names_the_left_matrix():
+    A = sp.csr_matrix(np.array([[0.0, 1.0], [1.0, 0.0]]))  # nrm: Lm = I + A = [[1, 1], [1, 1]]
+    with pytest.raises(np.linalg.LinAlgError, match="left matrix"):
+        nrmicp.Solver(A, method="nrm")
+
+
+# ---- item 4: threads at interpreter exit ----------------------------------------------------
+
+_LONG_SOLVE_IN_A_DAEMON_THREAD = textwrap.dedent("""
+    import threading, time, numpy as np, scipy.sparse as sp, nrmicp
+    m = 120
+    T = sp.diags([-np.ones(m - 1), 2 * np.ones(m), -np.ones(m - 1)], [-1, 0, 1])
+    A = sp.csr_matrix(sp.kron(sp.identity(m), T) + sp.kron(T, sp.identity(m)))
+    started = threading.Event()
+    def work():
+        started.set()
+        nrmicp.solve(A, -np.ones(m * m), method="nrmj", tol=1e-300, maxiter=10**8, stall_iterations=10**6)
+    th = threading.Thread(target=work, daemon=True)
+    th.start()
+    started.wait()
+    time.sleep(0.3)  # the worker is inside the C++ loop
+""")
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX threads and signals")
+def test_item4_interpreter_exit_while_a_thread_solves_is_clean():
+    rc, out, err = run_script(_LONG_SOLVE_IN_A_DAEMON_THREAD + "print('exiting')\n")
+    assert "terminate called" not in err
+    assert rc == 0, f"exit code {rc}: {err}"
+    assert out.strip() == "exiting"
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX threads and signals")
+def test_item4_ctrl_c_in_join_while_a_thread_solves_is_clean():
+    rc, out, err = run_script(_LONG_SOLVE_IN_A_DAEMON_THREAD + "print('joining')\nth.join()\n",
+                              sigint_after="joining")
+    assert "terminate called" not in err
+    assert "KeyboardInterrupt" in err
+    assert rc in (-signal.SIGINT, 1, 130), f"exit code {rc} (SIGABRT is {-signal.SIGABRT}): {err}"
+
+
+# ---- item 5: ζ gets a read-only array that is never the result --------------------------------
+
+
+@pytest.mark.parametrize("scale", [False, "rows", "both"])
+@pytest.mark.parametrize("kind", ["plain", "anderson", "solve"])
+def test_item5_zeta_input_is_read_only_and_never_the_result(scale, kind):
+    A = sp.csr_matrix(sp.diags(2.0 ** np.arange(-3, 3)) @ tridiag(6).toarray())
+    q = -np.ones(6)
+    seen = []
+
+    def zeta(z):
+        seen.append(z)
+        assert not z.flags.writeable
+        return 0.1 * np.sin(z)
+
+    opts = {"plain": {}, "anderson": dict(accelerate="anderson"), "solve": dict(z_update="solve")}[kind]
+    res = nrmicp.solve(A, q, zeta, scale=scale, **opts)
+    assert res.success
+    assert seen and not any(np.shares_memory(z, res.z) for z in seen)
+
+
+@pytest.mark.parametrize("scale", [False, "both"])
+def test_item5_in_place_zeta_is_an_error_naming_zeta_not_a_false_success(scale):
+    # was: success=True with reported residual 3.4e-9 and true Res 0.947 (scale='both')
+    A = sp.csr_matrix(sp.diags(2.0 ** np.arange(-2, 2)) @ tridiag().toarray())
+
+    def zeta(z):
+        z += 0.1
+        return np.zeros_like(z)
+
+    with pytest.raises(ValueError, match=r"zeta\(z\) tried to modify its input z, which is read-only"):
+        nrmicp.solve(A, -np.ones(4), zeta, scale=scale)
+
+
+@pytest.mark.parametrize("scale", [False, "both"])
+def test_item5_a_zeta_that_forces_its_input_writable_cannot_fake_success(scale):
+    A = sp.csr_matrix(sp.diags(2.0 ** np.arange(-2, 2)) @ tridiag().toarray())
+    q = -np.ones(4)
+
+    def zeta(z):
+        try:
+            z.flags.writeable = True
+            z[:] = 5.0  # scribble over its input, then return a legitimate value
+        except ValueError:
+            pass
+        return np.zeros(4)
+
+    res = nrmicp.solve(A, q, zeta, scale=scale)
+    w = A @ res.z + q
+    true_res = np.linalg.norm(np.minimum(w, res.z))
+    assert not res.success or true_res < 1e-8, (res.residual, true_res)
+
+
+# ---- item 9: dtypes by kind and size; every argument and ζ named --------------------------------
+
+
+def test_item9_longlong_indices_are_int64():
+    A = tridiag()
+    A.indices = A.indices.astype(np.longlong)
+    A.indptr = A.indptr.astype(np.longlong)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # zero-copy: no ConversionWarning
+        res = nrmicp.solve(A, -np.ones(4))
+    assert res.success
+
+
+def test_item9_float64_with_metadata_is_float64():
+    A = tridiag()
+    A.data = A.data.astype(np.dtype(np.float64, metadata={"unit": "m"}))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert nrmicp.solve(A, -np.ones(4)).success
+
+
+@pytest.mark.parametrize("name", ["maxiter", "stall_iterations"])
+def test_item9_int_options_beyond_int32_name_themselves(name):
+    with pytest.raises(ValueError, match=name):
+        nrmicp.solve(tridiag(), -np.ones(4), **{name: 2**31})
+
+
+@pytest.mark.parametrize("ret", [
+    lambda z: [1 + 0j] * 4,
+    lambda z: z.astype(np.complex128),
+    lambda z: ["0.1"] * 4,
+    lambda z: np.array(["0.1"] * 4),
+    lambda z: None,
+    lambda z: b"abcd",
+    lambda z: [[0.0, 1.0], [0.0]],
+    lambda z: np.array([None] * 4),
+])
+@pytest.mark.parametrize("scale", [False, "both"])
+def test_item9_zeta_returning_a_non_real_thing_is_a_type_error_naming_zeta(ret, scale):
+    with pytest.raises(TypeError, match=r"zeta\(z\)"):
+        nrmicp.solve(tridiag(), -np.ones(4), ret, scale=scale)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.int64, np.float16])
+def test_item9_zeta_of_another_real_dtype_is_converted_with_one_warning_per_solve(dtype):
+    A, q = tridiag(), -np.ones(4)
+    for _ in range(2):  # once per solve, not once per process or per iteration
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            res = nrmicp.solve(A, q, lambda z: np.zeros(4, dtype=dtype))
+        msgs = [str(w.message) for w in caught if issubclass(w.category, nrmicp.ConversionWarning)]
+        assert len(msgs) == 1 and "zeta(z) returned dtype" in msgs[0], msgs
+        assert res.success
+
+
+def test_item9_float64_zeta_output_needs_no_conversion():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert nrmicp.solve(tridiag(), -np.ones(4), lambda z: 0.1 * np.sin(z)).success
+
+
+def test_item9_zeta_failed_message_says_it_once():
+    with pytest.raises(ValueError) as info:
+        nrmicp.solve(tridiag(), -np.ones(4), lambda z: np.full(4, np.nan))
+    msg = str(info.value)
+    assert msg.startswith("zeta(z)") and msg.count("non-finite") == 1, msg
+
+
+def test_item9_small_values_are_shown_as_g():
+    A = sp.csr_matrix(np.diag([-1e-7, 1.0]))
+    with pytest.raises(ValueError, match=r"A\[0,0\] = -1e-07"):
+        nrmicp.solve(A, -np.ones(2))
