@@ -15,6 +15,7 @@ from scipy.optimize import OptimizeResult
 from . import _core
 from ._inputs import as_constant, as_csr, as_diagonal, as_vector
 from ._scaling import SCALINGS, ScaledCallable, equilibrate, scale_matrix
+from . import _newton
 
 __all__ = ["solve", "Solver", "Affine", "Result", "Status", "METHODS", "residual", "backends"]
 
@@ -25,8 +26,9 @@ ZetaLike = Union[None, float, ArrayLike, "Affine", Callable[[np.ndarray], ArrayL
 #: A diagonal parameter (omega1, omega2, phi): a scalar (times I) or a length-n vector.
 DiagonalLike = Union[None, float, ArrayLike]
 
-#: The methods, in the order of the paper: the NRM family, then the baselines.
-METHODS = ("nrm", "nrmm", "nrmaor", "nrmsor", "nrmgs", "nrmj", "mms", "two_sweep")
+#: The methods, in the order of the paper: the NRM family, the baselines, then the semismooth
+#: Newton member on the same modulus equation (docs/SPEC.md "The Newton member").
+METHODS = ("nrm", "nrmm", "nrmaor", "nrmsor", "nrmgs", "nrmj", "mms", "two_sweep", "newton")
 Z_UPDATES = ("auto", "explicit", "solve")
 INNERS = ("auto", "cholmod", "umfpack", "eigen_llt", "eigen_lu")
 ACCELERATIONS = ("none", "anderson")
@@ -118,7 +120,15 @@ def residual(A: MatrixLike, q: ArrayLike, z: ArrayLike, zeta: ZetaLike = None) -
         g = z - np.asarray(zeta(z), dtype=float)
     else:
         g = z - np.asarray(zeta, dtype=float)
-    return float(np.linalg.norm(np.minimum(w, g)))
+    return _norm(np.minimum(w, g))
+
+
+def _norm(m) -> float:
+    """‖m‖₂ without overflow or underflow (scaled by max |mᵢ|)."""
+    big = float(np.max(np.abs(m), initial=0.0))
+    if not (0.0 < big < math.inf):
+        return float(np.linalg.norm(m))
+    return big * float(np.linalg.norm(m / big))
 
 
 def _choice(value, allowed, name):
@@ -214,7 +224,7 @@ class Solver:
     """Set up once (splitting, factorizations), then solve ICP(q, A, ζ) for many q and ζ.
 
     ``Solver(A, method=..., **options)`` accepts the set-up options of :func:`solve`
-    (method, omega1, omega2, gamma, phi, alpha, beta, inner, scale) and defaults for the
+    (method, omega1, omega2, gamma, phi, alpha, beta, inner, scale, hierarchy, polish) and defaults for the
     iteration options (tol, maxiter, theta, z_update, accelerate, anderson_m, record_history,
     stall_iterations), each of which :meth:`solve` may override. A is referenced, not
     copied, when it is canonical float64 CSR and ``scale`` is off: do not modify it while the
@@ -233,7 +243,8 @@ class Solver:
                  alpha: Optional[float] = None, beta: Optional[float] = None, inner: str = "auto",
                  tol: float = 1e-8, maxiter: int = 10000, theta: float = 1.0, z_update: str = "auto",
                  accelerate: Optional[str] = "none", anderson_m: int = 5, record_history: bool = False,
-                 stall_iterations: int = 100, scale: Union[bool, str] = False) -> None:
+                 stall_iterations: int = 100, scale: Union[bool, str] = False, hierarchy: Any = "auto",
+                 polish: bool = False) -> None:
         self.A = as_csr(A, "A")
         n = self.A.shape[0]
         if n == 0:
@@ -265,8 +276,6 @@ class Solver:
         if self.method in ("mms", "two_sweep") and (omega1 is not None or phi is not None):
             raise ValueError(f"method {self.method!r} fixes omega1 = I and phi = 0; "
                              "use an NRM-family method to set them")
-        if self.method != "two_sweep" and theta != 1.0:
-            raise ValueError(f"theta is the relaxation of method 'two_sweep'; method {self.method!r} has none")
         if self.scale is None:
             self._dr = self._dc = None
             A_core = self.A
@@ -274,6 +283,13 @@ class Solver:
             self._dr, self._dc = equilibrate(self.A, self.scale)
             A_core = scale_matrix(self.A, self._dr, self._dc)
         self._index_dtype = A_core.indices.dtype
+        self.polish = _newton.check_polish(polish)
+        self._polisher = None
+        if self.method == "newton":
+            _newton.check_options(phi=phi, accelerate=accelerate, z_update=z_update)
+            self._core = _newton.make_core(A_core, opts, hierarchy, self.A, self._dc)
+            return
+        _newton.check_no_hierarchy(hierarchy, self.method)
         core_cls = _core.SolverI64 if self._index_dtype == np.int64 else _core.SolverI32
         try:
             self._core = core_cls(A_core.indptr, A_core.indices, A_core.data, n, opts)
@@ -287,6 +303,11 @@ class Solver:
         return dict(self._core.parameters())
 
     @property
+    def levels(self) -> int:
+        """Levels of nested iteration (method 'newton': 1 + the number of prolongations; else 1)."""
+        return self._core.levels if self.method == "newton" else 1
+
+    @property
     def scaling(self) -> Optional[tuple[np.ndarray, np.ndarray]]:
         """(d_r, d_c), the row and column factors of the scaled matrix D_r A D_c, or None."""
         if self._dr is None:
@@ -294,7 +315,8 @@ class Solver:
         return self._dr.copy(), self._dc.copy()
 
     def solve(self, q: ArrayLike, zeta: ZetaLike = None, *, x0: Optional[ArrayLike] = None,
-              callback: Optional[Callable[..., Any]] = None, **iteration_options: Any) -> Result:
+              callback: Optional[Callable[..., Any]] = None, zeta_jacobian: Optional[Callable[..., Any]] = None,
+              **iteration_options: Any) -> Result:
         """Solve ICP(q, A, ζ). See :func:`nrmicp.solve` for the arguments."""
         n = self.n
         unknown = set(iteration_options) - set(self._defaults)
@@ -303,8 +325,6 @@ class Solver:
                             "options (method, omega1, omega2, gamma, phi, alpha, beta, inner, scale) are fixed at "
                             "set-up")
         it = dict(self._defaults, **iteration_options)
-        if self.method != "two_sweep" and it["theta"] != 1.0:
-            raise ValueError(f"theta is the relaxation of method 'two_sweep'; method {self.method!r} has none")
         _iteration_options(_core.Options(), **it)  # validates every iteration option once
         tol = float(it["tol"])
         qv = as_vector(q, n, "q")
@@ -312,6 +332,7 @@ class Solver:
         kind, c, B, fn = _make_zeta(zeta, n)
         if callback is not None and not callable(callback):
             raise TypeError(f"callback must be callable, got {type(callback).__name__}")
+        core_kw = _newton.jacobian_argument(zeta_jacobian, self, kind, self._dc)
 
         dr, dc = self._dr, self._dc
         scaled = dr is not None
@@ -350,7 +371,7 @@ class Solver:
                 g = z - (B @ z + c)
             else:
                 g = z - np.asarray(fn(z), dtype=np.float64)
-            return w, float(np.linalg.norm(np.minimum(w, g)))
+            return w, _norm(np.minimum(w, g))
 
         tol_k, x0k = tol, z0s
         best = None
@@ -361,7 +382,7 @@ class Solver:
         refined = 0
         while True:
             opts = _iteration_options(_core.Options(), **dict(it, tol=tol_k))
-            d = self._core.solve(qs, kind, cs, bp, bi, bd, fns, x0k, cb, opts)
+            d = self._core.solve(qs, kind, cs, bp, bi, bd, fns, x0k, cb, opts, **core_kw)
             status = Status(d["status"])
             if status == Status.ZETA_FAILED:
                 raise ValueError(f"zeta(z) returned non-finite values (NaN or Inf): {d['message']}")
@@ -400,6 +421,12 @@ class Solver:
 
         d_last = d
         _, z, w, res, nit, d = best
+        polished = None
+        if self.polish:
+            polished = _newton.polish(self, (qs, kind, cs, bp, bi, bd, fns), z, res, original_residual,
+                                      dc if scaled else None)
+            if polished is not None:
+                z, w, res = polished
         last_status = rounds[-1][1]
         if not verify:
             status, message = last_status, d_last["message"]
@@ -426,6 +453,12 @@ class Solver:
                                 "rounds": [(float(tk), Status(s).name, float(r)) for tk, s, r in rounds]}
         if status != Status.CONVERGED and self._omega2_hint:
             message += self._omega2_hint
+        if self.polish:
+            extra["polished"] = polished is not None
+            if polished is not None and res < tol and status != Status.CONVERGED:
+                status, message = Status.CONVERGED, "converged: Res < tol after polishing (one Newton step)"
+        if self.method == "newton":
+            extra.update(_newton.result_fields(d))
         return Result(z=z, w=w, success=status == Status.CONVERGED, status=status, message=message, nit=nit,
                       iterations=done_iters, residual=res, history=history, timings=timings, method=self.method,
                       inner=d["inner"], **extra)
@@ -436,7 +469,8 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
           phi: DiagonalLike = None, alpha: Optional[float] = None, beta: Optional[float] = None,
           theta: float = 1.0, z_update: str = "auto", inner: str = "auto", accelerate: Optional[str] = "none",
           anderson_m: int = 5, x0: Optional[ArrayLike] = None, callback: Optional[Callable[..., Any]] = None,
-          record_history: bool = False, stall_iterations: int = 100, scale: Union[bool, str] = False) -> Result:
+          record_history: bool = False, stall_iterations: int = 100, scale: Union[bool, str] = False,
+          hierarchy: Any = "auto", polish: bool = False, zeta_jacobian: Optional[Callable[..., Any]] = None) -> Result:
     r"""Solve the implicit complementarity problem ICP(q, A, ζ):
 
     find z with  w = Az + q ≥ 0,  g = z − ζ(z) ≥ 0,  gᵀw = 0   (ζ ≡ 0: the LCP),
@@ -460,7 +494,11 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
         ``'nrmgs'`` (default), ``'nrm'``, ``'nrmm'``, ``'nrmaor'``, ``'nrmsor'``, ``'nrmj'``,
         ``'mms'`` (Zheng–Vong baseline), ``'two_sweep'`` (two-sweep baseline). The AOR-type
         methods need no factorization (forward substitution, O(nnz) per iteration); NRM and
-        NRMM factorize Ω2 + (A + φ)Ω1 once. Default by measurement: see README "Choosing a method".
+        NRMM factorize Ω2 + (A + φ)Ω1 once. ``'newton'``: the semismooth Newton member on the same
+        modulus equation (one sparse factorization of A restricted to the inactive set per step,
+        symbolic analysis once; nested iteration over ``hierarchy``; falls back to sweeps of 'nrm'
+        when a step does not reduce Res or the active set cycles). Its ``maxiter`` counts Newton
+        steps (and bounds the fallback sweeps). Default by measurement: see README "Choosing a method".
     tol : float
         Stop when Res(z) = ‖min(Az + q, z − ζ(z))‖₂ < tol (absolute, the paper's criterion).
     maxiter : int
@@ -499,7 +537,10 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
     record_history : bool
         Keep (iteration, seconds, Res) of every iterate in ``result.history``.
     stall_iterations : int
-        STAGNATED when the best Res has not improved for this many iterations.
+        The window of the no-progress rules: STAGNATED when Res stops improving at rounding level
+        for this many iterations, when 3 consecutive windows of this many iterations bring no lower
+        Res, or when the best Res has not improved for 10 windows and, at the rate Res falls, would
+        not be reached again within maxiter (README "What a solve returns").
     scale : False, True, 'rows' or 'both'
         Diagonal equilibration for badly scaled problems (default off). 'rows': D_r = 1/max|row|;
         'both' (= True): Ruiz equilibration of rows and columns. The solver then iterates on
@@ -513,12 +554,33 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
         otherwise ends with status STAGNATED (success False) and the best iterate.
         ``result.scaling`` records the kind, the number of re-solves and each round's
         (tolerance, status, Res).
+    hierarchy : 'auto', 'amg', list of sparse matrices, or None
+        Nested iteration of method 'newton' (other methods: 'auto' or None only). A list
+        [P_0, P_1, ...] of prolongations (P_l of shape (n_l, n_{l+1}), n_0 = n) defines coarse
+        problems P_lᵀ A_l P_l, P_lᵀ q_l, solved coarse to fine, each solution prolongated,
+        projected onto z ≥ ζ and used as the next start; 'amg' builds classical Ruge–Stüben
+        prolongations with pyamg; None starts cold (from x0 or zeros). 'auto': 'amg' for
+        n >= 4096 when pyamg is installed, else None (measured: README "Mesh-independent solves").
+        With a hierarchy the start is the nested solution and ``x0`` is not used (measured on the
+        American put at n_space = 6400: warm starts from the previous time step took 38.7 Newton
+        steps per time step, moving the exercise boundary one node per step; nested starts 1.2).
+    zeta_jacobian : callable, optional
+        Method 'newton' with a callable ζ: ``zeta_jacobian(z)`` returns a generalized Jacobian of ζ
+        at z as an (n, n) sparse matrix; then Newton works on the whole ICP (a semismooth Newton
+        method: for a max-type ζ, policy iteration). Without it, a callable ζ is handled by an
+        outer fixed point ζ(z_k) -> obstacle problem, each solved by warm-started Newton.
+    polish : bool
+        After the method stops, take one Newton step on the active set of its answer and keep it
+        if it lowers Res (``result.polished``); typically Res drops to rounding level.
 
     Returns
     -------
     Result
         ``z``, ``w``, ``success``, ``status``, ``message``, ``nit``, ``residual``, ``history``,
         ``timings``. A solve that does not converge says so in ``status`` and returns its best iterate.
+        Method 'newton' adds ``linear_solves`` (all levels), ``fallback_sweeps``, ``outer_iterations``
+        (callable ζ), ``level_steps`` and ``level_seconds`` (per level, finest first) and ``path``
+        ('newton', 'newton+fallback' or 'fallback'); its ``nit`` counts finest-level Newton steps.
         Without a callable ζ, Res(z) is re-measured in numpy in the original variables before
         success is declared (this matters for a constant obstacle, which the core solves as the
         shifted LCP), with the same re-solve rule as for ``scale``.
@@ -526,5 +588,5 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
     s = Solver(A, method=method, omega1=omega1, omega2=omega2, gamma=gamma, phi=phi, alpha=alpha, beta=beta,
                inner=inner, tol=tol, maxiter=maxiter, theta=theta, z_update=z_update, accelerate=accelerate,
                anderson_m=anderson_m, record_history=record_history, stall_iterations=stall_iterations,
-               scale=scale)
-    return s.solve(q, zeta, x0=x0, callback=callback)
+               scale=scale, hierarchy=hierarchy, polish=polish)
+    return s.solve(q, zeta, x0=x0, callback=callback, zeta_jacobian=zeta_jacobian)

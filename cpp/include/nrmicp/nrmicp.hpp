@@ -4,6 +4,7 @@
 #pragma once
 
 #include "inner_solver.hpp"
+#include "newton.hpp"
 #include "options.hpp"
 #include "result.hpp"
 #include "solver.hpp"

@@ -3,6 +3,7 @@
 
 #include <Eigen/Core>
 
+#include <cfloat>
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -22,6 +23,7 @@ enum class Method {
   NRMJ,      ///< NRMAOR with α = 1, β = 0; Lm diagonal
   MMS,       ///< Zheng–Vong modified modulus splitting: AOR splitting, Ω1 = I, φ = 0
   TwoSweep,  ///< two-sweep modulus method (Wu–Li form), M1 = (D − βL)/α, M2 = D − U, relaxation θ
+  Newton,    ///< semismooth Newton on the modulus equation (newton.hpp): one reduced linear solve per step
 };
 
 /// How z⁽ᵏ⁾ is recovered from the modulus vector x⁽ᵏ⁾.
@@ -47,6 +49,15 @@ enum class Accelerate {
   Anderson,  ///< safeguarded Anderson acceleration of x ↦ x⁺ with memory `anderson_m`
 };
 
+inline const char* to_string(Method m);
+
+/// A number for an error message (%g: small values stay readable).
+inline std::string to_text(double v) {
+  std::ostringstream s;
+  s << v;
+  return s.str();
+}
+
 /// Every option of the iteration, with its default. Vectors left empty take the method's
 /// default (docs/SPEC.md); a NaN alpha/beta takes the method's default too.
 struct Options {
@@ -59,25 +70,30 @@ struct Options {
   Eigen::VectorXd phi;             ///< relaxation diagonal φ (≥ 0), length n or empty
   double alpha = std::numeric_limits<double>::quiet_NaN();  ///< AOR α (NRMM: Ω2 = αI)
   double beta = std::numeric_limits<double>::quiet_NaN();   ///< AOR β
-  double theta = 1.0;              ///< relaxation of the two-sweep step, 0 < θ ≤ 2
+  double theta = 1.0;              ///< relaxation of the two-sweep step, 0 < θ ≤ 2 (two_sweep only: others need 1)
   ZUpdate z_update = ZUpdate::Auto;
   Inner inner = Inner::Auto;
   Accelerate accelerate = Accelerate::None;
   int anderson_m = 5;              ///< Anderson memory (number of past differences kept)
   bool record_history = false;     ///< keep (iteration, seconds, Res) of every iterate
   /// STAGNATED after this many iterations without a better Res whose steps are at rounding level
-  /// (tol below what floating point reaches), or after 3 consecutive windows of this many
-  /// iterations whose smallest Res does not improve on the previous windows' (a cycle).
+  /// (tol below what floating point reaches), after 3 consecutive windows of this many
+  /// iterations whose smallest Res does not improve on the previous windows' (a cycle), or when
+  /// the best Res has not improved for 10 windows and, at the rate Res falls, would not be
+  /// reached again within maxiter (detail/stopping.hpp). Plateaus of bit-identical Res are neutral.
   int stall_iterations = 100;
-  double divergence_factor = 1e10; ///< DIVERGED when Res exceeds this factor times the best Res seen
+  /// DIVERGED when Res exceeds this factor times the best Res seen, or the modulus vector x grows
+  /// by this factor while Res does not improve.
+  double divergence_factor = 1e10;
 
   /// Throws std::invalid_argument naming the offending field, its value and what is accepted.
   void check(Eigen::Index n) const {
     auto fail = [](const std::string& msg) { throw std::invalid_argument("Options: " + msg); };
-    auto num = [](double v) { std::ostringstream s; s << v; return s.str(); };
+    auto num = [](double v) { return to_text(v); };
     if (!(tol > 0) || !std::isfinite(tol)) fail("tol must be a finite number > 0, got " + num(tol));
     if (maxiter < 0) fail("maxiter must be >= 0, got " + std::to_string(maxiter));
     if (!(gamma > 0) || !std::isfinite(gamma)) fail("gamma must be a finite number > 0, got " + num(gamma));
+    if (gamma < DBL_MIN) fail("gamma = " + num(gamma) + " is subnormal; it must be >= " + num(DBL_MIN));
     auto check_vec = [&](const Eigen::VectorXd& v, const char* name, bool strictly_positive) {
       if (v.size() == 0) return;
       if (v.size() != n)
@@ -87,6 +103,9 @@ struct Options {
         if (!std::isfinite(x) || (strictly_positive ? !(x > 0) : x < 0))
           fail(std::string(name) + "[" + std::to_string(i) + "] = " + num(x) + "; it must be finite and " +
                (strictly_positive ? "> 0" : ">= 0"));
+        if (strictly_positive && x < DBL_MIN)  // 1/x overflows, and x·y loses its digits
+          fail(std::string(name) + "[" + std::to_string(i) + "] = " + num(x) + " is subnormal; it must be >= " +
+               num(DBL_MIN) + " (rescale the problem)");
       }
     };
     check_vec(omega1, "omega1", true);
@@ -94,9 +113,13 @@ struct Options {
     check_vec(phi, "phi", false);
     if (!std::isnan(alpha) && (!(alpha > 0) || !std::isfinite(alpha)))
       fail("alpha must be a finite number > 0, got " + num(alpha));
+    if (!std::isnan(alpha) && alpha < DBL_MIN) fail("alpha = " + num(alpha) + " is subnormal; it must be >= " + num(DBL_MIN));
     if (!std::isnan(beta) && (!(beta >= 0) || !std::isfinite(beta)))
       fail("beta must be a finite number >= 0, got " + num(beta));
     if (!(theta > 0 && theta <= 2)) fail("theta must lie in (0, 2], got " + num(theta));
+    if (theta != 1 && method != Method::TwoSweep)
+      fail("theta is the relaxation of method 'two_sweep'; method '" + std::string(to_string(method)) +
+           "' has none (got theta = " + num(theta) + ")");
     if (anderson_m < 1 || anderson_m > 100) fail("anderson_m must lie in [1, 100], got " + std::to_string(anderson_m));
     if (stall_iterations < 1) fail("stall_iterations must be >= 1, got " + std::to_string(stall_iterations));
     if (!(divergence_factor > 1)) fail("divergence_factor must be > 1, got " + num(divergence_factor));
@@ -113,6 +136,7 @@ inline const char* to_string(Method m) {
     case Method::NRMJ: return "nrmj";
     case Method::MMS: return "mms";
     case Method::TwoSweep: return "two_sweep";
+    case Method::Newton: return "newton";
   }
   return "?";
 }

@@ -3,6 +3,7 @@
 
 #include <Eigen/Core>
 
+#include <map>
 #include <string>
 #include <vector>
 
@@ -56,6 +57,15 @@ struct Result {
   std::vector<double> history_seconds;
   std::vector<double> history_residual;
   Timings timings;
+  /// Counts a step kind reports beyond the iterations (e.g. linear solves), by name.
+  std::map<std::string, long long> counters;
+  // The Newton member (newton.hpp) and polish; zero/empty for the stationary members.
+  int linear_solves = 0;               ///< reduced linear systems solved, on all levels
+  int fallback_sweeps = 0;             ///< sweeps of the fallback member (nrm) on the finest level
+  int outer_iterations = 0;            ///< callable ζ: outer fixed-point steps on ζ
+  std::vector<int> level_steps;        ///< Newton steps per level of nested iteration, finest first
+  std::vector<double> level_seconds;   ///< seconds per level, finest first
+  std::string path;                    ///< "newton", "newton+fallback" (Newton steps and fallback sweeps), "fallback"
   bool success() const { return status == Status::Converged; }
 };
 

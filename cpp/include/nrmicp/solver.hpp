@@ -4,10 +4,36 @@
 //
 // which is the paper's Lm x⁽ᵏ⁺¹⁾ = (N + φ)Ω1 x⁽ᵏ⁾ + (Ω2 − AΩ1)|x⁽ᵏ⁾| − γAζ(z⁽ᵏ⁾) − γq with
 // N = M − A rearranged (no cancellation of large terms). See docs/SPEC.md.
+//
+// The loop (Solver::run) is
+//
+//   for k = 0, 1, ...:  r = step.evaluate(s);  if (monitor.stop(k, r, s)) break;
+//                       step.move_x(s);  step.update_z(s);
+//
+// THE STEP INTERFACE. A step is a small type (detail/steps.hpp) with one job: advance the
+// iterate s (detail::Iterate: the modulus vector s.x, s.z, ζ(z) in s.zeta_z, ζ(z⁽ᵏ⁻¹⁾) in
+// s.zeta_prev, the last step size s.step, s.zeta_ok). It reads the problem from a
+// detail::Context (A, q, ζ, the resolved Parameters, the z-update, the timers, and the shared
+// operations spmv, eval_zeta, from_modulus, z_update, next_z, residual). It provides
+//   double evaluate(Iterate& s)  Res(z⁽ᵏ⁾) of s.z, accumulated with detail::ResidualSum, and
+//                                ζ(z⁽ᵏ⁾) in s.zeta_z via ctx.eval_zeta. It may already do the
+//                                work of the next step (the one-pass sweep moves s.x and sets
+//                                s.step here); it must not depend on being followed by move_x.
+//   void move_x(Iterate& s)      s.x ← x⁽ᵏ⁺¹⁾; s.step = ‖x⁽ᵏ⁺¹⁾ − x⁽ᵏ⁾‖∞.
+//   void update_z(Iterate& s)    s.z ← z⁽ᵏ⁺¹⁾ (usually ctx.next_z(s); s.z may be stale on entry:
+//                                the Monitor may have taken its buffer as the best iterate).
+//   const Eigen::VectorXd& dx()  x⁽ᵏ⁺¹⁾ − x⁽ᵏ⁾ of the plain step (Anderson mixes these).
+//   void report(Result&) const   extra counters (e.g. linear solves) into Result::counters;
+//                                inherit detail::StepBase for none.
+// Everything else is shared: the stopping rules, the history, the best iterate and the
+// Ctrl-C poll live in detail::Monitor (detail/stopping.hpp); Anderson acceleration wraps any
+// step (detail::Accelerated, detail/anderson.hpp); Res is defined once (detail/residual.hpp).
 #pragma once
 
 #include "detail/anderson.hpp"
-#include "detail/sweep.hpp"
+#include "detail/iterate.hpp"
+#include "detail/steps.hpp"
+#include "detail/stopping.hpp"
 #include "detail/timer.hpp"
 #include "inner_solver.hpp"
 #include "options.hpp"
@@ -38,9 +64,9 @@ class Solver {
   using Vector = Eigen::VectorXd;
   using ColMatrix = Eigen::SparseMatrix<double, Eigen::ColMajor, StorageIndex>;
   /// Called after every iterate with (k, z⁽ᵏ⁾, Res); return true to stop.
-  using Callback = std::function<bool(int, const Vector&, double)>;
+  using Callback = detail::Callback;
   /// Called about every 50 ms during a solve; may throw to abort (e.g. on Ctrl-C).
-  using Poll = std::function<void()>;
+  using Poll = detail::Poll;
 
   Solver(const MatrixType& A, Options options) : A_(A), options_(std::move(options)) {
     if (A.rows() != A.cols())
@@ -64,7 +90,8 @@ class Solver {
 
   /// Solves ICP(q, A, ζ) from the initial guess z0 (zeros when null). The iteration fields of
   /// `iteration_options` (tol, maxiter, z_update, accelerate, anderson_m, theta, record_history,
-  /// stall_iterations, divergence_factor) override the constructor's; the splitting stays.
+  /// stall_iterations, divergence_factor) override the constructor's; the splitting (method and
+  /// its parameters) stays, and the merged options are checked against it.
   Result solve(const Vector& q, const Zeta<StorageIndex>& zeta = Zeta<StorageIndex>::none(),
                const Vector* z0 = nullptr, const Callback& callback = {}, const Poll& poll = {},
                const Options* iteration_options = nullptr) const {
@@ -72,13 +99,13 @@ class Solver {
     const Eigen::Index n = A_.rows();
     Options o = options_;
     if (iteration_options) {
-      iteration_options->check(n);
       o.tol = iteration_options->tol; o.maxiter = iteration_options->maxiter;
       o.z_update = iteration_options->z_update; o.accelerate = iteration_options->accelerate;
       o.anderson_m = iteration_options->anderson_m; o.theta = iteration_options->theta;
       o.record_history = iteration_options->record_history;
       o.stall_iterations = iteration_options->stall_iterations;
       o.divergence_factor = iteration_options->divergence_factor;
+      o.check(n);
     }
     if (q.size() != n) throw std::invalid_argument("Solver::solve: q has length " + std::to_string(q.size()) + ", expected n = " + std::to_string(n));
     if (z0 && z0->size() != n) throw std::invalid_argument("Solver::solve: x0 has length " + std::to_string(z0->size()) + ", expected n = " + std::to_string(n));
@@ -110,281 +137,88 @@ class Solver {
     a_solver_.compute(ColMatrix(A_), options_.inner, "A (for the z-update 'solve')");
   }
 
-  // The loop. `shift` is the constant obstacle (only to report z to the callback), or empty.
-  Result iterate(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0, const Callback& callback,
-                 const Poll& poll, const Options& o, const Vector& shift) const {
-    using clock = std::chrono::steady_clock;
-    const Eigen::Index n = A_.rows();
-    const bool lcp = zeta.kind() == ZetaKind::None;
-    // Auto = Explicit: measured faster (no solve with A: 4-10x on ICPs at equal iteration
-    // counts) and more robust (it converged on unshifted-Laplacian and thermoforming ICPs where
-    // Solve stagnated). Except the paper's NRM (Ω2 = I, far from diag A) on an ICP: there
-    // Explicit stagnated on Bai's ICPs and Solve converged (~145 iterations). Solve is also
-    // needed when ζ's Lipschitz constant is about 1 (README). MMS is the Zheng–Vong baseline,
-    // whose definition includes the Solve update: Auto keeps it (else it equals NRMGS).
+  // Auto = Explicit: measured faster (no solve with A: 4-10x on ICPs at equal iteration
+  // counts) and more robust (it converged on unshifted-Laplacian and thermoforming ICPs where
+  // Solve stagnated). Except the paper's NRM (Ω2 = I, far from diag A) on an ICP: there
+  // Explicit stagnated on Bai's ICPs and Solve converged (~145 iterations). Solve is also
+  // needed when ζ's Lipschitz constant is about 1 (README). MMS is the Zheng–Vong baseline,
+  // whose definition includes the Solve update: Auto keeps it (else it equals NRMGS).
+  ZUpdate resolved_z_update(ZUpdate asked, bool lcp) const {
+    if (asked != ZUpdate::Auto) return asked;
     const bool paper_update = !lcp && ((options_.method == Method::NRM && options_.omega2.size() == 0) ||
                                        options_.method == Method::MMS);
-    const ZUpdate zu = o.z_update != ZUpdate::Auto ? o.z_update : (paper_update ? ZUpdate::Solve : ZUpdate::Explicit);
+    return paper_update ? ZUpdate::Solve : ZUpdate::Explicit;
+  }
+
+  // One solve of ICP(q, A, ζ) by Method 3.1. `shift` is the constant obstacle (only to report
+  // z to the callback), or empty.
+  Result iterate(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0, const Callback& callback,
+                 const Poll& poll, const Options& o, const Vector& shift) const {
+    const ZUpdate zu = resolved_z_update(o.z_update, zeta.kind() == ZetaKind::None);
     Result res;
-    Timings& tm = res.timings;
     if (zu == ZUpdate::Solve) {
       const double before = a_factorization_;
       factorize_A();
-      tm.factorization += a_factorization_ - before;  // only if this solve paid for it
+      res.timings.factorization += a_factorization_ - before;  // only if this solve paid for it
     }
-    const auto t_start = clock::now();
-    const Vector& om1 = params_.omega1;
-    const bool omega1_is_identity = (om1.array() == 1.0).all();
-    const Vector& om2 = params_.omega2;
-    const double gamma = params_.gamma;
-
-    Vector x(n), absx, z(n), Az(n), zeta_z = Vector::Zero(n), zeta_prev = Vector::Zero(n);
-    Vector zhat(n), Azhat(n), rhs(n), dx(n), absx_prev, x_plain, x_next, best_z(n), tmp(n);
-
-    auto spmv = [&](const Vector& v, Vector& out) { detail::ScopedTimer t(tm.spmv); out.noalias() = A_ * v; };
-    bool zeta_ok = true;
-    auto eval_zeta = [&](const Vector& v, Vector& out) {
-      if (lcp) return;
-      detail::ScopedTimer t(tm.zeta);
-      zeta_ok = zeta.eval(v, out);
-    };
-    // out = ζ-part + Ω1(|x| + x)/γ (no ζ-part for an LCP): the explicit z-update and ẑ.
-    auto from_modulus = [&](const Vector* zeta_part, Vector& out) {
-      if (zeta_part) {
-        for (Eigen::Index i = 0; i < n; ++i) out[i] = (*zeta_part)[i] + om1[i] * (std::abs(x[i]) + x[i]) / gamma;
-      } else {
-        for (Eigen::Index i = 0; i < n; ++i) out[i] = om1[i] * (std::abs(x[i]) + x[i]) / gamma;
-      }
-    };
-    // z from x (and, for the explicit update, ζ of the previous z).
-    auto compute_z = [&]() {
-      if (zu == ZUpdate::Explicit) {
-        from_modulus(lcp ? nullptr : &zeta_prev, z);
-      } else {
-        for (Eigen::Index i = 0; i < n; ++i) tmp[i] = om2[i] * (std::abs(x[i]) - x[i]) / gamma - q[i];
-        detail::ScopedTimer t(tm.inner_solve);
-        a_solver_.solve(tmp, z);
-      }
-    };
-    // LCP with the explicit update and a row-major (CSR) A: the product, Res and the next
-    // right-hand side rhs = Ω2(|x| − x) − γ(Az + q) in one pass over A (ẑ = z here). The whole
-    // iteration is memory-bound, so passes over n-vectors cost as much as the flops.
-    constexpr bool row_major = MatrixType::IsRowMajor;
-    const bool fused = row_major && lcp && zu == ZUpdate::Explicit;
-    auto evaluate_fused = [&]() -> double {
-      detail::ScopedTimer t(tm.spmv);
-      double s = 0;
-      for (Eigen::Index i = 0; i < n; ++i) {
-        double a = 0;
-        for (typename MatrixType::InnerIterator it(A_, i); it; ++it) a += it.value() * z[it.index()];
-        const double wi = a + q[i];
-        const double m = std::min(wi, z[i]);
-        s += m * m;
-        rhs[i] = om2[i] * (std::abs(x[i]) - x[i]) - gamma * wi;
-      }
-      return std::sqrt(s);
-    };
-    // Az, ζ(z) and Res for the current z, in one pass after the product (no w, g temporaries).
-    auto evaluate = [&]() -> double {
-      if (fused) return evaluate_fused();
-      spmv(z, Az);
-      eval_zeta(z, zeta_z);
-      double s = 0;
-      if (lcp) {
-        for (Eigen::Index i = 0; i < n; ++i) { const double m = std::min(Az[i] + q[i], z[i]); s += m * m; }
-      } else {
-        for (Eigen::Index i = 0; i < n; ++i) { const double m = std::min(Az[i] + q[i], z[i] - zeta_z[i]); s += m * m; }
-      }
-      return std::sqrt(s);
-    };
-
-    // Start: x⁽⁰⁾ = γ/2 (Ω1⁻¹(z0 − ζ(z0)) − Ω2⁻¹(Az0 + q)).
-    {
-      Vector zs = z0 ? *z0 : Vector::Zero(n);
-      Vector zeta0 = Vector::Zero(n);
-      eval_zeta(zs, zeta0);
-      if (!zeta_ok) {
-        res.status = Status::ZetaFailed; res.z = zs; res.w = A_ * zs + q;
-        res.residual = std::numeric_limits<double>::quiet_NaN();
-        res.message = std::string(to_string(res.status)) + " at the initial guess";
-        return res;
-      }
-      spmv(zs, Az);
-      x = gamma / 2 * ((zs - zeta0).cwiseQuotient(om1) - (Az + q).cwiseQuotient(om2));
-      zeta_prev = zeta0;
-    }
-    compute_z();
-
-    const bool anderson = o.accelerate == Accelerate::Anderson;
-    std::optional<detail::Anderson> aa;
-    if (anderson) aa.emplace(o.anderson_m);
-    bool aa_pending = false;  // x came from an Anderson step not yet checked
-    if (splitting_->two_sweep()) absx_prev = x.cwiseAbs();
-
-    double best = std::numeric_limits<double>::infinity(), prev_res = best, last_step = best;
-    int best_k = 0, floor_count = 0, win_count = 0, bad_windows = 0;
-    double win_min = std::numeric_limits<double>::infinity(), win_max = -win_min, prev_win_min = win_min;
-    auto last_poll = t_start;
-    const bool two_sweep = splitting_->two_sweep();
-    res.status = Status::MaxIterations;
-
-    // The AOR-type members with the explicit update on a row-major A run as one sweep over A
-    // per iteration (detail/sweep.hpp): it returns Res(z⁽ᵏ⁾) and has already made x⁽ᵏ⁺¹⁾ and
-    // z⁽ᵏ⁺¹⁾ (in z_next), which are simply not used when the loop stops at k. With Anderson,
-    // the sweep's plain step is mixed and z is recomputed from the mixed x.
-    const bool sweep = row_major && is_aor_type(options_.method) && !two_sweep && params_.theta == 1 &&
-                       zu == ZUpdate::Explicit;
-    Vector z_next, x_before;
-    if (sweep) z_next.resize(n);
-    auto run_sweep = [&]() -> double {
-      if (!lcp) {
-        eval_zeta(z, zeta_z);
-        if (!zeta_ok) return std::numeric_limits<double>::quiet_NaN();
-        from_modulus(&zeta_z, zhat);
-      }
-      if constexpr (row_major) {
-        detail::ScopedTimer t(tm.spmv);  // the sweep is the product with A (and the triangular solve)
-        return detail::aor_sweep(A_, z, lcp ? nullptr : &zeta_z, lcp ? nullptr : &zhat, q, om1, omega1_is_identity, om2,
-                                 splitting_->left_inverse_diagonal(), splitting_->lower_scale(), gamma, x, z_next, dx,
-                                 last_step);
-      } else {
-        return std::numeric_limits<double>::quiet_NaN();  // unreachable: sweep needs row-major
-      }
-    };
-
-    for (int k = 0;; ++k) {
-      if (sweep && anderson) x_before = x;  // the sweep advances x in place
-      double r = sweep ? run_sweep() : evaluate();
-      if (aa_pending && zeta_ok && !(r < prev_res)) {
-        // Safeguard: the accelerated step did not reduce Res; take the plain step instead.
-        x = x_plain;
-        aa->reset();
-        compute_z();
-        if (sweep) x_before = x;
-        r = sweep ? run_sweep() : evaluate();
-      }
-      aa_pending = false;
-      if (!zeta_ok) { res.status = Status::ZetaFailed; res.iterations = k; break; }
-      if (o.record_history) {
-        res.history_iteration.push_back(k);
-        res.history_seconds.push_back(detail::ScopedTimer::seconds_since(t_start));
-        res.history_residual.push_back(r);
-      }
-      // Stagnation, two ways. (1) At the rounding floor: Res does not improve while the steps
-      // are at rounding level. (2) No progress: in 3 consecutive windows of stall_iterations
-      // iterates, the smallest Res of a window is not below the previous window's (a cycle, or a
-      // slow divergence). Windows, not the global best: Res may jump up at first and then fall
-      // steadily (nrmm on the American put). A window of bit-identical Res is neutral: the
-      // iteration can sit on such a plateau for thousands of steps while x moves towards the
-      // solution (measured on the impulse-control and thermoforming scenes).
-      // The best iterate is kept by swapping buffers, not copying: z is rewritten by the next
-      // z-update, and the step below does not read it.
-      const bool improved = r < best;
-      if (improved) {
-        best = r; best_k = k; best_z.swap(z); floor_count = 0;
-      } else if (k > 0) {
-        const double xnorm = x.template lpNorm<Eigen::Infinity>();
-        floor_count = (last_step <= 1e-8 * (xnorm > 0 ? xnorm : 1.0)) ? floor_count + 1 : 0;
-      }
-      win_min = std::min(win_min, r);
-      win_max = std::max(win_max, r);
-      if (++win_count == o.stall_iterations) {
-        if (win_max != win_min) bad_windows = (win_min < prev_win_min) ? 0 : bad_windows + 1;
-        prev_win_min = win_min;
-        win_min = std::numeric_limits<double>::infinity();
-        win_max = -win_min;
-        win_count = 0;
-      }
-      res.iterations = k;
-      if (r < o.tol) { res.status = Status::Converged; break; }
-      if (!std::isfinite(r) || r > o.divergence_factor * best) { res.status = Status::Diverged; break; }
-      if (floor_count >= o.stall_iterations || bad_windows >= 3) {
-        res.status = Status::Stagnated;
-        break;
-      }
-      if (callback) {
-        bool stop;
-        const Vector& zk = improved ? best_z : z;
-        if (shift.size()) stop = callback(k, zk + shift, r); else stop = callback(k, zk, r);
-        if (stop) { res.status = Status::CallbackStop; break; }
-      }
-      if (poll && detail::ScopedTimer::seconds_since(last_poll) > 0.05) { poll(); last_poll = clock::now(); }
-      if (k >= o.maxiter) { res.status = Status::MaxIterations; break; }
-      prev_res = r;
-      if (sweep) {  // x⁽ᵏ⁺¹⁾ is made; take z⁽ᵏ⁺¹⁾
-        if (!anderson) {
-          z.swap(z_next);
-          continue;
-        }
-        // Anderson on the sweep: its workspace dx is exactly the plain step x⁽ᵏ⁺¹⁾ − x⁽ᵏ⁾.
-        x_plain = x;
-        aa->step(x_before, dx, x_next);
-        last_step = (x_next - x_before).template lpNorm<Eigen::Infinity>();
-        x.swap(x_next);
-        aa_pending = true;
-        if (!lcp) zeta_prev.swap(zeta_z);  // ζ(z⁽ᵏ⁾) for the explicit update
-        compute_z();
-        continue;
-      }
-
-      // One step of Method 3.1: rhs = Ω2(|x| − x) − γ(A ẑ + q), x += Lm⁻¹ rhs.
-      if (!fused) {
-        const Vector* Azh = &Az;  // LCP, explicit update: ẑ = z exactly, no second product
-        if (!(lcp && zu == ZUpdate::Explicit)) {
-          from_modulus(&zeta_z, zhat);
-          spmv(zhat, Azhat);
-          Azh = &Azhat;
-        }
-        for (Eigen::Index i = 0; i < n; ++i) rhs[i] = om2[i] * (std::abs(x[i]) - x[i]) - gamma * ((*Azh)[i] + q[i]);
-      }
-      if (two_sweep) {
-        absx = x.cwiseAbs();
-        detail::ScopedTimer t(tm.spmv);
-        rhs.noalias() -= splitting_->n2() * (absx - absx_prev);
-        absx_prev.swap(absx);
-      }
-      {
-        detail::ScopedTimer t(tm.inner_solve);
-        splitting_->solve(rhs, dx);
-      }
-      const double theta = params_.theta;
-      if (anderson) {
-        if (theta != 1) dx *= theta;
-        x_plain = x + dx;
-        aa->step(x, dx, x_next);
-        last_step = (x_next - x).template lpNorm<Eigen::Infinity>();
-        x.swap(x_next);
-        aa_pending = true;
-      } else {
-        double step = 0;
-        for (Eigen::Index i = 0; i < n; ++i) {
-          const double d = theta * dx[i];
-          x[i] += d;
-          step = std::max(step, std::abs(d));
-        }
-        last_step = step;
-      }
-      if (!lcp) zeta_prev.swap(zeta_z);  // ζ(z⁽ᵏ⁾) for the explicit update of z⁽ᵏ⁺¹⁾
-      compute_z();
-    }
-
-    tm.iterations = detail::ScopedTimer::seconds_since(t_start);
-    if (!std::isfinite(best)) best_z = z;  // no finite Res was ever seen
-    res.nit = (res.status == Status::Converged) ? res.iterations : best_k;
-    res.z = best_z;
-    // w and Res of the returned iterate, recomputed (honest even if it is not the last one).
-    spmv(res.z, Az);
-    res.w = Az + q;
-    if (std::isfinite(best)) {
-      res.residual = best;
-    } else {
+    detail::Context<MatrixType> ctx(A_, q, zeta, params_, zu, a_solver_, res.timings);
+    detail::Monitor monitor(o, callback, poll, shift, res, A_.rows());
+    detail::Iterate s;
+    if (!ctx.start(z0, s)) {
+      res.status = Status::ZetaFailed;
+      res.z = s.z;
+      res.w = A_ * s.z + q;
       res.residual = std::numeric_limits<double>::quiet_NaN();
+      res.message = std::string(to_string(res.status)) + " at the initial guess";
+      return res;
     }
-    res.message = to_string(res.status);
-    if (res.status != Status::Converged && res.status != Status::ZetaFailed)
-      res.message += "; returning the best iterate (iteration " + std::to_string(best_k) + ")";
-    if (res.status == Status::ZetaFailed) res.message += " at iteration " + std::to_string(res.iterations);
+    run_steps(ctx, s, monitor, o);
+    res.timings.iterations = monitor.seconds();
+    monitor.finish(z0 ? *z0 : Vector::Zero(A_.rows()));
+    Vector Az(A_.rows());
+    ctx.spmv(res.z, Az);  // w of the returned iterate (honest even if it is not the last one)
+    res.w = Az + q;
     return res;
+  }
+
+  // Picks the step for the method: the one-pass sweep for the AOR-type members with the explicit
+  // update on a row-major A, the two-sweep step, or the generic splitting step.
+  void run_steps(detail::Context<MatrixType>& ctx, detail::Iterate& s, detail::Monitor& monitor,
+                 const Options& o) const {
+    const bool two_sweep = splitting_->two_sweep();
+    if constexpr (MatrixType::IsRowMajor) {
+      if (is_aor_type(options_.method) && !two_sweep && ctx.zu == ZUpdate::Explicit) {
+        detail::SweepStep<MatrixType> step(ctx, *splitting_);
+        return run(step, ctx, s, monitor, o);
+      }
+    }
+    if (two_sweep) {
+      detail::TwoSweepStep<MatrixType> step(ctx, *splitting_, o.theta, s);
+      return run(step, ctx, s, monitor, o);
+    }
+    detail::SplittingStep<MatrixType> step(ctx, *splitting_);
+    run(step, ctx, s, monitor, o);
+  }
+
+  // Method 3.1: evaluate Res(z⁽ᵏ⁾), ask the Monitor, step x, update z (with Anderson if asked).
+  template <typename Step>
+  static void run(Step& step, detail::Context<MatrixType>& ctx, detail::Iterate& s, detail::Monitor& monitor,
+                  const Options& o) {
+    if (o.accelerate == Accelerate::Anderson) {
+      detail::Accelerated<Step, detail::Context<MatrixType>> accelerated(step, ctx, o.anderson_m);
+      return loop(accelerated, s, monitor);
+    }
+    loop(step, s, monitor);
+  }
+  template <typename Step>
+  static void loop(Step& step, detail::Iterate& s, detail::Monitor& monitor) {
+    for (int k = 0;; ++k) {
+      const double r = step.evaluate(s);
+      if (monitor.stop(k, r, s)) break;
+      step.move_x(s);
+      step.update_z(s);
+    }
+    step.report(monitor.result());
   }
 
   const MatrixType& A_;

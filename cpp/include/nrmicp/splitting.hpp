@@ -10,6 +10,7 @@
 
 #include <Eigen/SparseCore>
 
+#include <cfloat>
 #include <cmath>
 #include <functional>
 #include <mutex>
@@ -34,7 +35,7 @@ Eigen::VectorXd diagonal(const MatrixType& A) {
 struct Parameters {
   Eigen::VectorXd omega1, omega2, phi;
   Eigen::VectorXd diagonal;  ///< diag(A), computed once
-  double gamma = 1, alpha = 1, beta = 1, theta = 1;
+  double gamma = 1, alpha = 1, beta = 1;
 };
 
 /// Resolves the method defaults: Ω1 = I; Ω2 = I (NRM), αI (NRMM, α = mean diag A),
@@ -46,7 +47,6 @@ Parameters resolve_parameters(const MatrixType& A, const Options& o) {
   p.diagonal = diagonal(A);
   const Eigen::VectorXd& d = p.diagonal;
   p.gamma = o.gamma;
-  p.theta = o.theta;
   const bool has_alpha = !std::isnan(o.alpha), has_beta = !std::isnan(o.beta);
   auto reject = [&](bool given, const char* name, const char* why) {
     if (given)
@@ -63,9 +63,10 @@ Parameters resolve_parameters(const MatrixType& A, const Options& o) {
       if (has_alpha && o.omega2.size())
         throw std::invalid_argument("Options: method 'nrmm' sets omega2 = alpha*I; give alpha or omega2, not both");
       p.alpha = has_alpha ? o.alpha : (n > 0 ? d.mean() : 1.0); p.beta = 1;
-      if (!has_alpha && !o.omega2.size() && !(p.alpha > 0))
-        throw std::invalid_argument("Options: method 'nrmm' takes alpha = mean(diag(A)) = " + std::to_string(p.alpha) +
-                                    " by default, which must be > 0; pass alpha (Omega2 = alpha*I) explicitly");
+      if (!has_alpha && !o.omega2.size() && !(p.alpha >= DBL_MIN))
+        throw std::invalid_argument("Options: method 'nrmm' takes alpha = mean(diag(A)) = " + to_text(p.alpha) +
+                                    " by default, which must be > 0 and not subnormal; pass alpha (Omega2 = "
+                                    "alpha*I) explicitly, or rescale A");
       break;
     case Method::NRMAOR: case Method::MMS: case Method::TwoSweep:
       p.alpha = has_alpha ? o.alpha : 1.0;
@@ -77,11 +78,11 @@ Parameters resolve_parameters(const MatrixType& A, const Options& o) {
       if (has_beta && o.beta != p.alpha)
         throw std::invalid_argument("Options: method 'nrmsor' has beta = alpha; do not set beta (or use 'nrmaor')");
       break;
-    case Method::NRMGS: case Method::NRMJ:
+    case Method::NRMGS: case Method::NRMJ: case Method::Newton:
       if (has_alpha || has_beta)
         throw std::invalid_argument(std::string("Options: method '") + to_string(o.method) +
                                     "' fixes alpha and beta; use 'nrmaor' to choose them");
-      p.alpha = 1; p.beta = (o.method == Method::NRMGS) ? 1 : 0;
+      p.alpha = 1; p.beta = (o.method == Method::NRMJ) ? 0 : 1;
       break;
   }
   const bool fixed_omega1_phi = (o.method == Method::MMS || o.method == Method::TwoSweep);
@@ -98,14 +99,15 @@ Parameters resolve_parameters(const MatrixType& A, const Options& o) {
     p.omega2 = Eigen::VectorXd::Constant(n, p.alpha);
   } else {
     for (Eigen::Index i = 0; i < n; ++i)
-      if (!(d[i] > 0))
+      if (!(d[i] >= DBL_MIN))
         throw std::invalid_argument(std::string("Options: method '") + to_string(o.method) +
-                                    "' takes omega2 = diag(A) by default, which needs a positive diagonal, but A[" +
-                                    std::to_string(i) + "," + std::to_string(i) + "] = " + std::to_string(d[i]) +
-                                    "; pass omega2 explicitly");
+                                    "' takes omega2 = diag(A) by default, which needs a positive (not subnormal) "
+                                    "diagonal, but A[" + std::to_string(i) + "," + std::to_string(i) + "] = " +
+                                    to_text(d[i]) + "; pass omega2 explicitly, or rescale A");
     p.omega2 = d;
   }
-  if (!(p.omega2.array() > 0).all()) throw std::invalid_argument("Options: omega2 must be positive");
+  if (!(p.omega2.array() >= DBL_MIN).all())
+    throw std::invalid_argument("Options: omega2 must be positive and not subnormal");
   return p;
 }
 
@@ -179,8 +181,12 @@ class Splitting {
     lower_scale_ = b / a;
     diagonal_ = p.omega2 + (p.diagonal / a + p.phi).cwiseProduct(p.omega1);
     for (Eigen::Index i = 0; i < n; ++i)
-      if (!(diagonal_[i] != 0) || !std::isfinite(diagonal_[i]))
-        throw std::invalid_argument("Splitting: the left matrix has a zero diagonal entry at " + std::to_string(i));
+      if (!(std::abs(diagonal_[i]) >= DBL_MIN) || !std::isfinite(diagonal_[i]))
+        throw std::invalid_argument(
+            "Splitting: the left matrix Omega2 + (D/alpha + phi) Omega1 has diagonal entry [" + std::to_string(i) +
+            "] = " + to_text(diagonal_[i]) + " (zero, subnormal or not finite), from omega2 = " +
+            to_text(p.omega2[i]) + ", A[i,i] = " + to_text(p.diagonal[i]) + ", alpha = " + to_text(a) +
+            ", phi = " + to_text(p.phi[i]) + ", omega1 = " + to_text(p.omega1[i]));
     inverse_diagonal_ = diagonal_.cwiseInverse();
     const bool lower = (b != 0);
     kind_ = lower ? LeftKind::Lower : LeftKind::Diagonal;
@@ -247,8 +253,7 @@ class Splitting {
     return "?";
   }
   bool two_sweep() const { return n2_.rows() > 0; }
-  /// Diagonal of Lm (AOR types) and the factor β/α of its strictly lower part (β/α) a_ij Ω1_j.
-  const Vector& left_diagonal() const { return diagonal_; }
+  /// 1 / diag(Lm) (AOR types) and the factor β/α of its strictly lower part (β/α) a_ij Ω1_j.
   const Vector& left_inverse_diagonal() const { return inverse_diagonal_; }
   double lower_scale() const { return lower_scale_; }
   const RowMatrix& n2() const { return n2_; }

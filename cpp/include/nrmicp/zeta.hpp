@@ -20,6 +20,8 @@ class Zeta {
   using RowMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, StorageIndex>;
   /// Writes ζ(z) to out (both of length n). Returns false when ζ cannot be evaluated.
   using Functor = std::function<bool(const double* z, double* out, Eigen::Index n)>;
+  /// Writes a generalized Jacobian ∂ζ(z) (n-by-n) to J. Returns false when it cannot.
+  using Jacobian = std::function<bool(const Vector& z, RowMatrix& J)>;
 
   /// ζ ≡ 0: the linear complementarity problem.
   static Zeta none() { return Zeta(ZetaKind::None); }
@@ -31,11 +33,20 @@ class Zeta {
       throw std::invalid_argument("Zeta::affine: B must be n-by-n and c of length n");
     Zeta t(ZetaKind::Affine); t.B_ = std::move(B); t.c_ = std::move(c); return t;
   }
-  /// ζ given by a functor (e.g. a Python callable).
-  static Zeta functor(Functor f) { Zeta t(ZetaKind::Functor); t.f_ = std::move(f); return t; }
+  /// ζ given by a functor (e.g. a Python callable), optionally with its Jacobian (used by the
+  /// Newton member for a semismooth Newton method on the whole ICP).
+  static Zeta functor(Functor f, Jacobian jacobian = {}) {
+    Zeta t(ZetaKind::Functor); t.f_ = std::move(f); t.j_ = std::move(jacobian); return t;
+  }
 
   ZetaKind kind() const { return kind_; }
   const Vector& c() const { return c_; }
+  const RowMatrix& B() const { return B_; }
+  bool has_jacobian() const { return static_cast<bool>(j_); }
+  /// J = ∂ζ(z) (functor with a Jacobian only); false when it failed or has the wrong shape.
+  bool jacobian(const Vector& z, RowMatrix& J) const {
+    return j_(z, J) && J.rows() == z.size() && J.cols() == z.size();
+  }
 
   /// Checks the sizes against n; throws std::invalid_argument naming the mismatch.
   void check(Eigen::Index n) const {
@@ -66,6 +77,7 @@ class Zeta {
   Vector c_;
   RowMatrix B_;
   Functor f_;
+  Jacobian j_;
 };
 
 }  // namespace nrmicp

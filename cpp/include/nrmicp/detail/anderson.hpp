@@ -1,13 +1,17 @@
 // nrmicp — Anderson acceleration (type II) of a fixed-point map x ↦ x + f(x), with a
-// bounded memory. The safeguard (reject a step that does not reduce Res) lives in the solver.
+// bounded memory, and `Accelerated`, which wraps any step of Method 3.1 with it (safeguarded:
+// a step that does not reduce Res is replaced by the plain step).
 //
 // The differences live in a preallocated ring buffer and their Gram matrix is updated one row
 // per step (m dot products, not m²/2), so a step costs O(m n) with no allocation: at n = 10⁵
 // the old deque-of-fresh-vectors version spent more time in page faults than in the sweep.
 #pragma once
 
+#include "iterate.hpp"
+
 #include <Eigen/Dense>
 
+#include <limits>
 #include <vector>
 
 namespace nrmicp::detail {
@@ -66,6 +70,50 @@ class Anderson {
   Vector x_prev_, f_prev_;
   std::vector<Vector> dx_, df_;
   Eigen::MatrixXd G_;
+};
+
+/// Any step (the interface at the top of solver.hpp), accelerated: x⁽ᵏ⁺¹⁾ is Anderson's mix of
+/// the plain steps, and z is recomputed from it by the z-update. When the accelerated iterate
+/// does not reduce Res, it is replaced by the plain step's x and the memory is cleared.
+template <typename Step, typename ContextType>
+class Accelerated {
+ public:
+  using Vector = Eigen::VectorXd;
+  Accelerated(Step& plain, ContextType& ctx, int m) : plain_(plain), ctx_(ctx), aa_(m) {}
+
+  double evaluate(Iterate& s) {
+    x_k_ = s.x;  // the one-pass sweep moves x while it evaluates
+    double r = plain_.evaluate(s);
+    if (pending_ && s.zeta_ok && !(r < prev_res_)) {
+      s.x = x_plain_;
+      aa_.reset();
+      ctx_.z_update(s);
+      x_k_ = s.x;
+      r = plain_.evaluate(s);
+    }
+    pending_ = false;
+    prev_res_ = r;
+    return r;
+  }
+  void move_x(Iterate& s) {
+    plain_.move_x(s);
+    aa_.step(x_k_, plain_.dx(), x_next_);
+    s.step = (x_next_ - x_k_).template lpNorm<Eigen::Infinity>();
+    x_plain_.swap(s.x);
+    s.x.swap(x_next_);
+    pending_ = true;
+  }
+  void update_z(Iterate& s) { ctx_.next_z(s); }
+  const Vector& dx() const { return plain_.dx(); }
+  void report(Result& r) const { plain_.report(r); }
+
+ private:
+  Step& plain_;
+  ContextType& ctx_;
+  Anderson aa_;
+  Vector x_k_, x_plain_, x_next_;
+  bool pending_ = false;  // x came from an Anderson step not yet checked
+  double prev_res_ = std::numeric_limits<double>::infinity();
 };
 
 }  // namespace nrmicp::detail

@@ -6,6 +6,8 @@
 // both against the reference implementation.
 #pragma once
 
+#include "residual.hpp"
+
 #include <Eigen/Core>
 
 #include <algorithm>
@@ -13,12 +15,12 @@
 
 namespace nrmicp::detail {
 
-/// Computes Res(z⁽ᵏ⁾) (returned), x ← x⁽ᵏ⁺¹⁾ and z_next ← z⁽ᵏ⁺¹⁾; `step` = max|x⁽ᵏ⁺¹⁾ − x⁽ᵏ⁾|.
+/// Computes Res(z⁽ᵏ⁾)² (returned as its ResidualSum), x ← x⁽ᵏ⁺¹⁾ and z_next ← z⁽ᵏ⁺¹⁾; `step` = max|x⁽ᵏ⁺¹⁾ − x⁽ᵏ⁾|.
 /// For an LCP pass zeta_z = zhat = nullptr (then ẑ = z); for an ICP, zeta_z = ζ(z⁽ᵏ⁾) and
 /// zhat = ζ(z⁽ᵏ⁾) + Ω1(|x| + x)/γ; lm_inverse_diagonal = 1 / diag(Lm). `dx` is workspace of length n.
 /// `OmegaOneIsIdentity`: Ω1 = I (the default), so Ω1 is not read: the sweep is bandwidth-bound.
 template <bool OmegaOneIsIdentity, typename MatrixType>
-double aor_sweep_impl(const MatrixType& A, const Eigen::VectorXd& z, const Eigen::VectorXd* zeta_z,
+ResidualSum aor_sweep_impl(const MatrixType& A, const Eigen::VectorXd& z, const Eigen::VectorXd* zeta_z,
                       const Eigen::VectorXd* zhat, const Eigen::VectorXd& q, const Eigen::VectorXd& omega1,
                       const Eigen::VectorXd& omega2, const Eigen::VectorXd& lm_inverse_diagonal, double lower_scale,
                       double gamma, Eigen::VectorXd& x, Eigen::VectorXd& z_next, Eigen::VectorXd& dx, double& step) {
@@ -26,7 +28,8 @@ double aor_sweep_impl(const MatrixType& A, const Eigen::VectorXd& z, const Eigen
   auto om1 = [&](Eigen::Index j) { if constexpr (OmegaOneIsIdentity) return 1.0; else return omega1[j]; };
   const Eigen::Index n = A.rows();
   const double inv_gamma = 1.0 / gamma;
-  double res2 = 0, max_step = 0;
+  ResidualSum res;
+  double max_step = 0;
   for (Eigen::Index i = 0; i < n; ++i) {
     double az = 0, azhat = 0, lower = 0;
     for (typename MatrixType::InnerIterator it(A, i); it; ++it) {
@@ -38,8 +41,7 @@ double aor_sweep_impl(const MatrixType& A, const Eigen::VectorXd& z, const Eigen
     }
     const double wi = az + q[i];
     const double gi = zeta_z ? z[i] - (*zeta_z)[i] : z[i];
-    const double m = std::min(wi, gi);
-    res2 += m * m;
+    res.add(wi, gi);
     const double xi = x[i];
     const double rhs = omega2[i] * (std::abs(xi) - xi) - gamma * ((zhat ? azhat : az) + q[i]);
     // A multiply, not a divide: dx_i depends on dx_{i-1} through `lower`, so this sits on the
@@ -52,11 +54,11 @@ double aor_sweep_impl(const MatrixType& A, const Eigen::VectorXd& z, const Eigen
     z_next[i] = (zeta_z ? (*zeta_z)[i] : 0.0) + om1(i) * (std::abs(xn) + xn) * inv_gamma;
   }
   step = max_step;
-  return std::sqrt(res2);
+  return res;
 }
 
 template <typename MatrixType>
-double aor_sweep(const MatrixType& A, const Eigen::VectorXd& z, const Eigen::VectorXd* zeta_z,
+ResidualSum aor_sweep(const MatrixType& A, const Eigen::VectorXd& z, const Eigen::VectorXd* zeta_z,
                  const Eigen::VectorXd* zhat, const Eigen::VectorXd& q, const Eigen::VectorXd& omega1,
                  bool omega1_is_identity, const Eigen::VectorXd& omega2, const Eigen::VectorXd& lm_inverse_diagonal,
                  double lower_scale, double gamma, Eigen::VectorXd& x, Eigen::VectorXd& z_next, Eigen::VectorXd& dx,

@@ -1,0 +1,188 @@
+// nrmicp — the linear system of one semismooth Newton (active-set) step, kept on one fixed
+// sparsity pattern so that its symbolic analysis is done once and every step is only a
+// numeric refactorization (docs/SPEC.md, "The Newton member").
+//
+// For an active set 𝒜 (its complement, the inactive set ℐ = {x > 0}) the step solves K z = b with
+//   row i ∈ ℐ:  (A z)_i = −q_i                      (w_i = 0)
+//   row i ∈ 𝒜:  ((I − B) z)_i = c_i                 (g_i = z_i − ζ(z)_i = 0; ζ(z) = Bz + c)
+// A (shifted) LCP has B = 0, c = 0: the active rows are identity rows and z_𝒜 = 0, so the active
+// columns of the inactive rows may be zeroed too. That keeps K symmetric when A is (CHOLMOD);
+// otherwise K is factorized by LU (UMFPACK). K lives on the union of the patterns of A, I and B,
+// explicit zeros kept.
+#pragma once
+
+#include "../inner_solver.hpp"
+#include "../options.hpp"
+
+#include <Eigen/SparseCore>
+
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+namespace nrmicp::detail {
+
+/// One sparse direct solver whose symbolic analysis is done once (analyze) and whose numeric
+/// factorization is redone for new values on the same pattern (factorize).
+template <typename StorageIndex>
+class Refactorizer {
+ public:
+  using ColMatrix = Eigen::SparseMatrix<double, Eigen::ColMajor, StorageIndex>;
+  using Vector = Eigen::VectorXd;
+
+  /// Analyzes K's pattern. Auto: CHOLMOD when `spd_candidate` (else UMFPACK); Eigen's solvers
+  /// without SuiteSparse. K must outlive this object (UMFPACK reads it again when solving).
+  void analyze(const ColMatrix& K, Inner kind, bool spd_candidate) {
+    kind_ = kind;
+    if (kind == Inner::Auto) kind = spd_candidate ? (have_cholmod() ? Inner::Cholmod : Inner::EigenLLT)
+                                                  : (have_umfpack() ? Inner::Umfpack : Inner::EigenLU);
+    impl_ = make(kind);
+    impl_->analyze(K);
+  }
+
+  /// Numeric factorization of K (same pattern as analyzed). A Cholesky that fails under
+  /// inner = auto (K not positive definite) is replaced by LU for good. False when singular.
+  bool factorize(const ColMatrix& K) {
+    if (impl_->factorize(K)) return true;
+    if (kind_ != Inner::Auto || !impl_->cholesky) return false;
+    impl_ = make(have_umfpack() ? Inner::Umfpack : Inner::EigenLU);
+    impl_->analyze(K);
+    return impl_->factorize(K);
+  }
+
+  void solve(const Vector& b, Vector& x) const { impl_->solve(b, x); }
+  const char* name() const { return impl_ ? impl_->name : "none"; }
+
+ private:
+  struct Base {
+    const char* name = "";
+    bool cholesky = false;
+    virtual ~Base() = default;
+    virtual void analyze(const ColMatrix& K) = 0;
+    virtual bool factorize(const ColMatrix& K) = 0;
+    virtual void solve(const Vector& b, Vector& x) const = 0;
+  };
+  template <typename EigenSolver>
+  struct Impl : Base {
+    EigenSolver solver;
+    void analyze(const ColMatrix& K) override {
+#if defined(NRMICP_HAVE_CHOLMOD)
+      if constexpr (std::is_base_of_v<Eigen::CholmodBase<ColMatrix, Eigen::Lower, EigenSolver>, EigenSolver>)
+        solver.cholmod().print = 0;  // a library does not write to the user's terminal
+#endif
+      solver.analyzePattern(K);
+    }
+    bool factorize(const ColMatrix& K) override {
+      solver.factorize(K);
+      return solver.info() == Eigen::Success;
+    }
+    void solve(const Vector& b, Vector& x) const override { x = solver.solve(b); }
+  };
+  template <typename EigenSolver>
+  static std::unique_ptr<Base> impl(Inner k, bool cholesky) {
+    auto p = std::make_unique<Impl<EigenSolver>>();
+    p->name = InnerSolver<StorageIndex>::name_of(k);
+    p->cholesky = cholesky;
+    return p;
+  }
+  static std::unique_ptr<Base> make(Inner k) {
+    switch (k) {
+      case Inner::Cholmod:
+#if defined(NRMICP_HAVE_CHOLMOD)
+        return impl<Eigen::CholmodSupernodalLLT<ColMatrix, Eigen::Lower>>(k, true);
+#else
+        throw std::invalid_argument("inner = 'cholmod' but this build has no CHOLMOD (SuiteSparse was not found)");
+#endif
+      case Inner::Umfpack:
+#if defined(NRMICP_HAVE_UMFPACK)
+        return impl<Eigen::UmfPackLU<ColMatrix>>(k, false);
+#else
+        throw std::invalid_argument("inner = 'umfpack' but this build has no UMFPACK (SuiteSparse was not found)");
+#endif
+      case Inner::EigenLLT:
+        return impl<Eigen::SimplicialLLT<ColMatrix, Eigen::Lower, Eigen::AMDOrdering<StorageIndex>>>(k, true);
+      case Inner::EigenLU:
+      case Inner::Auto:
+        return impl<Eigen::SparseLU<ColMatrix, Eigen::COLAMDOrdering<StorageIndex>>>(Inner::EigenLU, false);
+    }
+    return nullptr;
+  }
+  Inner kind_ = Inner::Auto;
+  std::unique_ptr<Base> impl_;
+};
+
+/// K of the header comment on the union pattern, with its Refactorizer.
+template <typename StorageIndex>
+class ActiveSetSystem {
+ public:
+  using ColMatrix = Eigen::SparseMatrix<double, Eigen::ColMajor, StorageIndex>;
+  using RowMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, StorageIndex>;
+  using Vector = Eigen::VectorXd;
+
+  /// B == nullptr: the (shifted) LCP. The symbolic analysis happens here, once.
+  template <typename MatrixType>
+  ActiveSetSystem(const MatrixType& A, const RowMatrix* B, Inner inner) : lcp_(B == nullptr) {
+    using Triplet = Eigen::Triplet<double, StorageIndex>;
+    const Eigen::Index n = A.rows();
+    // Two matrices on the same union pattern: the inactive-row values (A) and the active-row
+    // values (I − B). setFromTriplets sorts and sums, and keeps zeros: the patterns coincide.
+    std::vector<Triplet> ta, tb;
+    ta.reserve(A.nonZeros() + n + (B ? B->nonZeros() : 0));
+    tb.reserve(ta.capacity());
+    for (Eigen::Index k = 0; k < A.outerSize(); ++k)
+      for (typename MatrixType::InnerIterator it(A, k); it; ++it) {
+        ta.emplace_back(it.row(), it.col(), it.value());
+        tb.emplace_back(it.row(), it.col(), 0.0);
+      }
+    for (Eigen::Index i = 0; i < n; ++i) {
+      ta.emplace_back(i, i, 0.0);
+      tb.emplace_back(i, i, 1.0);
+    }
+    if (B)
+      for (Eigen::Index k = 0; k < B->outerSize(); ++k)
+        for (typename RowMatrix::InnerIterator it(*B, k); it; ++it) {
+          ta.emplace_back(it.row(), it.col(), 0.0);
+          tb.emplace_back(it.row(), it.col(), -it.value());
+        }
+    K_.resize(n, n);
+    K_.setFromTriplets(ta.begin(), ta.end());
+    K_.makeCompressed();
+    ColMatrix Kb(n, n);
+    Kb.setFromTriplets(tb.begin(), tb.end());
+    Kb.makeCompressed();
+    if (Kb.nonZeros() != K_.nonZeros()) throw std::logic_error("ActiveSetSystem: patterns differ");
+    inactive_values_ = Eigen::Map<const Vector>(K_.valuePtr(), K_.nonZeros());
+    active_values_ = Eigen::Map<const Vector>(Kb.valuePtr(), Kb.nonZeros());
+    const bool spd_candidate = lcp_ && is_symmetric(K_) && has_positive_diagonal(K_);
+    solver_.analyze(K_, inner, spd_candidate);
+  }
+
+  /// Puts the values of the active set into K (inactive[i] != 0: i ∈ ℐ) and factorizes.
+  /// False when K is singular.
+  bool factorize(const std::vector<char>& inactive) {
+    const StorageIndex* outer = K_.outerIndexPtr();
+    const StorageIndex* row = K_.innerIndexPtr();
+    double* v = K_.valuePtr();
+    for (Eigen::Index j = 0; j < K_.cols(); ++j)
+      for (StorageIndex p = outer[j]; p < outer[j + 1]; ++p) {
+        const bool row_inactive = inactive[row[p]];
+        // LCP: z_𝒜 = 0, so the active columns of the inactive rows are dropped (symmetry).
+        v[p] = row_inactive ? ((lcp_ && !inactive[j]) ? 0.0 : inactive_values_[p]) : active_values_[p];
+      }
+    return solver_.factorize(K_);
+  }
+
+  /// z = K⁻¹ b after factorize().
+  void solve(const Vector& b, Vector& z) const { solver_.solve(b, z); }
+  const char* inner_name() const { return solver_.name(); }
+
+ private:
+  bool lcp_;
+  ColMatrix K_;
+  Vector inactive_values_, active_values_;
+  Refactorizer<StorageIndex> solver_;
+};
+
+}  // namespace nrmicp::detail

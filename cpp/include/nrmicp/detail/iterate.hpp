@@ -1,0 +1,141 @@
+// nrmicp — what every step of Method 3.1 shares: the iterate (x, z, ζ(z)) and the problem it
+// iterates on, with the operations all steps use (products, ζ, the z-update, Res, the start).
+#pragma once
+
+#include "../inner_solver.hpp"
+#include "../options.hpp"
+#include "../result.hpp"
+#include "../splitting.hpp"
+#include "../zeta.hpp"
+#include "residual.hpp"
+#include "timer.hpp"
+
+#include <Eigen/SparseCore>
+
+#include <cmath>
+#include <limits>
+
+namespace nrmicp::detail {
+
+/// The state of Method 3.1 between two steps.
+struct Iterate {
+  using Vector = Eigen::VectorXd;
+  Vector x;                  ///< the modulus vector x⁽ᵏ⁾ (the one-pass sweep moves it to x⁽ᵏ⁺¹⁾ while evaluating)
+  Vector z;                  ///< z⁽ᵏ⁾
+  Vector zeta_z;             ///< ζ(z⁽ᵏ⁾), set by a step's evaluate (zero for an LCP)
+  Vector zeta_prev;          ///< ζ(z⁽ᵏ⁻¹⁾), read by the explicit z-update (zero for an LCP)
+  double step = std::numeric_limits<double>::infinity();  ///< max|x⁽ᵏ⁺¹⁾ − x⁽ᵏ⁾| of the last step
+  bool zeta_ok = true;       ///< false once ζ returned non-finite values
+  bool finite = true;        ///< false once z became non-finite (ζ is then not called: the iteration diverged)
+};
+
+/// The problem ICP(q, A, ζ) with the resolved parameters and z-update, and the timers of this
+/// solve. One per solve (it owns a work vector); the steps hold a reference to it.
+template <typename MatrixType>
+class Context {
+ public:
+  using StorageIndex = typename MatrixType::StorageIndex;
+  using Vector = Eigen::VectorXd;
+
+  Context(const MatrixType& A, const Vector& q, const Zeta<StorageIndex>& zeta, const Parameters& p, ZUpdate zu,
+          const InnerSolver<StorageIndex>& a_solver, Timings& tm)
+      : A(A), q(q), zeta(zeta), p(p), zu(zu), tm(tm), a_solver_(a_solver) {}
+
+  const MatrixType& A;
+  const Vector& q;
+  const Zeta<StorageIndex>& zeta;
+  const Parameters& p;
+  const ZUpdate zu;  ///< Explicit or Solve (never Auto)
+  Timings& tm;
+
+  Eigen::Index n() const { return A.rows(); }
+  bool lcp() const { return zeta.kind() == ZetaKind::None; }
+
+  void spmv(const Vector& v, Vector& out) const {
+    ScopedTimer t(tm.spmv);
+    out.noalias() = A * v;
+  }
+  /// out = ζ(v); clears s.zeta_ok when ζ fails. Nothing to do for an LCP. ζ is never handed a
+  /// non-finite v: that is the iteration's failure, not ζ's (s.finite is cleared instead).
+  void eval_zeta(Iterate& s, const Vector& v, Vector& out) const {
+    if (lcp()) return;
+    if (!v.allFinite()) {
+      s.finite = false;
+      return;
+    }
+    ScopedTimer t(tm.zeta);
+    s.zeta_ok = zeta.eval(v, out);
+  }
+  /// out = ζ-part + Ω1(|x| + x)/γ (no ζ-part when null): the explicit z-update, and ẑ.
+  void from_modulus(const Vector* zeta_part, const Vector& x, Vector& out) const {
+    const Vector& om1 = p.omega1;
+    const double gamma = p.gamma;
+    const Eigen::Index n = x.size();
+    if (zeta_part) {
+      for (Eigen::Index i = 0; i < n; ++i) out[i] = (*zeta_part)[i] + om1[i] * (std::abs(x[i]) + x[i]) / gamma;
+    } else {
+      for (Eigen::Index i = 0; i < n; ++i) out[i] = om1[i] * (std::abs(x[i]) + x[i]) / gamma;
+    }
+  }
+  /// z from x: explicit z = ζ(z⁽ᵏ⁻¹⁾) + Ω1(|x| + x)/γ, or the paper's A z = Ω2(|x| − x)/γ − q.
+  void z_update(Iterate& s) {
+    if (zu == ZUpdate::Explicit) {
+      from_modulus(lcp() ? nullptr : &s.zeta_prev, s.x, s.z);
+      return;
+    }
+    const Vector& om2 = p.omega2;
+    work_.resize(n());
+    for (Eigen::Index i = 0; i < n(); ++i) work_[i] = om2[i] * (std::abs(s.x[i]) - s.x[i]) / p.gamma - q[i];
+    ScopedTimer t(tm.inner_solve);
+    a_solver_.solve(work_, s.z);
+  }
+  /// After x moved to x⁽ᵏ⁺¹⁾: ζ(z⁽ᵏ⁾) becomes the explicit update's ζ-part, and z⁽ᵏ⁺¹⁾ is made.
+  void next_z(Iterate& s) {
+    if (!lcp()) s.zeta_prev.swap(s.zeta_z);
+    z_update(s);
+  }
+  /// Res(z) = ‖min(Az + q, z − ζ(z))‖₂ of s.z from Az (ζ(z) in s.zeta_z for an ICP).
+  double residual(const Vector& Az, const Iterate& s) {
+    ResidualSum res;
+    if (!lcp()) {
+      for (Eigen::Index i = 0; i < n(); ++i) res.add(Az[i] + q[i], s.z[i] - s.zeta_z[i]);
+    } else {
+      for (Eigen::Index i = 0; i < n(); ++i) res.add(Az[i] + q[i], s.z[i]);
+    }
+    return residual_norm(res, s);
+  }
+  /// Res from the sum of squares a pass accumulated for s.z (and s.zeta_z): its square root, or
+  /// Res recomputed with a scaled norm when the plain sum overflowed or underflowed.
+  double residual_norm(const ResidualSum& sum, const Iterate& s) {
+    if (sum.plain_is_accurate()) return std::sqrt(sum.sum);
+    Vector Az(n());
+    spmv(s.z, Az);
+    work_.resize(n());
+    for (Eigen::Index i = 0; i < n(); ++i) work_[i] = std::min(Az[i] + q[i], lcp() ? s.z[i] : s.z[i] - s.zeta_z[i]);
+    return stable_norm(work_);
+  }
+  /// x⁽⁰⁾ = γ/2 (Ω1⁻¹(z0 − ζ(z0)) − Ω2⁻¹(Az0 + q)) and z⁽⁰⁾ from it; false when ζ(z0) failed
+  /// (then s.z = z0).
+  bool start(const Vector* z0, Iterate& s) {
+    s.zeta_z = Vector::Zero(n());
+    s.zeta_prev = Vector::Zero(n());
+    Vector zs = z0 ? *z0 : Vector::Zero(n());
+    eval_zeta(s, zs, s.zeta_prev);
+    if (!s.zeta_ok) {
+      s.z = std::move(zs);
+      return false;
+    }
+    Vector Az(n());
+    spmv(zs, Az);
+    s.x = p.gamma / 2 * ((zs - s.zeta_prev).cwiseQuotient(p.omega1) - (Az + q).cwiseQuotient(p.omega2));
+    s.z.resize(n());
+    z_update(s);
+    return true;
+  }
+
+ private:
+  const InnerSolver<StorageIndex>& a_solver_;
+  Vector work_;
+};
+
+}  // namespace nrmicp::detail

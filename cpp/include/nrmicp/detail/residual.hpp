@@ -1,0 +1,37 @@
+// nrmicp — the paper's accuracy measure Res(z) = ‖min(Az + q, z − ζ(z))‖₂, defined once.
+// The passes over A (the one-pass sweep, the fused product, the generic step) accumulate the
+// plain sum of squares row by row with ResidualSum as they go (no cost added to the sweep);
+// Context::residual_norm takes its square root, or, when the plain sum overflowed or may have
+// lost terms to underflow, recomputes Res with a scaled norm (stable_norm). Nothing else
+// computes Res.
+#pragma once
+
+#include <Eigen/Core>
+
+#include <algorithm>
+#include <cfloat>
+#include <cmath>
+
+namespace nrmicp::detail {
+
+/// Σ min(wᵢ, gᵢ)², accumulated one row at a time.
+struct ResidualSum {
+  double sum = 0;
+  void add(double w, double g) {
+    const double m = std::min(w, g);
+    sum += m * m;
+  }
+  /// The plain sum is exact up to rounding: it did not overflow, and it is large enough that
+  /// squares lost to underflow (each < 2^-1022) cannot matter (n · 2^-1074 ≪ 2^-800).
+  bool plain_is_accurate() const { return sum >= 0x1p-800 && sum <= DBL_MAX; }
+};
+
+/// ‖m‖₂ without overflow or underflow: scaled by the largest |mᵢ| (two passes; for the rare
+/// cases ResidualSum cannot take, |mᵢ| beyond about 1e154 or all below about 1e-120).
+inline double stable_norm(const Eigen::VectorXd& m) {
+  const double scale = m.cwiseAbs().maxCoeff();
+  if (!(scale > 0) || !std::isfinite(scale)) return m.size() ? std::sqrt(m.squaredNorm()) : 0.0;
+  return scale * (m / scale).norm();
+}
+
+}  // namespace nrmicp::detail

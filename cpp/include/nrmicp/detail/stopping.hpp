@@ -1,0 +1,186 @@
+// nrmicp — when a solve stops, for every step kind: converged, diverged, stagnated (rounding
+// floor, no progress), the user's callback, maxiter, and the Ctrl-C poll. The Monitor also
+// keeps the history and the best iterate, so that a step does nothing but step.
+#pragma once
+
+#include "../options.hpp"
+#include "../result.hpp"
+#include "iterate.hpp"
+#include "timer.hpp"
+
+#include <Eigen/Core>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <functional>
+#include <limits>
+#include <string>
+
+namespace nrmicp::detail {
+
+/// Called after every iterate with (k, z⁽ᵏ⁾, Res); return true to stop.
+using Callback = std::function<bool(int, const Eigen::VectorXd&, double)>;
+/// Called about every 50 ms during a solve; may throw to abort (e.g. on Ctrl-C).
+using Poll = std::function<void()>;
+
+class Monitor {
+ public:
+  using Vector = Eigen::VectorXd;
+  using clock = std::chrono::steady_clock;
+
+  /// `shift`: the constant obstacle c when the core iterates the shifted LCP in y = z − c (the
+  /// callback sees z = y + c), else empty.
+  Monitor(const Options& o, const Callback& callback, const Poll& poll, const Vector& shift, Result& res,
+          Eigen::Index n)
+      : o_(o), callback_(callback), poll_(poll), shift_(shift), res_(res), best_z_(n), t_start_(clock::now()),
+        last_poll_(t_start_) {
+    res_.status = Status::MaxIterations;
+  }
+
+  /// Looks at iterate k with Res r (s.z is z⁽ᵏ⁾); true when the solve must stop, and then
+  /// res.status says why. May take s.z as the best iterate (s.z is then stale: the step's
+  /// z-update rewrites it).
+  bool stop(int k, double r, Iterate& s) {
+    if (!s.finite) return finish_with(Status::Diverged, k);
+    if (!s.zeta_ok) return finish_with(Status::ZetaFailed, k);
+    record(k, r);
+    const bool improved = track_best(k, r, s);
+    track_windows(k, r);
+    res_.iterations = k;
+    if (r < o_.tol) return finish_with(Status::Converged, k);
+    if (!std::isfinite(r) || r > o_.divergence_factor * best_ || x_runaway_) return finish_with(Status::Diverged, k);
+    if (floor_count_ >= o_.stall_iterations || bad_windows_ >= 3 || out_of_reach_)
+      return finish_with(Status::Stagnated, k);
+    if (callback_ && call_back(k, improved ? best_z_ : s.z, r)) return finish_with(Status::CallbackStop, k);
+    if (poll_ && ScopedTimer::seconds_since(last_poll_) > 0.05) {
+      poll_();
+      last_poll_ = clock::now();
+    }
+    if (k >= o_.maxiter) return finish_with(Status::MaxIterations, k);
+    return false;
+  }
+
+  Result& result() { return res_; }
+
+  /// Seconds since the Monitor was made (the start of the iterations).
+  double seconds() const { return ScopedTimer::seconds_since(t_start_); }
+
+  /// The returned iterate: the best one (the last when converged), its Res, nit and message.
+  /// `z_start` (finite) is returned when no finite Res was ever seen.
+  void finish(const Vector& z_start) {
+    const bool any = std::isfinite(best_);
+    res_.nit = (res_.status == Status::Converged) ? res_.iterations : best_k_;
+    res_.z = any ? std::move(best_z_) : z_start;
+    res_.residual = any ? best_ : std::numeric_limits<double>::quiet_NaN();
+    res_.message = to_string(res_.status);
+    if (x_runaway_)
+      res_.message += " (the modulus vector x grew by more than divergence_factor while Res did not improve)";
+    if (res_.status == Status::Stagnated && out_of_reach_)
+      res_.message += " (the best Res was not improved in " + std::to_string(since_best_) +
+                      " iterations, and at the rate Res fell in the last " + std::to_string(o_.stall_iterations) +
+                      " it would not get back to it within maxiter)";
+    if (res_.status != Status::Converged && res_.status != Status::ZetaFailed)
+      res_.message += "; returning the best iterate (iteration " + std::to_string(best_k_) + ")";
+    if (res_.status == Status::ZetaFailed) res_.message += " at iteration " + std::to_string(res_.iterations);
+  }
+
+ private:
+  bool finish_with(Status s, int k) {
+    res_.status = s;
+    res_.iterations = k;
+    return true;
+  }
+  void record(int k, double r) {
+    if (!o_.record_history) return;
+    res_.history_iteration.push_back(k);
+    res_.history_seconds.push_back(seconds());
+    res_.history_residual.push_back(r);
+  }
+  // The best iterate is kept by swapping buffers, not copying. The rounding floor: Res does not
+  // improve while the steps are at rounding level (tol below what floating point reaches).
+  bool track_best(int k, double r, Iterate& s) {
+    if (k == 0) x_scale_ = s.x.lpNorm<Eigen::Infinity>();
+    if (r < best_) {
+      best_ = r;
+      best_k_ = k;
+      x_ref_k_ = -1;
+      best_z_.swap(s.z);
+      floor_count_ = 0;
+      since_best_ = 0;
+      last_r_ = r;
+      return true;
+    }
+    if (r != last_r_) ++since_best_;  // iterations on a plateau of bit-identical Res do not count
+    last_r_ = r;
+    if (k > 0) {
+      const double xnorm = s.x.lpNorm<Eigen::Infinity>();
+      track_x(k, xnorm);
+      floor_count_ = (s.step <= 1e-8 * (xnorm > 0 ? xnorm : 1.0)) ? floor_count_ + 1 : 0;
+    }
+    return false;
+  }
+  // A runaway modulus vector: x grows without bound while Res does not improve (Res can stay
+  // exactly constant while x triples every step, until it overflows). The scale of x is taken
+  // at x⁽⁰⁾ and at the first iterate after each best one; xnorm is what the rounding-floor rule
+  // computes anyway, so the check costs nothing on the way to a new best.
+  void track_x(int k, double xnorm) {
+    if (x_ref_k_ < 0) {
+      x_ref_k_ = k;
+      x_ref_ = std::max(x_scale_, xnorm);
+    }
+    if (!(xnorm <= o_.divergence_factor * x_ref_) || !std::isfinite(xnorm)) x_runaway_ = true;
+  }
+  // No progress, two ways, judged at the end of each window of stall_iterations iterates.
+  // (1) In 3 consecutive windows the smallest Res of a window is not below the previous
+  // window's (a cycle, or a slow divergence). Windows, not the global best: Res may jump up at
+  // first and then fall steadily (nrmm on the American put: 127 iterations to return below its
+  // first Res). (2) Out of reach: the best Res has not been improved for kOutOfReach windows'
+  // worth of iterations, and at the rate the window minima fell in the last window Res would
+  // not get back to the best within maxiter (the paper's nrm on obstacle_2d(64): best at
+  // iteration 2, then Res 4x higher, falling 5% per 500 iterations). A slow return that fits in
+  // the budget goes on (nrm on obstacle_2d(32): 965 iterations back to its best, then
+  // converges). A window of bit-identical Res is neutral for both: the iteration can sit on
+  // such a plateau for thousands of steps while x moves towards the solution (impulse control,
+  // thermoforming), and plateau iterations do not count as iterations without improvement.
+  static constexpr int kOutOfReach = 10;
+  void track_windows(int k, double r) {
+    win_min_ = std::min(win_min_, r);
+    win_max_ = std::max(win_max_, r);
+    if (++win_count_ < o_.stall_iterations) return;
+    if (win_max_ != win_min_) {
+      bad_windows_ = (win_min_ < prev_win_min_) ? 0 : bad_windows_ + 1;
+      out_of_reach_ = since_best_ >= double(kOutOfReach) * o_.stall_iterations && !reachable(k);
+    }
+    prev_win_min_ = win_min_;
+    win_min_ = std::numeric_limits<double>::infinity();
+    win_max_ = -win_min_;
+    win_count_ = 0;
+  }
+  // Would Res, falling from prev_win_min_ to win_min_ per window, reach the best by maxiter?
+  bool reachable(int k) const {
+    if (!(win_min_ < prev_win_min_) || !(best_ > 0)) return false;
+    const double windows = std::log(best_ / win_min_) / std::log(win_min_ / prev_win_min_);
+    return k + windows * o_.stall_iterations <= double(o_.maxiter);
+  }
+  bool call_back(int k, const Vector& z, double r) const {
+    return shift_.size() ? callback_(k, z + shift_, r) : callback_(k, z, r);
+  }
+
+  const Options& o_;
+  const Callback& callback_;
+  const Poll& poll_;
+  const Vector& shift_;
+  Result& res_;
+  Vector best_z_;
+  double best_ = std::numeric_limits<double>::infinity();
+  int best_k_ = 0, floor_count_ = 0, win_count_ = 0, bad_windows_ = 0, since_best_ = 0;
+  bool out_of_reach_ = false, x_runaway_ = false;
+  int x_ref_k_ = -1;
+  double x_scale_ = 0, x_ref_ = 0;
+  double last_r_ = std::numeric_limits<double>::quiet_NaN();
+  double win_min_ = std::numeric_limits<double>::infinity(), win_max_ = -win_min_, prev_win_min_ = win_min_;
+  clock::time_point t_start_, last_poll_;
+};
+
+}  // namespace nrmicp::detail

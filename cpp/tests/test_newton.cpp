@@ -1,0 +1,220 @@
+// The Newton member: known solutions, complementarity, nested iteration with user-supplied
+// (geometric) prolongations, the fallback on a P-matrix where the active-set steps cycle, and
+// every kind of ζ.
+#include "common.hpp"
+
+#include <doctest/doctest.h>
+
+#include <cmath>
+#include <vector>
+
+using namespace nrmicp;
+
+namespace {
+using RowMat = testing::SpMat<int, Eigen::RowMajor>;
+using Vec = Eigen::VectorXd;
+
+/// −Δ_h (5-point) on m × m interior nodes of the unit square, h = 1/(m + 1).
+RowMat laplacian_2d(int m) {
+  const double s = (m + 1.0) * (m + 1.0);
+  std::vector<Eigen::Triplet<double>> t;
+  for (int b = 0; b < m; ++b)
+    for (int i = 0; i < m; ++i) {
+      const int r = b * m + i;
+      t.emplace_back(r, r, 4 * s);
+      if (i > 0) t.emplace_back(r, r - 1, -s);
+      if (i + 1 < m) t.emplace_back(r, r + 1, -s);
+      if (b > 0) t.emplace_back(r, r - m, -s);
+      if (b + 1 < m) t.emplace_back(r, r + m, -s);
+    }
+  RowMat A(m * m, m * m);
+  A.setFromTriplets(t.begin(), t.end());
+  return A;
+}
+
+/// Linear interpolation from mc = (m − 1)/2 coarse nodes to m fine nodes (1D), and its 2D tensor.
+RowMat interpolation_2d(int m) {
+  const int mc = (m - 1) / 2;
+  std::vector<Eigen::Triplet<double>> t;
+  auto p1 = [&](int i, int j) {  // weight of coarse node j at fine node i
+    const int centre = 2 * j + 1;
+    return i == centre ? 1.0 : (std::abs(i - centre) == 1 ? 0.5 : 0.0);
+  };
+  for (int by = 0; by < m; ++by)
+    for (int bx = 0; bx < m; ++bx)
+      for (int cy = std::max(0, (by - 1) / 2); cy <= std::min(mc - 1, by / 2); ++cy)
+        for (int cx = std::max(0, (bx - 1) / 2); cx <= std::min(mc - 1, bx / 2); ++cx) {
+          const double wgt = p1(bx, cx) * p1(by, cy);
+          if (wgt > 0) t.emplace_back(by * m + bx, cy * mc + cx, wgt);
+        }
+  RowMat P(m * m, mc * mc);
+  P.setFromTriplets(t.begin(), t.end());
+  return P;
+}
+
+/// The membrane obstacle ψ = 0.1 − (x − ½)² − (y − ½)².
+Vec paraboloid(int m) {
+  Vec psi(m * m);
+  for (int b = 0; b < m; ++b)
+    for (int i = 0; i < m; ++i) {
+      const double x = (i + 1.0) / (m + 1), y = (b + 1.0) / (m + 1);
+      psi[b * m + i] = 0.1 - (x - 0.5) * (x - 0.5) - (y - 0.5) * (y - 0.5);
+    }
+  return psi;
+}
+
+/// Projected Gauss–Seidel for min(Az + q, z − ψ) = 0, run far past convergence: an independent
+/// reference for an M-matrix.
+Vec projected_gauss_seidel(const RowMat& A, const Vec& q, const Vec& psi, int sweeps) {
+  Vec z = psi.cwiseMax(0.0);
+  for (int k = 0; k < sweeps; ++k)
+    for (int i = 0; i < A.rows(); ++i) {
+      double off = 0, d = 0;
+      for (RowMat::InnerIterator it(A, i); it; ++it) (it.col() == i ? d : off) += it.value() * (it.col() == i ? 1 : z[it.col()]);
+      z[i] = std::max(psi[i], -(q[i] + off) / d);
+    }
+  return z;
+}
+
+void check_complementarity(const RowMat& A, const Vec& q, const Vec& z, const Vec& zeta_z, double tol) {
+  const Vec w = A * z + q, g = z - zeta_z;
+  CHECK(w.cwiseMin(g).norm() < tol);
+  CHECK(w.minCoeff() > -tol);
+  CHECK(g.minCoeff() > -tol);
+  CHECK(std::abs(g.cwiseProduct(w).sum()) < tol * (1 + z.norm()));
+}
+}  // namespace
+
+TEST_CASE("Newton solves Bai's LCP and constant-obstacle problems with known solutions") {
+  for (bool symmetric : {true, false}) {
+    const RowMat A = testing::bai<int, Eigen::RowMajor>(12, 4.0, symmetric);
+    const auto k = testing::known_solution(A.rows());
+    Options o;
+    o.tol = 1e-12;
+    const Newton<RowMat> newton(A, o);
+    const Vec q = k.w - A * k.g;
+    Result r = newton.solve(q);
+    CHECK(r.status == Status::Converged);
+    CHECK((r.z - k.g).lpNorm<Eigen::Infinity>() < 1e-12);
+    CHECK(r.path == "newton");
+    CHECK(r.nit <= 5);
+    CHECK(r.linear_solves == r.nit);
+    // ζ ≡ c: z* = g* + c.
+    const Vec c = Vec::LinSpaced(A.rows(), -1.0, 1.0);
+    const Vec qc = k.w - A * (k.g + c);
+    r = newton.solve(qc, Zeta<int>::constant(c));
+    CHECK(r.status == Status::Converged);
+    CHECK((r.z - (k.g + c)).lpNorm<Eigen::Infinity>() < 1e-12);
+  }
+}
+
+TEST_CASE("Newton with user-supplied prolongations: the obstacle problem in 2D, few fine steps") {
+  const int m = 31;  // 31 -> 15 -> 7 -> 3
+  const RowMat A = laplacian_2d(m);
+  const Vec psi = paraboloid(m), q = Vec::Zero(m * m);
+  std::vector<RowMat> P;
+  for (int mm = m; mm >= 7; mm = (mm - 1) / 2) P.push_back(interpolation_2d(mm));
+  Options o;
+  o.tol = 1e-9;
+  const Newton<RowMat> nested(A, o, P), cold(A, o);
+  CHECK(nested.levels() == 4);
+  const Result rn = nested.solve(q, Zeta<int>::constant(psi));
+  const Result rc = cold.solve(q, Zeta<int>::constant(psi));
+  CHECK(rn.status == Status::Converged);
+  CHECK(rc.status == Status::Converged);
+  CHECK(rn.nit <= 3);          // started from the coarse solutions
+  CHECK(rn.nit < rc.nit);      // the cold start peels the contact set
+  CHECK(rn.level_steps.size() == 4);
+  CHECK(rn.level_seconds.size() == 4);
+  CHECK(rn.linear_solves > rn.nit);  // coarse levels solve too
+  check_complementarity(A, q, rn.z, psi, 1e-9);
+  const Vec ref = projected_gauss_seidel(A, q, psi, 4000);
+  CHECK((rn.z - ref).lpNorm<Eigen::Infinity>() < 1e-8);
+  CHECK((rn.z - rc.z).lpNorm<Eigen::Infinity>() < 1e-12);
+}
+
+TEST_CASE("a prolongation of the wrong shape is refused, naming it") {
+  const RowMat A = laplacian_2d(7);
+  std::vector<RowMat> P{interpolation_2d(15)};
+  CHECK_THROWS_WITH_AS(Newton<RowMat>(A, Options(), P), doctest::Contains("prolongations[0]"), std::invalid_argument);
+}
+
+TEST_CASE("a P-matrix on which the active-set steps cycle: the fallback is taken and the answer is right") {
+  // A P-matrix, not an M-matrix (found by search: from z = 0 the plain active-set method cycles
+  // through three active sets). Its unique solution, by enumeration of the 8 active sets:
+  std::vector<Eigen::Triplet<double>> t{{0, 0, 1}, {0, 1, -3}, {0, 2, 2}, {1, 0, 2}, {1, 1, 1}, {1, 2, 1}, {2, 1, -1}, {2, 2, 1}};
+  RowMat A(3, 3);
+  A.setFromTriplets(t.begin(), t.end());
+  const Vec q = (Vec(3) << 0.0, -2.0, 1.0).finished();
+  Vec z_star;
+  for (int mask = 0; mask < 8; ++mask) {
+    Eigen::MatrixXd K = Eigen::MatrixXd::Identity(3, 3);
+    Vec b = Vec::Zero(3);
+    for (int i = 0; i < 3; ++i)
+      if (mask >> i & 1) { K.row(i) = Eigen::MatrixXd(A).row(i); b[i] = -q[i]; }
+    const Vec z = K.fullPivLu().solve(b), w = A * z + q;
+    if (z.minCoeff() >= -1e-14 && w.minCoeff() >= -1e-14) z_star = z;
+  }
+  REQUIRE(z_star.size() == 3);
+  Options o;
+  o.tol = 1e-10;
+  const Result r = Newton<RowMat>(A, o).solve(q);
+  CHECK(r.status == Status::Converged);
+  CHECK(r.fallback_sweeps > 0);
+  CHECK(r.path.find("fallback") != std::string::npos);
+  CHECK((r.z - z_star).lpNorm<Eigen::Infinity>() < 1e-9);
+}
+
+TEST_CASE("Newton on ICPs: affine ζ (full system) and a functor ζ (outer fixed point)") {
+  const RowMat A = testing::bai<int, Eigen::RowMajor>(10, 4.0, false);
+  const Eigen::Index n = A.rows();
+  const auto k = testing::known_solution(n);
+  const Vec z_star = k.g + Vec::Constant(n, 0.5);
+  // Affine: ζ(z) = Bz + c, B = 0.2 × (shift by one).
+  std::vector<Eigen::Triplet<double>> t;
+  for (Eigen::Index i = 0; i + 1 < n; ++i) t.emplace_back(i, i + 1, 0.2);
+  Zeta<int>::RowMatrix B(n, n);
+  B.setFromTriplets(t.begin(), t.end());
+  const Vec c = z_star - k.g - B * z_star;
+  const Vec q = k.w - A * z_star;
+  Options o;
+  o.tol = 1e-11;
+  const Newton<RowMat> newton(A, o);
+  Result r = newton.solve(q, Zeta<int>::affine(B, c));
+  CHECK(r.status == Status::Converged);
+  CHECK((r.z - z_star).lpNorm<Eigen::Infinity>() < 1e-10);
+  check_complementarity(A, q, r.z, B * r.z + c, 1e-10);
+  // Functor: ζ(z) = 0.1 sin z + s.
+  const Vec s = z_star - k.g - 0.1 * z_star.array().sin().matrix();
+  const auto zeta = Zeta<int>::functor([&](const double* z, double* out, Eigen::Index nn) {
+    for (Eigen::Index i = 0; i < nn; ++i) out[i] = 0.1 * std::sin(z[i]) + s[i];
+    return true;
+  });
+  r = newton.solve(q, zeta);
+  CHECK(r.status == Status::Converged);
+  CHECK(r.outer_iterations >= 2);
+  CHECK((r.z - z_star).lpNorm<Eigen::Infinity>() < 1e-10);
+}
+
+TEST_CASE("Newton: warm start from the solution, maxiter, callback stop, tol below rounding") {
+  const RowMat A = testing::bai<int, Eigen::RowMajor>(8, 4.0, true);
+  const auto k = testing::known_solution(A.rows());
+  const Vec q = k.w - A * k.g;
+  Options o;
+  o.tol = 1e-10;
+  const Newton<RowMat> newton(A, o);
+  Result r = newton.solve(q, Zeta<int>::none(), &k.g);
+  CHECK(r.status == Status::Converged);
+  CHECK(r.nit == 0);
+  Options it = o;
+  it.maxiter = 0;
+  r = newton.solve(q, Zeta<int>::none(), nullptr, {}, {}, &it);
+  CHECK(r.status == Status::MaxIterations);
+  r = newton.solve(q, Zeta<int>::none(), nullptr, [](int, const Vec&, double) { return true; });
+  CHECK(r.status == Status::CallbackStop);
+  it = o;
+  it.tol = 1e-300;
+  r = newton.solve(q, Zeta<int>::none(), nullptr, {}, {}, &it);
+  CHECK(r.status == Status::Stagnated);
+  CHECK(r.residual < 1e-12);
+}

@@ -1,0 +1,143 @@
+"""The Python side of the Newton member (``method="newton"``) and of ``polish``: option checks,
+the hierarchy (prolongations for nested iteration), the polishing step and the result fields.
+The algorithm itself is C++ (cpp/include/nrmicp/newton.hpp)."""
+from __future__ import annotations
+
+import numpy as np
+
+from . import _core
+from ._hierarchy import resolve_hierarchy
+
+#: hierarchy="auto" builds the AMG hierarchy (pyamg) for method "newton" from this many unknowns
+#: on, and starts cold below: measured in README "Mesh-independent solves" (at n ≈ 4,000 nesting
+#: and its set-up already pay; below, a cold start takes a few steps of microseconds each while
+#: pyamg's import alone costs about a second).
+AUTO_AMG_MIN_N = 4096
+
+
+def _has_pyamg() -> bool:
+    try:
+        import pyamg  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def check_polish(polish) -> bool:
+    if not isinstance(polish, (bool, np.bool_)):
+        raise TypeError(f"polish must be True or False, got {polish!r}")
+    return bool(polish)
+
+
+def check_options(*, phi, accelerate, z_update):
+    """Options of the stationary members that method 'newton' does not have."""
+    if phi is not None:
+        raise ValueError("phi is a parameter of the stationary members; method 'newton' has none")
+    if (accelerate or "none").lower() != "none":
+        raise ValueError(f"accelerate={accelerate!r} applies to the stationary members; method 'newton' "
+                         "takes Newton steps (use accelerate='none')")
+    if not isinstance(z_update, str) or z_update.lower() != "auto":
+        raise ValueError(f"z_update={z_update!r} applies to the stationary members; method 'newton' "
+                         "recovers z from its linear solves (use z_update='auto')")
+
+
+def check_no_hierarchy(hierarchy, method):
+    if hierarchy is not None and not (isinstance(hierarchy, str) and hierarchy == "auto"):
+        raise ValueError(f"hierarchy is the nested iteration of method 'newton'; method {method!r} has none "
+                         f"(got hierarchy={hierarchy!r}; use None)")
+
+
+def prolongations(hierarchy, A, A_core, dc) -> list:
+    """hierarchy= -> prolongations for the core's matrix A_core (= A, or D_r A D_c when scaled).
+    'auto': 'amg' for n >= AUTO_AMG_MIN_N when pyamg is importable, else none (cold start)."""
+    if isinstance(hierarchy, str) and hierarchy == "auto":
+        hierarchy = "amg" if A.shape[0] >= AUTO_AMG_MIN_N and _has_pyamg() else None
+    if isinstance(hierarchy, str) and hierarchy == "amg":
+        return resolve_hierarchy("amg", A_core) or []
+    Ps = resolve_hierarchy(hierarchy, A) or []
+    if Ps and dc is not None:
+        # z = D_c y: a prolongation of y is D_c⁻¹ P (the coarse variables keep their scale).
+        import scipy.sparse as sp
+        Ps = [sp.csr_matrix(sp.diags(1.0 / dc) @ Ps[0])] + Ps[1:]
+    return Ps
+
+
+def make_core(A_core, opts, hierarchy, A, dc):
+    """The C++ Newton object (NewtonI32/NewtonI64) with its prolongations."""
+    idx = A_core.indices.dtype
+    Ps = prolongations(hierarchy, A, A_core, dc)
+    triples = [(P.indptr.astype(idx), P.indices.astype(idx), np.ascontiguousarray(P.data, dtype=np.float64),
+                P.shape[0], P.shape[1]) for P in Ps]
+    cls = _core.NewtonI64 if idx == np.int64 else _core.NewtonI32
+    return cls(A_core.indptr, A_core.indices, A_core.data, A_core.shape[0], opts, triples)
+
+
+def polisher(solver):
+    """The Newton object used to polish a stationary member's answer (built on first use, no
+    hierarchy). None when Newton cannot be set up on A (e.g. diag(A) not positive)."""
+    if solver._polisher is None:
+        A_core = solver.A if solver._dr is None else None
+        if A_core is None:
+            from ._scaling import scale_matrix
+            A_core = scale_matrix(solver.A, solver._dr, solver._dc)
+        opts = _core.Options()
+        opts.method = _core.Method.newton
+        try:
+            solver._polisher = make_core(A_core, opts, None, solver.A, solver._dc)
+        except ValueError:
+            solver._polisher = False
+    return solver._polisher or None
+
+
+def polish(solver, problem, z, res, original_residual, dc):
+    """One Newton step from z on its active set (``polish=True``). Returns (z, w, Res) when it
+    lowered Res (measured in the original variables), else None.
+
+    `problem` is the core's (q, kind, c, B-indptr, B-indices, B-data, fn) in the core's variables;
+    dc the column scaling (None when unscaled)."""
+    core = solver._core if solver.method == "newton" else polisher(solver)
+    if core is None or not np.isfinite(res):
+        return None
+    z0 = z / dc if dc is not None else z
+    qs, kind, cs, bp, bi, bd, fns = problem
+    # tol = tiny: the step is taken whatever the member's tol
+    d = core.polish(qs, kind, cs, bp, bi, bd, fns, np.ascontiguousarray(z0), np.finfo(float).tiny)
+    zp = d["z"] * dc if dc is not None else d["z"]
+    wp, rp = original_residual(zp)
+    if not rp < res:
+        return None
+    return zp, wp, rp
+
+
+def result_fields(d) -> dict:
+    """The Newton member's result fields from the core's dict."""
+    return {"linear_solves": int(d["linear_solves"]), "fallback_sweeps": int(d["fallback_sweeps"]),
+            "outer_iterations": int(d["outer_iterations"]), "level_steps": list(d["level_steps"]),
+            "level_seconds": list(d["level_seconds"]), "path": d["path"]}
+
+
+def jacobian_argument(zeta_jacobian, solver, kind, dc) -> dict:
+    """The core's ``zeta_jacobian`` keyword: a wrapper returning canonical CSR arrays with the
+    core's index type (in the scaled variables y = D_c⁻¹ z: J' = D_c⁻¹ J(D_c y) D_c)."""
+    if zeta_jacobian is None:
+        return {}
+    if not callable(zeta_jacobian):
+        raise TypeError(f"zeta_jacobian must be callable, got {type(zeta_jacobian).__name__}")
+    if solver.method != "newton" or kind != 3:
+        raise ValueError("zeta_jacobian is used by method 'newton' with a callable zeta only")
+    import scipy.sparse as sp
+    from ._inputs import as_csr
+
+    n, idx = solver.n, solver._index_dtype
+
+    def jac(y):
+        z = y * dc if dc is not None else y
+        J = as_csr(zeta_jacobian(z), "zeta_jacobian(z)")
+        if J.shape != (n, n):
+            raise ValueError(f"zeta_jacobian(z) must return an ({n}, {n}) matrix, got shape {J.shape}")
+        if dc is not None:
+            J = sp.csr_matrix(sp.diags(1.0 / dc) @ J @ sp.diags(dc))
+            J.sort_indices()
+        return J.indptr.astype(idx), J.indices.astype(idx), np.ascontiguousarray(J.data, dtype=np.float64)
+
+    return {"zeta_jacobian": jac}

@@ -1,0 +1,166 @@
+"""The hierarchy= option's Python side: AMG prolongations from pyamg and checked
+user-supplied (geometric) prolongations. Fast: matrices of at most a few thousand rows."""
+import sys
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+pytest.importorskip("nrmicp")
+pytest.importorskip("pyamg")
+from nrmicp._hierarchy import amg_prolongations, resolve_hierarchy  # noqa: E402
+
+
+def laplacian_2d(m):
+    t = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(m, m))
+    eye = sp.identity(m)
+    return sp.csr_matrix(sp.kron(eye, t) + sp.kron(t, eye))
+
+
+def upwind_convection_diffusion(m, eps=0.01, b=(1.0, 0.5)):
+    """−εΔu + b·∇u, first-order upwind (b > 0): a nonsymmetric M-matrix."""
+    h = 1.0 / (m + 1)
+    e = np.ones(m)
+    d2 = sp.diags([-e[1:], 2 * e, -e[1:]], [-1, 0, 1]) / h**2
+    d1 = sp.diags([-e[1:], e], [-1, 0]) / h
+    eye = sp.identity(m)
+    return sp.csr_matrix(eps * (sp.kron(eye, d2) + sp.kron(d2, eye))
+                         + b[0] * sp.kron(eye, d1) + b[1] * sp.kron(d1, eye))
+
+
+def assert_chain(Ps, n):
+    rows = n
+    for P in Ps:
+        assert isinstance(P, sp.csr_matrix) and P.dtype == np.float64
+        assert P.has_sorted_indices
+        assert P.shape[0] == rows and P.shape[1] < rows
+        assert np.all(np.isfinite(P.data))
+        rows = P.shape[1]
+    return rows
+
+
+@pytest.mark.parametrize("build", [lambda: laplacian_2d(32), lambda: upwind_convection_diffusion(32)],
+                         ids=["laplacian", "upwind_convection_diffusion"])
+def test_amg_prolongations_form_a_shape_chain_down_to_a_small_coarsest_level(build):
+    A = build()
+    Ps = amg_prolongations(A)
+    assert len(Ps) >= 2
+    coarsest = assert_chain(Ps, A.shape[0])
+    assert coarsest <= 10
+
+
+def test_amg_prolongations_of_an_m_matrix_are_nonnegative_on_the_first_levels():
+    Ps = amg_prolongations(laplacian_2d(32))
+    assert Ps[0].data.min() >= 0 and Ps[1].data.min() >= 0
+
+
+def test_amg_galerkin_coarse_operator_of_spd_matrix_is_spd():
+    A = laplacian_2d(16)
+    P = amg_prolongations(A)[0]
+    Ac = (P.T @ A @ P).toarray()
+    assert np.allclose(Ac, Ac.T)
+    assert np.linalg.eigvalsh(Ac).min() > 0
+
+
+def test_amg_prolongations_interpolate_constants_in_the_interior():
+    # classical interpolation reproduces constants at points whose strong neighbours all
+    # lie inside the domain: rows of P sum to 1 away from the boundary
+    m = 32
+    A = laplacian_2d(m)
+    P = amg_prolongations(A)[0]
+    sums = np.asarray(P.sum(axis=1)).ravel()
+    i, j = np.divmod(np.arange(m * m), m)
+    interior = (i > 1) & (i < m - 2) & (j > 1) & (j < m - 2)
+    assert np.allclose(sums[interior], 1.0)
+
+
+def test_amg_prolongations_of_a_tiny_matrix_are_empty():
+    assert amg_prolongations(laplacian_2d(3)) == []   # n = 9 <= max_coarse
+
+
+def test_amg_prolongations_pass_options_to_pyamg():
+    A = laplacian_2d(32)
+    assert len(amg_prolongations(A, max_levels=2)) == 1
+
+
+def test_amg_prolongations_do_not_mutate_A():
+    A = laplacian_2d(16)
+    before = A.copy()
+    amg_prolongations(A)
+    assert (A != before).nnz == 0
+
+
+def test_resolve_none_is_none_and_amg_builds_the_chain():
+    A = laplacian_2d(16)
+    assert resolve_hierarchy(None, A) is None
+    assert_chain(resolve_hierarchy("amg", A), A.shape[0])
+
+
+def test_resolve_accepts_a_tuple_of_matrices_and_converts_them_to_csr():
+    A = laplacian_2d(7)  # n = 49
+    P0 = sp.random(49, 9, density=0.3, format="coo", random_state=0)
+    P1 = np.ones((9, 1))
+    with pytest.warns(sp.SparseEfficiencyWarning):
+        out = resolve_hierarchy((P0, P1), A)
+    assert_chain(out, 49)
+    assert np.allclose(out[0].toarray(), P0.toarray())
+
+
+def test_resolve_empty_list_means_no_coarse_level():
+    assert resolve_hierarchy([], laplacian_2d(4)) == []
+
+
+@pytest.mark.parametrize("bad, match", [
+    ("geometric", "hierarchy must be 'amg'"),
+])
+def test_resolve_rejects_unknown_strings(bad, match):
+    with pytest.raises(ValueError, match=match):
+        resolve_hierarchy(bad, laplacian_2d(4))
+
+
+def test_resolve_rejects_a_bare_matrix_naming_hierarchy():
+    with pytest.raises(TypeError, match="hierarchy"):
+        resolve_hierarchy(sp.identity(16, format="csr"), laplacian_2d(4))
+
+
+def test_resolve_rejects_a_first_level_with_the_wrong_row_count():
+    with pytest.raises(ValueError, match=r"hierarchy\[0\].*A's size \(16\)"):
+        resolve_hierarchy([sp.csr_matrix(np.ones((15, 4)))], laplacian_2d(4))
+
+
+def test_resolve_rejects_a_broken_shape_chain_naming_the_level():
+    P0 = sp.csr_matrix(np.ones((16, 4)))
+    P1 = sp.csr_matrix(np.ones((5, 2)))
+    with pytest.raises(ValueError, match=r"hierarchy\[1\].*columns of hierarchy\[0\] \(4\)"):
+        resolve_hierarchy([P0, P1], laplacian_2d(4))
+
+
+def test_resolve_rejects_a_transposed_prolongation():
+    with pytest.raises(ValueError, match=r"hierarchy\[0\] has shape \(16, 16\).*strictly coarser"):
+        resolve_hierarchy([sp.identity(16, format="csr")], laplacian_2d(4))
+
+
+def test_resolve_rejects_non_finite_entries_naming_the_level():
+    P = np.ones((16, 4))
+    P[3, 2] = np.nan
+    with pytest.raises(ValueError, match=r"hierarchy\[0\] has a non-finite entry"):
+        resolve_hierarchy([sp.csr_matrix(P)], laplacian_2d(4))
+
+
+def test_resolve_rejects_non_matrix_levels_naming_the_level():
+    with pytest.raises(TypeError, match=r"hierarchy\[0\]"):
+        resolve_hierarchy(["not a matrix"], laplacian_2d(4))
+
+
+def test_resolve_does_not_mutate_the_callers_matrices():
+    P = sp.csr_matrix(np.ones((16, 4)))
+    P.data[0] = 2.0
+    before = P.copy()
+    resolve_hierarchy([P], laplacian_2d(4))
+    assert (P != before).nnz == 0
+
+
+def test_amg_without_pyamg_says_what_to_do(monkeypatch):
+    monkeypatch.setitem(sys.modules, "pyamg", None)   # import pyamg now raises ImportError
+    with pytest.raises(ImportError, match=r"hierarchy='amg' needs pyamg.*hierarchy=None"):
+        resolve_hierarchy("amg", laplacian_2d(8))

@@ -1,0 +1,145 @@
+"""The iteration loop of the C++ core: per-solve options, the stopping rules, Res at extreme
+scales, progress output. Each test names the behaviour it checks; oracles are independent
+(the numpy reference implementation, numpy residuals, known solutions)."""
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import nrmicp
+from nrmicp import scenes
+from problems import make_problem
+from reference_impl import reference_solve
+
+
+# ---- theta: the two-sweep relaxation, and only that ---------------------------------------
+
+def test_per_solve_theta_is_used():
+    """Solver(two_sweep).solve(theta=0.5) iterates with theta = 0.5 (it used the set-up theta)."""
+    P = make_problem("lcp", 10, True)
+    d = P.A.diagonal()
+    ref = reference_solve(P.A, P.q, method="two_sweep", z_update="explicit", gamma=1.0, omega2=d,
+                          alpha=1.0, beta=1.0, theta=0.5, tol=1e-8)
+    ref_one = reference_solve(P.A, P.q, method="two_sweep", z_update="explicit", gamma=1.0, omega2=d,
+                              alpha=1.0, beta=1.0, theta=1.0, tol=1e-8)
+    assert ref.nit != ref_one.nit  # theta matters here
+    s = nrmicp.Solver(P.A, method="two_sweep", z_update="explicit")
+    res = s.solve(P.q, theta=0.5)
+    assert res.success
+    assert res.nit == ref.nit
+
+
+@pytest.mark.parametrize("method", ["nrmgs", "nrm", "nrmaor", "mms"])
+def test_theta_rejected_for_other_methods(method):
+    P = make_problem("lcp", 4, True)
+    with pytest.raises(ValueError, match="theta"):
+        nrmicp.solve(P.A, P.q, method=method, theta=0.5)
+    with pytest.raises(ValueError, match="theta"):
+        nrmicp.Solver(P.A, method=method).solve(P.q, theta=0.5)
+
+
+# ---- honest stopping: hopeless solves stop early, slow-but-steady ones go on ---------------
+
+def _numpy_res(A, q, z, zeta=None):
+    w = A @ z + q
+    g = z if zeta is None else (z - (zeta(z) if callable(zeta) else zeta))
+    return float(np.linalg.norm(np.minimum(w, g)))
+
+
+def test_hopeless_solve_stagnates_long_before_maxiter():
+    """The paper's nrm on obstacle_2d(64): best Res at iteration 2, then 4x higher and falling too
+    slowly to return within maxiter = 10,000. It used to burn all 10,000 iterations."""
+    P = scenes.obstacle_2d(64)
+    res = nrmicp.solve(P.A, P.q, P.zeta, method="nrm")
+    assert res.status == nrmicp.Status.STAGNATED, res.message
+    assert res.iterations <= 20 * 100  # a couple of thousand at most, with stall_iterations = 100
+    assert np.all(np.isfinite(res.z))
+    assert res.residual == pytest.approx(_numpy_res(P.A, P.q, res.z, P.zeta), rel=1e-9)
+
+
+def test_slow_return_within_budget_is_not_cut():
+    """nrm on obstacle_2d(32) needs 965 iterations to get back below its first Res, then keeps
+    improving (converging after ~89,000): at maxiter = 3000 it must run to maxiter."""
+    P = scenes.obstacle_2d(32)
+    res = nrmicp.solve(P.A, P.q, P.zeta, method="nrm", maxiter=3000)
+    assert res.status == nrmicp.Status.MAX_ITERATIONS, res.message
+    assert res.nit == 3000  # still improving at the end
+
+
+def test_res_jumping_up_then_falling_steadily_is_not_cut():
+    """nrmm on the American put: Res jumps from 2 to 759, and takes 127 iterations to fall back."""
+    P = scenes.american_put()
+    res = nrmicp.solve(P.A, P.q, P.zeta, method="nrmm")
+    assert res.success, res.message
+
+
+def test_plateaus_of_constant_res_are_not_cut():
+    """Impulse control: Res stays bit-identical for over a thousand iterations at a time while x
+    moves; the default stopping rules must let it converge."""
+    P = scenes.impulse_control(101)
+    res = P.solve(method="nrmgs", tol=1e-8, maxiter=20_000)
+    assert res.success, res.message
+    assert _numpy_res(P.A, P.q, res.z, P.zeta) < 1e-8
+
+
+# ---- divergence of the modulus vector, and ζ's reputation ---------------------------------
+
+def test_runaway_modulus_vector_is_diverged_not_zeta_failure():
+    """Issue 9 item 6: Res stays exactly constant while x triples every step; this used to end
+    in 'zeta(z) returned non-finite values ... at iteration 649'."""
+    calls = []
+
+    def zeta(z):
+        calls.append(np.isfinite(z).all())
+        return z + 0.5
+
+    A = sp.csr_matrix([[-1.0]])
+    res = nrmicp.solve(A, [1.0], zeta, method="nrmj", omega2=2.0, z_update="solve")
+    assert res.status == nrmicp.Status.DIVERGED, res.message
+    assert "x grew" in res.message
+    assert res.iterations < 100
+    assert np.all(np.isfinite(res.z)) and np.isfinite(res.residual)
+    assert res.residual == pytest.approx(_numpy_res(A, np.array([1.0]), res.z, zeta), rel=1e-12)
+    assert all(calls)
+
+
+# ---- Res without overflow or underflow ----------------------------------------------------
+
+def _stable_norm(m):
+    big = np.abs(m).max()
+    return float(big * np.linalg.norm(m / big)) if big > 0 else 0.0
+
+
+@pytest.mark.parametrize("scale", [2.0 ** 600, 2.0 ** -530, 2.0 ** -660])
+def test_res_neither_overflows_nor_underflows(scale):
+    """Issue 9 item 7: Res = sqrt(sum m^2) overflowed beyond |m| ~ 1e154 (DIVERGED at iteration 0,
+    Res NaN) and underflowed below ~1e-154 (a false CONVERGED). Scaling A and q by a power of two
+    leaves the iterates exactly the same; Res becomes ||min(scale w, z)||."""
+    A = scenes.bai(4).A
+    q = -np.ones(A.shape[0])
+    fixed = dict(tol=1e-300, maxiter=12, stall_iterations=1000)
+    ref = nrmicp.solve(A, q, **fixed)
+    res = nrmicp.solve(scale * A, scale * q, **fixed)
+    np.testing.assert_array_equal(res.z, ref.z)
+    m = np.minimum(scale * (A @ res.z + q), res.z)
+    assert res.residual == pytest.approx(_stable_norm(m), rel=1e-12)
+    assert nrmicp.residual(scale * A, scale * q, res.z) == pytest.approx(_stable_norm(m), rel=1e-12)
+    conv = nrmicp.solve(scale * A, scale * q, tol=1e-8 * scale)
+    assert conv.success, conv.message
+    assert np.all(np.isfinite(conv.z))
+    assert _stable_norm(np.minimum(scale * (A @ conv.z + q), conv.z)) < 1e-8 * scale
+
+
+@pytest.mark.parametrize("name, kwargs", [("omega2", dict(omega2=1e-310)), ("gamma", dict(gamma=1e-310)),
+                                          ("alpha", dict(method="nrmm", alpha=1e-310)),
+                                          ("omega1", dict(omega1=4e-320))])
+def test_subnormal_parameters_are_rejected_by_name(name, kwargs):
+    A = scenes.bai(4).A
+    with pytest.raises(ValueError, match=name):
+        nrmicp.solve(A, -np.ones(A.shape[0]), **kwargs)
+
+
+def test_subnormal_matrix_diagonal_is_rejected_naming_A():
+    """1e-320 * A: the default Omega2 = diag(A) is subnormal (it returned [inf inf ...], Res NaN)."""
+    A = scenes.bai(4).A
+    with pytest.raises(ValueError, match=r"A\[0,0\]"):
+        nrmicp.solve(1e-320 * A, -np.ones(A.shape[0]))
