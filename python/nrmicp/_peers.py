@@ -147,7 +147,7 @@ def _qp_once(name, A, q, eps):
         s.settings.eps_duality_gap_abs = s.settings.eps_duality_gap_rel = eps
         s.setup(P, q, x_l=np.zeros(n), x_u=np.full(n, np.inf))
         st = s.solve()
-        return np.array(s.result.x), str(st), int(s.result.info.iter)
+        return np.array(s.result.x), getattr(st, "name", str(st)), int(s.result.info.iter)
     if name == "osqp":
         import osqp
 

@@ -1,14 +1,23 @@
 """Work–precision benchmark: what each extra digit of accuracy costs in time.
 
-    python -m nrmicp bench [--quick] [--scenes ...] [--methods ...] [--z-updates ...]
+    python -m nrmicp bench [--quick] [--scenes ...] [--methods ...] [--peers psor,qp] [--z-updates ...]
                            [--tols ... | --tol-min 1e-12 --tol-max 1e-2] [--size small]
                            [--repeat 1] [--maxiter 10000] [--out bench-out]
 
-For every scene, method and z-update it sweeps ``tol`` (default 1e-2, 1e-3, …, 1e-12) and
+For every scene, method and z-update it sweeps ``tol`` (default 1e-2, 1e-3, …, 1e-12). The
+methods are nrmicp's members, ``newton`` (its 'iterations' are Newton steps on the finest level;
+``hierarchy='auto'``) and any member with ``+polish`` (``polish=True``: one Newton step on the
+settled active set); next to them, in the same diagrams, the peers a user would otherwise
+reach for (nrmicp/_peers.py): red-black projected SOR in numpy with SOR's optimal ω, and a QP
+solver (PIQP, else OSQP) on min ½zᵀAz + qᵀz, z ≥ 0, its eps tightened from tol by 10× until
+Res < tol (the time of that last run). The peers run on the scenes that are LCPs (ζ constant),
+the QP solver on the symmetric ones; one that is not installed is skipped with a note. It
 records, per tol:
 
 - ``seconds``: wall time of one ``nrmicp.solve`` call (set-up, factorizations and iterations;
-  building the scene and its exact reference is excluded), best of ``--repeat`` runs;
+  building the scene and its exact reference is excluded), best of ``--repeat`` runs; for
+  PSOR the row blocks and the sweeps (the colouring and ω are found once per scene, untimed),
+  for a QP solver its matrices, set-up, factorization and solve;
   ``setup_seconds``, ``factorization_seconds`` and ``iteration_seconds`` are the core's own
   ``result.timings`` of the best run, reported separately;
 - ``iterations`` (``result.nit``), ``residual`` (Res of the returned z), ``status``;
@@ -37,7 +46,9 @@ Outputs in ``--out`` (default ``bench-out/``): ``work_precision.csv``, ``work_pr
 and case the iterations per extra digit (Theil–Sen slope of the iteration count against
 −log10 tol over the converged rows) and the seconds per digit (that times the seconds per
 iteration, the least over the converged runs on the core's clock; "noise" when they are all
-too short to time), the best Res reached, and the fastest case at 1e-6 and 1e-10. The CSV and the
+too short to time; "-" for newton, a polished member and a QP solver, which do not buy digits
+one at a time), the seconds to reach the tols nearest 1e-6 and 1e-10, the best Res reached,
+and the fastest case at 1e-6 and 1e-10, peers included. The CSV and the
 summary are written before any figure, and record nrmicp's version and backends, the numpy,
 scipy and Python versions, the CPU model and the cores. Without matplotlib the run ends after
 them with a line saying that ``pip install nrmicp[plot]`` draws the figures.
@@ -355,15 +366,15 @@ def resolve_peers(names, problems):
             continue
         if p not in out:
             out.append(p)
-    per_scene = {}
-    for s, P in problems.items():
-        per_scene[s] = []
-        for p in out:
+    per_scene, skipped = {s: [] for s in problems}, {}
+    for p in out:
+        for s, P in problems.items():
             why = _peers.applicable(p, P)
             if why:
-                notes.append(f"peer {p} not run on {s}: {why}")
+                skipped.setdefault((p, why), []).append(s)
             else:
                 per_scene[s].append(p)
+    notes += [f"peer {p} not run on {', '.join(ss)}: {why}" for (p, why), ss in skipped.items()]
     return per_scene, notes
 
 
@@ -832,7 +843,7 @@ def _parser(prog: str = "python -m nrmicp bench"):
     p.add_argument("--repeat", type=int, default=1, help="time each solve r times and keep the best (default 1)")
     p.add_argument("--maxiter", type=int, default=10000, help="iteration cap per solve (default 10000)")
     p.add_argument("--history-scene", help="scene of the convergence-history figure "
-                                           "(default thermoforming_2d if swept, else the first scene)")
+                                           "(default obstacle_2d if swept, where newton and the peers all run; else the first scene)")
     p.add_argument("--out", default="bench-out", help="output directory (default bench-out/)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     return p
@@ -870,7 +881,7 @@ def main(argv: Optional[list[str]] = None, prog: str = "python -m nrmicp bench")
         print("--repeat and --maxiter must be >= 1", file=sys.stderr)
         return 2
     tols = _tols(args)
-    hist_scene = args.history_scene or ("thermoforming_2d" if "thermoforming_2d" in scenes_ else scenes_[0])
+    hist_scene = args.history_scene or ("obstacle_2d" if "obstacle_2d" in scenes_ else scenes_[0])
     if hist_scene not in scenes_:
         print(f"--history-scene {hist_scene!r} is not among the swept scenes", file=sys.stderr)
         return 2
