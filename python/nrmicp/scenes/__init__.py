@@ -20,6 +20,11 @@ Scenes (one module per family):
                           with a solution known by construction
 :func:`obstacle_1d`       membrane over a concave obstacle, closed-form solution
 :func:`obstacle_2d`       membrane over a paraboloid obstacle on the unit square
+:func:`obstacle_3d`       the same in 3D (7-point Laplacian): where factorizations get costly
+:func:`convection_diffusion_obstacle`
+                          upwind convection–diffusion with an obstacle: a nonsymmetric
+                          M-matrix
+:func:`p_matrix_cycling`  a P-matrix (not M, not H+) on which plain active-set Newton cycles
 :func:`thermoforming_1d`  implicit obstacle: a mould that expands with a temperature
 :func:`thermoforming_2d`  driven by the membrane (a quasi-variational inequality)
 :func:`impulse_control`   1D impulse-control QVI: ζ(z)_i = max_{j≥i} z_j − cost
@@ -31,6 +36,10 @@ Scenes (one module per family):
 should converge to), computed by construction or by a direct policy-iteration solver
 (:func:`solve_exact_obstacle`); quantities of the continuous model, such as a sampled
 closed-form solution or a price, live in ``reference``.
+
+Grid scenes record their grid (``Problem.grid``) and offer its geometric hierarchy for nested
+iteration, ``Problem.prolongations()`` (linear / bilinear / trilinear interpolation, for
+m = 2^k − 1 nodes per axis), to pass as ``hierarchy=``.
 
 nrmicp itself is imported lazily (only where ``nrmicp.Affine`` or ``nrmicp.Solver`` is
 needed), so these modules import and build their matrices without the compiled core.
@@ -48,6 +57,9 @@ __all__ = [
     "bai",
     "obstacle_1d",
     "obstacle_2d",
+    "obstacle_3d",
+    "convection_diffusion_obstacle",
+    "p_matrix_cycling",
     "thermoforming_1d",
     "thermoforming_2d",
     "impulse_control",
@@ -107,6 +119,10 @@ class Problem:
         Options the scene needs from the solver, with the reason in the scene's docstring
         (e.g. impulse control needs ``z_update='solve'``: its ζ has Lipschitz constant 1, where
         the default explicit z-update does not converge). :meth:`solve` applies them.
+    grid : tuple of int or None
+        Nodes per axis (x first, the fastest in the ordering) when the unknowns are the
+        interior nodes of a uniform tensor grid; None otherwise. :meth:`prolongations`
+        builds the geometric hierarchy from it.
     """
 
     name: str
@@ -120,6 +136,7 @@ class Problem:
     omits: tuple = ()
     lipschitz: Optional[float] = None
     solver_options: dict = field(default_factory=dict)
+    grid: Optional[tuple] = None
 
     @property
     def n(self) -> int:
@@ -140,6 +157,20 @@ class Problem:
         w, g = self.parts(z)
         return float(np.linalg.norm(np.minimum(w, g)))
 
+    def prolongations(self):
+        """The scene's geometric hierarchy for ``hierarchy=`` (nested iteration), or None.
+
+        Linear / bilinear / trilinear interpolation on the scene's grid, finest first (P_l of
+        shape (n_l, n_{l+1})), halving every axis while the node counts are odd, so a grid
+        of m = 2^k − 1 nodes per axis coarsens to a single node. None when the scene has no
+        grid or its node counts are even (use ``hierarchy="amg"`` there).
+        """
+        if self.grid is None:
+            return None
+        from ._operators import grid_prolongations
+
+        return grid_prolongations(self.grid) or None
+
     def solve(self, **options):
         """``nrmicp.solve(self.A, self.q, self.zeta, **self.solver_options, **options)``."""
         import nrmicp
@@ -149,7 +180,9 @@ class Problem:
 
 from ._exact import solve_exact_obstacle  # noqa: E402
 from .bai import bai  # noqa: E402
-from .obstacle import obstacle_1d, obstacle_2d  # noqa: E402
+from .obstacle import obstacle_1d, obstacle_2d, obstacle_3d  # noqa: E402
+from .convection import convection_diffusion_obstacle  # noqa: E402
+from .p_matrix import p_matrix_cycling  # noqa: E402
 from .thermoforming import thermoforming_1d, thermoforming_2d  # noqa: E402
 from .impulse import impulse_control  # noqa: E402
 from .american import american_put, american_put_price, binomial_american_put  # noqa: E402
@@ -162,9 +195,9 @@ def catalog(size: str = "small") -> list:
     (n of tens of thousands).
     """
     if size == "small":
-        m1, m2 = 255, 16
+        m1, m2, m3 = 255, 16, 7
     elif size == "medium":
-        m1, m2 = 4095, 128
+        m1, m2, m3 = 4095, 128, 31
     else:
         raise ValueError(f"size must be 'small' or 'medium', got {size!r}")
     return [
@@ -173,6 +206,9 @@ def catalog(size: str = "small") -> list:
         bai(m2, kind="icp"),
         obstacle_1d(m1),
         obstacle_2d(m2),
+        obstacle_3d(m3),
+        convection_diffusion_obstacle(m2),
+        p_matrix_cycling(m2),
         thermoforming_1d(m1),
         thermoforming_2d(m2),
         impulse_control(m1),

@@ -114,7 +114,7 @@ def american_put(S_max: float = 400.0, K: float = 100.0, r: float = 0.05, sigma:
         models=("Black-Scholes dynamics", "early exercise (payoff obstacle)"),
         omits=("dividends", "transaction costs", "stochastic volatility or rates",
                "all later time steps (see american_put_price)"),
-        lipschitz=0.0)
+        lipschitz=0.0, grid=(n_space - 1,))
 
 
 def american_put_price(S0: float, K: float = 100.0, r: float = 0.05, sigma: float = 0.2,

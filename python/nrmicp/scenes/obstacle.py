@@ -4,8 +4,8 @@ Model (dimensionless: unit tension, unit domain): find the deflection u with
 
     −Δu ≥ f,   u ≥ ψ,   (−Δu − f)(u − ψ) = 0   in Ω = (0, 1)^d,   u = 0 on ∂Ω.
 
-Discretization: finite differences on the interior nodes, h = 1/(n + 1), 3-point (1D) or
-5-point (2D) Laplacian. As ICP(q, A, ζ) in z = u:
+Discretization: finite differences on the interior nodes, h = 1/(n + 1), 3-point (1D),
+5-point (2D) or 7-point (3D) Laplacian. As ICP(q, A, ζ) in z = u:
 
     A = −Δ_h (entries 2/h² and −1/h² in 1D, 4/h² and −1/h² in 2D: the PDE as written,
         so w = A z + q is the contact pressure density in units of f),
@@ -24,7 +24,7 @@ import numpy as np
 
 from . import Problem
 from ._exact import solve_exact_obstacle
-from ._operators import grid_1d, grid_2d, neg_laplacian_1d, neg_laplacian_2d
+from ._operators import grid_1d, grid_2d, grid_3d, neg_laplacian_1d, neg_laplacian_2d, neg_laplacian_3d
 
 _MODELS = ("linear elastic membrane (small deflections)", "rigid obstacle, unilateral contact")
 _OMITS = ("large-deflection nonlinearity", "friction and adhesion", "dynamics",
@@ -71,7 +71,7 @@ def obstacle_1d(n: int, a: float = 0.1, exact: bool = True) -> Problem:
         reference={"x": x, "h": 1.0 / (n + 1), "u_exact": obstacle_1d_exact(x, a),
                    "contact": (x0, 1.0 - x0)},
         description=f"string over the obstacle {a} - (x-1/2)^2, f = 0, FD h = 1/{n + 1} (shifted LCP)",
-        models=_MODELS, omits=_OMITS, lipschitz=0.0)
+        models=_MODELS, omits=_OMITS, lipschitz=0.0, grid=(n,))
 
 
 def obstacle_2d(m: int, a: float = 0.1, load: float = 0.0, exact=None) -> Problem:
@@ -92,4 +92,29 @@ def obstacle_2d(m: int, a: float = 0.1, load: float = 0.0, exact=None) -> Proble
         z_exact=solve_exact_obstacle(A, q, psi) if exact else None,
         reference={"x": X, "y": Y, "h": 1.0 / (m + 1)},
         description=f"membrane over a paraboloid obstacle, f = {load}, 5-point FD on {m}x{m} (shifted LCP)",
-        models=_MODELS, omits=_OMITS, lipschitz=0.0)
+        models=_MODELS, omits=_OMITS, lipschitz=0.0, grid=(m, m))
+
+
+def obstacle_3d(m: int, a: float = 0.1, load: float = 0.0, exact=None) -> Problem:
+    """3D obstacle problem on (0, 1)³ over ψ = a − |x − ½|², load f ≡ ``load``, μ = 0.
+
+    Not a membrane any more but the same variational inequality (e.g. a confined elastic
+    body or a potential bounded below); it is here because 3D is where factorizations get
+    expensive (fill grows like n^{4/3}). m³ interior nodes (n = m³), h = 1/(m + 1), 7-point
+    Laplacian, lexicographic ordering (x fastest). ``z_exact`` by policy iteration when
+    ``exact`` is True (default: when n ≤ 20 000), else None.
+    """
+    A = neg_laplacian_3d(m)
+    X, Y, Z = grid_3d(m)
+    psi = a - (X - 0.5) ** 2 - (Y - 0.5) ** 2 - (Z - 0.5) ** 2
+    q = np.full(m**3, -float(load))
+    if exact is None:
+        exact = m**3 <= 20_000
+    return Problem(
+        name=f"obstacle_3d(m={m})", A=A, q=q, zeta=psi,
+        z_exact=solve_exact_obstacle(A, q, psi) if exact else None,
+        reference={"x": X, "y": Y, "z": Z, "h": 1.0 / (m + 1)},
+        description=f"3D obstacle problem over a paraboloid, f = {load}, 7-point FD on {m}^3 (shifted LCP)",
+        models=("Laplace operator in 3D (mu = 0)", "rigid obstacle, unilateral constraint"),
+        omits=("any specific 3D physics beyond the Laplacian",) + _OMITS[1:],
+        lipschitz=0.0, grid=(m, m, m))

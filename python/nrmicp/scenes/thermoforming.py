@@ -65,7 +65,7 @@ def _thermo_zeta(L: sp.csr_matrix, phi0: np.ndarray, kappa: float, delta: float,
     return zeta
 
 
-def _problem(name, dim, L, phi0, f, kappa, delta, ell, exact, extra_ref):
+def _problem(name, dim, L, phi0, f, kappa, delta, ell, exact, extra_ref, grid):
     if not (kappa >= 0 and delta >= 0 and ell > 0):
         raise ValueError(f"need kappa >= 0, delta >= 0, ell > 0; got {kappa}, {delta}, {ell}")
     lip = kappa * 3.0 * np.sqrt(3.0) / (8.0 * ell)
@@ -80,7 +80,7 @@ def _problem(name, dim, L, phi0, f, kappa, delta, ell, exact, extra_ref):
     return Problem(
         name=name, A=L, q=q, zeta=zeta, z_exact=z_exact, reference=ref,
         description=f"{dim} thermoforming QVI: membrane on a mould expanding with a membrane-heated temperature",
-        models=_MODELS, omits=_OMITS, lipschitz=float(lip))
+        models=_MODELS, omits=_OMITS, lipschitz=float(lip), grid=grid)
 
 
 def thermoforming_1d(n: int, f: float = -10.0, kappa: float = 0.05, delta: float = 0.01,
@@ -95,7 +95,7 @@ def thermoforming_1d(n: int, f: float = -10.0, kappa: float = 0.05, delta: float
     x = grid_1d(n)
     phi0 = -0.45 + 0.2 * np.sin(2 * np.pi * x) ** 2
     return _problem(f"thermoforming_1d(n={n})", "1D", L, phi0, f, kappa, delta, ell, exact,
-                    {"x": x, "h": 1.0 / (n + 1)})
+                    {"x": x, "h": 1.0 / (n + 1)}, (n,))
 
 
 def thermoforming_2d(m: int, f: float = -10.0, kappa: float = 0.05, delta: float = 0.01,
@@ -112,4 +112,4 @@ def thermoforming_2d(m: int, f: float = -10.0, kappa: float = 0.05, delta: float
     if exact is None:
         exact = m * m <= 20_000
     return _problem(f"thermoforming_2d(m={m})", "2D", L, phi0, f, kappa, delta, ell, exact,
-                    {"x": X, "y": Y, "h": 1.0 / (m + 1)})
+                    {"x": X, "y": Y, "h": 1.0 / (m + 1)}, (m, m))

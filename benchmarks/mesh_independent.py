@@ -1,0 +1,424 @@
+#!/usr/bin/env python
+"""Mesh-independent solves (issue 7), re-measured on the product: one command.
+
+    python benchmarks/mesh_independent.py --out bench-out/mesh            # everything (long)
+    python benchmarks/mesh_independent.py --quick --out bench-out/mesh-q  # n <= 65k, minutes
+
+Obstacle section: the membrane obstacle of benchmarks/run_peers.py ("obstacle0": 5-point
+Laplacian, μ = 0, multiplied through by h² and shifted to the LCP in y = z − ψ) on 2D grids
+m = 127 … 2047 (n = 16k … 4M), and its 3D 7-point twin (obstacle_3d, m = 47 and 103, n ≈ 1e5
+and 1.1e6), target Res = ‖min(Ay + q, y)‖₂ < 1e-8. Peers, each in its own subprocess (peak
+memory = the child's VmHWM during the solve, reset by /proc/self/clear_refs after building
+the problem; "extra" subtracts the resident size before the solve; CPU seconds of the child,
+all threads, next to wall seconds, since a loaded machine inflates wall time; for the QP
+solvers the wall time is the final run's, CPU time includes the eps tuning):
+
+    newton-amg / newton-geo / newton-cold   nrmicp method="newton", hierarchy "amg" /
+                                            the scene's prolongations() / None
+    nrmgs+aa                                nrmicp nrmgs, accelerate="anderson"
+    psor                                    red-black projected SOR, grid-optimal ω
+    piqp, osqp                              QP solvers (benchmarks/qp_peers.py), eps tightened
+                                            10× at a time until Res < target
+    proto-amg / proto-geo / proto-amg-cg    benchmarks/newton_prototype.py (scipy splu, or
+                                            pyamg-preconditioned CG)
+
+A peer whose time, extrapolated from its smaller sizes (power law), exceeds --budget is
+skipped at that size and marked so; one that failed or timed out is skipped at larger sizes.
+The prototype's SuperLU (splu) is not run above n = 1.1e6 in 2D and 1.5e5 in 3D (its fill
+needs > 10 GB there).
+
+Other sections (in this process): thermoforming 1D/2D (total linear solves of newton against
+iterations of nrmgs ± Anderson), the American put march (Newton steps per time step,
+warm-started) and impulse control (steps). Writes <out>.csv and <out>.md. Timings on a shared
+machine are noisy: compare peers within one run; the load average is recorded.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+import scipy.sparse as sp
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+
+TOL = 1e-8
+GRIDS = {"2d": [127, 255, 511, 1023, 2047], "3d": [47, 103]}
+QUICK_GRIDS = {"2d": [127, 255], "3d": [23]}
+PEERS = ["newton-amg", "newton-geo", "newton-cold", "nrmgs+aa", "psor", "piqp", "osqp",
+         "proto-amg", "proto-geo", "proto-amg-cg"]
+# exponent p of time ~ n^p used to extrapolate before a peer has two sizes; in 3D a sparse
+# Cholesky factorization costs ~n^2 flops (nested dissection), hence the "3d" entries
+DEFAULT_P = {"newton-cold": 2.5, "nrmgs+aa": 2.0, "psor": 1.6, "piqp": 1.5, "osqp": 2.0,
+             "3d": {"newton-amg": 2.0, "newton-geo": 2.0, "newton-cold": 2.5, "piqp": 2.0,
+                    "proto-amg": 2.0, "proto-geo": 2.0}}
+SPLU_MAX_N = {"2d": 1_100_000, "3d": 150_000}   # SuperLU's fill: > 10 GB beyond (2D 4M, 3D 1M)
+
+
+# ----------------------------------------------------------------------------- child side
+def build(dim, m):
+    """(A, q, problem): the h²-scaled shifted LCP of obstacle_2d / obstacle_3d."""
+    from nrmicp import scenes
+    P = (scenes.obstacle_2d if dim == "2d" else scenes.obstacle_3d)(m, exact=False)
+    h2 = P.reference["h"] ** 2
+    A = sp.csr_matrix(P.A * h2)
+    q = h2 * (P.q + P.A @ P.zeta)
+    return A, q, P
+
+
+def _status_kb(field):
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith(field + ":"):
+                return int(line.split()[1])
+    return 0
+
+
+def _colors(dim, m):
+    """Red-black colouring of the grid (x fastest): (i + j [+ k]) mod 2."""
+    d = 2 if dim == "2d" else 3
+    return (np.indices((m,) * d).reshape(d, -1).sum(axis=0) % 2).astype(np.int8)
+
+
+def run_peer(peer, dim, m, tol, budget, eps_start=None):
+    """Run one peer on one case; returns a dict (JSON-serializable)."""
+    import nrmicp  # noqa: F401  (imports outside the timed region, as a user's process has them)
+    import pyamg  # noqa: F401
+    import qp_peers
+    import newton_prototype as proto
+    from scipy_modulus import residual
+
+    A, q, P = build(dim, m)
+    rss0 = _status_kb("VmRSS")
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")          # reset VmHWM to the current RSS
+    except OSError:
+        pass
+    out = dict(steps=None, solves=None, note="")
+    if peer.endswith("-geo") and P.prolongations() is None:
+        return dict(status="skipped (no geometric hierarchy)", note="")
+    t0, c0 = time.perf_counter(), time.process_time()
+    if peer.startswith("newton"):
+        hier = {"newton-amg": "amg", "newton-geo": None, "newton-cold": None}[peer]
+        if peer == "newton-geo":
+            hier = P.prolongations()
+        r = nrmicp.solve(A, q, method="newton", hierarchy=hier, tol=tol, maxiter=1000)
+        z = r.z
+        out.update(status=r.status.name.lower(), steps=int(r.nit), solves=int(r.linear_solves),
+                   note=f"path={r.path}; level_steps={r.level_steps}; level_seconds="
+                        f"{[round(t, 2) for t in r.level_seconds]}")
+    elif peer == "nrmgs+aa":
+        r = nrmicp.solve(A, q, method="nrmgs", accelerate="anderson", tol=tol, maxiter=200_000)
+        z = r.z
+        out.update(status=r.status.name.lower(), steps=int(r.nit))
+    elif peer == "psor":
+        h = 1.0 / (m + 1)
+        rho = math.cos(math.pi * h)     # Jacobi spectral radius, 5- and 7-point Laplacian
+        omega = 2.0 / (1.0 + math.sqrt(1.0 - rho**2))
+        o = qp_peers.psor_solve(A, q, tol, omega=omega, colors=_colors(dim, m),
+                                time_limit=1.5 * budget)
+        z = o["z"]
+        out.update(status=o["status"], steps=int(o["iters"]), note=f"omega={omega:.4f}")
+    elif peer in ("piqp", "osqp"):
+        # eps tightened 10x from the eps that worked at the previous size; `seconds` is the
+        # final run's time (a user who knew the right eps), the tuning total is in the note
+        o = qp_peers.solve_to_target(peer, A, q, tol, eps_start=eps_start, time_budget=budget)
+        z = o["z"]
+        out.update(status="converged" if o["reached"] else o["status"], steps=int(o["iters"]),
+                   eps=o["eps"], final_seconds=o["seconds"],
+                   note=f"{o['setting']}; with eps tuning {o['tuning_seconds']:.1f} s")
+    elif peer.startswith("proto"):
+        pro = {"proto-amg": "amg", "proto-geo": P.prolongations(), "proto-amg-cg": "amg"}[peer]
+        o = proto.solve(A, q, pro, tol=tol, inner="cg" if peer.endswith("cg") else "splu")
+        z = o["z"]
+        out.update(status="converged" if o["res"] < tol else "not converged", steps=o["steps"],
+                   solves=o["solves"], note=f"level_steps={o['steps_per_level']}")
+    else:
+        raise ValueError(peer)
+    cpu = time.process_time() - c0
+    seconds = out.pop("final_seconds", None) or time.perf_counter() - t0
+    hwm = _status_kb("VmHWM")
+    res = float(residual(A, q, z)) if z is not None else float("nan")
+    if out["status"] == "converged" and not res < tol:
+        out["status"] = "res above target"
+    out.update(seconds=seconds, cpu_seconds=cpu, res=res, peak_mb=hwm / 1024, extra_mb=(hwm - rss0) / 1024)
+    return out
+
+
+# ----------------------------------------------------------------------------- parent side
+def available(peer):
+    if peer in ("piqp", "osqp"):
+        try:
+            __import__(peer)
+        except ImportError:
+            return False
+    return True
+
+
+def estimate(hist, n, p_default):
+    if not hist:
+        return None
+    if len(hist) >= 2:
+        (n1, t1), (n2, t2) = hist[-2], hist[-1]
+        p = min(max(math.log(max(t2, 1e-3) / max(t1, 1e-3)) / math.log(n2 / n1), 1.0), 2.5)
+    else:
+        p = p_default
+    n0, t0 = hist[-1]
+    return t0 * (n / n0) ** p
+
+
+def obstacle_section(args, log):
+    rows = []
+    grids = QUICK_GRIDS if args.quick else GRIDS
+    for dim in args.dims:
+        hist, dead, qp_eps = {}, {}, {}
+        for m in grids[dim]:
+            n = m ** (2 if dim == "2d" else 3)
+            log(f"\n== obstacle {dim} m={m} n={n}  (load {os.getloadavg()[0]:.1f})")
+            for peer in args.peers:
+                row = dict(section="obstacle", case=f"obstacle_{dim}", m=m, n=n, peer=peer,
+                           target=args.tol, load=round(os.getloadavg()[0], 2))
+                p_default = DEFAULT_P[dim].get(peer) if dim in DEFAULT_P else None
+                est = estimate(hist.get(peer, []), n, p_default or DEFAULT_P.get(peer, 1.3))
+                if not available(peer):
+                    row["status"] = "not installed"
+                elif peer in dead:
+                    row["status"] = dead[peer]
+                elif peer in ("proto-amg", "proto-geo") and n > SPLU_MAX_N[dim]:
+                    row["status"] = "skipped (splu fill > 10 GB)"
+                elif est is not None and est > args.budget:
+                    row["status"] = f"skipped (est. {est:.0f} s > budget {args.budget:.0f} s)"
+                else:
+                    cmd = [sys.executable, os.path.abspath(__file__), "--child",
+                           json.dumps([peer, dim, m, args.tol, args.budget, qp_eps.get(peer)])]
+                    try:
+                        cp = subprocess.run(cmd, capture_output=True, text=True,
+                                            timeout=2 * args.budget + 60)
+                        lines = [ln for ln in cp.stdout.splitlines() if ln.startswith("{")]
+                        if cp.returncode != 0 or not lines:
+                            row["status"] = "error"
+                            row["note"] = (cp.stderr.strip().splitlines() or ["?"])[-1][:200]
+                        else:
+                            row.update(json.loads(lines[-1]))
+                    except subprocess.TimeoutExpired:
+                        row["status"] = f"timeout (> {2 * args.budget + 60:.0f} s)"
+                st = row.get("status", "")
+                if st == "converged":
+                    hist.setdefault(peer, []).append((n, row["seconds"]))
+                    if "eps" in row:
+                        qp_eps[peer] = row["eps"]
+                elif not st.startswith(("skipped", "not installed")) and peer not in dead:
+                    dead[peer] = f"skipped (failed at n={n}: {st})"
+                rows.append(row)
+                log(f"  {peer:13s} {st:28s} steps={row.get('steps')} solves={row.get('solves')} "
+                    f"t={row.get('seconds', float('nan')):.2f}s cpu={row.get('cpu_seconds', float('nan')):.2f}s res={row.get('res', float('nan')):.1e} "
+                    f"extra={row.get('extra_mb', float('nan')):.0f}MB {row.get('note', '')}")
+    return rows
+
+
+def _newton_row(section, case, n, peer, r, seconds, z_exact=None, extra=None):
+    row = dict(section=section, case=case, n=n, peer=peer, status=r.status.name.lower(),
+               steps=int(r.nit), seconds=seconds, res=float(r.residual),
+               load=round(os.getloadavg()[0], 2))
+    if hasattr(r, "linear_solves"):
+        row["solves"] = int(r.linear_solves)
+        row["note"] = f"path={r.path}; outer={r.outer_iterations}; level_steps={r.level_steps}"
+    if z_exact is not None:
+        row["err"] = float(np.abs(r.z - z_exact).max())
+    row.update(extra or {})
+    return row
+
+
+def thermoforming_section(args, log):
+    import nrmicp
+    from nrmicp import scenes
+    rows = []
+    sizes = {"1d": [63, 127, 255, 511] if not args.quick else [63, 127],
+             "2d": [15, 31, 63, 127] if not args.quick else [15, 31]}
+    for dim, ms in sizes.items():
+        for m in ms:
+            n = m if dim == "1d" else m * m
+            P = (scenes.thermoforming_1d if dim == "1d" else scenes.thermoforming_2d)(m, exact=n <= 4096)
+            log(f"\n== thermoforming_{dim} m={m} n={n}")
+            runs = [("newton", dict(method="newton")),
+                    ("newton-cold", dict(method="newton", hierarchy=None)),
+                    ("newton-geo", dict(method="newton", hierarchy=P.prolongations())),
+                    ("nrmgs", dict(method="nrmgs", maxiter=200_000)),
+                    ("nrmgs+aa", dict(method="nrmgs", accelerate="anderson", maxiter=200_000))]
+            for peer, kw in runs:
+                t0 = time.perf_counter()
+                r = nrmicp.solve(P.A, P.q, P.zeta, tol=args.tol, **kw)
+                row = _newton_row("thermoforming", f"thermoforming_{dim}", n, peer, r,
+                                  time.perf_counter() - t0, P.z_exact)
+                rows.append(row)
+                log(f"  {peer:12s} {row['status']:10s} steps={row['steps']} solves={row.get('solves')} "
+                    f"t={row['seconds']:.2f}s res={row['res']:.1e} err={row.get('err', float('nan')):.1e} "
+                    f"{row.get('note', '')}")
+    return rows
+
+
+def american_section(args, log):
+    from nrmicp import scenes
+    rows = []
+    sizes = [800, 1600, 3200, 6400] if not args.quick else [800, 1600]
+    for n_space in sizes:
+        log(f"\n== american put n_space={n_space}, 100 time steps")
+        for peer, kw in [("newton", dict(method="newton")),
+                         ("nrmgs+aa", dict(method="nrmgs", accelerate="anderson"))]:
+            price, info = scenes.american_put_price(100.0, n_space=n_space, n_time=100, tol=args.tol,
+                                                    full_output=True, **kw)
+            nit = info["nit"]
+            row = dict(section="american", case="american_put", n=n_space - 1, peer=peer,
+                       status="converged" if info["success"] else "not converged",
+                       steps=float(nit.mean()), solves=int(nit.sum()), seconds=info["seconds"],
+                       res=float(info["residual"].max()), load=round(os.getloadavg()[0], 2),
+                       note=f"price={price:.6f}; steps after the first: mean {nit[1:].mean():.2f}, "
+                            f"max {nit[1:].max()}; first {nit[0]}")
+            rows.append(row)
+            log(f"  {peer:10s} {row['status']} steps/step={row['steps']:.2f} t={row['seconds']:.2f}s {row['note']}")
+        rows.append(_american_prototype(n_space, args.tol))
+        log(f"  prototype  {rows[-1]['status']} steps/step={rows[-1]['steps']:.2f} t={rows[-1]['seconds']:.2f}s "
+            f"{rows[-1]['note']}")
+    return rows
+
+
+def _american_prototype(n_space, tol):
+    """The same march with the prototype's active-set Newton (splu), warm-started from the
+    previous time step: the hand-assembled peer."""
+    import newton_prototype as proto
+    from nrmicp.scenes.american import _March
+    m = _March(400.0, 100.0, 0.05, 0.2, 1.0, n_space, 100, 2)
+    t0 = time.perf_counter()
+    v, nit, ok = m.payoff.copy(), [], True
+    for kind in m.steps():
+        q = m.q(kind, v) + m.A @ m.payoff          # the LCP in y = v − payoff
+        y, k, res = proto.active_set_newton(m.A, q, np.maximum(v - m.payoff, 0.0), tol, 200)
+        v = y + m.payoff
+        nit.append(k)
+        ok = ok and res < tol
+    nit = np.array(nit)
+    return dict(section="american", case="american_put", n=n_space - 1, peer="prototype",
+                status="converged" if ok else "not converged", steps=float(nit.mean()),
+                solves=int(nit.sum()), seconds=time.perf_counter() - t0, res=float("nan"),
+                load=round(os.getloadavg()[0], 2),
+                note=f"steps after the first: mean {nit[1:].mean():.2f}, max {nit[1:].max()}; first {nit[0]}")
+
+
+def impulse_section(args, log):
+    import nrmicp
+    from nrmicp import scenes
+    rows = []
+    sizes = [101, 401, 1601] if not args.quick else [101, 401]
+    for n in sizes:
+        P = scenes.impulse_control(n)
+        log(f"\n== impulse control n={n}")
+        for peer, kw in [("newton", dict(method="newton")),
+                         ("nrmgs (z_update=solve)", dict(method="nrmgs", z_update="solve", maxiter=200_000))]:
+            t0 = time.perf_counter()
+            r = nrmicp.solve(P.A, P.q, P.zeta, tol=args.tol, **kw)
+            row = _newton_row("impulse", "impulse_control", n, peer, r, time.perf_counter() - t0, P.z_exact)
+            rows.append(row)
+            log(f"  {peer:22s} {row['status']:10s} steps={row['steps']} solves={row.get('solves')} "
+                f"t={row['seconds']:.2f}s res={row['res']:.1e} err={row['err']:.1e} {row.get('note', '')}")
+    return rows
+
+
+# ----------------------------------------------------------------------------- report
+FIELDS = ["section", "case", "m", "n", "peer", "status", "steps", "solves", "seconds", "cpu_seconds", "res", "err",
+          "peak_mb", "extra_mb", "target", "load", "note"]
+
+
+def _cell(r):
+    st = r.get("status", "")
+    if st != "converged":
+        return st.split(" (")[0] if st.startswith("skipped") else st
+    s = f"{r['seconds']:.2f} s"
+    if r.get("steps") is not None:
+        unit = "steps" if r["peer"].startswith(("newton", "proto")) else "it"
+        s = f"{r['steps']} {unit}, " + s
+    return s
+
+
+def markdown(rows, meta):
+    out = [f"# Mesh-independent solves (benchmarks/mesh_independent.py)", "",
+           f"{meta}", ""]
+    obst = [r for r in rows if r["section"] == "obstacle"]
+    for case in dict.fromkeys(r["case"] for r in obst):
+        rs = [r for r in obst if r["case"] == case]
+        peers = list(dict.fromkeys(r["peer"] for r in rs))
+        out += [f"## {case}: seconds to Res < {rs[0]['target']:g} (finest-level Newton steps / iterations)", "",
+                "| n | " + " | ".join(peers) + " |", "|---|" + "---|" * len(peers)]
+        for n in dict.fromkeys(r["n"] for r in rs):
+            cells = {r["peer"]: _cell(r) for r in rs if r["n"] == n}
+            out.append(f"| {n:,} | " + " | ".join(cells.get(p, "") for p in peers) + " |")
+        out += ["", "Linear solves (all levels) and extra peak memory (MB):", "",
+                "| n | " + " | ".join(p for p in peers) + " |", "|---|" + "---|" * len(peers)]
+        for n in dict.fromkeys(r["n"] for r in rs):
+            cells = {}
+            for r in rs:
+                if r["n"] == n and r.get("status") == "converged":
+                    sol = f"{r['solves']} solves, " if r.get("solves") is not None else ""
+                    cells[r["peer"]] = f"{sol}{r['extra_mb']:.0f} MB"
+            out.append(f"| {n:,} | " + " | ".join(cells.get(p, "") for p in peers) + " |")
+        out.append("")
+    for sec, title in [("thermoforming", "Thermoforming: Newton steps / linear solves (total) and nrmgs iterations"),
+                       ("american", "American put, 100 time steps: Newton steps per time step (mean)"),
+                       ("impulse", "Impulse control")]:
+        rs = [r for r in rows if r["section"] == sec]
+        if not rs:
+            continue
+        out += [f"## {title}", "", "| case | n | peer | status | steps | linear solves | seconds | Res | max err | note |",
+                "|---|---|---|---|---|---|---|---|---|---|"]
+        for r in rs:
+            steps = f"{r['steps']:.2f}" if isinstance(r.get("steps"), float) else r.get("steps")
+            err = f"{r['err']:.1e}" if r.get("err") is not None else ""
+            out.append(f"| {r['case']} | {r['n']:,} | {r['peer']} | {r['status']} | {steps} | "
+                       f"{r.get('solves', '')} | {r['seconds']:.2f} | {r['res']:.1e} | {err} | {r.get('note', '')} |")
+        out.append("")
+    return "\n".join(out)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--child", help=argparse.SUPPRESS)
+    ap.add_argument("--out", default="bench-out/mesh_independent")
+    ap.add_argument("--quick", action="store_true", help="small sizes only (minutes)")
+    ap.add_argument("--sections", nargs="+", default=["obstacle", "thermoforming", "american", "impulse"])
+    ap.add_argument("--dims", nargs="+", default=["2d", "3d"])
+    ap.add_argument("--peers", nargs="+", default=PEERS)
+    ap.add_argument("--budget", type=float, default=600.0, help="seconds per peer and size (extrapolated)")
+    ap.add_argument("--tol", type=float, default=TOL)
+    args = ap.parse_args()
+    if args.child:
+        print(json.dumps(run_peer(*json.loads(args.child))), flush=True)
+        return
+    log = lambda s: print(s, flush=True)  # noqa: E731
+    import nrmicp
+    meta = (f"nrmicp {nrmicp.__version__}, {os.cpu_count()} cores, load average at start "
+            f"{os.getloadavg()[0]:.1f} (shared machine: compare within the run), {time.strftime('%Y-%m-%d %H:%M')}")
+    log(meta)
+    rows = []
+    sections = {"obstacle": obstacle_section, "thermoforming": thermoforming_section,
+                "american": american_section, "impulse": impulse_section}
+    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    for name in args.sections:
+        rows += sections[name](args, log)
+        with open(args.out + ".csv", "w", newline="") as f:     # after each section: partial results survive
+            w = csv.DictWriter(f, fieldnames=FIELDS, extrasaction="ignore")
+            w.writeheader()
+            w.writerows(rows)
+        with open(args.out + ".md", "w") as f:
+            f.write(markdown(rows, meta) + "\n")
+    log(f"\nwrote {args.out}.csv and {args.out}.md")
+
+
+if __name__ == "__main__":
+    main()

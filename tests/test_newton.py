@@ -1,0 +1,203 @@
+"""method="newton": agreement with the scenes' exact discrete solutions (policy iteration),
+nesting, the fallback, flat step counts under refinement, honesty on the hard cases, polish,
+and its options. Small sizes: seconds in all."""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import nrmicp
+from nrmicp import scenes
+
+import test_hard_cases as hard
+
+pytest.importorskip("pyamg")
+
+
+def err(res, problem):
+    return float(np.abs(res.z - problem.z_exact).max())
+
+
+def impulse_jacobian(problem):
+    """∂ζ of the impulse-control ζ(z)_i = max_{j≥i}(z_j − c x_j) + c x_i − K: row i picks the
+    first maximizer j*(i) (a selection matrix). Written here from the scene's formula."""
+    x, c = problem.reference["x"], problem.reference["prop"]
+    n, idx = x.size, np.arange(x.size)
+
+    def jacobian(z):
+        v = z - c * x
+        best = np.maximum.accumulate(v[::-1])[::-1]
+        first = np.minimum.accumulate(np.where(v == best, idx, n)[::-1])[::-1]
+        return sp.csr_matrix((np.ones(n), (idx, first)), shape=(n, n))
+
+    return jacobian
+
+
+SCENES = {
+    "obstacle_1d": lambda: scenes.obstacle_1d(127),
+    "obstacle_2d": lambda: scenes.obstacle_2d(31),
+    "thermoforming_1d": lambda: scenes.thermoforming_1d(63),
+    "american_put": lambda: scenes.american_put(n_space=256),
+}
+
+
+@pytest.mark.parametrize("hierarchy", [None, "amg", "grid"])
+@pytest.mark.parametrize("name", list(SCENES))
+def test_newton_agrees_with_the_exact_discrete_solution(name, hierarchy):
+    problem = SCENES[name]()
+    if hierarchy == "grid":
+        hierarchy = problem.prolongations()
+        assert hierarchy, f"{name} offers a geometric hierarchy"
+    res = problem.solve(method="newton", hierarchy=hierarchy, tol=1e-10)
+    assert res.success, res.message
+    assert err(res, problem) < 1e-10
+    assert res.residual == pytest.approx(problem.residual(res.z), rel=1e-6, abs=1e-13)
+    assert len(res.level_steps) == len(res.level_seconds)
+    if not isinstance(hierarchy, str):
+        assert len(res.level_steps) == 1 + len(hierarchy or [])
+    assert res.nit == res.level_steps[0] and res.linear_solves >= sum(res.level_steps)
+
+
+def test_nesting_needs_fewer_finest_steps_than_a_cold_start():
+    problem = scenes.obstacle_2d(63, exact=False)
+    cold = problem.solve(method="newton", hierarchy=None)
+    nested = problem.solve(method="newton", hierarchy="amg")
+    assert cold.success and nested.success
+    assert nested.nit <= 3 < cold.nit
+    assert len(nested.level_steps) > 2 and nested.linear_solves > nested.nit
+
+
+@pytest.mark.parametrize("hierarchy", ["amg", "grid"])
+def test_finest_step_count_is_flat_under_refinement(hierarchy):
+    steps = []
+    for m in (15, 31, 63):  # odd: the geometric hierarchy halves down to one node
+        problem = scenes.obstacle_2d(m, exact=False)
+        h = problem.prolongations() if hierarchy == "grid" else "amg"
+        res = problem.solve(method="newton", hierarchy=h, tol=1e-10)
+        assert res.success, res.message
+        steps.append(res.nit)
+    assert max(steps) - min(steps) <= 1, steps
+
+
+def test_thermoforming_outer_iteration_and_impulse_control_with_its_jacobian():
+    problem = scenes.thermoforming_1d(63)
+    res = problem.solve(method="newton", hierarchy="amg", tol=1e-10)
+    assert res.success and err(res, problem) < 1e-10
+    assert res.outer_iterations >= 2 and res.linear_solves <= 30
+    problem = scenes.impulse_control(101)
+    res = nrmicp.solve(problem.A, problem.q, problem.zeta, method="newton", tol=1e-10,
+                       zeta_jacobian=impulse_jacobian(problem))
+    assert res.success, res.message
+    assert err(res, problem) < 1e-10
+    assert res.nit <= 20  # policy iteration: a handful of steps, not the outer fixed point's hundreds
+
+
+def test_affine_zeta_is_solved_on_the_full_system():
+    import problems
+    p = problems.make_affine_icp(8, symmetric=False)
+    res = nrmicp.solve(p.A, p.q, nrmicp.Affine(p.zeta.B, p.zeta.c), method="newton", tol=1e-12)
+    assert res.success and np.abs(res.z - p.z_star).max() < 1e-12
+    assert res.path == "newton"
+
+
+def test_nonsymmetric_m_matrix_upwind_convection_diffusion():
+    problem = scenes.convection_diffusion_obstacle(31)
+    for hierarchy in (None, "amg"):
+        res = problem.solve(method="newton", hierarchy=hierarchy, tol=1e-10)
+        assert res.success and err(res, problem) < 1e-10
+        assert res.inner == "umfpack"  # nonsymmetric: LU
+
+
+def test_p_matrix_where_the_active_set_steps_cycle_takes_the_fallback():
+    problem = scenes.p_matrix_cycling(4)
+    res = problem.solve(method="newton", hierarchy=None, tol=1e-12)
+    assert res.success, res.message
+    assert res.fallback_sweeps > 0 and res.path in ("newton+fallback", "fallback")
+    assert err(res, problem) < 1e-10
+
+
+def test_time_stepping_with_one_solver_american_put():
+    price_exact, exact = scenes.american_put_price(100.0, n_space=256, n_time=20, method="exact", full_output=True)
+    price, info = scenes.american_put_price(100.0, n_space=256, n_time=20, method="newton", full_output=True,
+                                            tol=1e-10, hierarchy="amg")
+    assert info["success"]
+    assert np.abs(info["V"] - exact["V"]).max() < 1e-8
+    assert info["nit"].mean() <= 3
+
+
+HARD_CONFIGS = {"newton": dict(method="newton"), "newton+scale": dict(method="newton", scale="both")}
+
+
+@pytest.mark.parametrize("config", list(HARD_CONFIGS))
+@pytest.mark.parametrize("case", hard.CASES, ids=hard.CASE_IDS)
+def test_hard_cases_end_in_success_or_an_honest_status(case, config):
+    opts = dict(HARD_CONFIGS[config], **case.setup)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", nrmicp.ConversionWarning)
+            res = nrmicp.solve(case.A, case.q, case.zeta, tol=hard.TOL, maxiter=3000, **opts)
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        assert case.may_refuse, f"{case.name}/{config}: unexpected {type(exc).__name__}: {exc}"
+        assert "omega2" in str(exc) or "singular" in str(exc)
+        return
+    hard.check_honest(case, config, res)
+    assert res.path in ("newton", "newton+fallback", "fallback")
+    if case.name in ("laplacian-cond1e+07-lcp", "convection-upwind-p10", "hplus-nonsym", "degenerate-lcp",
+                     "badly-scaled-lcp", "near-singular", "explicit-zeros", "duplicate-entries"):
+        assert res.success, f"{case.name}/{config}: {res.message}"
+
+
+@pytest.mark.parametrize("zeta_kind", ["obstacle", "lcp", "callable"])
+def test_polish_takes_a_member_stopped_at_1e6_to_rounding_level(zeta_kind):
+    problem = scenes.obstacle_2d(31)
+    zeta = {"obstacle": problem.zeta, "lcp": None, "callable": lambda z: problem.zeta}[zeta_kind]
+    q = problem.q if zeta_kind != "lcp" else problem.q + problem.A @ problem.zeta  # the shifted LCP
+    plain = nrmicp.solve(problem.A, q, zeta, method="nrmgs", accelerate="anderson", tol=1e-6)
+    polished = nrmicp.solve(problem.A, q, zeta, method="nrmgs", accelerate="anderson", tol=1e-6, polish=True)
+    assert plain.success and not hasattr(plain, "polished")
+    assert polished.polished and polished.success
+    assert plain.residual > 1e-8 and polished.residual < 1e-10  # from ~1e-6 to rounding level
+    assert polished.residual == pytest.approx(nrmicp.residual(problem.A, q, polished.z, zeta), rel=1e-6, abs=1e-14)
+
+
+def test_polish_is_refused_when_it_does_not_help():
+    A = sp.csr_matrix(np.array([[2.0]]))
+    res = nrmicp.solve(A, np.array([-4.0]), method="nrmgs", polish=True)
+    assert res.success and res.residual == 0 and res.polished is False
+
+
+@pytest.mark.parametrize("kwargs, error, words", [
+    (dict(method="newton", hierarchy="geometric"), ValueError, "hierarchy"),
+    (dict(method="newton", hierarchy=42), TypeError, "hierarchy"),
+    (dict(method="nrmgs", hierarchy="amg"), ValueError, "hierarchy"),
+    (dict(method="newton", accelerate="anderson"), ValueError, "accelerate"),
+    (dict(method="newton", phi=1.0), ValueError, "phi"),
+    (dict(method="newton", z_update="solve"), ValueError, "z_update"),
+    (dict(method="newton", alpha=1.2), ValueError, "alpha"),
+    (dict(method="nrmgs", polish="yes"), TypeError, "polish"),
+])
+def test_bad_newton_options_are_refused_naming_them(kwargs, error, words):
+    A = hard.lap2d(4)
+    with pytest.raises(error, match=words):
+        nrmicp.solve(A, -np.ones(16), **kwargs)
+
+
+def test_zeta_jacobian_needs_newton_and_a_callable_zeta():
+    A = hard.lap2d(4)
+    with pytest.raises(ValueError, match="zeta_jacobian"):
+        nrmicp.solve(A, -np.ones(16), None, method="newton", zeta_jacobian=lambda z: sp.identity(16))
+    with pytest.raises(ValueError, match="zeta_jacobian"):
+        nrmicp.solve(A, -np.ones(16), lambda z: 0 * z, method="nrmgs", zeta_jacobian=lambda z: sp.identity(16))
+
+
+def test_newton_does_not_mutate_its_inputs():
+    problem = scenes.obstacle_2d(15, exact=False)
+    A, q, psi = problem.A.copy(), problem.q.copy(), problem.zeta.copy()
+    Ps = problem.prolongations()
+    Ps_copy = [P.copy() for P in Ps]
+    nrmicp.solve(problem.A, problem.q, problem.zeta, method="newton", hierarchy=Ps)
+    assert (abs(problem.A - A)).nnz == 0 and np.array_equal(problem.q, q) and np.array_equal(problem.zeta, psi)
+    assert all((abs(P - Pc)).nnz == 0 for P, Pc in zip(Ps, Ps_copy))
