@@ -80,7 +80,7 @@ import numpy as np
 DEFAULT_SCENES = ("bai_sym_lcp", "bai_nonsym_lcp", "bai_sym_icp", "bai_nonsym_icp",
                   "obstacle_2d", "thermoforming_2d", "impulse_control", "american_put")
 #: Further scenes that may be named with --scenes.
-EXTRA_SCENES = ("bai_sym_affine", "obstacle_1d", "thermoforming_1d")
+EXTRA_SCENES = ("bai_sym_affine", "obstacle_1d", "thermoforming_1d", "obstacle_3d", "convection_obstacle")
 SCENES = DEFAULT_SCENES + EXTRA_SCENES
 
 #: Default methods: nrmaor and nrmsor with their default parameters (α = β = 1) are nrmgs.
@@ -95,13 +95,13 @@ TARGETS = (1e-6, 1e-10)
 #: n_space (n = n_space − 1) for the American put. 'tiny' is what --quick uses.
 SIZES = {
     "tiny":   dict(bai=8,   obstacle_2d=8,   thermoforming_2d=8,   impulse_control=33,  american_put=100,
-                   obstacle_1d=63,   thermoforming_1d=63),
+                   obstacle_1d=63,   thermoforming_1d=63, obstacle_3d=6, convection_obstacle=8),
     "small":  dict(bai=64,  obstacle_2d=32,  thermoforming_2d=32,  impulse_control=65,  american_put=1600,
-                   obstacle_1d=255,  thermoforming_1d=255),
+                   obstacle_1d=255,  thermoforming_1d=255, obstacle_3d=12, convection_obstacle=32),
     "medium": dict(bai=128, obstacle_2d=64,  thermoforming_2d=64,  impulse_control=129, american_put=3200,
-                   obstacle_1d=1023, thermoforming_1d=1023),
+                   obstacle_1d=1023, thermoforming_1d=1023, obstacle_3d=20, convection_obstacle=64),
     "large":  dict(bai=256, obstacle_2d=128, thermoforming_2d=128, impulse_control=255, american_put=6400,
-                   obstacle_1d=4095, thermoforming_1d=4095),
+                   obstacle_1d=4095, thermoforming_1d=4095, obstacle_3d=32, convection_obstacle=128),
 }
 # 'small' is chosen so that the default sweep takes about a minute on one core yet every solve
 # takes well over the ~0.1 ms Python overhead of a call: Bai's iteration counts do not grow with
@@ -116,6 +116,8 @@ _LABELS = {
     "bai_sym_affine": "Bai, symmetric, affine ICP",
     "obstacle_1d": "obstacle 1D (shifted LCP)",
     "obstacle_2d": "obstacle 2D membrane (shifted LCP)",
+    "obstacle_3d": "obstacle 3D, 7-point (shifted LCP)",
+    "convection_obstacle": "upwind convection–diffusion obstacle (nonsymmetric)",
     "thermoforming_1d": "thermoforming 1D (QVI)",
     "thermoforming_2d": "thermoforming 2D (nonlocal QVI)",
     "impulse_control": "impulse control (QVI, Lipschitz 1)",
@@ -139,6 +141,10 @@ def build_scene(name: str, size: str = "small"):
         return scenes.obstacle_1d(s[name])
     if name == "obstacle_2d":
         return scenes.obstacle_2d(s[name])
+    if name == "obstacle_3d":
+        return scenes.obstacle_3d(s[name])
+    if name == "convection_obstacle":
+        return scenes.convection_diffusion_obstacle(s[name])
     if name == "thermoforming_1d":
         return scenes.thermoforming_1d(s[name])
     if name == "thermoforming_2d":
