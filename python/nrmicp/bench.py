@@ -445,7 +445,7 @@ def run_case(problem, scene, method, z_update, tols, *, size, maxiter, repeat, h
         if not out["success"]:
             failed = (tol, row)
         progress.step(repeat, what)
-    if history and not method.startswith(tuple(_peers_without_history())):
+    if history and method not in _peers_without_history():
         try:
             out, wall = None, math.inf
             for _ in range(max(1, repeat)):  # best of repeat, like the timed solves
