@@ -201,3 +201,20 @@ def test_newton_does_not_mutate_its_inputs():
     nrmicp.solve(problem.A, problem.q, problem.zeta, method="newton", hierarchy=Ps)
     assert (abs(problem.A - A)).nnz == 0 and np.array_equal(problem.q, q) and np.array_equal(problem.zeta, psi)
     assert all((abs(P - Pc)).nnz == 0 for P, Pc in zip(Ps, Ps_copy))
+
+
+def test_callback_sees_z_in_the_original_variables_and_can_stop_newton():
+    problem = scenes.obstacle_2d(15)
+    seen = []
+
+    def callback(intermediate):
+        seen.append((intermediate.nit, intermediate.residual, problem.residual(intermediate.z)))
+        if len(seen) == 3:
+            raise StopIteration
+
+    res = problem.solve(method="newton", hierarchy=None, callback=callback, record_history=True)
+    assert res.status == nrmicp.Status.CALLBACK_STOP and not res.success
+    assert len(seen) == 3
+    for _, reported, recomputed in seen:  # the callback's z is z = y + ψ, with the Res it reports
+        assert reported == pytest.approx(recomputed, rel=1e-8, abs=1e-12)
+    assert len(res.history["residual"]) == 3

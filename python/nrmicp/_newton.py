@@ -9,9 +9,11 @@ from . import _core
 from ._hierarchy import resolve_hierarchy
 
 #: hierarchy="auto" builds the AMG hierarchy (pyamg) for method "newton" from this many unknowns
-#: on, and starts cold below: measured in README "Mesh-independent solves" (at n ≈ 4,000 nesting
-#: and its set-up already pay; below, a cold start takes a few steps of microseconds each while
-#: pyamg's import alone costs about a second).
+#: on, and starts cold below. Measured on obstacle_2d (tol 1e-8, one solve, set-up included, a
+#: loaded 2-core machine): n = 1,024: cold 12 steps 0.011 s, amg 2 steps 0.008 s; n = 4,096: cold
+#: 24 steps 0.10 s, amg 2 steps 0.29 s (AMG set-up dominates a single solve); n = 16,384: cold 49
+#: steps 6.4 s, amg 3 steps 1.4 s. A Solver pays the set-up once: the American put march at
+#: n = 6,399 took 1.9 s nested against 32 s warm-started. pyamg's import costs 1-4 s once.
 AUTO_AMG_MIN_N = 4096
 
 

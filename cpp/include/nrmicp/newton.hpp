@@ -17,7 +17,9 @@
 // or a singular reduced system hands over to sweeps of nrm (M = A, the paper's first member; it
 // converged on P-matrices where both nrmgs and the active-set steps cycle) from the best
 // iterate (10, then 20, 40, ... sweeps), after which Newton resumes. The result says which path
-// was taken.
+// was taken. Every iterate goes to the family's stopping Monitor (detail/stopping.hpp), as in
+// Method 3.1's loop; the Newton-specific ends (a settled active set, a fallback that brings
+// nothing, maxiter Newton steps) are decided in newton_loop.
 #pragma once
 
 #include "detail/active_set.hpp"
@@ -58,8 +60,9 @@ struct NewtonControl {
   int maxiter = 50;           ///< Newton steps
   int sweep_budget = 0;       ///< fallback sweeps allowed in all (0: no fallback)
   bool record_history = false;
-  std::function<bool(int, const Eigen::VectorXd&, double)> callback;  ///< finest level only
-  std::function<void()> poll;
+  Callback callback;  ///< finest level only; called with z = y + shift
+  Poll poll;
+  const Eigen::VectorXd* shift = nullptr;  ///< the constant obstacle of a shifted LCP (for the callback)
 };
 
 /// What the Newton loop on one level did.
@@ -67,6 +70,7 @@ struct NewtonOutcome {
   Eigen::VectorXd z;          ///< best iterate (smallest Res)
   double residual = std::numeric_limits<double>::infinity();
   Status status = Status::MaxIterations;
+  std::string message;
   bool settled = false;       ///< the active set repeated: z solves the problem to rounding
   std::vector<char> inactive; ///< the inactive set of z's last step (empty if no step was taken)
   int steps = 0, sweeps = 0, solves = 0;
@@ -144,6 +148,9 @@ class NewtonLevel {
     return w.cwiseMin(g).norm();
   }
 
+  /// Ω1 (g/Ω1 − w/Ω2) = g − (Ω1/Ω2) w: the modulus vector x up to the factor γ/(2Ω1).
+  void modulus(const Vector& w, const Vector& g, Vector& x) const { x = g - ratio_.cwiseProduct(w); }
+
   /// The inactive set ℐ = {x > 0} = {g/Ω1 − w/Ω2 > 0}.
   void active_set(const Vector& w, const Vector& g, std::vector<char>& inactive) const {
     inactive.resize(static_cast<std::size_t>(w.size()));
@@ -180,19 +187,37 @@ NewtonOutcome newton_loop(NewtonLevel<MatrixType>& level, ActiveSetSystem<typena
                           const Eigen::VectorXd& q, const typename NewtonLevel<MatrixType>::RowMatrix* B,
                           const Eigen::VectorXd* c, Eigen::VectorXd z, const NewtonControl& ctl) {
   using Vector = Eigen::VectorXd;
-  const auto t0 = std::chrono::steady_clock::now();
+  static const Vector no_shift;
   const Eigen::Index n = level.size();
   NewtonOutcome o;
-  Vector w(n), g(n), rhs(n), z_new(n), w_new(n), g_new(n);
+  // The family's Monitor decides convergence, divergence, the callback, the Ctrl-C poll and keeps
+  // the history and the best iterate; Newton's own ends (a settled active set, a fallback that
+  // brings nothing, maxiter Newton steps) are decided here.
+  Options mo;
+  mo.tol = ctl.tol;
+  mo.maxiter = std::numeric_limits<int>::max();
+  mo.record_history = ctl.record_history;
+  Result mres;
+  Monitor monitor(mo, ctl.callback, ctl.poll, ctl.shift ? *ctl.shift : no_shift, mres, n);
+  Iterate s;  // what the Monitor reads: z, and x up to the factor γ/2 (Ω1⁻¹g − Ω2⁻¹w, times Ω1)
+  const Vector z_start = z;
+  Vector w(n), g(n), rhs(n), z_new(n), w_new(n), g_new(n), x_new(n);
   double r = level.evaluate(z, q, B, c, w, g);
-  o.z = z;
+  o.z = z;  // the best iterate, where a fallback starts
   o.residual = r;
   std::vector<char> inactive;
   std::unordered_set<std::uint64_t> seen;
   std::uint64_t last_set = 0;
   bool have_last = false, exempt = true;
-  int sweep_run = 10;
+  int sweep_run = 10, k = 0;
   NonMonotone test(r);
+  auto observe = [&]() -> bool {  // iterate k to the Monitor; true: stop (mres.status says why)
+    level.modulus(w, g, x_new);
+    s.step = s.x.size() ? (x_new - s.x).template lpNorm<Eigen::Infinity>() : std::numeric_limits<double>::infinity();
+    s.x.swap(x_new);
+    s.z = z;
+    return monitor.stop(k++, r, s);
+  };
   auto accept = [&](double r_new) {
     z.swap(z_new); w.swap(w_new); g.swap(g_new); r = r_new;
     if (r < o.residual || !std::isfinite(o.residual)) { o.residual = r; o.z = z; }
@@ -201,9 +226,9 @@ NewtonOutcome newton_loop(NewtonLevel<MatrixType>& level, ActiveSetSystem<typena
   // Sweeps of the fallback member from the best iterate; false when not allowed or no better iterate came.
   auto fall_back = [&]() -> bool {
     if (o.sweeps >= ctl.sweep_budget) return false;
-    const int k = std::min(sweep_run, ctl.sweep_budget - o.sweeps);
+    const int sweeps = std::min(sweep_run, ctl.sweep_budget - o.sweeps);
     sweep_run *= 2;
-    const Result fr = level.sweep(q, B, c, o.z, k, ctl.tol);
+    const Result fr = level.sweep(q, B, c, o.z, sweeps, ctl.tol);
     o.sweeps += fr.iterations;
     seen.clear();
     have_last = false;
@@ -216,25 +241,17 @@ NewtonOutcome newton_loop(NewtonLevel<MatrixType>& level, ActiveSetSystem<typena
     if (r < o.residual) { o.residual = r; o.z = z; }
     return true;
   };
-  auto last_poll = t0;
-  for (;;) {
-    if (ctl.record_history) {
-      o.history_iteration.push_back(o.steps);
-      o.history_seconds.push_back(ScopedTimer::seconds_since(t0));
-      o.history_residual.push_back(r);
-    }
-    if (r < ctl.tol) { o.status = Status::Converged; break; }
-    if (ctl.callback && ctl.callback(o.steps, z, r)) { o.status = Status::CallbackStop; break; }
-    if (ctl.poll && ScopedTimer::seconds_since(last_poll) > 0.05) { ctl.poll(); last_poll = std::chrono::steady_clock::now(); }
-    if (o.steps >= ctl.maxiter) { o.status = Status::MaxIterations; break; }
-    if (o.steps == 0 && !ctl.start_set.empty() && o.sweeps == 0) {
+  std::optional<Status> own;  // an end decided here, not by the Monitor
+  while (!observe()) {
+    if (o.steps >= ctl.maxiter) { own = Status::MaxIterations; break; }
+    if (o.steps == 0 && !ctl.start_set.empty() && o.sweeps == 0)
       inactive = ctl.start_set;
-    } else
+    else
       level.active_set(w, g, inactive);
     const std::uint64_t h = hash_set(inactive);
     if (have_last && h == last_set) {  // z solves its own active set's system: exact to rounding
       o.settled = true;
-      o.status = Status::Stagnated;
+      own = Status::Stagnated;
       break;
     }
     bool ok = seen.insert(h).second;  // a set seen before: a cycle
@@ -254,19 +271,30 @@ NewtonOutcome newton_loop(NewtonLevel<MatrixType>& level, ActiveSetSystem<typena
         last_set = h;
         have_last = true;
         exempt = false;
-        if (still && !(r < ctl.tol)) {
-          o.settled = true;
-          o.status = Status::Stagnated;
+        if (still && !(r < ctl.tol)) {  // report this iterate, then end: nothing left to gain
+          if (!observe()) {
+            o.settled = true;
+            own = Status::Stagnated;
+          }
           break;
         }
         continue;
       }
     }
     if (!fall_back()) {
-      o.status = o.sweeps >= ctl.sweep_budget && ctl.sweep_budget > 0 ? Status::MaxIterations : Status::Stagnated;
+      own = o.sweeps >= ctl.sweep_budget && ctl.sweep_budget > 0 ? Status::MaxIterations : Status::Stagnated;
       break;
     }
   }
+  if (own) monitor.result().status = *own;
+  monitor.finish(z_start);
+  o.z = std::move(mres.z);
+  o.residual = mres.residual;
+  o.status = mres.status;
+  o.message = std::move(mres.message);
+  o.history_iteration = std::move(mres.history_iteration);
+  o.history_seconds = std::move(mres.history_seconds);
+  o.history_residual = std::move(mres.history_residual);
   return o;
 }
 
@@ -408,7 +436,8 @@ class Newton {
       c.maxiter = maxiter;
       c.sweep_budget = o.maxiter;
       c.record_history = report && o.record_history;
-      if (report && callback) c.callback = [this, &shift](int k, const Vector& y, double r) { return callback(k, y + shift, r); };
+      if (report) c.callback = callback;
+      c.shift = &shift;
       c.poll = poll;
       return c;
     }
@@ -653,10 +682,10 @@ class Newton {
       r.w = self.A_ * z + q;
       r.residual = out.residual;
       r.status = out.status;
-      r.message = to_string(r.status);
+      r.message = out.message;
       if (out.settled && r.status == Status::Stagnated)
-        r.message = "stagnated: the active set has settled and Res is at its rounding floor, above tol";
-      if (r.status != Status::Converged) r.message += "; returning the best iterate";
+        r.message = "stagnated: the active set has settled and Res is at its rounding floor, above tol; "
+                    "returning the best iterate";
       r.path = r.fallback_sweeps ? (r.nit ? "newton+fallback" : "fallback") : "newton";
       return r;
     }
