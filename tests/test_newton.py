@@ -207,8 +207,9 @@ def test_callback_sees_z_in_the_original_variables_and_can_stop_newton():
     problem = scenes.obstacle_2d(15)
     seen = []
 
-    def callback(intermediate):
-        seen.append((intermediate.nit, intermediate.residual, problem.residual(intermediate.z)))
+    def callback(intermediate_result):  # main's rule (scipy's): this name receives a Result
+        seen.append((intermediate_result.nit, intermediate_result.residual,
+                     problem.residual(intermediate_result.z)))
         if len(seen) == 3:
             raise StopIteration
 
