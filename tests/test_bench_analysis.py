@@ -68,9 +68,75 @@ def test_summary_has_no_negative_cost_and_records_the_environment(tmp_path):
         parts = line.split()
         if len(parts) > 4 and parts[1] == "/" and parts[0] != "method":
             spd = parts[3]
-            assert spd == "noise" or float(spd) >= 0, line
+            assert spd in ("noise", "-") or float(spd) >= 0, line
+            if parts[0] in ("newton", "nrmgs+polish"):  # not linear: no cost per digit
+                assert spd == "-", line
     with open(out / "work_precision.csv", newline="") as f:
         rows = list(csv.DictReader(f))
     assert rows
     for r in rows:
         assert {k: r[k] for k in bench.ENV_COLUMNS} == {k: str(v) for k, v in env.items()}
+
+
+def _known_lcp(n=40, seed=0):
+    """A symmetric M-matrix LCP with a known solution: z* with zeros, w* = Az* + q complementary."""
+    import numpy as np
+    import scipy.sparse as sp
+
+    rng = np.random.default_rng(seed)
+    A = sp.diags([-np.ones(n - 1), 2.5 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1], format="csr")
+    z = np.where(rng.random(n) < 0.5, 0.0, rng.random(n) + 0.1)
+    w = np.where(z > 0, 0.0, rng.random(n) + 0.1)
+    return A, w - A @ z, z
+
+
+def test_peers_solve_a_known_lcp_and_its_shifted_form():
+    """Red-black PSOR and the QP solver against a known solution, through the shifted LCP
+    y = z − c that the bench hands them (ζ ≡ c constant)."""
+    import numpy as np
+
+    from nrmicp import _peers
+    from nrmicp.scenes import Problem
+
+    A, q0, y_star = _known_lcp()
+    c = np.linspace(-1.0, 1.0, A.shape[0])
+    P = Problem(name="known", A=A, q=q0 - A @ c, zeta=c, z_exact=y_star + c)  # z = y + c
+    assert _peers.applicable("psor", P) == ""
+    Ash, qsh, csh = _peers.shifted_lcp(P)
+    assert np.allclose(qsh, q0) and np.allclose(csh, c)
+    colour = _peers.colours(Ash)
+    assert colour.max() == 1  # tridiagonal: red-black
+    omega = _peers.sor_omega(Ash)
+    assert 1.0 <= omega < 2.0
+    out = _peers.psor(Ash, qsh, csh, 1e-10, omega=omega, colour=colour, maxiter=10_000, history=True)
+    assert out["success"] and out["residual"] < 1e-10
+    assert np.max(np.abs(out["z"] - P.z_exact)) < 1e-9
+    assert nrmicp.residual(P.A, P.q, out["z"], P.zeta) < 1e-10
+    assert len(out["history"]["residual"]) == out["nit"] + 1
+    for name in _peers.QP_SOLVERS:
+        if _peers.installed(name):
+            o = _peers.qp(name, Ash, qsh, csh, 1e-8)
+            assert o["success"] and nrmicp.residual(P.A, P.q, o["z"], P.zeta) < 1e-8, (name, o["status"])
+            assert np.max(np.abs(o["z"] - P.z_exact)) < 1e-6
+
+
+def test_peers_say_where_they_do_not_apply():
+    from nrmicp import _peers, scenes
+
+    assert "not constant" in _peers.applicable("psor", scenes.bai(4, kind="icp"))
+    assert "not symmetric" in _peers.applicable("piqp", scenes.bai(4, symmetric=False, kind="lcp"))
+    assert _peers.applicable("piqp", scenes.bai(4, kind="lcp")) == ""
+
+
+def test_a_missing_qp_solver_is_a_note_not_an_error(tmp_path):
+    code = ("import sys; sys.modules['matplotlib'] = None; sys.modules['piqp'] = None; "
+            "sys.modules['osqp'] = None; from nrmicp.__main__ import main; sys.exit(main(sys.argv[1:]))")
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-c", code, "bench", "--quick", "--no-progress", "--scenes",
+                           "obstacle_2d", "--methods", "nrmgs", "--out", str(out)],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "peer qp skipped: none of piqp, osqp is installed" in proc.stdout
+    with open(out / "work_precision.csv", newline="") as f:
+        methods = {r["method"] for r in csv.DictReader(f)}
+    assert methods == {"nrmgs", "psor"}

@@ -19,6 +19,12 @@ EXPECTED_COLUMNS = {"scene", "size", "n", "method", "z_update", "z_update_used",
                     "residual", "error", "repeat", "reused_from_tol"}
 
 
+def _installed_qp():
+    from nrmicp import _peers
+
+    return next((s for s in _peers.QP_SOLVERS if _peers.installed(s)), None)
+
+
 @pytest.fixture(scope="module")
 def quick_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("bench")
@@ -39,6 +45,12 @@ def test_csv_columns_and_one_row_per_case_and_tol(quick_run):
     assert len(keys) == len(set(keys)), "duplicate (scene, method, z-update, tol) rows"
     expected = {(s, m, z, t) for s in bench.DEFAULT_SCENES for m in bench.QUICK_METHODS for z in ("auto",)
                 for t in bench.QUICK_TOLS}
+    # the peers, on the scenes that are LCPs (ζ constant); the QP solver on the symmetric ones
+    lcp = ("bai_sym_lcp", "bai_nonsym_lcp", "obstacle_2d", "american_put")
+    expected |= {(s, "psor", "", t) for s in lcp for t in bench.QUICK_TOLS}
+    qp = _installed_qp()
+    if qp:
+        expected |= {(s, qp, "", t) for s in ("bai_sym_lcp", "obstacle_2d") for t in bench.QUICK_TOLS}
     assert set(keys) == expected
     for r in rows:
         assert r["size"] == "tiny"
@@ -69,7 +81,8 @@ def test_converged_rows_meet_their_tol(quick_run):
 @pytest.mark.parametrize("scene", ["bai_sym_icp", "obstacle_2d"])
 def test_converged_row_reproduced_independently(quick_run, scene):
     """Re-solve one converged row's case and recompute Res in numpy."""
-    rows = [r for r in quick_run[3] if r["scene"] == scene and r["status"] == "converged"]
+    rows = [r for r in quick_run[3] if r["scene"] == scene and r["status"] == "converged"
+            and r["method"] in ("nrmgs", "nrmm")]
     assert rows
     r = min(rows, key=lambda r: float(r["tol"]))
     P = bench.build_scene(scene, r["size"])
@@ -89,3 +102,57 @@ def test_bad_arguments_exit_nonzero(tmp_path):
                            "--out", str(tmp_path)], capture_output=True, text=True, timeout=120)
     assert proc.returncode != 0
     assert "nope" in proc.stderr
+
+
+def _rows(rows, scene, method):
+    return sorted((r for r in rows if r["scene"] == scene and r["method"] == method), key=lambda r: -float(r["tol"]))
+
+
+def test_newton_polish_and_the_peers_are_in_the_same_sweep(quick_run):
+    """newton, nrmgs+polish, red-black PSOR and the QP solver each reach Res < 1e-8 on the obstacle,
+    and their answers agree with the scene's exact discrete solution (policy iteration)."""
+    _, proc, _, rows = quick_run
+    methods = ["newton", "nrmgs+polish", "psor"] + ([_installed_qp()] if _installed_qp() else [])
+    P = bench.build_scene("obstacle_2d", "tiny")
+    for m in methods:
+        rs = _rows(rows, "obstacle_2d", m)
+        assert [float(r["tol"]) for r in rs] == list(bench.QUICK_TOLS), m
+        last = rs[-1]
+        assert last["converged"] == "1" and float(last["residual"]) < 1e-8, last
+        # Res < 1e-8 on this 8 x 8 grid bounds the error by ||A^-1|| Res < 1e-9
+        assert float(last["error"]) < 1e-6, last
+    if not _installed_qp():
+        assert "peer qp skipped" in proc.stdout
+
+
+def test_polish_reaches_rounding_level_where_its_member_stops_at_tol(quick_run):
+    rows = quick_run[3]
+    for scene in ("obstacle_2d", "bai_sym_lcp"):
+        plain, polished = _rows(rows, scene, "nrmgs")[0], _rows(rows, scene, "nrmgs+polish")[0]
+        assert float(plain["tol"]) == float(polished["tol"]) == 1e-2
+        assert plain["iterations"] == polished["iterations"]  # the same member, then one Newton step
+        assert float(plain["residual"]) > 1e-6
+        assert float(polished["residual"]) < 1e-10
+
+
+def test_newton_counts_newton_steps(quick_run):
+    """For newton 'iterations' are Newton steps: few, and the same at every tol once the active set
+    is found (Res then drops to rounding level in one step), and its history has those steps."""
+    out, _, _, rows = quick_run
+    rs = [r for r in _rows(rows, "obstacle_2d", "newton") if r["reused_from_tol"] == ""]
+    its = [int(r["iterations"]) for r in rs]
+    assert 1 <= max(its) <= 30
+    assert all(float(r["residual"]) < 1e-11 for r in rs)
+    assert int(rs[-1]["linear_solves"]) >= its[-1]
+
+
+@pytest.mark.parametrize("method", ["newton", "nrmgs+polish"])
+def test_newton_and_polish_rows_reproduced_independently(quick_run, method):
+    r = _rows(quick_run[3], "obstacle_2d", method)[-1]
+    P = bench.build_scene("obstacle_2d", "tiny")
+    base, kw = bench.split_method(method)
+    res = nrmicp.solve(P.A, P.q, P.zeta, method=base, tol=float(r["tol"]), **kw)
+    assert int(res.nit) == int(r["iterations"])
+    res_np = nrmicp.residual(P.A, P.q, res.z, P.zeta)
+    assert res_np < float(r["tol"])
+    assert res_np == pytest.approx(float(r["residual"]), rel=1e-2, abs=1e-13)

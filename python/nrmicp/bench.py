@@ -1,14 +1,23 @@
 """Work–precision benchmark: what each extra digit of accuracy costs in time.
 
-    python -m nrmicp bench [--quick] [--scenes ...] [--methods ...] [--z-updates ...]
+    python -m nrmicp bench [--quick] [--scenes ...] [--methods ...] [--peers psor,qp] [--z-updates ...]
                            [--tols ... | --tol-min 1e-12 --tol-max 1e-2] [--size small]
                            [--repeat 1] [--maxiter 10000] [--out bench-out]
 
-For every scene, method and z-update it sweeps ``tol`` (default 1e-2, 1e-3, …, 1e-12) and
+For every scene, method and z-update it sweeps ``tol`` (default 1e-2, 1e-3, …, 1e-12). The
+methods are nrmicp's members, ``newton`` (its 'iterations' are Newton steps on the finest level;
+``hierarchy='auto'``) and any member with ``+polish`` (``polish=True``: one Newton step on the
+settled active set); next to them, in the same diagrams, the peers a user would otherwise
+reach for (nrmicp/_peers.py): red-black projected SOR in numpy with SOR's optimal ω, and a QP
+solver (PIQP, else OSQP) on min ½zᵀAz + qᵀz, z ≥ 0, its eps tightened from tol by 10× until
+Res < tol (the time of that last run). The peers run on the scenes that are LCPs (ζ constant),
+the QP solver on the symmetric ones; one that is not installed is skipped with a note. It
 records, per tol:
 
 - ``seconds``: wall time of one ``nrmicp.solve`` call (set-up, factorizations and iterations;
-  building the scene and its exact reference is excluded), best of ``--repeat`` runs;
+  building the scene and its exact reference is excluded), best of ``--repeat`` runs; for
+  PSOR the row blocks and the sweeps (the colouring and ω are found once per scene, untimed),
+  for a QP solver its matrices, set-up, factorization and solve;
   ``setup_seconds``, ``factorization_seconds`` and ``iteration_seconds`` are the core's own
   ``result.timings`` of the best run, reported separately;
 - ``iterations`` (``result.nit``), ``residual`` (Res of the returned z), ``status``;
@@ -37,7 +46,9 @@ Outputs in ``--out`` (default ``bench-out/``): ``work_precision.csv``, ``work_pr
 and case the iterations per extra digit (Theil–Sen slope of the iteration count against
 −log10 tol over the converged rows) and the seconds per digit (that times the seconds per
 iteration, the least over the converged runs on the core's clock; "noise" when they are all
-too short to time), the best Res reached, and the fastest case at 1e-6 and 1e-10. The CSV and the
+too short to time; "-" for newton, a polished member and a QP solver, which do not buy digits
+one at a time), the seconds to reach the tols nearest 1e-6 and 1e-10, the best Res reached,
+and the fastest case at 1e-6 and 1e-10, peers included. The CSV and the
 summary are written before any figure, and record nrmicp's version and backends, the numpy,
 scipy and Python versions, the CPU model and the cores. Without matplotlib the run ends after
 them with a line saying that ``pip install nrmicp[plot]`` draws the figures.
@@ -69,12 +80,13 @@ import numpy as np
 DEFAULT_SCENES = ("bai_sym_lcp", "bai_nonsym_lcp", "bai_sym_icp", "bai_nonsym_icp",
                   "obstacle_2d", "thermoforming_2d", "impulse_control", "american_put")
 #: Further scenes that may be named with --scenes.
-EXTRA_SCENES = ("bai_sym_affine", "obstacle_1d", "thermoforming_1d")
+EXTRA_SCENES = ("bai_sym_affine", "obstacle_1d", "thermoforming_1d", "obstacle_3d", "convection_obstacle")
 SCENES = DEFAULT_SCENES + EXTRA_SCENES
 
 #: Default methods: nrmaor and nrmsor with their default parameters (α = β = 1) are nrmgs.
-DEFAULT_METHODS = ("nrm", "nrmm", "nrmgs", "nrmj", "mms", "two_sweep")
-QUICK_METHODS = ("nrmgs", "nrmm")
+#: 'nrmgs+polish' is nrmgs with polish=True (one Newton step on the settled active set).
+DEFAULT_METHODS = ("nrm", "nrmm", "nrmgs", "nrmj", "mms", "two_sweep", "newton", "nrmgs+polish")
+QUICK_METHODS = ("nrmgs", "nrmm", "newton", "nrmgs+polish")
 QUICK_TOLS = (1e-2, 1e-4, 1e-6, 1e-8)
 #: Target tolerances of the "fastest method" summary.
 TARGETS = (1e-6, 1e-10)
@@ -83,13 +95,13 @@ TARGETS = (1e-6, 1e-10)
 #: n_space (n = n_space − 1) for the American put. 'tiny' is what --quick uses.
 SIZES = {
     "tiny":   dict(bai=8,   obstacle_2d=8,   thermoforming_2d=8,   impulse_control=33,  american_put=100,
-                   obstacle_1d=63,   thermoforming_1d=63),
+                   obstacle_1d=63,   thermoforming_1d=63, obstacle_3d=6, convection_obstacle=8),
     "small":  dict(bai=64,  obstacle_2d=32,  thermoforming_2d=32,  impulse_control=65,  american_put=1600,
-                   obstacle_1d=255,  thermoforming_1d=255),
+                   obstacle_1d=255,  thermoforming_1d=255, obstacle_3d=12, convection_obstacle=32),
     "medium": dict(bai=128, obstacle_2d=64,  thermoforming_2d=64,  impulse_control=129, american_put=3200,
-                   obstacle_1d=1023, thermoforming_1d=1023),
+                   obstacle_1d=1023, thermoforming_1d=1023, obstacle_3d=20, convection_obstacle=64),
     "large":  dict(bai=256, obstacle_2d=128, thermoforming_2d=128, impulse_control=255, american_put=6400,
-                   obstacle_1d=4095, thermoforming_1d=4095),
+                   obstacle_1d=4095, thermoforming_1d=4095, obstacle_3d=32, convection_obstacle=128),
 }
 # 'small' is chosen so that the default sweep takes about a minute on one core yet every solve
 # takes well over the ~0.1 ms Python overhead of a call: Bai's iteration counts do not grow with
@@ -104,6 +116,8 @@ _LABELS = {
     "bai_sym_affine": "Bai, symmetric, affine ICP",
     "obstacle_1d": "obstacle 1D (shifted LCP)",
     "obstacle_2d": "obstacle 2D membrane (shifted LCP)",
+    "obstacle_3d": "obstacle 3D, 7-point (shifted LCP)",
+    "convection_obstacle": "upwind convection–diffusion obstacle (nonsymmetric)",
     "thermoforming_1d": "thermoforming 1D (QVI)",
     "thermoforming_2d": "thermoforming 2D (nonlocal QVI)",
     "impulse_control": "impulse control (QVI, Lipschitz 1)",
@@ -127,6 +141,10 @@ def build_scene(name: str, size: str = "small"):
         return scenes.obstacle_1d(s[name])
     if name == "obstacle_2d":
         return scenes.obstacle_2d(s[name])
+    if name == "obstacle_3d":
+        return scenes.obstacle_3d(s[name])
+    if name == "convection_obstacle":
+        return scenes.convection_diffusion_obstacle(s[name])
     if name == "thermoforming_1d":
         return scenes.thermoforming_1d(s[name])
     if name == "thermoforming_2d":
@@ -149,7 +167,7 @@ def scene_label(name: str) -> str:
 ENV_COLUMNS = ("nrmicp", "backends", "numpy", "scipy", "python", "cpu", "cores")
 CSV_COLUMNS = ("scene", "size", "n", "method", "z_update", "z_update_used", "tol", "status", "converged",
                "seconds", "setup_seconds", "factorization_seconds", "iteration_seconds", "iterations",
-               "residual", "error", "repeat", "reused_from_tol") + ENV_COLUMNS
+               "linear_solves", "residual", "error", "repeat", "setting", "reused_from_tol") + ENV_COLUMNS
 
 
 def _cpu_model() -> str:
@@ -195,10 +213,23 @@ class Case:
     rows: list = field(default_factory=list)
     history: dict = None          # iteration, seconds (shifted by set-up), residual
     history_status: str = ""
+    tool: str = "nrmicp"          # or "peer"
+    setting: str = ""             # a peer's tuning (PSOR's omega, the QP solver and its version)
+    best: tuple = None            # (Res, z) of the least Res among the rows
 
     @property
     def label(self) -> str:
-        return f"{self.method} / {self.z_update_used or self.z_update}"
+        if self.tool == "peer" or not self.z_update_used or self.z_update_used == "-":
+            return self.method
+        return f"{self.method} / {self.z_update_used}"
+
+    @property
+    def linear(self) -> bool:
+        """A member that buys digits one at a time (linear convergence): per-digit costs apply.
+        Newton (superlinear), a polished member (one Newton step jumps to rounding level) and the
+        QP solvers (eps tuned per tol) are compared by their seconds to each tol instead."""
+        base, kw = split_method(self.method)
+        return (base != "newton" and not kw) if self.tool == "nrmicp" else self.method == "psor"
 
 
 class Progress:
@@ -236,6 +267,9 @@ class Progress:
 
 
 def _z_update_used(problem, z_update: str, method: str = "") -> str:
+    method = split_method(method)[0]
+    if method == "newton":
+        return "-"  # Newton recovers z from its linear solves: no z-update to choose
     if z_update != "auto":
         return z_update
     # A scene may say it needs a z-update (impulse control: Lipschitz-1 ζ, only 'solve'
@@ -256,32 +290,131 @@ def _status_name(status) -> str:
     return getattr(status, "name", str(status)).lower()
 
 
-def _timed_solve(problem, method, z_update, tol, maxiter, repeat):
-    """Best of ``repeat`` solves: (result of the best run, its seconds)."""
+# --- cases: an nrmicp member ('nrmgs'), a member with polish ('nrmgs+polish'), or a peer
+
+#: Peers (not nrmicp) the bench can run next to nrmicp: red-black projected SOR (numpy) and the QP
+#: solvers of nrmicp._peers. 'qp' means the first installed of nrmicp._peers.QP_SOLVERS.
+PEERS = ("psor", "qp", "piqp", "osqp")
+DEFAULT_PEERS = ("psor", "qp")
+
+
+def split_method(method: str):
+    """'nrmgs+polish' -> ('nrmgs', {'polish': True}); 'newton' -> ('newton', {})."""
+    base, _, extra = method.partition("+")
+    if extra not in ("", "polish"):
+        raise ValueError(f"unknown method {method!r}: a method name, optionally with '+polish'")
+    return base, ({"polish": True} if extra else {})
+
+
+def is_peer(method: str) -> bool:
+    return method in PEERS
+
+
+def _run_nrmicp(problem, method, z_update_used, maxiter):
+    """solve(tol, history) for an nrmicp case: the outcome dict run_case records."""
     import nrmicp
 
+    base, kw = split_method(method)
+
+    def solve(tol, history=False):
+        res = nrmicp.solve(problem.A, problem.q, problem.zeta, method=base, tol=tol, maxiter=maxiter,
+                           z_update="auto" if z_update_used == "-" else z_update_used, record_history=history, **kw)
+        tm = res.timings or {}
+        out = dict(z=np.asarray(res.z), status=_status_name(res.status), success=bool(res.success),
+                   nit=int(res.nit), residual=float(res.residual), setup=tm.get("setup", ""),
+                   factorization=tm.get("factorization", ""), iterations=tm.get("iterations", ""),
+                   linear_solves=getattr(res, "linear_solves", ""))
+        if base == "newton":  # its time is per level (the stationary clocks stay 0)
+            out["iterations"] = float(sum(getattr(res, "level_seconds", []) or [0.0]))
+        if history and res.history is not None:
+            h = {k: np.asarray(v, dtype=float) for k, v in res.history.items()}
+            if getattr(res, "polished", False):  # the polishing step is not in the member's history
+                h = {k: np.append(v, x) for (k, v), x in
+                     zip(h.items(), (h["iteration"][-1] + 1, out["iterations"] or h["seconds"][-1],
+                                     out["residual"]))}
+            out["history"] = h
+        return out
+
+    return solve
+
+
+def _run_peer(problem, peer, maxiter):
+    """solve(tol, history) for a peer, after its one-off tuning (colouring and ω for PSOR; done
+    once per scene outside the timings, as a user who knows the grid would), and its setting."""
+    from . import _peers
+
+    A, q, c = _peers.shifted_lcp(problem)
+    if peer == "psor":
+        colour, omega = _peers.colours(A), _peers.sor_omega(A)
+        setting = f"omega={omega:.4g}, {colour.max() + 1} colours"
+
+        def solve(tol, history=False):
+            return dict(_peers.psor(A, q, c, tol, omega=omega, colour=colour, maxiter=maxiter, history=history),
+                        setting=setting)
+        return solve, setting
+
+    def solve(tol, history=False):
+        return _peers.qp(peer, A, q, c, tol)
+    return solve, f"{peer} {_peers.installed(peer)}"
+
+
+def resolve_peers(names, problems):
+    """The peers to run per scene and the notes to print for those that cannot run."""
+    from . import _peers
+
+    notes, out = [], []
+    for p in names:
+        if p == "qp":
+            have = [s for s in _peers.QP_SOLVERS if _peers.installed(s)]
+            if not have:
+                notes.append(f"peer qp skipped: none of {', '.join(_peers.QP_SOLVERS)} is installed "
+                             "(pip install piqp)")
+                continue
+            p = have[0]
+        elif p != "psor" and not _peers.installed(p):
+            notes.append(f"peer {p} skipped: not installed (pip install {p})")
+            continue
+        if p not in out:
+            out.append(p)
+    per_scene, skipped = {s: [] for s in problems}, {}
+    for p in out:
+        for s, P in problems.items():
+            why = _peers.applicable(p, P)
+            if why:
+                skipped.setdefault((p, why), []).append(s)
+            else:
+                per_scene[s].append(p)
+    notes += [f"peer {p} not run on {', '.join(ss)}: {why}" for (p, why), ss in skipped.items()]
+    return per_scene, notes
+
+
+def _timed(solve, tol, repeat):
+    """Best of ``repeat``: (outcome, seconds). A peer that times itself (a QP solver, whose eps
+    tuning is not counted) reports its own seconds."""
     best, best_t = None, math.inf
     for _ in range(max(1, repeat)):
         t0 = time.perf_counter()
-        res = nrmicp.solve(problem.A, problem.q, problem.zeta, method=method, tol=tol, maxiter=maxiter,
-                           z_update=_z_update_used(problem, z_update, method))
-        dt = time.perf_counter() - t0
+        out = solve(tol)
+        dt = out.pop("seconds", time.perf_counter() - t0)
         if dt < best_t:
-            best, best_t = res, dt
+            best, best_t = out, dt
     return best, best_t
 
 
 def run_case(problem, scene, method, z_update, tols, *, size, maxiter, repeat, history, progress):
     """All tols of one case, then (if ``history``) one recorded run at the smallest tol."""
-    import nrmicp
-
-    case = Case(scene, method, z_update, _z_update_used(problem, z_update, method))
-    base = dict(scene=scene, size=size, n=problem.n, method=method, z_update=z_update,
+    peer = is_peer(method)
+    if peer:
+        case = Case(scene, method, "", "", tool="peer")
+        solve, case.setting = _run_peer(problem, method, maxiter)
+    else:
+        case = Case(scene, method, z_update, _z_update_used(problem, z_update, method))
+        solve = _run_nrmicp(problem, method, case.z_update_used, maxiter)
+    base = dict(scene=scene, size=size, n=problem.n, method=method, z_update=case.z_update,
                 z_update_used=case.z_update_used, repeat=repeat)
     failed = None  # (tol, row) of the first solve that did not converge
-    try:  # one untimed warm-up solve (first-call allocations, library initialisation)
-        nrmicp.solve(problem.A, problem.q, problem.zeta, method=method, tol=max(tols), maxiter=maxiter,
-                     z_update=case.z_update_used)
+    try:  # one untimed warm-up solve (first-call allocations, library initialisation, imports)
+        solve(max(tols))
     except Exception:
         pass  # the timed solves record it
     for tol in tols:
@@ -292,65 +425,68 @@ def run_case(problem, scene, method, z_update, tols, *, size, maxiter, repeat, h
             progress.step(repeat, what)
             continue
         try:
-            res, secs = _timed_solve(problem, method, z_update, tol, maxiter, repeat)
+            out, secs = _timed(solve, tol, repeat)
         except Exception as exc:  # a property of the case (e.g. a factorization failed): record it
             row = dict(base, tol=tol, status=f"error: {type(exc).__name__}: {exc}"[:200], converged=0,
                        seconds="", setup_seconds="", factorization_seconds="", iteration_seconds="",
-                       iterations="", residual="", error="", reused_from_tol="")
+                       iterations="", linear_solves="", residual="", error="", setting=case.setting,
+                       reused_from_tol="")
             case.rows.append(row)
             failed = (tol, row)
             progress.step(repeat, what)
             continue
-        tm = res.timings or {}
         err = ""
         if problem.z_exact is not None:
-            err = float(np.max(np.abs(np.asarray(res.z) - problem.z_exact)))
-        row = dict(base, tol=tol, status=_status_name(res.status), converged=int(bool(res.success)),
-                   seconds=secs, setup_seconds=tm.get("setup", ""),
-                   factorization_seconds=tm.get("factorization", ""),
-                   iteration_seconds=tm.get("iterations", ""), iterations=int(res.nit),
-                   residual=float(res.residual), error=err, reused_from_tol="")
+            err = float(np.max(np.abs(out["z"] - problem.z_exact)))
+        row = dict(base, tol=tol, status=out["status"], converged=int(out["success"]), seconds=secs,
+                   setup_seconds=out.get("setup", ""), factorization_seconds=out.get("factorization", ""),
+                   iteration_seconds=out.get("iterations", ""), iterations=out["nit"],
+                   linear_solves=out.get("linear_solves", ""), residual=out["residual"], error=err,
+                   setting=out.get("setting", case.setting), reused_from_tol="")
         case.rows.append(row)
-        if not res.success:
+        if np.isfinite(out["residual"]) and (case.best is None or out["residual"] < case.best[0]):
+            case.best = (out["residual"], out["z"])
+        if not out["success"]:
             failed = (tol, row)
         progress.step(repeat, what)
-    if history:
+    if history and method not in _peers_without_history():
         try:
-            res, wall = None, math.inf
+            out, wall = None, math.inf
             for _ in range(max(1, repeat)):  # best of repeat, like the timed solves
                 t0 = time.perf_counter()
-                r = nrmicp.solve(problem.A, problem.q, problem.zeta, method=method, tol=min(tols),
-                                 maxiter=maxiter, z_update=case.z_update_used, record_history=True)
+                o = solve(min(tols), history=True)
                 dt = time.perf_counter() - t0
                 if dt < wall:
-                    res, wall = r, dt
-            h = res.history
-            # the core's clock starts with the iteration: shift by everything else in the call
-            # (Python checks, set-up, factorizations, result conversion) so that the last
-            # iterate sits at the run's wall time, on the same axis as the timed solves
-            offset = max(wall - res.timings["iterations"], 0.0)
-            case.history = dict(iteration=np.asarray(h["iteration"]),
-                                seconds=np.asarray(h["seconds"]) + offset,
-                                residual=np.asarray(h["residual"]))
-            case.history_status = _status_name(res.status)
+                    out, wall = o, dt
+            h = out["history"]
+            # the clock of a history starts with the iteration: shift it by everything else in
+            # the call (Python checks, set-up, factorizations, result conversion) so that the
+            # last iterate sits at the run's wall time, on the same axis as the timed solves
+            last = out["iterations"] if out.get("iterations") not in ("", None) else h["seconds"][-1]
+            offset = max(wall - max(last, h["seconds"][-1]), 0.0)
+            case.history = dict(iteration=h["iteration"], seconds=h["seconds"] + offset, residual=h["residual"])
+            case.history_status = out["status"]
         except Exception as exc:  # already recorded in the rows
             case.history_status = f"error: {exc}"
-        progress.step(repeat, f"{scene} {method} {z_update} history")
+    progress.step(repeat, f"{scene} {method} {z_update} history")
     return case
 
 
+def _peers_without_history():
+    """Peers whose solvers report no per-iteration Res (the QP solvers): no history line."""
+    from . import _peers
+
+    return _peers.QP_SOLVERS
+
+
 def rounding_floor(problem, cases) -> float:
-    """eps·‖|A||z*| + |q|‖₂ with z* = z_exact, else the best z seen (the residual's rounding level)."""
+    """eps·‖|A||z*| + |q|‖₂ with z* = z_exact, else the z of least Res seen (the residual's rounding level)."""
     z = problem.z_exact
     if z is None:
-        best = None
-        for c in cases:
-            for r in c.rows:
-                if r["residual"] != "" and (best is None or r["residual"] < best[0]):
-                    best = (r["residual"], c)
+        best = min((c.best for c in cases if c.best is not None), key=lambda b: b[0], default=None)
         if best is None:
             return math.nan
-        z = problem.solve(method=best[1].method, z_update=best[1].z_update_used or best[1].z_update, tol=0.0).z
+        z = best[1]
     absA = abs(problem.A)
     return float(np.finfo(float).eps * np.linalg.norm(absA @ np.abs(z) + np.abs(problem.q)))
 
@@ -437,19 +573,35 @@ def fastest_at(cases, target, tols):
     return (best[0], best[1], tol) if best else (None, None, tol)
 
 
+def _closest(tols, target):
+    """The tol closest to ``target`` in log scale (the smaller one on a tie)."""
+    return min(sorted(set(tols)), key=lambda t: abs(math.log10(t) - math.log10(target)))
+
+
+def seconds_to(case, target, tols):
+    """The converged, freshly timed row of ``case`` at the tol closest to ``target`` (log scale), or None."""
+    if not tols:
+        return None
+    tol = _closest(tols, target)
+    return next((r for r in case.rows if r["tol"] == tol and r["converged"] == 1 and r["reused_from_tol"] == ""),
+                None)
+
+
 def summarize(scene_results, tols, env=None) -> str:
     lines = []
     if env:
         lines.append(environment_line(env))
         lines.append("s/digit = it/digit x least seconds per iteration of the converged runs (core clock); "
-                     f"'noise': none iterated {MIN_TIMED_SECONDS * 1e6:.0f} us, too short to tell")
+                     f"'noise': none iterated {MIN_TIMED_SECONDS * 1e6:.0f} us, too short to tell; "
+                     "'-': not linear (newton, +polish, a QP solver), see 's to tol'")
     for scene, (problem, cases, floor) in scene_results.items():
         lines.append(f"\n== {scene_label(scene)}: {problem.name}, n = {problem.n}; "
                      f"rounding level eps*|| |A||z*|+|q| || = {floor:.1e}")
-        lines.append(f"   {'method / z-update':<22} {'s/digit':>9} {'it/digit':>9} {'best Res':>9} "
-                     f"{'smallest tol met':>16}  stopped (first failing tol)")
+        lines.append(f"   {'method / z-update':<24} {'s/digit':>9} {'it/digit':>9} "
+                     + " ".join(f"{'s to ' + f'{_closest(tols, t):.0e}':>10}" for t in TARGETS)
+                     + f" {'best Res':>9} {'smallest tol met':>16}  stopped (first failing tol)")
         for c in cases:
-            spd, ipd = per_digit(c.rows)
+            spd, ipd = per_digit(c.rows) if c.linear else (math.nan, math.nan)
             met = [r["tol"] for r in c.rows if r["converged"] == 1]
             stop = next((r for r in c.rows if r["converged"] != 1), None)
             stop_s = "-" if stop is None else (f"{stop['status']} at tol {stop['tol']:.0e}"
@@ -457,7 +609,15 @@ def summarize(scene_results, tols, env=None) -> str:
                                                   if stop["residual"] != "" else ""))
             twin = next((o.label for o in cases[:cases.index(c)] if _same_iterates(o, c)), None)
             spd_s = "noise" if math.isnan(spd) and not math.isnan(ipd) else f"{spd:.2e}"
-            lines.append(f"   {c.label:<22} {spd_s:>9} {ipd:9.1f} {best_residual(c):9.1e} "
+            ipd_s = f"{ipd:.1f}"
+            if not c.linear:  # superlinear, or one jump to rounding level: no cost per digit
+                spd_s = ipd_s = "-"
+            at = []
+            for t in TARGETS:
+                r = seconds_to(c, t, tols)
+                at.append("-" if r is None else f"{r['seconds']:.2e}")
+            lines.append(f"   {c.label:<24} {spd_s:>9} {ipd_s:>9} " + " ".join(f"{a:>10}" for a in at)
+                         + f" {best_residual(c):9.1e} "
                          f"{(f'{min(met):.0e}' if met else 'none'):>16}  {stop_s}"
                          + (f"  [same iterates as {twin}]" if twin else ""))
         for target in TARGETS:
@@ -477,10 +637,13 @@ def summarize(scene_results, tols, env=None) -> str:
 # --------------------------------------------------------------------------- plots
 
 _COLORS = {"nrm": "tab:blue", "nrmm": "tab:orange", "nrmaor": "tab:brown", "nrmsor": "tab:pink",
-           "nrmgs": "tab:green", "nrmj": "tab:red", "mms": "tab:purple", "two_sweep": "tab:gray"}
+           "nrmgs": "tab:green", "nrmj": "tab:red", "mms": "tab:purple", "two_sweep": "tab:gray",
+           "newton": "tab:cyan", "psor": "black", "piqp": "tab:olive", "osqp": "gold"}
+_POLISH_COLOR = "darkgreen"
 _MARKERS = {"nrm": "o", "nrmm": "s", "nrmaor": "P", "nrmsor": "X", "nrmgs": "^", "nrmj": "v",
-            "mms": "D", "two_sweep": "*"}
+            "mms": "D", "two_sweep": "*", "newton": "p", "psor": "x", "piqp": "h", "osqp": "d"}
 _LINESTYLES = {"explicit": "-", "solve": "--"}
+_PEER_LINESTYLE = "-."
 
 
 def _pyplot():
@@ -515,8 +678,14 @@ def _log_ticks(ax):
 
 
 def _case_style(c):
-    return dict(color=_COLORS.get(c.method, "k"), marker=_MARKERS.get(c.method, "o"),
-                linestyle=_LINESTYLES.get(c.z_update_used, ":"))
+    base, kw = split_method(c.method)
+    if c.tool == "peer":
+        linestyle = _PEER_LINESTYLE
+    else:
+        linestyle = _LINESTYLES.get(c.z_update_used, "-")
+    return dict(color=_POLISH_COLOR if kw else _COLORS.get(base, "k"),
+                marker="*" if kw else _MARKERS.get(base, "o"), linestyle=linestyle,
+                lw=2.0 if base == "newton" or kw else 1.3)
 
 
 def plot_work_precision(scene_results, path, *, y="residual", tols=(), dpi=110):
@@ -533,7 +702,7 @@ def plot_work_precision(scene_results, path, *, y="residual", tols=(), dpi=110):
         problem, cases, floor = scene_results[scene]
         for c in cases:
             st = _case_style(c)
-            seen_methods.setdefault(c.method, st)
+            seen_methods.setdefault(c.method, dict(st, linestyle=_PEER_LINESTYLE if c.tool == "peer" else "-"))
             seen_z.add(c.z_update_used)
             if y == "residual" and c.history is not None:
                 hs, hr = c.history["seconds"], c.history["residual"]
@@ -546,7 +715,7 @@ def plot_work_precision(scene_results, path, *, y="residual", tols=(), dpi=110):
             bad = [(s, v) for s, v, conv in vals if conv != 1]
             if ok:
                 xs, ys = zip(*ok)
-                ax.plot(xs, ys, color=st["color"], linestyle=st["linestyle"], marker=st["marker"], ms=5, lw=1.3)
+                ax.plot(xs, ys, color=st["color"], linestyle=st["linestyle"], marker=st["marker"], ms=5, lw=st["lw"])
             if bad:  # the point reached when the solve stopped early: hollow marker
                 xs, ys = zip(*bad)
                 ax.plot(xs, ys, linestyle="none", marker=st["marker"], ms=9, mfc="none", mec=st["color"],
@@ -568,10 +737,12 @@ def plot_work_precision(scene_results, path, *, y="residual", tols=(), dpi=110):
         ax.tick_params(labelsize=7)
     for ax in list(axes.flat)[len(names):]:
         ax.set_visible(False)
-    handles = [Line2D([], [], color=st["color"], marker=st["marker"], linestyle="-", label=m)
+    handles = [Line2D([], [], color=st["color"], marker=st["marker"], linestyle=st["linestyle"], label=m)
                for m, st in seen_methods.items()]
     handles += [Line2D([], [], color="k", linestyle=_LINESTYLES[z], label=f"z-update '{z}'")
                 for z in _LINESTYLES if z in seen_z]
+    if any(c.tool == "peer" for _, cs, _ in scene_results.values() for c in cs):
+        handles.append(Line2D([], [], color="k", linestyle=_PEER_LINESTYLE, label="peer (not nrmicp)"))
     handles += [Line2D([], [], color="k", marker="o", linestyle="none", label="converged (Res < tol)"),
                 Line2D([], [], color="k", marker="o", mfc="none", ms=9, linestyle="none",
                        label="stopped early: point reached")]
@@ -582,7 +753,7 @@ def plot_work_precision(scene_results, path, *, y="residual", tols=(), dpi=110):
     tl = f"tol = {max(tols):.0e} … {min(tols):.0e}" if tols else ""
     what = "residual Res reached" if y == "residual" else "true error max|z − z_exact| reached"
     fig.suptitle(f"nrmicp work–precision: {what} against solve time, {tl} (one marker per tol; "
-                 f"colour: method, line style: z-update)", fontsize=11)
+                 f"colour: method or peer, line style: z-update)", fontsize=11)
     fig.tight_layout(rect=(0, 0.75 / (3.6 * nrows + 1.2), 1, 1 - 0.45 / (3.6 * nrows + 1.2)))
     _save(fig, path, dpi)
     plt.close(fig)
@@ -662,8 +833,12 @@ def _parser(prog: str = "python -m nrmicp bench"):
                     "scene, method and z-update; writes a CSV, PNG diagrams and a text summary.")
     p.add_argument("--scenes", help=f"comma-separated; default: {','.join(DEFAULT_SCENES)} "
                                     f"(also: {','.join(EXTRA_SCENES)})")
-    p.add_argument("--methods", help=f"comma-separated from {','.join(nrmicp.METHODS)}; "
-                                     f"default: {','.join(DEFAULT_METHODS)}")
+    p.add_argument("--methods", help=f"comma-separated from {','.join(nrmicp.METHODS)}, each optionally "
+                                     f"with '+polish'; default: {','.join(DEFAULT_METHODS)}")
+    p.add_argument("--peers", default=",".join(DEFAULT_PEERS),
+                   help=f"comma-separated from {','.join(PEERS)} or 'none' (default {','.join(DEFAULT_PEERS)}: "
+                        "red-black PSOR and the first installed of piqp, osqp); run on the LCP scenes "
+                        "(a QP solver on the symmetric ones); one not installed is skipped with a note")
     p.add_argument("--z-updates", default="auto",
                    help="comma-separated from auto,explicit,solve (default auto, which is explicit; "
                         "use explicit,solve to compare the two)")
@@ -673,11 +848,12 @@ def _parser(prog: str = "python -m nrmicp bench"):
     p.add_argument("--size", default=None, choices=tuple(SIZES),
                    help="problem sizes (default small; --quick: tiny)")
     p.add_argument("--quick", action="store_true",
-                   help="tiny sizes, tols 1e-2..1e-8 (4), methods nrmgs,nrmm: a smoke run of seconds")
+                   help=f"tiny sizes, tols 1e-2..1e-8 (4), methods {','.join(QUICK_METHODS)} and the peers: "
+                        "a smoke run of seconds")
     p.add_argument("--repeat", type=int, default=1, help="time each solve r times and keep the best (default 1)")
     p.add_argument("--maxiter", type=int, default=10000, help="iteration cap per solve (default 10000)")
     p.add_argument("--history-scene", help="scene of the convergence-history figure "
-                                           "(default thermoforming_2d if swept, else the first scene)")
+                                           "(default obstacle_2d if swept, where newton and the peers all run; else the first scene)")
     p.add_argument("--out", default="bench-out", help="output directory (default bench-out/)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     return p
@@ -697,8 +873,15 @@ def main(argv: Optional[list[str]] = None, prog: str = "python -m nrmicp bench")
             print(f"unknown scene {s!r}; choose from {', '.join(SCENES)}", file=sys.stderr)
             return 2
     for m in methods:
-        if m not in nrmicp.METHODS:
-            print(f"unknown method {m!r}; choose from {', '.join(nrmicp.METHODS)}", file=sys.stderr)
+        base, _, extra = m.partition("+")
+        if base not in nrmicp.METHODS or extra not in ("", "polish"):
+            print(f"unknown method {m!r}; choose from {', '.join(nrmicp.METHODS)} (each optionally "
+                  "with '+polish')", file=sys.stderr)
+            return 2
+    peer_names = [p.lower() for p in _split(args.peers) if p.lower() != "none"]
+    for p in peer_names:
+        if p not in PEERS:
+            print(f"unknown peer {p!r}; choose from {', '.join(PEERS)} or none", file=sys.stderr)
             return 2
     for z in z_updates:
         if z not in ("auto", "explicit", "solve"):
@@ -708,7 +891,7 @@ def main(argv: Optional[list[str]] = None, prog: str = "python -m nrmicp bench")
         print("--repeat and --maxiter must be >= 1", file=sys.stderr)
         return 2
     tols = _tols(args)
-    hist_scene = args.history_scene or ("thermoforming_2d" if "thermoforming_2d" in scenes_ else scenes_[0])
+    hist_scene = args.history_scene or ("obstacle_2d" if "obstacle_2d" in scenes_ else scenes_[0])
     if hist_scene not in scenes_:
         print(f"--history-scene {hist_scene!r} is not among the swept scenes", file=sys.stderr)
         return 2
@@ -716,21 +899,23 @@ def main(argv: Optional[list[str]] = None, prog: str = "python -m nrmicp bench")
 
     t_start = time.perf_counter()
     print(f"nrmicp {nrmicp.__version__} bench: scenes {','.join(scenes_)}; methods {','.join(methods)}; "
-          f"z-updates {','.join(z_updates)}; size {size}; {len(tols)} tols {tols[0]:.0e}..{tols[-1]:.0e}; "
+          f"peers {','.join(peer_names) or 'none'}; z-updates {','.join(z_updates)}; size {size}; {len(tols)} tols {tols[0]:.0e}..{tols[-1]:.0e}; "
           f"repeat {args.repeat}; maxiter {args.maxiter}", flush=True)
     problems = {}
     for s in scenes_:  # build first: exact references are not part of any timing
         problems[s] = build_scene(s, size)
-    n_cases = len(scenes_) * len(methods) * len(z_updates)
+    peers, notes = resolve_peers(peer_names, problems)
+    for note in notes:
+        print(note, flush=True)
+    plan = {s: [(m, z) for m in methods for z in (z_updates if split_method(m)[0] != "newton" else z_updates[:1])]
+            + [(p, "") for p in peers[s]] for s in scenes_}
+    n_cases = sum(len(v) for v in plan.values())
     progress = Progress(n_cases * (len(tols) + 1) * args.repeat, enabled=not args.no_progress)
     scene_results = {}
     for s in scenes_:
         P = problems[s]
-        cases = []
-        for m in methods:
-            for z in z_updates:
-                cases.append(run_case(P, s, m, z, tols, size=size, maxiter=args.maxiter, repeat=args.repeat,
-                                      history=True, progress=progress))
+        cases = [run_case(P, s, m, z, tols, size=size, maxiter=args.maxiter, repeat=args.repeat, history=True,
+                          progress=progress) for m, z in plan[s]]
         scene_results[s] = (P, cases, rounding_floor(P, cases))
     progress.close()
 

@@ -1,0 +1,183 @@
+"""What a user would use instead of nrmicp, for the work–precision bench (``python -m nrmicp bench``):
+red-black projected SOR in numpy and a QP solver (PIQP or OSQP) on min ½zᵀAz + qᵀz, z ≥ 0.
+
+They live in the package, not in benchmarks/, because the bench must run from an installed
+nrmicp (benchmarks/ is not part of the wheel). benchmarks/qp_peers.py has the same two peers
+(and more QP solvers) for the large-n peer tables; this module is the minimal version.
+
+A peer solves LCP(q', A) in y = z − c: ζ ≡ 0 (c = 0) or a constant ζ ≡ c (the shifted LCP,
+q' = q + Ac). A callable ζ is not a peer's problem, and the QP form needs a symmetric A; a peer
+says which with :func:`applicable`. Res is the paper's ‖min(Az + q, z − c)‖₂ = ‖min(Ay + q', y)‖₂.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import scipy.sparse as sp
+
+#: The QP solvers the bench knows, in order of preference for ``--peers qp``.
+QP_SOLVERS = ("piqp", "osqp")
+
+
+def installed(name: str):
+    """The module version of an installed QP solver, or None."""
+    try:
+        mod = __import__(name)
+    except ImportError:
+        return None
+    return getattr(mod, "__version__", "?")
+
+
+def shifted_lcp(problem):
+    """(A csr, q', c) with y = z − c solving LCP(q', A), or None when ζ is not constant."""
+    A = sp.csr_matrix(problem.A, dtype=float)
+    q = np.asarray(problem.q, dtype=float)
+    zeta = problem.zeta
+    if zeta is None:
+        return A, q, np.zeros(A.shape[0])
+    if callable(zeta) or hasattr(zeta, "B"):
+        return None
+    c = np.broadcast_to(np.asarray(zeta, dtype=float), q.shape).copy()
+    return A, q + A @ c, c
+
+
+def applicable(peer: str, problem) -> str:
+    """'' when ``peer`` can solve ``problem``, else why not."""
+    lcp = shifted_lcp(problem)
+    if lcp is None:
+        return "ζ is not constant (not an LCP)"
+    if peer in QP_SOLVERS:
+        A = lcp[0]
+        if abs(A - A.T).max() > 1e-14 * abs(A).max():
+            return "A is not symmetric (no QP form)"
+    return ""
+
+
+def _res(A, q, y):
+    return float(np.linalg.norm(np.minimum(A @ y + q, y)))
+
+
+# --------------------------------------------------------------------------- red-black PSOR
+
+def colours(A) -> np.ndarray:
+    """Greedy colouring of A's graph in row order: red-black (2 colours) on a 5-point grid or a
+    tridiagonal matrix. Rows of one colour do not couple, so each colour is one vectorized update."""
+    A = sp.csr_matrix(A)
+    S = A + A.T
+    ip, ix = S.indptr, S.indices
+    col = np.full(A.shape[0], -1, dtype=np.int64)
+    for i in range(A.shape[0]):
+        used = set(col[ix[ip[i]:ip[i + 1]]].tolist())
+        c = 0
+        while c in used:
+            c += 1
+        col[i] = c
+    return col
+
+
+def sor_omega(A) -> float:
+    """ω = 2 / (1 + √(1 − ρ_J²)), SOR's optimum for a consistently ordered matrix, with ρ_J the
+    spectral radius of the Jacobi matrix I − D⁻¹A (ARPACK). 1 when that fails or ρ_J ≥ 1."""
+    from scipy.sparse.linalg import eigs
+
+    d = A.diagonal()
+    J = sp.identity(A.shape[0], format="csr") - sp.diags(1.0 / d) @ A
+    try:
+        if A.shape[0] < 50:
+            rho = float(np.max(np.abs(np.linalg.eigvals(J.toarray()))))
+        else:
+            rho = float(np.abs(eigs(J, k=1, which="LM", return_eigenvectors=False, tol=1e-6)[0]))
+    except Exception:
+        return 1.0
+    return 2.0 / (1.0 + np.sqrt(1.0 - rho * rho)) if rho < 1 else 1.0
+
+
+def psor(A, q, c, tol, *, omega, colour, maxiter, history=False):
+    """Projected SOR y_i ← max(0, y_i − ω (Ay + q)_i / a_ii) colour by colour, from y = 0, until
+    Res < tol (checked every sweep, one SpMV). Returns z = y + c and the outcome."""
+    t0 = time.perf_counter()
+    blocks = []
+    for k in np.unique(colour):
+        rows = np.flatnonzero(colour == k)
+        Ak = A[rows]
+        blocks.append((rows, Ak, omega / Ak[np.arange(len(rows)), rows].A1, q[rows]))
+    setup = time.perf_counter() - t0
+    y = np.zeros(A.shape[0])
+    hist = ([], [], []) if history else None
+    k, status = 0, "max_iterations"
+    while True:
+        res = _res(A, q, y)
+        if hist is not None:
+            hist[0].append(k), hist[1].append(time.perf_counter() - t0), hist[2].append(res)
+        if res < tol:
+            status = "converged"
+            break
+        if not np.isfinite(res):
+            status = "diverged"
+            break
+        if k >= maxiter:
+            break
+        for rows, Ak, wd, qk in blocks:
+            yk = y[rows] - wd * (Ak @ y + qk)
+            np.maximum(yk, 0.0, out=yk)
+            y[rows] = yk
+        k += 1
+    total = time.perf_counter() - t0
+    out = dict(z=y + c, status=status, success=status == "converged", nit=k, residual=res,
+               setup=setup, iterations=total - setup)
+    if hist is not None:
+        out["history"] = dict(iteration=np.array(hist[0]), seconds=np.array(hist[1]), residual=np.array(hist[2]))
+    return out
+
+
+# --------------------------------------------------------------------------- QP solvers
+
+def _qp_once(name, A, q, eps):
+    """One solve of min ½yᵀAy + qᵀy, y ≥ 0 at accuracy eps: (y, status, iterations). Everything
+    the user pays (the upper triangle, the constraint block, set-up, factorization) is inside."""
+    n = A.shape[0]
+    P = sp.triu(A, format="csc")
+    if name == "piqp":
+        import piqp
+
+        s = piqp.SparseSolver()
+        s.settings.verbose = False
+        s.settings.eps_abs = s.settings.eps_rel = eps
+        s.settings.eps_duality_gap_abs = s.settings.eps_duality_gap_rel = eps
+        s.setup(P, q, x_l=np.zeros(n), x_u=np.full(n, np.inf))
+        st = s.solve()
+        return np.array(s.result.x), getattr(st, "name", str(st)), int(s.result.info.iter)
+    if name == "osqp":
+        import osqp
+
+        m = osqp.OSQP()
+        # polishing (OSQP >= 1.0; 'polish' before): one solve on the guessed active set
+        v1 = int(osqp.__version__.split(".")[0]) >= 1
+        m.setup(P=P, q=q, A=sp.identity(n, format="csc"), l=np.zeros(n), u=np.full(n, np.inf),
+                eps_abs=eps, eps_rel=eps, max_iter=1_000_000, verbose=False,
+                **{"polishing" if v1 else "polish": True})
+        r = m.solve(raise_error=False) if v1 else m.solve()  # a failed solve is a status, not an error
+        return np.array(r.x), str(r.info.status), int(r.info.iter)
+    raise ValueError(f"unknown QP solver {name!r}")
+
+
+def qp(name, A, q, c, tol, *, eps_min=1e-14):
+    """The QP solver's eps, from tol down by 10× until Res < tol (a user has to find it too):
+    the outcome of the last run, its own seconds (the tuning runs before it are not counted)
+    and the eps it needed. Not converged when even eps_min does not get Res below tol."""
+    eps = tol
+    while True:
+        t0 = time.perf_counter()
+        try:
+            y, st, it = _qp_once(name, A, q, eps)
+            res = _res(A, q, y)
+        except Exception as exc:  # a solver failure is a result too
+            y, st, it, res = np.zeros_like(q), f"error: {type(exc).__name__}", 0, np.inf
+        secs = time.perf_counter() - t0
+        if res < tol or eps / 10 < eps_min * 0.999 or st.startswith("error"):
+            break
+        eps /= 10
+    ok = bool(res < tol)
+    return dict(z=y + c, status="converged" if ok else st.lower().replace(" ", "_"), success=ok, nit=it,
+                residual=res, seconds=secs, setting=f"eps={eps:.0e}")
