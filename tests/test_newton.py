@@ -79,7 +79,10 @@ def test_finest_step_count_is_flat_under_refinement(hierarchy):
         res = problem.solve(method="newton", hierarchy=h, tol=1e-10)
         assert res.success, res.message
         steps.append(res.nit)
-    assert max(steps) - min(steps) <= 1, steps
+    # flat: no size takes more than 1 step beyond the fewest of the smaller sizes (a cold start
+    # peels, 12 -> 24 -> 49 here); fewer steps on a finer grid are no growth
+    assert all(steps[i] <= min(steps[:i]) + 1 for i in range(1, len(steps))), steps
+    assert max(steps) <= 3, steps
 
 
 def test_thermoforming_outer_iteration_and_impulse_control_with_its_jacobian():
@@ -93,6 +96,17 @@ def test_thermoforming_outer_iteration_and_impulse_control_with_its_jacobian():
     assert res.success, res.message
     assert err(res, problem) < 1e-10
     assert res.nit <= 20  # policy iteration: a handful of steps, not the outer fixed point's hundreds
+
+
+def test_impulse_control_without_jacobian_converges_by_the_outer_iteration():
+    # A regression: the outer fixed point warm-starts each inner obstacle solve with the previous
+    # active set; on impulse control its steps were rejected and the solve ended STAGNATED at
+    # Res 3.2 after 6 outer steps. A rejected guess must give way to the start's own active set.
+    problem = scenes.impulse_control(101)
+    res = nrmicp.solve(problem.A, problem.q, problem.zeta, method="newton", tol=1e-10)
+    assert res.success, res.message
+    assert err(res, problem) < 1e-9
+    assert res.path == "newton" and res.outer_iterations >= 2
 
 
 def test_affine_zeta_is_solved_on_the_full_system():
