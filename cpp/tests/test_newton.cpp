@@ -6,6 +6,7 @@
 #include <doctest/doctest.h>
 
 #include <cmath>
+#include <string>
 #include <vector>
 
 using namespace nrmicp;
@@ -131,6 +132,38 @@ TEST_CASE("Newton with user-supplied prolongations: the obstacle problem in 2D, 
   const Vec ref = projected_gauss_seidel(A, q, psi, 4000);
   CHECK((rn.z - ref).lpNorm<Eigen::Infinity>() < 1e-8);
   CHECK((rn.z - rc.z).lpNorm<Eigen::Infinity>() < 1e-12);
+}
+
+TEST_CASE("inner = cg: multigrid-preconditioned CG on the reduced systems agrees with the direct solve") {
+  const int m = 31;
+  const RowMat A = laplacian_2d(m);
+  const Vec psi = paraboloid(m), q = Vec::Zero(m * m);
+  std::vector<RowMat> P;
+  for (int mm = m; mm >= 7; mm = (mm - 1) / 2) P.push_back(interpolation_2d(mm));
+  Options o;
+  o.tol = 1e-10;
+  o.method = Method::Newton;
+  const Newton<RowMat> direct(A, o, P);
+  o.inner = Inner::CG;
+  const Newton<RowMat> cg(A, o, P);
+  const Result rd = direct.solve(q, Zeta<int>::constant(psi));
+  const Result rc = cg.solve(q, Zeta<int>::constant(psi));
+  CHECK(std::string(rc.inner) == "cg");
+  CHECK(std::string(rd.inner) != "cg");
+  CHECK(rc.status == Status::Converged);
+  CHECK(rc.residual < 1e-10);
+  CHECK(rc.nit <= 3);
+  check_complementarity(A, q, rc.z, psi, 1e-10);
+  CHECK((rc.z - rd.z).lpNorm<Eigen::Infinity>() < 1e-10);
+  const Vec ref = projected_gauss_seidel(A, q, psi, 4000);
+  CHECK((rc.z - ref).lpNorm<Eigen::Infinity>() < 1e-8);
+  // Without a hierarchy, or for a stationary member, cg does not apply.
+  const Newton<RowMat> no_hierarchy(A, o);
+  CHECK(std::string(no_hierarchy.solve(q, Zeta<int>::constant(psi)).inner) != "cg");
+  Options s;
+  s.method = Method::NRM;
+  s.inner = Inner::CG;
+  CHECK_THROWS_WITH_AS(Solver<RowMat>(A, s), doctest::Contains("inner = 'cg'"), std::invalid_argument);
 }
 
 TEST_CASE("a prolongation of the wrong shape is refused, naming it") {

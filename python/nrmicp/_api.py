@@ -571,9 +571,12 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
         the paper's Ω2 = I (there only 'solve' converged) and for the baseline 'mms' (whose
         definition, Zheng–Vong, includes it). Use 'solve' when ζ has Lipschitz
         constant about 1 (impulse control). An LCP never factorizes A unless 'solve' is asked for.
-    inner : {'auto', 'cholmod', 'umfpack', 'eigen_llt', 'eigen_lu'}
+    inner : {'auto', 'cholmod', 'umfpack', 'eigen_llt', 'eigen_lu', 'cg'}
         Factorization for Ω2 + (A + φ)Ω1 (nrm, nrmm) and for A ('solve' z-update). 'auto':
         CHOLMOD when symmetric positive definite, else UMFPACK (Eigen's solvers without SuiteSparse).
+        'cg' (method 'newton' only): the reduced systems by CG preconditioned with a multigrid
+        V-cycle on the hierarchy's prolongations, for symmetric A with a hierarchy (else the direct
+        solve); 'auto' picks it there from n = 10,000 on (measured 2.4-10x faster, 3D especially).
     accelerate : {'none', 'anderson'}
         Safeguarded Anderson acceleration of the fixed-point map (memory ``anderson_m``).
     x0 : array_like (n,), optional

@@ -258,6 +258,9 @@ class InnerSolver {
       case Inner::EigenLU:
         // COLAMD: AMD ordering took 450 s at n = 250,000 on this machine, COLAMD 2.5 s.
         return emplace<Eigen::SparseLU<ColMatrix, Eigen::COLAMDOrdering<StorageIndex>>>(M, k, what);
+      case Inner::CG:
+        throw std::invalid_argument("inner = 'cg' is the iterative inner solve of method 'newton' only; the "
+                                    "stationary members factorize their matrices (use 'auto' or a direct backend)");
       case Inner::Auto: break;
     }
     return false;

@@ -123,15 +123,19 @@ class NewtonLevel {
     fallback_options_.method = Method::NRM;
     fallback_options_.omega1 = p.omega1;
     fallback_options_.omega2 = p.omega2;
-    fallback_options_.inner = options.inner;
+    fallback_options_.inner = options.inner == Inner::CG ? Inner::Auto : options.inner;  // nrm factorizes
   }
+
+  /// The prolongations below this level (P[0]: the next coarser level → this one), for the
+  /// multigrid-preconditioned CG inner solve; they must outlive this level.
+  void use_hierarchy(const RowMatrix* P, std::size_t levels) { P_ = P; levels_ = levels; }
 
   const MatrixType& matrix() const { return A_; }
   Eigen::Index size() const { return A_.rows(); }
 
   /// The reduced system of the (shifted) LCP, analysed once.
   System& lcp_system() {
-    if (!lcp_system_) lcp_system_ = std::make_unique<System>(A_, nullptr, inner_);
+    if (!lcp_system_) lcp_system_ = std::make_unique<System>(A_, nullptr, inner_, P_, levels_);
     return *lcp_system_;
   }
   std::unique_ptr<System> affine_system(const RowMatrix& B) const { return std::make_unique<System>(A_, &B, inner_); }
@@ -179,6 +183,8 @@ class NewtonLevel {
   Vector ratio_;  // Ω1/Ω2: x > 0 ⇔ g − (Ω1/Ω2) w > 0
   Options fallback_options_;
   std::unique_ptr<System> lcp_system_;
+  const RowMatrix* P_ = nullptr;
+  std::size_t levels_ = 0;
   std::optional<Solver<MatrixType>> fallback_;
 };
 
@@ -260,7 +266,8 @@ NewtonOutcome newton_loop(NewtonLevel<MatrixType>& level, ActiveSetSystem<typena
     bool ok = seen.insert(h).second;  // a set seen before: a cycle
     if (ok && K.factorize(inactive)) {
       for (Eigen::Index i = 0; i < n; ++i) rhs[i] = inactive[i] ? -q[i] : (c ? (*c)[i] : 0.0);
-      K.solve(rhs, z_new);
+      z_new = z;  // the start of an iterative inner solve (inner = cg), which stops at tol / 10
+      K.solve(rhs, z_new, 0.1 * ctl.tol);
       ++o.solves;
       ++o.steps;
       const double r_new = level.evaluate(z_new, q, B, c, w_new, g_new);
@@ -353,6 +360,8 @@ class Newton {
       coarse_.push_back(std::make_unique<detail::NewtonLevel<RowMatrix>>(*coarse_matrices_.back(), co));
       fine = coarse_matrices_.back().get();
     }
+    finest_->use_hierarchy(P_.data(), P_.size());
+    for (std::size_t l = 0; l < coarse_.size(); ++l) coarse_[l]->use_hierarchy(P_.data() + l + 1, P_.size() - l - 1);
     setup_seconds_ = detail::ScopedTimer::seconds_since(t0);
   }
 

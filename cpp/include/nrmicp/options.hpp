@@ -41,6 +41,7 @@ enum class Inner {
   Umfpack,   ///< UMFPACK LU (SuiteSparse)
   EigenLLT,  ///< Eigen::SimplicialLLT (AMD ordering)
   EigenLU,   ///< Eigen::SparseLU (COLAMD ordering)
+  CG,        ///< method newton only: multigrid-preconditioned CG on the reduced systems (detail/multigrid.hpp)
 };
 
 /// Stabilizers beyond the paper.
@@ -164,6 +165,7 @@ inline const char* to_string(Inner k) {
     case Inner::Umfpack: return "umfpack";
     case Inner::EigenLLT: return "eigen_llt";
     case Inner::EigenLU: return "eigen_lu";
+    case Inner::CG: return "cg";
   }
   return "?";
 }
@@ -181,7 +183,8 @@ inline constexpr Method all_methods[] = {Method::NRM,   Method::NRMM, Method::NR
                                          Method::NRMGS, Method::NRMJ, Method::MMS,    Method::TwoSweep,
                                          Method::Newton};
 inline constexpr ZUpdate all_z_updates[] = {ZUpdate::Auto, ZUpdate::Explicit, ZUpdate::Solve};
-inline constexpr Inner all_inners[] = {Inner::Auto, Inner::Cholmod, Inner::Umfpack, Inner::EigenLLT, Inner::EigenLU};
+inline constexpr Inner all_inners[] = {Inner::Auto, Inner::Cholmod, Inner::Umfpack, Inner::EigenLLT, Inner::EigenLU,
+                                       Inner::CG};
 inline constexpr Accelerate all_accelerations[] = {Accelerate::None, Accelerate::Anderson};
 
 /// The z-update a solve uses. Auto = Explicit: measured faster (no solve with A: 4-10x on ICPs
