@@ -1,11 +1,13 @@
-"""Fuzz: random problems and options through the Python API, against an oracle that does not
-trust the library:
+"""Fuzz: random problems and options through the Python API (magnitudes 1e-300…1e300, NaN/Inf
+inputs, every method including 'newton' with its hierarchy=, polish= and zeta_jacobian=), against
+an oracle that does not trust the library:
 
 - no crash and no hang (every solve is bounded by maxiter);
 - success=True only when Res(z), recomputed here in numpy from the original data and the test's
   own ζ, is below tol (up to rounding in computing Res itself);
 - z finite for finite input; the caller's arrays unmodified;
-- corrupt input -> TypeError/ValueError whose message names the corrupted argument.
+- corrupt input -> TypeError/ValueError whose message names the corrupted argument (a raising
+  zeta_jacobian: its own exception, unchanged).
 
 A few hundred cases in CI (deterministic); NRMICP_FUZZ_EXAMPLES=N runs N random cases, e.g.
 ``NRMICP_FUZZ_EXAMPLES=5000 python -m pytest -q tests/test_fuzz.py``.
@@ -106,10 +108,13 @@ def cases(draw):
     x0 = rng.uniform(0, 1, n) if draw(st.booleans()) else None
     opts["polish"] = draw(st.booleans())
     cname = corrupt[0] if corrupt else None
-    if cname == "hierarchy" and corrupt[1] != "for a stationary method":
-        opts["method"] = "newton"
+    if cname in ("hierarchy", "zeta_jacobian"):  # the method these arguments belong to (or not)
+        method = "nrmgs" if corrupt[1] == "for a stationary method" else "newton"
+        if method != opts["method"] and not (method == "nrmgs" and cname == "hierarchy" and opts["method"] != "newton"):
+            opts["method"] = method
+            opts.pop("alpha", None)  # (options of the method drawn first)
+            opts.pop("theta", None)
     if cname == "zeta_jacobian":
-        opts["method"] = "nrmgs" if corrupt[1] == "for a stationary method" else "newton"
         zkind = draw(st.sampled_from(["callable", "callable_f32"]))
     if opts["method"] == "newton":
         newton_options(opts)
@@ -204,7 +209,8 @@ def apply_corruption(case, zeta):
         opts[name] = np.full(n, {"negative": -1.0, "zero": 0.0, "inf": np.inf, "subnormal": 1e-310}[how])
         if name in ("omega1", "phi"):
             opts["method"] = "nrmgs"
-            opts.pop("hierarchy", None)
+            for k in ("hierarchy", "alpha", "theta"):
+                opts.pop(k, None)
     elif name == "maxiter":
         opts["maxiter"] = 2**31 if how == "beyond int32" else -1
     elif name == "tol":
