@@ -312,7 +312,7 @@ def test_fuzz_oracle(case):
     if case["corrupt"] is not None:
         zeta = apply_corruption(case, zeta)
     A, q, x0, opts = case["A"], case["q"], case["x0"], case["opts"]
-    jac = zeta_jacobian if case["jacobian"] == "valid" else case["jacobian"]
+    jac = zeta_jacobian if isinstance(case["jacobian"], str) else case["jacobian"]  # "valid"
     hier = opts.get("hierarchy")
     hier = list(hier) if isinstance(hier, (list, tuple)) else []
     watched = [A, q, x0, case["B"], case["c"], *(opts.get(k) for k in ("omega1", "omega2", "phi")), *hier]
