@@ -1,11 +1,13 @@
-"""Fuzz: random problems and options through the Python API, against an oracle that does not
-trust the library:
+"""Fuzz: random problems and options through the Python API (magnitudes 1e-300…1e300, NaN/Inf
+inputs, every method including 'newton' with its hierarchy=, polish= and zeta_jacobian=), against
+an oracle that does not trust the library:
 
 - no crash and no hang (every solve is bounded by maxiter);
 - success=True only when Res(z), recomputed here in numpy from the original data and the test's
   own ζ, is below tol (up to rounding in computing Res itself);
 - z finite for finite input; the caller's arrays unmodified;
-- corrupt input -> TypeError/ValueError whose message names the corrupted argument.
+- corrupt input -> TypeError/ValueError whose message names the corrupted argument (a raising
+  zeta_jacobian: its own exception, unchanged).
 
 A few hundred cases in CI (deterministic); NRMICP_FUZZ_EXAMPLES=N runs N random cases, e.g.
 ``NRMICP_FUZZ_EXAMPLES=5000 python -m pytest -q tests/test_fuzz.py``.
@@ -27,7 +29,7 @@ _LONG_RUN = int(os.environ.get("NRMICP_FUZZ_EXAMPLES", "0"))
 FUZZ = settings(max_examples=_LONG_RUN or 300, deadline=None, derandomize=not _LONG_RUN, database=None,
                 suppress_health_check=list(HealthCheck))
 
-METHODS = ["nrm", "nrmm", "nrmaor", "nrmsor", "nrmgs", "nrmj", "mms", "two_sweep"]
+METHODS = ["nrm", "nrmm", "nrmaor", "nrmsor", "nrmgs", "nrmj", "mms", "two_sweep", "newton"]
 EPS = np.finfo(float).eps
 
 #: (argument named in the error, how the input is corrupted)
@@ -39,7 +41,17 @@ CORRUPTIONS = [
     ("zeta", "returns wrong shape"), ("zeta", "writes into z"), ("zeta.B", "index out of range"),
     ("omega1", "negative"), ("omega2", "zero"), ("phi", "negative"), ("maxiter", "beyond int32"),
     ("maxiter", "negative"), ("tol", "nan"), ("method", "unknown"), ("gamma", "string"),
+    ("q", "inf"), ("omega2", "inf"), ("zeta", "inf constant"), ("omega2", "subnormal"), ("polish", "string"),
+    ("hierarchy", "rows not n"), ("hierarchy", "not coarser"), ("hierarchy", "second level mismatched"),
+    ("hierarchy", "nan entry"), ("hierarchy", "inf entry"), ("hierarchy", "a string"), ("hierarchy", "not a list"),
+    ("hierarchy", "list of strings"), ("hierarchy", "for a stationary method"),
+    ("zeta_jacobian", "wrong shape"), ("zeta_jacobian", "returns a string"), ("zeta_jacobian", "not callable"),
+    ("zeta_jacobian", "raises"), ("zeta_jacobian", "for a stationary method"),
 ]
+
+#: The exception a raising zeta_jacobian throws: it must reach the caller unchanged.
+class JacobianError(Exception):
+    pass
 
 
 def random_matrix(rng, n, kind, scale):
@@ -67,7 +79,7 @@ def cases(draw):
     corrupt = draw(st.sampled_from(CORRUPTIONS)) if draw(st.integers(0, 3)) == 0 else None
     # a corrupted case is otherwise valid, so that the error can only be about the corruption
     kind = "hplus" if corrupt else draw(st.sampled_from(["hplus", "hplus", "posdiag", "random", "singular"]))
-    scale = 10.0 ** draw(st.sampled_from([0, 0, -8, 8, -100, 100]))
+    scale = 10.0 ** draw(st.sampled_from([0, 0, 0, -8, 8, -100, 100, -200, 200, -300, 300]))
     A = random_matrix(rng, n, kind, scale)
     if draw(st.booleans()):
         A = sp.csr_matrix((A.data, A.indices.astype(np.int64), A.indptr.astype(np.int64)), shape=A.shape)
@@ -94,7 +106,49 @@ def cases(draw):
     if draw(st.booleans()):
         opts["omega2"] = np.abs(A.diagonal()) + scale * rng.uniform(0.1, 1.0, n)
     x0 = rng.uniform(0, 1, n) if draw(st.booleans()) else None
-    return dict(A=A, q=q, zkind=zkind, c=c, B=B, x0=x0, opts=opts, corrupt=corrupt, rng=rng)
+    opts["polish"] = draw(st.booleans())
+    cname = corrupt[0] if corrupt else None
+    if cname in ("hierarchy", "zeta_jacobian"):  # the method these arguments belong to (or not)
+        method = "nrmgs" if corrupt[1] == "for a stationary method" else "newton"
+        if method != opts["method"] and not (method == "nrmgs" and cname == "hierarchy" and opts["method"] != "newton"):
+            opts["method"] = method
+            opts.pop("alpha", None)  # (options of the method drawn first)
+            opts.pop("theta", None)
+    if cname == "zeta_jacobian":
+        zkind = draw(st.sampled_from(["callable", "callable_f32"]))
+    if opts["method"] == "newton":
+        newton_options(opts)
+        opts["hierarchy"] = draw(st.sampled_from([None, "auto", "amg", "list", "list"]))
+        if opts["hierarchy"] == "list":
+            opts["hierarchy"] = random_hierarchy(rng, n, dense=draw(st.booleans()))
+    jacobian = None
+    if opts["method"] == "newton" and zkind in ("callable", "callable_f32") and draw(st.booleans()):
+        jacobian = "valid"
+    return dict(A=A, q=q, zkind=zkind, c=c, B=B, x0=x0, opts=opts, corrupt=corrupt, rng=rng, jacobian=jacobian)
+
+
+def newton_options(opts):
+    """Drop the options of the stationary members that method 'newton' rejects (phi, accelerate,
+    z_update): a valid newton case must fail only for what it is fuzzed with."""
+    opts.pop("phi", None)
+    opts["accelerate"] = "none"
+    opts["z_update"] = "auto"
+
+
+def random_hierarchy(rng, n, dense=False):
+    """A valid random hierarchy: prolongations P_l of shape (n_l, n_{l+1}), n_{l+1} < n_l, each
+    coarse unknown aggregating at least one fine one (positive weights, some extra entries)."""
+    Ps, rows = [], n
+    while rows > 1 and rng.uniform() < 0.7:
+        cols = int(rng.integers(1, rows))
+        agg = np.r_[np.arange(cols), rng.integers(0, cols, rows - cols)]
+        rng.shuffle(agg)
+        P = sp.csr_matrix((rng.uniform(0.5, 1.5, rows), (np.arange(rows), agg)), shape=(rows, cols))
+        P = sp.csr_matrix(P + 0.1 * sp.random(rows, cols, density=0.2, random_state=rng))
+        P.sort_indices()
+        Ps.append(P.toarray() if dense else P)
+        rows = cols
+    return Ps
 
 
 def make_zeta(zkind, c, B):
@@ -110,6 +164,11 @@ def make_zeta(zkind, c, B):
         return f, f
     f = lambda z: (0.05 * np.sin(z) + c).astype(np.float32)  # noqa: E731
     return f, lambda z: f(z).astype(np.float64)
+
+
+def zeta_jacobian(z):
+    """The Jacobian of the callables of make_zeta, 0.05 sin(z) + c."""
+    return sp.diags(0.05 * np.cos(z), format="csr")
 
 
 def apply_corruption(case, zeta):
@@ -132,12 +191,13 @@ def apply_corruption(case, zeta):
         elif how == "not square":
             case["A"] = sp.csr_matrix(sp.vstack([A, sp.csr_matrix((1, n))]))
     elif name == "q":
-        case["q"] = {"nan": np.r_[case["q"][:-1], np.nan], "wrong length": np.ones(n + 1),
+        case["q"] = {"nan": np.r_[case["q"][:-1], np.nan], "inf": np.r_[np.inf, case["q"][1:]],
+                     "wrong length": np.ones(n + 1),
                      "strings": np.array(["1"] * n)}[how]
     elif name == "x0":
         case["x0"] = np.full(n, np.inf) if how == "inf" else np.zeros(n + 2)
     elif name == "zeta":
-        zeta = {"wrong length": np.ones(n + 1), "nan constant": np.full(n, np.nan),
+        zeta = {"wrong length": np.ones(n + 1), "nan constant": np.full(n, np.nan), "inf constant": np.full(n, np.inf),
                 "returns None": lambda z: None, "returns strings": lambda z: ["0.5"] * n,
                 "returns complex": lambda z: z + 1j, "returns wrong shape": lambda z: np.zeros((n, 2)),
                 "writes into z": _writes_into_z}[how]
@@ -146,9 +206,11 @@ def apply_corruption(case, zeta):
         B.indices[0] = n + 7
         zeta = nrmicp.Affine(B, case["c"])
     elif name in ("omega1", "omega2", "phi"):
-        opts[name] = np.full(n, {"negative": -1.0, "zero": 0.0}[how])
+        opts[name] = np.full(n, {"negative": -1.0, "zero": 0.0, "inf": np.inf, "subnormal": 1e-310}[how])
         if name in ("omega1", "phi"):
             opts["method"] = "nrmgs"
+            for k in ("hierarchy", "alpha", "theta"):
+                opts.pop(k, None)
     elif name == "maxiter":
         opts["maxiter"] = 2**31 if how == "beyond int32" else -1
     elif name == "tol":
@@ -157,7 +219,37 @@ def apply_corruption(case, zeta):
         opts["method"] = "newton?"
     elif name == "gamma":
         opts["gamma"] = "1"
+    elif name == "polish":
+        opts["polish"] = "yes"
+    elif name == "hierarchy":
+        opts["hierarchy"] = _bad_hierarchy(how, n, case["rng"])
+    elif name == "zeta_jacobian":
+        case["jacobian"] = {"wrong shape": lambda z: sp.eye(n + 1, format="csr"),
+                            "returns a string": lambda z: "J", "not callable": sp.eye(n, format="csr"),
+                            "raises": _raising_jacobian, "for a stationary method": zeta_jacobian}[how]
     return zeta
+
+
+def _bad_hierarchy(how, n, rng):
+    good = random_hierarchy(rng, n) if n > 1 else []
+    P0 = good[0] if good else sp.csr_matrix(np.ones((n, max(n - 1, 1))))
+    if how == "rows not n":
+        return [sp.csr_matrix(np.ones((n + 1, 1)))]
+    if how == "not coarser":
+        return [sp.eye(n, format="csr")]
+    if how == "second level mismatched":
+        return [P0, sp.csr_matrix(np.ones((P0.shape[1] + 2, 1)))]
+    if how in ("nan entry", "inf entry"):
+        P = P0.copy()
+        P.data[-1] = np.nan if how == "nan entry" else -np.inf
+        return [P]
+    if how == "for a stationary method":
+        return good or [P0]
+    return {"a string": "geometric", "not a list": sp.eye(n, format="csr"), "list of strings": ["P0"]}[how]
+
+
+def _raising_jacobian(z):
+    raise JacobianError("from the user's zeta_jacobian")
 
 
 def _writes_into_z(z):
@@ -194,14 +286,23 @@ def oracle_residual(A, q, z, zeta_ref):
     w = Ad @ z + q
     zz = zeta_ref(z)
     g = z - zz
-    res = float(np.linalg.norm(np.minimum(w, g)))
-    slack = 64 * EPS * float(np.linalg.norm(np.abs(Ad) @ np.abs(z) + np.abs(q) + np.abs(z) + np.abs(zz)))
+    res = stable_norm(np.minimum(w, g))
+    slack = 64 * EPS * stable_norm(np.abs(Ad) @ np.abs(z) + np.abs(q) + np.abs(z) + np.abs(zz))
     return res, slack
 
 
-#: Failures owned by the solver-loop rewrite (issue 9 items 6 and 7), tolerated here until it lands:
-#: a diverging iterate handed to a callable ζ ends as "zeta(z) returned non-finite values".
-KNOWN_ZETA_BLAME = "returned non-finite values"
+def stable_norm(v):
+    """‖v‖₂ scaled by max|vᵢ| (no overflow or underflow for data of magnitude 1e±300)."""
+    big = float(np.max(np.abs(v), initial=0.0))
+    if not 0.0 < big < np.inf:
+        return big
+    return big * float(np.linalg.norm(v / big))
+
+
+#: Corruptions seen only when the library calls the corrupted callable (a Newton solve that stops
+#: before its first step never asks for the Jacobian): an exception is then required to be the
+#: right one, but a solve may also end normally.
+LAZY = {("zeta_jacobian", "wrong shape"), ("zeta_jacobian", "returns a string"), ("zeta_jacobian", "raises")}
 
 
 @FUZZ
@@ -211,11 +312,20 @@ def test_fuzz_oracle(case):
     if case["corrupt"] is not None:
         zeta = apply_corruption(case, zeta)
     A, q, x0, opts = case["A"], case["q"], case["x0"], case["opts"]
-    before = snapshot(A, q, x0, case["B"], case["c"], *(opts.get(k) for k in ("omega1", "omega2", "phi")))
+    jac = zeta_jacobian if isinstance(case["jacobian"], str) else case["jacobian"]  # "valid"
+    hier = opts.get("hierarchy")
+    hier = list(hier) if isinstance(hier, (list, tuple)) else []
+    watched = [A, q, x0, case["B"], case["c"], *(opts.get(k) for k in ("omega1", "omega2", "phi")), *hier]
+    before = snapshot(*watched)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            res = nrmicp.solve(A, q, zeta, x0=x0, **opts)
+            res = nrmicp.solve(A, q, zeta, x0=x0, zeta_jacobian=jac, **opts)
+    except JacobianError:
+        event("corrupt input: the user's JacobianError")
+        assert case["corrupt"] == ("zeta_jacobian", "raises")
+        assert_unchanged(before, watched)
+        return
     except (TypeError, ValueError) as exc:  # numpy.linalg.LinAlgError is a ValueError
         msg = str(exc)
         event(f"{'corrupt input' if case['corrupt'] else 'valid input'}: {type(exc).__name__}")
@@ -224,17 +334,15 @@ def test_fuzz_oracle(case):
             assert name in msg, f"corrupt {case['corrupt']} -> {type(exc).__name__}: {msg}"
         else:  # valid input that the method cannot take: still a clear error naming what
             assert isinstance(exc, (ValueError, np.linalg.LinAlgError)), msg
-            assert any(s in msg for s in ("A[", "A (", "A is", "left matrix", "omega2", "alpha", "zeta")), msg
-            if "zeta" in msg and case["zkind"] in ("callable", "callable_f32"):
-                assert KNOWN_ZETA_BLAME in msg, msg
-                event("valid input: callable zeta blamed for a non-finite iterate (item 6)")
-        assert_unchanged(before, [A, q, x0, case["B"], case["c"],
-                                  *(opts.get(k) for k in ("omega1", "omega2", "phi"))])
+            assert any(s in msg for s in ("A[", "A (", "A is", "left matrix", "omega2", "alpha")), msg
+        assert_unchanged(before, watched)
         return
-    assert case["corrupt"] is None, f"corrupt {case['corrupt']} was accepted: {res.message}"
-    assert_unchanged(before, [A, q, x0, case["B"], case["c"], *(opts.get(k) for k in ("omega1", "omega2", "phi"))])
+    assert case["corrupt"] is None or case["corrupt"] in LAZY, f"corrupt {case['corrupt']} was accepted: {res.message}"
+    assert_unchanged(before, watched)
     assert isinstance(res.status, nrmicp.Status)
     event(f"valid input: {res.status.name}")
+    if opts["method"] == "newton":
+        event(f"newton: {res.status.name}, path {res.path}")
     assert np.all(np.isfinite(res.z)), res.message
     if res.success:
         true_res, slack = oracle_residual(A, q, res.z, zeta_ref)

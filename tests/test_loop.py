@@ -102,6 +102,25 @@ def test_runaway_modulus_vector_is_diverged_not_zeta_failure():
     assert all(calls)
 
 
+def test_overflowing_affine_zeta_in_scaled_variables_is_diverged_not_zeta_failure():
+    """Found by the fuzz test: with scale='both' an Affine ζ becomes D_c⁻¹ B D_c y + D_c⁻¹ c, whose
+    entries reach 1e150 when A has an entry 2e300; the runaway iterate (q ~ 1e300, no solution: row 1
+    of A is empty and q[1] < 0) overflowed it, and the solve raised 'zeta(z) returned non-finite
+    values'. ζ = Bz + c with finite B, c is the library's own evaluation: this is divergence."""
+    Ad = np.zeros((3, 3))
+    Ad[0, 0] = 2e300
+    A = sp.csr_matrix(Ad)
+    q = np.array([8.66177327e299, -7.90350451e299, 3.32873280e299])
+    B = sp.csr_matrix(0.1 * np.array([[0, 1, 0], [1, 0, 1], [0, 0, 1.0]]))
+    zeta = nrmicp.Affine(B, np.array([0.6, 0.4, 1.0]))
+    res = nrmicp.solve(A, q, zeta, method="nrm", maxiter=50, tol=1e292, z_update="explicit", scale="both")
+    assert not res.success
+    assert res.status in (nrmicp.Status.DIVERGED, nrmicp.Status.STAGNATED, nrmicp.Status.MAX_ITERATIONS), res.message
+    assert np.all(np.isfinite(res.z))
+    assert res.residual == pytest.approx(_stable_norm(np.minimum(A @ res.z + q, res.z - (B @ res.z + zeta.c))),
+                                         rel=1e-12)
+
+
 # ---- Res without overflow or underflow ----------------------------------------------------
 
 def _stable_norm(m):

@@ -232,3 +232,43 @@ def test_callback_sees_z_in_the_original_variables_and_can_stop_newton():
     for _, reported, recomputed in seen:  # the callback's z is z = y + ψ, with the Res it reports
         assert reported == pytest.approx(recomputed, rel=1e-8, abs=1e-12)
     assert len(res.history["residual"]) == 3
+
+
+@pytest.mark.parametrize("zkind", ["none", "affine", "callable", "callable+jacobian"])
+@pytest.mark.parametrize("scale", [2.0 ** 600, 2.0 ** -600])
+def test_newton_res_neither_overflows_nor_underflows(zkind, scale):
+    """Found by the fuzz test: Newton computed Res as a plain sqrt(sum m^2), which overflowed for
+    |m| > ~1e154 — with a callable ζ this ended as 'zeta(z) returned non-finite values' though ζ
+    only ever saw finite input and returned finite values — and underflowed to 0 below ~1e-154
+    (a false success). Scaling A and q by a power of two leaves the solution exactly the same."""
+    A = sp.csr_matrix(scenes.bai(3).A)
+    n = A.shape[0]
+    q = -np.ones(n)
+    c = np.full(n, 0.1)
+    B = sp.csr_matrix(0.1 * sp.eye(n))
+    seen = []
+
+    def zeta(z):
+        seen.append(bool(np.isfinite(z).all()))
+        return 0.05 * np.sin(z) + c
+
+    extra = {}
+    if zkind == "affine":
+        zarg, zref = nrmicp.Affine(B, c), (lambda z: B @ z + c)
+    elif zkind == "none":
+        zarg, zref = None, (lambda z: 0 * z)
+    else:
+        zarg, zref = zeta, zeta
+        if zkind == "callable+jacobian":
+            extra["zeta_jacobian"] = lambda z: sp.diags(0.05 * np.cos(z), format="csr")
+    ref = nrmicp.solve(A, q, zarg, method="newton", hierarchy=None, **extra)
+    assert ref.success, ref.message
+    res = nrmicp.solve(scale * A, scale * q, zarg, method="newton", hierarchy=None, tol=1e-8 * scale, **extra)
+    assert res.success, res.message
+    assert np.all(np.isfinite(res.z))
+    m = np.minimum(scale * (A @ res.z + q), res.z - zref(res.z))
+    big = np.abs(m).max()
+    true_res = float(big * np.linalg.norm(m / big)) if big > 0 else 0.0
+    assert true_res < 1e-8 * scale
+    np.testing.assert_allclose(res.z, ref.z, rtol=1e-10, atol=1e-12)
+    assert all(seen)

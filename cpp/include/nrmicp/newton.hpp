@@ -23,6 +23,7 @@
 #pragma once
 
 #include "detail/active_set.hpp"
+#include "detail/residual.hpp"
 #include "detail/timer.hpp"
 #include "options.hpp"
 #include "result.hpp"
@@ -151,7 +152,7 @@ class NewtonLevel {
     } else {
       g = z;
     }
-    return w.cwiseMin(g).norm();
+    return stable_norm(w.cwiseMin(g));
   }
 
   /// Ω1 (g/Ω1 − w/Ω2) = g − (Ω1/Ω2) w: the modulus vector x up to the factor γ/(2Ω1).
@@ -560,17 +561,12 @@ class Newton {
     Result functor(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0) {
       const Eigen::Index n = q.size();
       Vector z = z0 ? *z0 : Vector::Zero(n), psi(n), w(n);
-      auto icp_res = [&](const Vector& v, Vector& zv) -> double {
-        if (!zeta.eval(v, zv)) return std::numeric_limits<double>::quiet_NaN();
-        w.noalias() = self.A_ * v;
-        w += q;
-        return w.cwiseMin(v - zv).norm();
-      };
+      auto icp_res = [&](const Vector& v, Vector& zv) -> double { return icp_residual(q, zeta, v, zv, w); };
       double r = icp_res(z, psi);
       Result best;
       best.z = z;
       best.residual = r;
-      if (!std::isfinite(r)) return zeta_failed(best, q);
+      if (std::isnan(r)) return zeta_failed(best, q);
       bool first = true;
       int sweep_run = 10;
       detail::NonMonotone test(r);
@@ -594,7 +590,7 @@ class Newton {
         ++res.outer_iterations;
         Vector psi_new(n);
         const double r_new = icp_res(inner.z, psi_new);
-        if (!std::isfinite(r_new)) return zeta_failed(best, q);
+        if (std::isnan(r_new)) return zeta_failed(best, q);
         if (callback && callback(res.nit, inner.z, r_new)) { status = Status::CallbackStop; break; }
         if (test.acceptable(r_new)) {
           z = inner.z; psi = psi_new; r = r_new;
@@ -633,14 +629,12 @@ class Newton {
       if (!zeta.eval(best.z, psi)) return zeta_failed(best, q);
       Vector z = (z0 && !nest) ? *z0 : obstacle(q, psi, z0, nest, 0.0, std::min(100, o.maxiter), false).z;
       auto icp_res = [&](const Vector& v, Vector& zv, Vector& wv, Vector& gv) -> double {
-        if (!zeta.eval(v, zv)) return std::numeric_limits<double>::quiet_NaN();
-        wv.noalias() = self.A_ * v;
-        wv += q;
-        gv = v - zv;
-        return wv.cwiseMin(gv).norm();
+        const double r = icp_residual(q, zeta, v, zv, wv);
+        if (!std::isnan(r)) gv = v - zv;
+        return r;
       };
       double r = icp_res(z, psi, w, g);
-      if (!std::isfinite(r)) return zeta_failed(best, q);
+      if (std::isnan(r)) return zeta_failed(best, q);
       best.z = z;
       best.residual = r;
       detail::NonMonotone test(r);
@@ -700,6 +694,18 @@ class Newton {
       out.residual = best.residual;
       out.status = status;
       return finish_outer(out, q);
+    }
+
+    /// Res of the ICP at v (ζ(v) in zv, Av + q in wv): NaN only when ζ failed; +inf for a
+    /// runaway v (non-finite, never handed to ζ) or an Av + q that overflowed.
+    double icp_residual(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector& v, Vector& zv, Vector& wv) {
+      constexpr double inf = std::numeric_limits<double>::infinity();
+      if (!v.allFinite()) return inf;
+      if (!zeta.eval(v, zv)) return std::numeric_limits<double>::quiet_NaN();
+      wv.noalias() = self.A_ * v;
+      wv += q;
+      const double r = detail::stable_norm(wv.cwiseMin(v - zv));
+      return std::isnan(r) ? inf : r;
     }
 
     Result sweep_icp(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector& z, int sweeps) {

@@ -64,7 +64,10 @@ class Context {
       return;
     }
     ScopedTimer t(tm.zeta);
-    s.zeta_ok = zeta.eval(v, out);
+    const bool ok = zeta.eval(v, out);
+    // A ζ evaluated here (Affine: finite B, c) overflowing at a finite v: the iterate ran away.
+    if (!ok && zeta.kind() != ZetaKind::Functor) s.finite = false;
+    else s.zeta_ok = ok;
   }
   /// out = ζ-part + Ω1(|x| + x)/γ (no ζ-part when null): the explicit z-update, and ẑ.
   void from_modulus(const Vector* zeta_part, const Vector& x, Vector& out) const {
