@@ -236,24 +236,34 @@ py::dict result_dict(const nrmicp::Result& r, bool record_history) {
   return d;
 }
 
+// A mapped zero-copy over scipy's CSR arrays, which it keeps alive (the cores hold references
+// to the map). Checked here for what the map itself reads; the rest of the structure (monotone
+// indptr, indices in range) was checked by check_compressed in the Python layer.
+template <typename I>
+struct MappedCsr {
+  py::array indptr, indices, data;
+  CsrMap<I> A;
+  MappedCsr(py::array ip, py::array ix, py::array dv, Eigen::Index n)
+      : indptr(ip), indices(ix), data(dv),
+        A(n, n, dv.shape(0), checked_data<I>(ip, "A.indptr"), checked_data<I>(ix, "A.indices"),
+          checked_data<double>(dv, "A.data")) {
+    if (ip.shape(0) != n + 1) throw py::value_error("A.indptr must have length n + 1");
+    if (ix.shape(0) != dv.shape(0)) throw py::value_error("A.indices and A.data differ in length");
+    if (A.outerIndexPtr()[0] != 0 || A.outerIndexPtr()[n] != dv.shape(0))
+      throw py::value_error("A.indptr must run from 0 to nnz = len(A.data)");
+  }
+};
+
 template <typename I>
 class PySolver {
  public:
-  PySolver(py::array indptr, py::array indices, py::array data, Eigen::Index n)
-      : indptr_(indptr), indices_(indices), data_(data),
-        A_(n, n, data.shape(0), checked_data<I>(indptr, "A.indptr"), checked_data<I>(indices, "A.indices"),
-           checked_data<double>(data, "A.data")) {
-    if (indptr.shape(0) != n + 1) throw py::value_error("A.indptr must have length n + 1");
-    if (indices.shape(0) != data.shape(0)) throw py::value_error("A.indices and A.data differ in length");
-    if (A_.outerIndexPtr()[0] != 0 || A_.outerIndexPtr()[n] != data.shape(0))  // the rest: check_compressed
-      throw py::value_error("A.indptr must run from 0 to nnz = len(A.data)");
-  }
-  void build(const Options& o) { solver_.emplace(A_, o); }
+  PySolver(py::array indptr, py::array indices, py::array data, Eigen::Index n) : A_(indptr, indices, data, n) {}
+  void build(const Options& o) { solver_.emplace(A_.A, o); }
 
   py::dict solve(py::array q, int zeta_kind, py::object zeta_c, py::object b_indptr, py::object b_indices,
                  py::object b_data, py::object zeta_fn, py::object z0, py::object callback, const Options& it,
                  py::object progress) {
-    const Eigen::Index n = A_.rows();
+    const Eigen::Index n = A_.A.rows();
     Eigen::VectorXd qv = to_vector(q, "q");
     std::optional<Eigen::VectorXd> z0v;
     if (!z0.is_none()) z0v = to_vector(z0.cast<py::array>(), "x0");
@@ -275,8 +285,7 @@ class PySolver {
   }
 
  private:
-  py::array indptr_, indices_, data_;  // A_ maps these
-  CsrMap<I> A_;
+  MappedCsr<I> A_;
   std::optional<nrmicp::Solver<CsrMap<I>>> solver_;
 };
 
@@ -301,13 +310,7 @@ template <typename I>
 class PyNewton {
  public:
   using Core = nrmicp::Newton<CsrMap<I>>;
-  PyNewton(py::array indptr, py::array indices, py::array data, Eigen::Index n)
-      : indptr_(indptr), indices_(indices), data_(data),
-        A_(n, n, data.shape(0), checked_data<I>(indptr, "A.indptr"), checked_data<I>(indices, "A.indices"),
-           checked_data<double>(data, "A.data")) {
-    if (indptr.shape(0) != n + 1) throw py::value_error("A.indptr must have length n + 1");
-    if (indices.shape(0) != data.shape(0)) throw py::value_error("A.indices and A.data differ in length");
-  }
+  PyNewton(py::array indptr, py::array indices, py::array data, Eigen::Index n) : A_(indptr, indices, data, n) {}
   static std::vector<typename Core::RowMatrix> prolongations(const py::list& ps) {
     std::vector<typename Core::RowMatrix> out;
     for (std::size_t l = 0; l < ps.size(); ++l) {
@@ -322,12 +325,12 @@ class PyNewton {
     }
     return out;
   }
-  void build(const Options& o, std::vector<typename Core::RowMatrix> P) { newton_.emplace(A_, o, std::move(P)); }
+  void build(const Options& o, std::vector<typename Core::RowMatrix> P) { newton_.emplace(A_.A, o, std::move(P)); }
 
   py::dict solve(py::array q, int zeta_kind, py::object zeta_c, py::object b_indptr, py::object b_indices,
                  py::object b_data, py::object zeta_fn, py::object z0, py::object callback, const Options& it,
                  py::object zeta_jacobian, py::object progress) {
-    const Eigen::Index n = A_.rows();
+    const Eigen::Index n = A_.A.rows();
     Eigen::VectorXd qv = to_vector(q, "q");
     std::optional<Eigen::VectorXd> z0v;
     if (!z0.is_none()) z0v = to_vector(z0.cast<py::array>(), "x0");
@@ -341,7 +344,7 @@ class PyNewton {
   // One Newton step from z (polish).
   py::dict polish(py::array q, int zeta_kind, py::object zeta_c, py::object b_indptr, py::object b_indices,
                   py::object b_data, py::object zeta_fn, py::array z, double tol) {
-    const Eigen::Index n = A_.rows();
+    const Eigen::Index n = A_.A.rows();
     Eigen::VectorXd qv = to_vector(q, "q"), zv = to_vector(z, "z");
     const auto zeta = make_zeta<I>(n, zeta_kind, zeta_c, b_indptr, b_indices, b_data, zeta_fn);
     nrmicp::Result r = without_gil([&] { return newton_->polish(qv, zeta, zv, tol); });
@@ -357,8 +360,7 @@ class PyNewton {
   }
 
  private:
-  py::array indptr_, indices_, data_;  // A_ maps these
-  CsrMap<I> A_;
+  MappedCsr<I> A_;
   std::optional<Core> newton_;
 };
 
