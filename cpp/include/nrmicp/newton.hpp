@@ -324,8 +324,8 @@ class Newton {
   using StorageIndex = typename MatrixType::StorageIndex;
   using Vector = Eigen::VectorXd;
   using RowMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, StorageIndex>;
-  using Callback = std::function<bool(int, const Vector&, double)>;
-  using Poll = std::function<void()>;
+  using Callback = detail::Callback;
+  using Poll = detail::Poll;
   using Progress = detail::Progress;
 
   Newton(const MatrixType& A, Options options, std::vector<RowMatrix> prolongations = {})
@@ -574,11 +574,7 @@ class Newton {
       Status status = Status::MaxIterations;
       const auto t0 = std::chrono::steady_clock::now();
       for (;;) {
-        if (o.record_history) {
-          res.history_iteration.push_back(res.nit);
-          res.history_seconds.push_back(detail::ScopedTimer::seconds_since(t0));
-          res.history_residual.push_back(r);
-        }
+        record(r, t0);
         if (r < o.tol) { status = Status::Converged; break; }
         if (res.nit >= o.maxiter) { status = Status::MaxIterations; break; }
         if (poll) poll();
@@ -598,15 +594,7 @@ class Newton {
           if (r < best.residual) { best.z = z; best.residual = r; }
           continue;
         }
-        // Fallback: sweeps of the fallback member on the whole ICP from the best iterate.
-        if (res.fallback_sweeps >= o.maxiter) { status = Status::MaxIterations; break; }
-        const int k = std::min(sweep_run, o.maxiter - res.fallback_sweeps);
-        sweep_run *= 2;
-        Result sw = sweep_icp(q, zeta, best.z, k);
-        res.fallback_sweeps += sw.iterations;
-        res.iterations += sw.iterations;
-        if (!(sw.residual < best.residual)) { status = Status::Stagnated; break; }
-        z = sw.z;
+        if (const auto stop = fallback(q, zeta, best, sweep_run, z)) { status = *stop; break; }
         r = icp_res(z, psi);
         test.reset(r);
         if (r < best.residual) { best.z = z; best.residual = r; }
@@ -645,11 +633,7 @@ class Newton {
       std::vector<char> inactive;
       const auto t0 = std::chrono::steady_clock::now();
       for (;;) {
-        if (o.record_history) {
-          res.history_iteration.push_back(res.nit);
-          res.history_seconds.push_back(detail::ScopedTimer::seconds_since(t0));
-          res.history_residual.push_back(r);
-        }
+        record(r, t0);
         if (r < o.tol) { status = Status::Converged; break; }
         if (callback && callback(res.nit, z, r)) { status = Status::CallbackStop; break; }
         if (poll) poll();
@@ -675,15 +659,7 @@ class Newton {
             continue;
           }
         }
-        // Fallback: sweeps of the fallback member on the whole ICP from the best iterate.
-        if (res.fallback_sweeps >= o.maxiter) { status = Status::MaxIterations; break; }
-        const int k = std::min(sweep_run, o.maxiter - res.fallback_sweeps);
-        sweep_run *= 2;
-        const Result sw = sweep_icp(q, zeta, best.z, k);
-        res.fallback_sweeps += sw.iterations;
-        res.iterations += sw.iterations;
-        if (!(sw.residual < best.residual)) { status = Status::Stagnated; break; }
-        z = sw.z;
+        if (const auto stop = fallback(q, zeta, best, sweep_run, z)) { status = *stop; break; }
         r = icp_res(z, psi, w, g);
         test.reset(r);
         exempt = true;
@@ -694,6 +670,31 @@ class Newton {
       out.residual = best.residual;
       out.status = status;
       return finish_outer(out, q);
+    }
+
+    /// The history of the outer iterations (finest level): iterate res.nit with Res r.
+    void record(double r, std::chrono::steady_clock::time_point t0) {
+      if (!o.record_history) return;
+      res.history_iteration.push_back(res.nit);
+      res.history_seconds.push_back(detail::ScopedTimer::seconds_since(t0));
+      res.history_residual.push_back(r);
+    }
+
+    /// Fallback of the outer iterations: sweeps of the fallback member on the whole ICP from the
+    /// best iterate, each run twice as long as the last (`sweep_run`). Sets z to the sweeps' best
+    /// iterate, or returns why to stop: maxiter fallback sweeps spent, or STAGNATED when the
+    /// sweeps did not improve on the best Res.
+    std::optional<Status> fallback(const Vector& q, const Zeta<StorageIndex>& zeta, const Result& best,
+                                   int& sweep_run, Vector& z) {
+      if (res.fallback_sweeps >= o.maxiter) return Status::MaxIterations;
+      const int k = std::min(sweep_run, o.maxiter - res.fallback_sweeps);
+      sweep_run *= 2;
+      const Result sw = sweep_icp(q, zeta, best.z, k);
+      res.fallback_sweeps += sw.iterations;
+      res.iterations += sw.iterations;
+      if (!(sw.residual < best.residual)) return Status::Stagnated;
+      z = sw.z;
+      return std::nullopt;
     }
 
     /// Res of the ICP at v (ζ(v) in zv, Av + q in wv): NaN only when ζ failed; +inf for a
