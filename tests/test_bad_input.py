@@ -11,6 +11,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import nrmicp
+from snapshots import assert_unchanged, snapshot
 
 SETTINGS = settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
@@ -22,31 +23,6 @@ def bai_like(n, rng):
     R.setdiag(0)
     R.eliminate_zeros()
     return sp.csr_matrix(R + sp.diags(abs(R).sum(axis=1).A1 + 1.0))
-
-
-def snapshot(*objs):
-    out = []
-    for o in objs:
-        if sp.issparse(o):
-            names = ("data", "row", "col") if o.format == "coo" else ("data", "indices", "indptr")
-            out.append(tuple((name, getattr(o, name).copy()) for name in names))
-        elif isinstance(o, np.ndarray):
-            out.append(o.copy())
-        else:
-            out.append(None)
-    return out
-
-
-def assert_unchanged(before, objs):
-    for b, o in zip(before, objs):
-        if b is None:
-            continue
-        if isinstance(b, tuple):
-            for name, arr in b:
-                np.testing.assert_array_equal(arr, getattr(o, name))
-                assert getattr(o, name).dtype == arr.dtype
-        else:
-            np.testing.assert_array_equal(b, o)
 
 
 def in_format(A, fmt, index_dtype):

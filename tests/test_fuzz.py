@@ -24,6 +24,7 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 import nrmicp
+from snapshots import assert_unchanged, snapshot
 
 _LONG_RUN = int(os.environ.get("NRMICP_FUZZ_EXAMPLES", "0"))
 FUZZ = settings(max_examples=_LONG_RUN or 300, deadline=None, derandomize=not _LONG_RUN, database=None,
@@ -255,29 +256,6 @@ def _raising_jacobian(z):
 def _writes_into_z(z):
     z[0] = 0.0
     return np.zeros_like(z)
-
-
-def snapshot(*objs):
-    out = []
-    for o in objs:
-        if sp.issparse(o):
-            out.append((o.data.copy(), o.indices.copy(), o.indptr.copy()))
-        elif isinstance(o, np.ndarray):
-            out.append(o.copy())
-        else:
-            out.append(None)
-    return out
-
-
-def assert_unchanged(before, objs):
-    for b, o in zip(before, objs):
-        if b is None:
-            continue
-        if isinstance(b, tuple):
-            for x, y in zip(b, (o.data, o.indices, o.indptr)):
-                np.testing.assert_array_equal(x, y)
-        else:
-            np.testing.assert_array_equal(b, o)
 
 
 def oracle_residual(A, q, z, zeta_ref):
