@@ -228,6 +228,7 @@ py::dict result_dict(const nrmicp::Result& r, bool record_history) {
   d["timings"] = t;
   // the Newton member (empty for the stationary members)
   d["linear_solves"] = r.linear_solves;
+  d["inner_iterations"] = r.inner_iterations;
   d["fallback_sweeps"] = r.fallback_sweeps;
   d["outer_iterations"] = r.outer_iterations;
   d["level_steps"] = r.level_steps;

@@ -635,7 +635,8 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
     Result
         ``z``, ``w``, ``success``, ``status``, ``message``, ``nit``, ``residual``, ``history``,
         ``timings``. A solve that does not converge says so in ``status`` and returns its best iterate.
-        Method 'newton' adds ``linear_solves`` (all levels), ``fallback_sweeps``, ``outer_iterations``
+        Method 'newton' adds ``linear_solves`` (all levels), ``inner_iterations`` (CG iterations of
+        ``inner='cg'``, all levels; 0 for direct solves), ``fallback_sweeps``, ``outer_iterations``
         (callable ζ), ``level_steps`` and ``level_seconds`` (per level, finest first) and ``path``
         ('newton', 'newton+fallback' or 'fallback'); its ``nit`` counts finest-level Newton steps.
         Without a callable ζ, Res(z) is re-measured in numpy in the original variables before

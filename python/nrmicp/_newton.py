@@ -113,7 +113,8 @@ def polish(solver, problem, z, res, original_residual, dc):
 
 def result_fields(d) -> dict:
     """The Newton member's result fields from the core's dict."""
-    return {"linear_solves": int(d["linear_solves"]), "fallback_sweeps": int(d["fallback_sweeps"]),
+    return {"linear_solves": int(d["linear_solves"]), "inner_iterations": int(d["inner_iterations"]),
+            "fallback_sweeps": int(d["fallback_sweeps"]),
             "outer_iterations": int(d["outer_iterations"]), "level_steps": list(d["level_steps"]),
             "level_seconds": list(d["level_seconds"]), "path": d["path"]}
 

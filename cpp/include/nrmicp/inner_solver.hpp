@@ -15,6 +15,8 @@
 #include <Eigen/UmfPackSupport>
 #endif
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <limits>
 #include <memory>
@@ -60,12 +62,36 @@ inline bool have_umfpack() {
 
 namespace detail {
 
+/// ‖M − Mᵀ‖_F ≤ 1e-14 ‖M‖_F, read off M's compressed storage (each entry's mirror found by
+/// binary search in its sorted inner vector; a mirror that is not stored is 0), without
+/// forming Mᵀ: measured with perf, forming it was 4% of a nested Newton solve at n = 10⁶.
 template <typename SpMat>
 bool is_symmetric(const SpMat& M) {
-  using ColMat = Eigen::SparseMatrix<double, Eigen::ColMajor, typename SpMat::StorageIndex>;
-  ColMat T = M.transpose();
-  const double scale = M.norm();
-  return (ColMat(M) - T).norm() <= 1e-14 * (scale > 0 ? scale : 1.0);
+  using StorageIndex = typename SpMat::StorageIndex;
+  if (!M.isCompressed()) {
+    Eigen::SparseMatrix<double, Eigen::ColMajor, StorageIndex> C = M;
+    C.makeCompressed();
+    return is_symmetric(C);
+  }
+  const StorageIndex* outer = M.outerIndexPtr();
+  const StorageIndex* inner = M.innerIndexPtr();
+  const double* v = M.valuePtr();
+  double diff = 0, norm = 0;  // squared Frobenius norms (M is checked finite before it gets here)
+  for (Eigen::Index k = 0; k < M.outerSize(); ++k)
+    for (StorageIndex p = outer[k]; p < outer[k + 1]; ++p) {
+      norm += v[p] * v[p];
+      const StorageIndex j = inner[p];
+      const StorageIndex* b = inner + outer[j];
+      const StorageIndex* e = inner + outer[j + 1];
+      const StorageIndex* f = std::lower_bound(b, e, static_cast<StorageIndex>(k));
+      if (f != e && *f == k) {
+        const double d = v[p] - v[f - inner];
+        diff += d * d;  // the mirror's own visit adds the other half
+      } else {
+        diff += 2 * v[p] * v[p];  // both (k, j) and (j, k) of M − Mᵀ
+      }
+    }
+  return std::sqrt(diff) <= 1e-14 * (norm > 0 ? std::sqrt(norm) : 1.0);
 }
 
 template <typename SpMat>

@@ -77,6 +77,7 @@ struct Result {
   std::map<std::string, long long> counters;
   // The Newton member (newton.hpp) and polish; zero/empty for the stationary members.
   int linear_solves = 0;               ///< reduced linear systems solved, on all levels
+  long long inner_iterations = 0;      ///< iterations of the iterative inner solve (inner = "cg"), all levels
   int fallback_sweeps = 0;             ///< sweeps of the fallback member (nrm) on the finest level
   int outer_iterations = 0;            ///< callable ζ: outer fixed-point steps on ζ
   std::vector<int> level_steps;        ///< Newton steps per level of nested iteration, finest first

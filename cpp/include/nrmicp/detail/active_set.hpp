@@ -124,11 +124,99 @@ class ActiveSetSystem {
   using Vector = Eigen::VectorXd;
 
   /// B == nullptr: the (shifted) LCP. The symbolic analysis happens here, once.
-  /// `P`, `levels`: the prolongations below this level, for inner = cg (detail/multigrid.hpp).
+  /// `below`: the prolongations below this level, for inner = cg (detail/multigrid.hpp).
   template <typename MatrixType>
-  ActiveSetSystem(const MatrixType& A, const RowMatrix* B, Inner inner, const RowMatrix* P = nullptr,
-                  std::size_t levels = 0)
+  ActiveSetSystem(const MatrixType& A, const RowMatrix* B, Inner inner, Prolongations<StorageIndex> below = {})
       : lcp_(B == nullptr) {
+    if (lcp_ && has_full_diagonal(A))
+      use_pattern_of(A);
+    else
+      use_union_pattern(A, B);
+    const bool spd_candidate = lcp_ && is_symmetric(K_) && has_positive_diagonal(K_);
+    // CG needs a symmetric positive definite K: the LCP of a symmetric A (an indefinite K shows
+    // as a failed coarsest Cholesky or CG breakdown; then the loop falls back). Otherwise the
+    // direct solve stays: there is no nonsymmetric Krylov path (GMRES/BiCGSTAB) yet.
+    if (use_cg(inner, spd_candidate, below.levels, A.rows())) {
+      cg_ = std::make_unique<MultigridCG<StorageIndex>>(below);
+      return;
+    }
+    solver_.analyze(K_, inner == Inner::CG ? Inner::Auto : inner, spd_candidate);
+  }
+
+  /// Puts the values of the active set into K (inactive[i] != 0: i ∈ ℐ) and factorizes.
+  /// False when K is singular.
+  bool factorize(const std::vector<char>& inactive) {
+    const StorageIndex* outer = K_.outerIndexPtr();
+    const StorageIndex* row = K_.innerIndexPtr();
+    double* v = K_.valuePtr();
+    for (Eigen::Index j = 0; j < K_.cols(); ++j)
+      for (StorageIndex p = outer[j]; p < outer[j + 1]; ++p) {
+        const bool row_inactive = inactive[row[p]];
+        // LCP: z_𝒜 = 0, so the active columns of the inactive rows are dropped (symmetry).
+        v[p] = row_inactive ? ((lcp_ && !inactive[j]) ? 0.0 : inactive_values_[p]) : active_values_[p];
+      }
+    if (cg_) inactive_ = inactive;
+    return cg_ ? cg_->setup(K_) : solver_.factorize(K_);
+  }
+
+  /// z = K⁻¹ b after factorize(). An iterative solve (cg) starts from z's value and stops when
+  /// ‖b − Kz‖ ≤ `target` (absolute), or ≤ MultigridCG::rtol ‖b‖ when target is 0; a direct one
+  /// ignores both.
+  /// The residual is that of the inactive rows, i.e. of w = Az + q there, what Res measures: the
+  /// active rows (identity, zeroed columns) are set exactly first and the V-cycle keeps them so.
+  /// Returns the iterations of the iterative solve (0 for a direct one).
+  int solve(const Vector& b, Vector& z, double target = 0) const {
+    if (!cg_) { solver_.solve(b, z); return 0; }
+    for (Eigen::Index i = 0; i < z.size(); ++i)
+      if (!inactive_[i]) z[i] = b[i];
+    return cg_->solve(b, z, target);
+  }
+  const char* inner_name() const { return cg_ ? "cg" : solver_.name(); }
+
+  /// Whether `inner` (with K's size n and `levels` prolongations below) means the multigrid-
+  /// preconditioned CG. Auto: only when a hierarchy exists, K is an SPD candidate and n ≥
+  /// auto_cg_min_n (the measurement is in that constant's comment).
+  static bool use_cg(Inner inner, bool spd_candidate, std::size_t levels, Eigen::Index n) {
+    if (!spd_candidate || levels == 0) return false;
+    return inner == Inner::CG || (inner == Inner::Auto && n >= auto_cg_min_n);
+  }
+  /// Measured (obstacle scenes, hierarchy "amg", tol 1e-8, one solve, OPENBLAS_NUM_THREADS=1,
+  /// same run), Newton solve time direct (CHOLMOD) → cg, same steps and Res: 2D n = 16,129:
+  /// 0.29 → 0.12 s; 2D n = 261,121: 11.9 → 4.0 s; 3D n = 29,791: 3.0 → 0.32 s; 3D n = 103,823:
+  /// 25.2 → 2.5 s (CHOLMOD's fill grows like n^{4/3} in 3D); 3D n = 10⁶: 47 s with cg (+15 s
+  /// set-up, 3 fine steps, Res 2e-9), the direct solve was estimated at an hour. Below 10⁴ both take milliseconds
+  /// and the direct solve is the exact one.
+  static constexpr Eigen::Index auto_cg_min_n = 10000;
+
+ private:
+  /// Whether every row of A has a stored diagonal entry.
+  template <typename MatrixType>
+  static bool has_full_diagonal(const MatrixType& A) {
+    for (Eigen::Index k = 0; k < A.outerSize(); ++k) {
+      bool found = false;
+      for (typename MatrixType::InnerIterator it(A, k); it && !found; ++it) found = it.row() == it.col();
+      if (!found) return false;
+    }
+    return true;
+  }
+
+  /// The LCP on A's own pattern (it holds the diagonal): K = A, the active-row values the
+  /// identity's. A copy in column order, no sorting (measured with perf, obstacle_2d n = 10⁶,
+  /// nested: the triplet path below was 17% of the solve).
+  template <typename MatrixType>
+  void use_pattern_of(const MatrixType& A) {
+    K_ = A;
+    K_.makeCompressed();
+    inactive_values_ = Eigen::Map<const Vector>(K_.valuePtr(), K_.nonZeros());
+    active_values_ = Vector::Zero(K_.nonZeros());
+    for (Eigen::Index j = 0; j < K_.cols(); ++j)
+      for (StorageIndex p = K_.outerIndexPtr()[j]; p < K_.outerIndexPtr()[j + 1]; ++p)
+        if (K_.innerIndexPtr()[p] == j) active_values_[p] = 1.0;
+  }
+
+  /// Any other case: the union of the patterns of A, I and B.
+  template <typename MatrixType>
+  void use_union_pattern(const MatrixType& A, const RowMatrix* B) {
     using Triplet = Eigen::Triplet<double, StorageIndex>;
     const Eigen::Index n = A.rows();
     // Two matrices on the same union pattern: the inactive-row values (A) and the active-row
@@ -160,69 +248,13 @@ class ActiveSetSystem {
     if (Kb.nonZeros() != K_.nonZeros()) throw std::logic_error("ActiveSetSystem: patterns differ");
     inactive_values_ = Eigen::Map<const Vector>(K_.valuePtr(), K_.nonZeros());
     active_values_ = Eigen::Map<const Vector>(Kb.valuePtr(), Kb.nonZeros());
-    const bool spd_candidate = lcp_ && is_symmetric(K_) && has_positive_diagonal(K_);
-    // CG needs a symmetric positive definite K: the LCP of a symmetric A (an indefinite K shows
-    // as a failed coarsest Cholesky or CG breakdown; then the loop falls back). Otherwise the
-    // direct solve stays: there is no nonsymmetric Krylov path (GMRES/BiCGSTAB) yet.
-    if (use_cg(inner, spd_candidate, levels, n)) {
-      cg_ = std::make_unique<MultigridCG<StorageIndex>>(P, levels);
-      return;
-    }
-    solver_.analyze(K_, inner == Inner::CG ? Inner::Auto : inner, spd_candidate);
   }
 
-  /// Puts the values of the active set into K (inactive[i] != 0: i ∈ ℐ) and factorizes.
-  /// False when K is singular.
-  bool factorize(const std::vector<char>& inactive) {
-    const StorageIndex* outer = K_.outerIndexPtr();
-    const StorageIndex* row = K_.innerIndexPtr();
-    double* v = K_.valuePtr();
-    for (Eigen::Index j = 0; j < K_.cols(); ++j)
-      for (StorageIndex p = outer[j]; p < outer[j + 1]; ++p) {
-        const bool row_inactive = inactive[row[p]];
-        // LCP: z_𝒜 = 0, so the active columns of the inactive rows are dropped (symmetry).
-        v[p] = row_inactive ? ((lcp_ && !inactive[j]) ? 0.0 : inactive_values_[p]) : active_values_[p];
-      }
-    if (cg_) inactive_ = inactive;
-    return cg_ ? cg_->setup(K_) : solver_.factorize(K_);
-  }
-
-  /// z = K⁻¹ b after factorize(). An iterative solve (cg) starts from z's value and stops when
-  /// ‖b − Kz‖ ≤ `target` (absolute; 0: none) or MultigridCG::rtol ‖b‖; a direct one ignores both.
-  /// The residual is that of the inactive rows, i.e. of w = Az + q there, what Res measures: the
-  /// active rows (identity, zeroed columns) are set exactly first and the V-cycle keeps them so.
-  void solve(const Vector& b, Vector& z, double target = 0) const {
-    if (!cg_) return solver_.solve(b, z);
-    for (Eigen::Index i = 0; i < z.size(); ++i)
-      if (!inactive_[i]) z[i] = b[i];
-    cg_iterations_ += cg_->solve(b, z, target);
-  }
-  const char* inner_name() const { return cg_ ? "cg" : solver_.name(); }
-  /// CG iterations in all (0 for a direct solve).
-  long cg_iterations() const { return cg_iterations_; }
-
-  /// Whether `inner` (with K's size n and `levels` prolongations below) means the multigrid-
-  /// preconditioned CG. Auto: only when a hierarchy exists, K is an SPD candidate and n ≥
-  /// auto_cg_min_n (the measurement is in that constant's comment).
-  static bool use_cg(Inner inner, bool spd_candidate, std::size_t levels, Eigen::Index n) {
-    if (!spd_candidate || levels == 0) return false;
-    return inner == Inner::CG || (inner == Inner::Auto && n >= auto_cg_min_n);
-  }
-  /// Measured (obstacle scenes, hierarchy "amg", tol 1e-8, one solve, OPENBLAS_NUM_THREADS=1,
-  /// same run), Newton solve time direct (CHOLMOD) → cg, same steps and Res: 2D n = 16,129:
-  /// 0.29 → 0.12 s; 2D n = 261,121: 11.9 → 4.0 s; 3D n = 29,791: 3.0 → 0.32 s; 3D n = 103,823:
-  /// 25.2 → 2.5 s (CHOLMOD's fill grows like n^{4/3} in 3D); 3D n = 10⁶: 47 s with cg (+15 s
-  /// set-up, 3 fine steps, Res 2e-9), the direct solve was estimated at an hour. Below 10⁴ both take milliseconds
-  /// and the direct solve is the exact one.
-  static constexpr Eigen::Index auto_cg_min_n = 10000;
-
- private:
   bool lcp_;
   ColMatrix K_;
   Vector inactive_values_, active_values_;
   Refactorizer<StorageIndex> solver_;
   std::unique_ptr<MultigridCG<StorageIndex>> cg_;
-  mutable long cg_iterations_ = 0;
   std::vector<char> inactive_;  // of the last factorize (cg)
 };
 
