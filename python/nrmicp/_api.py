@@ -235,12 +235,14 @@ def _scale_choice(scale):
     raise ValueError(f"scale must be False, True, 'rows' or 'both'; got {scale!r}")
 
 
-def _core_callback(callback: Callable[..., Any], dc: Optional[np.ndarray]) -> Callable[[int, np.ndarray, float], bool]:
+def _core_callback(callback: Callable[..., Any], dc: Optional[np.ndarray],
+                   offset: Optional[list] = None) -> Callable[[int, np.ndarray, float], bool]:
     """The core's per-iterate hook (k, z, Res) -> stop?, calling ``callback`` by scipy's rule:
     a callback whose only parameter is named ``intermediate_result`` receives a :class:`Result`
     with ``z`` (= ``x``), ``nit`` and ``residual``; any other callback receives the iterate z
     alone (``callback(xk)``). Raising StopIteration (or returning True) stops the solve.
-    ``dc``: column scaling, mapping the core's z back to the original variables."""
+    ``dc``: column scaling, mapping the core's z back to the original variables. ``offset[0]``:
+    the iterations of earlier rounds (scaled re-solves), added to k as the history does."""
     try:
         params = set(inspect.signature(callback).parameters)
     except (TypeError, ValueError):  # a builtin without a signature: the plain form
@@ -250,7 +252,8 @@ def _core_callback(callback: Callable[..., Any], dc: Optional[np.ndarray]) -> Ca
     def hook(k: int, z: np.ndarray, res: float) -> bool:
         zk = z * dc if dc is not None else z  # a fresh array: the core passes a copy
         try:
-            stop = callback(intermediate_result=Result(z=zk, nit=k, residual=res)) if wants_result \
+            nit = k + offset[0] if offset else k
+            stop = callback(intermediate_result=Result(z=zk, nit=nit, residual=res)) if wants_result \
                 else callback(zk)
         except StopIteration:
             return True
@@ -399,7 +402,8 @@ class Solver:
         else:
             bp = bi = bd = None
 
-        cb = None if callback is None else _core_callback(callback, dc if scaled else None)
+        cb_offset = [0]  # the callback's nit counts on over re-solves, as the history's
+        cb = None if callback is None else _core_callback(callback, dc if scaled else None, cb_offset)
 
         # Res is re-measured in the original variables whenever that costs no call of a user ζ
         # (constant: the core iterated the shifted LCP; Affine), and always with scaling (then a
@@ -428,6 +432,7 @@ class Solver:
         timings = None
         refined = 0
         while True:
+            cb_offset[0] = done_iters
             opts = _iteration_options(_core.Options(), **dict(it, tol=tol_k))
             core_kw["progress"] = _progress_hook(self.method, n) if opts.verbose > 0 else None
             d = self._core.solve(qs, kind, cs, bp, bi, bd, fns, x0k, cb, opts, **core_kw)
@@ -582,10 +587,13 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
     x0 : array_like (n,), optional
         Initial guess for z (warm start); default zeros.
     callback : callable, optional
-        Called after each iterate, by scipy's rule: ``callback(intermediate_result)`` (the only
-        parameter named exactly so) receives a :class:`Result` with ``z`` (alias ``x``), ``nit``
-        and ``residual``; any other callable is called as ``callback(zk)`` with the iterate.
-        Raise StopIteration (or return True) to stop: status CALLBACK_STOP.
+        Called once for every iterate k = 0 (the start), 1, 2, ..., the last one too whatever ended
+        the solve (the iterates of ``result.history``; method 'newton': the finest-level ones), by
+        scipy's rule: ``callback(intermediate_result)`` (the only parameter named exactly so)
+        receives a :class:`Result` with ``z`` (alias ``x``), ``nit`` (= k) and ``residual``; any
+        other callable is called as ``callback(zk)`` with the iterate. For a converged solve the
+        last call has ``result.z`` (before ``polish``). Raise StopIteration (or return True) to
+        stop: status CALLBACK_STOP (unless that iterate converged).
     record_history : bool
         Keep (iteration, seconds, Res) of every iterate in ``result.history``.
     stall_iterations : int
