@@ -70,7 +70,9 @@ class Result(OptimizeResult):
     ``setup``, ``factorization``, ``iterations``, ``zeta``, ``spmv``, ``inner_solve``, ``total``;
     ``factorization`` is part of ``setup``, and for the AOR-type methods the one-pass sweep,
     product and forward substitution together, counts as ``spmv``),
-    ``method``, ``inner`` (the solver used for the left matrix).
+    ``method``, ``inner`` (the solver used for the left matrix), ``counters`` (dict name -> int:
+    what the step kind counts beyond the iterations, e.g. ``anderson_rejections``, the
+    accelerated steps replaced by the plain one; empty when it counts nothing).
     ``x`` is an alias of ``z`` (scipy's name for the solution).
     """
 
@@ -78,6 +80,12 @@ class Result(OptimizeResult):
     def x(self) -> np.ndarray:
         """The solution z (scipy's ``OptimizeResult.x``)."""
         return self["z"]
+
+    def __repr__(self) -> str:
+        # scipy's formatter fails on an empty nested dict (max() of no keys): print it as {}
+        if any(isinstance(v, dict) and not v for v in self.values()):
+            return repr(Result({k: "{}" if isinstance(v, dict) and not v else v for k, v in self.items()}))
+        return super().__repr__()
 
 
 @dataclass(frozen=True)
@@ -430,6 +438,7 @@ class Solver:
         rounds = []
         histories = []
         timings = None
+        counters: dict[str, int] = {}
         refined = 0
         while True:
             cb_offset[0] = done_iters
@@ -457,6 +466,8 @@ class Solver:
                 for name in t:
                     if name != "setup":
                         timings[name] += t[name]
+            for name, count in d["counters"].items():
+                counters[name] = counters.get(name, 0) + int(count)
             done_iters += d["iterations"]
             rounds.append((tol_k, status, res))
             if status != Status.CONVERGED or res < tol or not verify:
@@ -514,7 +525,7 @@ class Solver:
             extra.update(_newton.result_fields(d))
         return Result(z=z, w=w, success=status == Status.CONVERGED, status=status, message=message, nit=nit,
                       iterations=done_iters, residual=res, history=history, timings=timings, method=self.method,
-                      inner=d["inner"], **extra)
+                      inner=d["inner"], counters=counters, **extra)
 
 
 def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "nrmgs", tol: float = 1e-8,
