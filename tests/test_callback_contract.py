@@ -111,6 +111,11 @@ def test_stop_iteration_at_the_converged_iterate_keeps_converged():
 def test_callback_nit_counts_on_over_scaled_re_solves():
     """With scale=, the core may be re-run from its last iterate with a tighter tolerance; the
     callback's nit counts on as the history's iterations do."""
-    A, q = _bai()
-    res, calls = _record(A=A, q=q, method="nrmgs", scale="both")
+    problem = scenes.obstacle_2d(8, exact=False)
+    d = 10.0 ** np.random.default_rng(0).uniform(0, 4, problem.A.shape[0])  # badly scaled rows
+    A = sp.csr_matrix(sp.diags(d) @ problem.A)
+    A.sort_indices()
+    res, calls = _record(A=A, q=d * problem.q, zeta=problem.zeta, method="nrmgs", scale="both")
+    assert res.success and res.scaling["refinements"] >= 1  # the case this test is about
     assert [k for k, _, _ in calls] == list(res.history["iteration"])
+    assert [k for k, _, _ in calls][-1] == res.iterations
