@@ -30,6 +30,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from peers_impl import _peers
+
 AOR_METHODS = ("nrmaor", "nrmsor", "nrmgs", "nrmj")
 FACTOR_METHODS = ("nrm", "nrmm")
 
@@ -141,7 +143,6 @@ class ScipyNRM:
         gq = g * q
         best_res, best_z = np.inf, None
         k = 0
-        status = "max_iterations"
         while True:
             ax = np.abs(x)
             z = o1 * (ax + x) / g
@@ -150,16 +151,8 @@ class ScipyNRM:
             res = float(np.linalg.norm(np.minimum(r, z)))
             if res < best_res:
                 best_res, best_z = res, z
-            if res < tol:
-                status = "converged"
-                break
-            if not np.isfinite(res):
-                status = "diverged"
-                break
-            if k >= maxiter:
-                break
-            if time_limit is not None and time.perf_counter() - t0 > time_limit:
-                status = "time_limit"
+            status = _peers.verdict(res, tol, k, maxiter, t0, time_limit)  # the peers' one stopping rule
+            if status:
                 break
             if self.form == "defect":
                 rhs = o2 * (ax - x)

@@ -175,18 +175,52 @@ _LONG_SOLVE_IN_A_DAEMON_THREAD = textwrap.dedent("""
 """)
 
 
+class KnownAsanThreadExitReport(Exception):
+    """ASan's report from its own sigaltstack interceptor (__asan_handle_no_return) while
+    pthread_exit's forced unwind destroys the solving thread's frames."""
+
+
+def _no_sanitizer_report(err):
+    """Fails on a sanitizer report in a child's stderr; the known ASan one raises
+    KnownAsanThreadExitReport (expected under make sanitize only), any other an AssertionError.
+    Known: a stack-buffer-overflow whose frame #0 is the sigaltstack interceptor, or whose frames
+    were never written (after Ctrl-C the process dies while ASan is still printing)."""
+    at = err.find("ERROR: AddressSanitizer: stack-buffer-overflow")
+    if at >= 0:
+        report = err[at:].splitlines()
+        frame0 = next((line for line in report if line.strip().startswith("#0 ")), None)
+        if frame0 is None or "sigaltstack" in frame0:
+            raise KnownAsanThreadExitReport(report[0])
+    assert "Sanitizer" not in err, err
+
+
+#: make sanitize (NRMICP_SANITIZE=1): the two thread-exit tests below end in ASan's report from its
+#: own interceptor, every run (its exit code only sometimes shows it: the report races the exit).
+#: Only that report is expected (raises=); any other failure still fails. Not strict: if the
+#: process exits before the dying thread is unwound, there is no report and the test passes.
+_ASAN_THREAD_EXIT = pytest.mark.xfail(
+    bool(os.environ.get("NRMICP_SANITIZE")), raises=KnownAsanThreadExitReport, strict=False,
+    reason="under ASan only: a stack-buffer-overflow reported by ASan's sigaltstack interceptor "
+           "(__asan_handle_no_return) during pthread_exit's forced unwind of the solving thread, a "
+           "known ASan false positive; the test passes without ASan")
+
+
+@_ASAN_THREAD_EXIT
 @pytest.mark.skipif(sys.platform == "win32", reason="POSIX threads and signals")
 def test_item4_interpreter_exit_while_a_thread_solves_is_clean():
     rc, out, err = run_script(_LONG_SOLVE_IN_A_DAEMON_THREAD + "print('exiting')\n")
+    _no_sanitizer_report(err)
     assert "terminate called" not in err
     assert rc == 0, f"exit code {rc}: {err}"
     assert out.strip() == "exiting"
 
 
+@_ASAN_THREAD_EXIT
 @pytest.mark.skipif(sys.platform == "win32", reason="POSIX threads and signals")
 def test_item4_ctrl_c_in_join_while_a_thread_solves_is_clean():
     rc, out, err = run_script(_LONG_SOLVE_IN_A_DAEMON_THREAD + "print('joining')\nth.join()\n",
                               sigint_after="joining")
+    _no_sanitizer_report(err)
     assert "terminate called" not in err
     assert "KeyboardInterrupt" in err
     assert rc in (-signal.SIGINT, 1, 130), f"exit code {rc} (SIGABRT is {-signal.SIGABRT}): {err}"

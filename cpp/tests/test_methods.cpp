@@ -103,6 +103,39 @@ TEST_CASE("ICP with a functor zeta and with a constant obstacle") {
   check_solution(rc, A, q, c, z_star, 1e-10);
 }
 
+TEST_CASE("the callback sees every iterate of the history, the converged one last") {
+  const auto A = testing::bai(8, 4.0, true);
+  const auto k = testing::known_solution(A.rows());
+  const Eigen::VectorXd q = k.w - A * k.g;
+  for (Method m : all_methods) {
+    Options o = tuned(m);
+    o.record_history = true;
+    std::vector<int> ks;
+    std::vector<double> rs;
+    Eigen::VectorXd last;
+    const Result r = Solver<testing::SpMat<>>(A, o).solve(q, Zeta<int>::none(), nullptr,
+                                                          [&](int it, const Eigen::VectorXd& z, double res) {
+                                                            ks.push_back(it);
+                                                            rs.push_back(res);
+                                                            last = z;
+                                                            return false;
+                                                          });
+    CAPTURE(to_string(m));
+    CHECK(r.status == Status::Converged);
+    CHECK(ks == r.history_iteration);
+    CHECK(rs == r.history_residual);
+    CHECK(ks.back() == r.nit);
+    CHECK(last == r.z);
+    CHECK(rs.back() == r.residual);
+  }
+  // asking to stop at the iterate that converges does not change why the solve ended
+  const Result first = Solver<testing::SpMat<>>(A, Options()).solve(q);
+  const Result r = Solver<testing::SpMat<>>(A, Options()).solve(
+      q, Zeta<int>::none(), nullptr, [&](int it, const Eigen::VectorXd&, double) { return it == first.nit; });
+  CHECK(r.status == Status::Converged);
+  CHECK(r.nit == first.nit);
+}
+
 TEST_CASE("statuses: max iterations, stagnation, callback stop, zeta failure; the best iterate is returned") {
   const auto A = testing::bai(8, 4.0, true);
   const auto k = testing::known_solution(A.rows());

@@ -70,7 +70,9 @@ class Result(OptimizeResult):
     ``setup``, ``factorization``, ``iterations``, ``zeta``, ``spmv``, ``inner_solve``, ``total``;
     ``factorization`` is part of ``setup``, and for the AOR-type methods the one-pass sweep,
     product and forward substitution together, counts as ``spmv``),
-    ``method``, ``inner`` (the solver used for the left matrix).
+    ``method``, ``inner`` (the solver used for the left matrix), ``counters`` (dict name -> int:
+    what the step kind counts beyond the iterations, e.g. ``anderson_rejections``, the
+    accelerated steps replaced by the plain one; empty when it counts nothing).
     ``x`` is an alias of ``z`` (scipy's name for the solution).
     """
 
@@ -78,6 +80,12 @@ class Result(OptimizeResult):
     def x(self) -> np.ndarray:
         """The solution z (scipy's ``OptimizeResult.x``)."""
         return self["z"]
+
+    def __repr__(self) -> str:
+        # scipy's formatter fails on an empty nested dict (max() of no keys): print it as {}
+        if any(isinstance(v, dict) and not v for v in self.values()):
+            return repr(Result({k: "{}" if isinstance(v, dict) and not v else v for k, v in self.items()}))
+        return super().__repr__()
 
 
 @dataclass(frozen=True)
@@ -235,12 +243,14 @@ def _scale_choice(scale):
     raise ValueError(f"scale must be False, True, 'rows' or 'both'; got {scale!r}")
 
 
-def _core_callback(callback: Callable[..., Any], dc: Optional[np.ndarray]) -> Callable[[int, np.ndarray, float], bool]:
+def _core_callback(callback: Callable[..., Any], dc: Optional[np.ndarray],
+                   offset: Optional[list] = None) -> Callable[[int, np.ndarray, float], bool]:
     """The core's per-iterate hook (k, z, Res) -> stop?, calling ``callback`` by scipy's rule:
     a callback whose only parameter is named ``intermediate_result`` receives a :class:`Result`
     with ``z`` (= ``x``), ``nit`` and ``residual``; any other callback receives the iterate z
     alone (``callback(xk)``). Raising StopIteration (or returning True) stops the solve.
-    ``dc``: column scaling, mapping the core's z back to the original variables."""
+    ``dc``: column scaling, mapping the core's z back to the original variables. ``offset[0]``:
+    the iterations of earlier rounds (scaled re-solves), added to k as the history does."""
     try:
         params = set(inspect.signature(callback).parameters)
     except (TypeError, ValueError):  # a builtin without a signature: the plain form
@@ -250,7 +260,8 @@ def _core_callback(callback: Callable[..., Any], dc: Optional[np.ndarray]) -> Ca
     def hook(k: int, z: np.ndarray, res: float) -> bool:
         zk = z * dc if dc is not None else z  # a fresh array: the core passes a copy
         try:
-            stop = callback(intermediate_result=Result(z=zk, nit=k, residual=res)) if wants_result \
+            nit = k + offset[0] if offset else k
+            stop = callback(intermediate_result=Result(z=zk, nit=nit, residual=res)) if wants_result \
                 else callback(zk)
         except StopIteration:
             return True
@@ -399,7 +410,8 @@ class Solver:
         else:
             bp = bi = bd = None
 
-        cb = None if callback is None else _core_callback(callback, dc if scaled else None)
+        cb_offset = [0]  # the callback's nit counts on over re-solves, as the history's
+        cb = None if callback is None else _core_callback(callback, dc if scaled else None, cb_offset)
 
         # Res is re-measured in the original variables whenever that costs no call of a user ζ
         # (constant: the core iterated the shifted LCP; Affine), and always with scaling (then a
@@ -426,8 +438,10 @@ class Solver:
         rounds = []
         histories = []
         timings = None
+        counters: dict[str, int] = {}
         refined = 0
         while True:
+            cb_offset[0] = done_iters
             opts = _iteration_options(_core.Options(), **dict(it, tol=tol_k))
             core_kw["progress"] = _progress_hook(self.method, n) if opts.verbose > 0 else None
             d = self._core.solve(qs, kind, cs, bp, bi, bd, fns, x0k, cb, opts, **core_kw)
@@ -452,6 +466,8 @@ class Solver:
                 for name in t:
                     if name != "setup":
                         timings[name] += t[name]
+            for name, count in d["counters"].items():
+                counters[name] = counters.get(name, 0) + int(count)
             done_iters += d["iterations"]
             rounds.append((tol_k, status, res))
             if status != Status.CONVERGED or res < tol or not verify:
@@ -509,7 +525,7 @@ class Solver:
             extra.update(_newton.result_fields(d))
         return Result(z=z, w=w, success=status == Status.CONVERGED, status=status, message=message, nit=nit,
                       iterations=done_iters, residual=res, history=history, timings=timings, method=self.method,
-                      inner=d["inner"], **extra)
+                      inner=d["inner"], counters=counters, **extra)
 
 
 def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "nrmgs", tol: float = 1e-8,
@@ -582,10 +598,13 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
     x0 : array_like (n,), optional
         Initial guess for z (warm start); default zeros.
     callback : callable, optional
-        Called after each iterate, by scipy's rule: ``callback(intermediate_result)`` (the only
-        parameter named exactly so) receives a :class:`Result` with ``z`` (alias ``x``), ``nit``
-        and ``residual``; any other callable is called as ``callback(zk)`` with the iterate.
-        Raise StopIteration (or return True) to stop: status CALLBACK_STOP.
+        Called once for every iterate k = 0 (the start), 1, 2, ..., the last one too whatever ended
+        the solve (the iterates of ``result.history``; method 'newton': the finest-level ones), by
+        scipy's rule: ``callback(intermediate_result)`` (the only parameter named exactly so)
+        receives a :class:`Result` with ``z`` (alias ``x``), ``nit`` (= k) and ``residual``; any
+        other callable is called as ``callback(zk)`` with the iterate. For a converged solve the
+        last call has ``result.z`` (before ``polish``). Raise StopIteration (or return True) to
+        stop: status CALLBACK_STOP (unless that iterate converged).
     record_history : bool
         Keep (iteration, seconds, Res) of every iterate in ``result.history``.
     stall_iterations : int

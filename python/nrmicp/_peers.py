@@ -2,8 +2,9 @@
 red-black projected SOR in numpy and a QP solver (PIQP or OSQP) on min ½zᵀAz + qᵀz, z ≥ 0.
 
 They live in the package, not in benchmarks/, because the bench must run from an installed
-nrmicp (benchmarks/ is not part of the wheel). benchmarks/qp_peers.py has the same two peers
-(and more QP solvers) for the large-n peer tables; this module is the minimal version.
+nrmicp (benchmarks/ is not part of the wheel). The peer tables of benchmarks/ (qp_peers.py,
+scipy_modulus.py) use these same implementations: PSOR, the QP calls, the eps tuning and the
+stopping rule are written once, here.
 
 A peer solves LCP(q', A) in y = z − c: ζ ≡ 0 (c = 0) or a constant ζ ≡ c (the shifted LCP,
 q' = q + Ac). A callable ζ is not a peer's problem, and the QP form needs a symmetric A; a peer
@@ -58,6 +59,21 @@ def _res(A, q, y):
     return float(np.linalg.norm(np.minimum(A @ y + q, y)))
 
 
+def verdict(res, tol, k, maxiter, t0=None, time_limit=None):
+    """Why an iteration stops at iterate k with Res ``res``, or None to go on: 'converged'
+    (Res < tol), 'diverged' (Res not finite), 'max_iterations' (k >= maxiter) or 'time_limit'
+    (more than ``time_limit`` seconds since ``t0``)."""
+    if res < tol:
+        return "converged"
+    if not np.isfinite(res):
+        return "diverged"
+    if k >= maxiter:
+        return "max_iterations"
+    if time_limit is not None and time.perf_counter() - t0 > time_limit:
+        return "time_limit"
+    return None
+
+
 # --------------------------------------------------------------------------- red-black PSOR
 
 def colours(A) -> np.ndarray:
@@ -93,9 +109,10 @@ def sor_omega(A) -> float:
     return 2.0 / (1.0 + np.sqrt(1.0 - rho * rho)) if rho < 1 else 1.0
 
 
-def psor(A, q, c, tol, *, omega, colour, maxiter, history=False):
+def psor(A, q, c, tol, *, omega, colour, maxiter, history=False, time_limit=None):
     """Projected SOR y_i ← max(0, y_i − ω (Ay + q)_i / a_ii) colour by colour, from y = 0, until
-    Res < tol (checked every sweep, one SpMV). Returns z = y + c and the outcome."""
+    Res < tol (checked every sweep, one SpMV; see :func:`verdict`). Returns z = y + c and the
+    outcome; ``setup + iterations`` is the whole time."""
     t0 = time.perf_counter()
     blocks = []
     for k in np.unique(colour):
@@ -105,18 +122,13 @@ def psor(A, q, c, tol, *, omega, colour, maxiter, history=False):
     setup = time.perf_counter() - t0
     y = np.zeros(A.shape[0])
     hist = ([], [], []) if history else None
-    k, status = 0, "max_iterations"
+    k = 0
     while True:
         res = _res(A, q, y)
         if hist is not None:
             hist[0].append(k), hist[1].append(time.perf_counter() - t0), hist[2].append(res)
-        if res < tol:
-            status = "converged"
-            break
-        if not np.isfinite(res):
-            status = "diverged"
-            break
-        if k >= maxiter:
+        status = verdict(res, tol, k, maxiter, t0, time_limit)
+        if status:
             break
         for rows, Ak, wd, qk in blocks:
             yk = y[rows] - wd * (Ak @ y + qk)
@@ -133,9 +145,10 @@ def psor(A, q, c, tol, *, omega, colour, maxiter, history=False):
 
 # --------------------------------------------------------------------------- QP solvers
 
-def _qp_once(name, A, q, eps):
+def qp_once(name, A, q, eps, *, max_iter=None):
     """One solve of min ½yᵀAy + qᵀy, y ≥ 0 at accuracy eps: (y, status, iterations). Everything
-    the user pays (the upper triangle, the constraint block, set-up, factorization) is inside."""
+    the user pays (the upper triangle, the constraint block, set-up, factorization) is inside.
+    ``max_iter``: PIQP's iteration limit (None: its default); OSQP gets 10⁶."""
     n = A.shape[0]
     P = sp.triu(A, format="csc")
     if name == "piqp":
@@ -145,6 +158,8 @@ def _qp_once(name, A, q, eps):
         s.settings.verbose = False
         s.settings.eps_abs = s.settings.eps_rel = eps
         s.settings.eps_duality_gap_abs = s.settings.eps_duality_gap_rel = eps
+        if max_iter is not None:
+            s.settings.max_iter = max_iter
         s.setup(P, q, x_l=np.zeros(n), x_u=np.full(n, np.inf))
         st = s.solve()
         return np.array(s.result.x), getattr(st, "name", str(st)), int(s.result.info.iter)
@@ -162,22 +177,43 @@ def _qp_once(name, A, q, eps):
     raise ValueError(f"unknown QP solver {name!r}")
 
 
-def qp(name, A, q, c, tol, *, eps_min=1e-14):
-    """The QP solver's eps, from tol down by 10× until Res < tol (a user has to find it too):
-    the outcome of the last run, its own seconds (the tuning runs before it are not counted)
-    and the eps it needed. Not converged when even eps_min does not get Res below tol."""
-    eps = tol
+def tune_eps(run, A, q, tol, *, eps_start=None, eps_min=1e-14, time_budget=None):
+    """A QP solver's eps, from ``eps_start`` (default tol) down by 10× until Res < tol (a user
+    has to find it too). ``run(eps)`` -> (y, status, iterations) is one solve; a solve that
+    raises is a result too (status 'error: ...', Res inf) and ends the tuning, as do eps_min
+    and more than ``time_budget`` seconds spent (status + ' (tuning budget exhausted)').
+    Returns the last run: y, status, iterations, residual, seconds (that run alone), eps,
+    reached, attempts [(eps, Res, seconds)], tuning_seconds (all runs)."""
+    eps = tol if eps_start is None else eps_start
+    attempts, spent = [], 0.0
     while True:
         t0 = time.perf_counter()
         try:
-            y, st, it = _qp_once(name, A, q, eps)
+            y, st, it = run(eps)
+            secs = time.perf_counter() - t0
             res = _res(A, q, y)
         except Exception as exc:  # a solver failure is a result too
-            y, st, it, res = np.zeros_like(q), f"error: {type(exc).__name__}", 0, np.inf
-        secs = time.perf_counter() - t0
-        if res < tol or eps / 10 < eps_min * 0.999 or st.startswith("error"):
-            break
+            y, st, it, res = None, f"error: {exc}", -1, np.inf
+            secs = time.perf_counter() - t0
+        attempts.append((eps, res, secs))
+        spent += secs
+        out = dict(y=y, status=st, iterations=it, residual=res, seconds=secs, eps=eps, reached=bool(res < tol),
+                   attempts=attempts, tuning_seconds=spent)
+        if out["reached"] or eps / 10 < eps_min * 0.999 or y is None:
+            return out
+        if time_budget is not None and spent > time_budget:
+            out["status"] += " (tuning budget exhausted)"
+            return out
         eps /= 10
-    ok = bool(res < tol)
-    return dict(z=y + c, status="converged" if ok else st.lower().replace(" ", "_"), success=ok, nit=it,
-                residual=res, seconds=secs, setting=f"eps={eps:.0e}")
+
+
+def qp(name, A, q, c, tol, *, eps_min=1e-14):
+    """The QP peer for the bench: :func:`tune_eps` on :func:`qp_once`, the outcome of the last
+    run, its own seconds (the tuning runs before it are not counted) and the eps it needed. Not
+    converged when even eps_min does not get Res below tol."""
+    o = tune_eps(lambda eps: qp_once(name, A, q, eps), A, q, tol, eps_min=eps_min)
+    y = np.zeros_like(q) if o["y"] is None else o["y"]
+    ok = o["reached"]
+    return dict(z=y + c, status="converged" if ok else o["status"].lower().replace(" ", "_"), success=ok,
+                nit=max(o["iterations"], 0), residual=o["residual"], seconds=o["seconds"],
+                setting=f"eps={o['eps']:.0e}")

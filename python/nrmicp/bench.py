@@ -137,23 +137,14 @@ def build_scene(name: str, size: str = "small"):
         if sym not in ("sym", "nonsym") or kind not in ("lcp", "icp", "affine"):
             raise ValueError(f"unknown scene {name!r}")
         return scenes.bai(s["bai"], symmetric=sym == "sym", kind=kind)
-    if name == "obstacle_1d":
-        return scenes.obstacle_1d(s[name])
-    if name == "obstacle_2d":
-        return scenes.obstacle_2d(s[name])
-    if name == "obstacle_3d":
-        return scenes.obstacle_3d(s[name])
-    if name == "convection_obstacle":
-        return scenes.convection_diffusion_obstacle(s[name])
-    if name == "thermoforming_1d":
-        return scenes.thermoforming_1d(s[name])
-    if name == "thermoforming_2d":
-        return scenes.thermoforming_2d(s[name])
-    if name == "impulse_control":
-        return scenes.impulse_control(s[name])
-    if name == "american_put":
-        return scenes.american_put(n_space=s[name])
-    raise ValueError(f"unknown scene {name!r}; choose from {', '.join(SCENES)}")
+    builders = {"obstacle_1d": scenes.obstacle_1d, "obstacle_2d": scenes.obstacle_2d,
+                "obstacle_3d": scenes.obstacle_3d, "convection_obstacle": scenes.convection_diffusion_obstacle,
+                "thermoforming_1d": scenes.thermoforming_1d, "thermoforming_2d": scenes.thermoforming_2d,
+                "impulse_control": scenes.impulse_control,
+                "american_put": lambda n_space: scenes.american_put(n_space=n_space)}
+    if name not in builders:
+        raise ValueError(f"unknown scene {name!r}; choose from {', '.join(SCENES)}")
+    return builders[name](s[name])
 
 
 def scene_label(name: str) -> str:

@@ -456,8 +456,9 @@ class Newton {
       c.maxiter = maxiter;
       c.sweep_budget = o.maxiter;
       c.record_history = report && o.record_history;
-      if (report) {
-        c.callback = callback;
+      if (report) {  // the callback's k counts on from the steps before this loop, as absorb()'s history does
+        if (callback)
+          c.callback = [&cb = callback, base = res.nit](int k, const Vector& z, double r) { return cb(base + k, z, r); };
         c.progress = progress;
         c.verbose = o.verbose;
       }
@@ -585,8 +586,9 @@ class Newton {
       Status status = Status::MaxIterations;
       const auto t0 = std::chrono::steady_clock::now();
       for (;;) {
-        record(r, t0);
+        const bool asked = record(z, r, t0);
         if (r < o.tol) { status = Status::Converged; break; }
+        if (asked) { status = Status::CallbackStop; break; }
         if (res.nit >= o.maxiter) { status = Status::MaxIterations; break; }
         if (poll) poll();
         // The inner obstacle problem, solved to a settled active set (its own tol: 0).
@@ -598,7 +600,6 @@ class Newton {
         Vector psi_new(n);
         const double r_new = icp_res(inner.z, psi_new);
         if (std::isnan(r_new)) return zeta_failed(best, q);
-        if (callback && callback(res.nit, inner.z, r_new)) { status = Status::CallbackStop; break; }
         if (test.acceptable(r_new)) {
           z = inner.z; psi = psi_new; r = r_new;
           test.push(r);
@@ -644,9 +645,9 @@ class Newton {
       std::vector<char> inactive;
       const auto t0 = std::chrono::steady_clock::now();
       for (;;) {
-        record(r, t0);
+        const bool asked = record(z, r, t0);
         if (r < o.tol) { status = Status::Converged; break; }
-        if (callback && callback(res.nit, z, r)) { status = Status::CallbackStop; break; }
+        if (asked) { status = Status::CallbackStop; break; }
         if (poll) poll();
         if (res.nit >= o.maxiter) { status = Status::MaxIterations; break; }
         if (!zeta.jacobian(z, J)) return zeta_failed(best, q);
@@ -683,12 +684,16 @@ class Newton {
       return finish_outer(out, q);
     }
 
-    /// The history of the outer iterations (finest level): iterate res.nit with Res r.
-    void record(double r, std::chrono::steady_clock::time_point t0) {
-      if (!o.record_history) return;
-      res.history_iteration.push_back(res.nit);
-      res.history_seconds.push_back(detail::ScopedTimer::seconds_since(t0));
-      res.history_residual.push_back(r);
+    /// Iterate res.nit of the outer iterations (finest level), z with Res r, into the history and
+    /// to the callback (every iterate, the last one too, as the Monitor does); true when the
+    /// callback asks to stop.
+    bool record(const Vector& z, double r, std::chrono::steady_clock::time_point t0) {
+      if (o.record_history) {
+        res.history_iteration.push_back(res.nit);
+        res.history_seconds.push_back(detail::ScopedTimer::seconds_since(t0));
+        res.history_residual.push_back(r);
+      }
+      return callback && callback(res.nit, z, r);
     }
 
     /// Fallback of the outer iterations: sweeps of the fallback member on the whole ICP from the

@@ -63,7 +63,7 @@ class Solver {
   using StorageIndex = typename MatrixType::StorageIndex;
   using Vector = Eigen::VectorXd;
   using ColMatrix = Eigen::SparseMatrix<double, Eigen::ColMajor, StorageIndex>;
-  /// Called after every iterate with (k, z⁽ᵏ⁾, Res); return true to stop.
+  /// Called for every iterate with (k, z⁽ᵏ⁾, Res), the last one too; return true to stop.
   using Callback = detail::Callback;
   /// Called about every 50 ms during a solve; may throw to abort (e.g. on Ctrl-C).
   using Poll = detail::Poll;

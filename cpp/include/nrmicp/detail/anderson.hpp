@@ -85,6 +85,7 @@ class Accelerated {
     x_k_ = s.x;  // the one-pass sweep moves x while it evaluates
     double r = plain_.evaluate(s);
     if (pending_ && s.zeta_ok && !(r < prev_res_)) {
+      ++rejections_;
       s.x = x_plain_;
       aa_.reset();
       ctx_.z_update(s);
@@ -105,7 +106,11 @@ class Accelerated {
   }
   void update_z(Iterate& s) { ctx_.next_z(s); }
   const Vector& dx() const { return plain_.dx(); }
-  void report(Result& r) const { plain_.report(r); }
+  /// Accelerated steps replaced by the plain one (Result::counters "anderson_rejections").
+  void report(Result& r) const {
+    plain_.report(r);
+    r.counters["anderson_rejections"] += rejections_;
+  }
 
  private:
   Step& plain_;
@@ -113,6 +118,7 @@ class Accelerated {
   Anderson aa_;
   Vector x_k_, x_plain_, x_next_;
   bool pending_ = false;  // x came from an Anderson step not yet checked
+  long long rejections_ = 0;
   double prev_res_ = std::numeric_limits<double>::infinity();
 };
 

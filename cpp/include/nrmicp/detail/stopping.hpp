@@ -15,11 +15,13 @@
 #include <cmath>
 #include <functional>
 #include <limits>
+#include <optional>
 #include <string>
 
 namespace nrmicp::detail {
 
-/// Called after every iterate with (k, z⁽ᵏ⁾, Res); return true to stop.
+/// Called for every iterate k = 0, 1, ... that has a Res (the last one too, whatever ends the
+/// solve) with (k, z⁽ᵏ⁾, Res); return true to stop.
 using Callback = std::function<bool(int, const Eigen::VectorXd&, double)>;
 /// Called about every 50 ms during a solve; may throw to abort (e.g. on Ctrl-C).
 using Poll = std::function<void()>;
@@ -51,11 +53,12 @@ class Monitor {
     const bool improved = track_best(k, r, s);
     track_windows(k, r);
     res_.iterations = k;
-    if (r < o_.tol) return finish_with(Status::Converged, k);
-    if (!std::isfinite(r) || r > o_.divergence_factor * best_ || x_runaway_) return finish_with(Status::Diverged, k);
-    if (floor_count_ >= o_.stall_iterations || bad_windows_ >= 3 || out_of_reach_)
-      return finish_with(Status::Stagnated, k);
-    if (callback_ && call_back(k, improved ? best_z_ : s.z, r)) return finish_with(Status::CallbackStop, k);
+    const std::optional<Status> end = verdict(r);
+    // The callback sees every iterate that has a Res (those of the history), the last one too;
+    // asking to stop at an iterate that ends the solve anyway does not change why it ended.
+    const bool asked = callback_ && call_back(k, improved ? best_z_ : s.z, r);
+    if (end) return finish_with(*end, k);
+    if (asked) return finish_with(Status::CallbackStop, k);
     if (poll_ && ScopedTimer::seconds_since(last_poll_) > 0.05) {
       poll_();
       last_poll_ = clock::now();
@@ -94,6 +97,13 @@ class Monitor {
   }
 
  private:
+  // Converged, diverged or stagnated at this iterate (after record/track_best/track_windows).
+  std::optional<Status> verdict(double r) const {
+    if (r < o_.tol) return Status::Converged;
+    if (!std::isfinite(r) || r > o_.divergence_factor * best_ || x_runaway_) return Status::Diverged;
+    if (floor_count_ >= o_.stall_iterations || bad_windows_ >= 3 || out_of_reach_) return Status::Stagnated;
+    return std::nullopt;
+  }
   bool finish_with(Status s, int k) {
     res_.status = s;
     res_.iterations = k;

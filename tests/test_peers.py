@@ -1,0 +1,74 @@
+"""nrmicp._peers's shared pieces, which the bench and benchmarks/ (qp_peers.py, scipy_modulus.py)
+use alike: the stopping rule, the QP eps tuning and PSOR's time limit."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from nrmicp import _peers
+
+
+@pytest.mark.parametrize("res, k, expected", [
+    (1e-9, 0, "converged"), (1e-9, 50, "converged"),  # converged wins over maxiter
+    (np.inf, 3, "diverged"), (np.nan, 3, "diverged"),
+    (1.0, 10, "max_iterations"), (1.0, 3, None)])
+def test_verdict(res, k, expected):
+    assert _peers.verdict(res, 1e-8, k, 10) == expected
+
+
+def test_verdict_time_limit():
+    assert _peers.verdict(1.0, 1e-8, 0, 10, time.perf_counter() - 5, time_limit=1.0) == "time_limit"
+    assert _peers.verdict(1.0, 1e-8, 0, 10, time.perf_counter(), time_limit=100.0) is None
+
+
+def _lcp(n=6):
+    """LCP(q, I) with solution y* = max(−q, 0)."""
+    q = np.linspace(-1.0, 1.0, n)
+    return sp.identity(n, format="csr"), q, np.maximum(-q, 0.0)
+
+
+def test_tune_eps_tightens_until_res_below_tol():
+    A, q, y_star = _lcp()
+    # a "solver" whose error is eps itself: min(y* + eps + q, y* + eps) = eps, so Res = √6 eps
+    run = lambda eps: (y_star + eps, "ok", 1)  # noqa: E731
+    o = _peers.tune_eps(run, A, q, 1e-6)
+    assert o["reached"] and o["residual"] < 1e-6
+    assert [e for e, _, _ in o["attempts"]] == pytest.approx([1e-6, 1e-7])  # √6·1e-6 > tol, √6·1e-7 < tol
+    assert o["eps"] == pytest.approx(1e-7) and o["tuning_seconds"] >= o["seconds"]
+
+
+def test_tune_eps_stops_at_eps_min_and_on_an_error():
+    A, q, y_star = _lcp()
+    o = _peers.tune_eps(lambda eps: (y_star + 1.0, "stuck", 1), A, q, 1e-6, eps_min=1e-8)
+    assert not o["reached"] and [e for e, _, _ in o["attempts"]] == pytest.approx([1e-6, 1e-7, 1e-8])
+
+    def fails(eps):
+        raise RuntimeError("boom")
+
+    o = _peers.tune_eps(fails, A, q, 1e-6)
+    assert not o["reached"] and o["y"] is None and o["status"] == "error: boom" and len(o["attempts"]) == 1
+
+
+def test_tune_eps_budget():
+    A, q, y_star = _lcp()
+
+    def slow(eps):
+        time.sleep(0.02)
+        return y_star + 1.0, "stuck", 1
+
+    o = _peers.tune_eps(slow, A, q, 1e-6, time_budget=0.01)
+    assert o["status"] == "stuck (tuning budget exhausted)" and len(o["attempts"]) == 1
+
+
+def test_psor_time_limit_and_max_iterations():
+    n = 400
+    A = sp.diags([-np.ones(n - 1), 2.0 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1], format="csr")  # slow
+    q = -np.ones(n)
+    colour = _peers.colours(A)
+    o = _peers.psor(A, q, np.zeros(n), 1e-14, omega=1.0, colour=colour, maxiter=10**9, time_limit=0.05)
+    assert o["status"] == "time_limit" and not o["success"] and o["nit"] > 0
+    o = _peers.psor(A, q, np.zeros(n), 1e-14, omega=1.0, colour=colour, maxiter=5)
+    assert o["status"] == "max_iterations" and o["nit"] == 5
