@@ -4,8 +4,8 @@
 //
 // with nested iteration over user-supplied prolongations and a fallback to the paper's
 // iteration (docs/SPEC.md, "The Newton member"). A step with D = diag(sign x) solves the piece
-// of F on which x lies: with the inactive set ℐ = {x > 0} (z − ζ > 0, w = 0) and the active set
-// 𝒜 = {x ≤ 0} (z − ζ = 0), i.e. x > 0 ⇔ (z − ζ)/Ω1 > w/Ω2:
+// of F on which x lies: with the inactive set ℐ = {x ≥ 0} (z − ζ > 0, w = 0) and the active set
+// 𝒜 = {x < 0} (z − ζ = 0), i.e. x ≥ 0 ⇔ (z − ζ)/Ω1 ≥ w/Ω2 (ties: NewtonLevel::active_set):
 //   (Az + q)_ℐ = 0,   (z − ζ(z))_𝒜 = 0            (detail/active_set.hpp)
 // and x⁺ is recovered by the start formula x = γ/2 (Ω1⁻¹ g − Ω2⁻¹ w). For an LCP this is the
 // primal–dual active-set method; on each piece F is affine, so the step is exact there.
@@ -161,10 +161,15 @@ class NewtonLevel {
   /// Ω1 (g/Ω1 − w/Ω2) = g − (Ω1/Ω2) w: the modulus vector x up to the factor γ/(2Ω1).
   void modulus(const Vector& w, const Vector& g, Vector& x) const { x = g - ratio_.cwiseProduct(w); }
 
-  /// The inactive set ℐ = {x > 0} = {g/Ω1 − w/Ω2 > 0}.
+  /// The inactive set ℐ = {x ≥ 0} = {g/Ω1 − w/Ω2 ≥ 0}. A tie x = 0 (z = ζ and w = 0) counts as
+  /// inactive: if it is in fact active the solve puts it back at no cost, while holding every
+  /// tie at the obstacle peels a region of exact zeros one node per step. Measured on the
+  /// American put (n_space = 1600, warm start x0 = the previous time step, hierarchy None, where
+  /// the far field is z = ψ, w = 0 exactly): 9.09 steps per time step with ties active, 1.49
+  /// with ties inactive (the same as a plain scipy active-set loop with this rule).
   void active_set(const Vector& w, const Vector& g, std::vector<char>& inactive) const {
     inactive.resize(static_cast<std::size_t>(w.size()));
-    for (Eigen::Index i = 0; i < w.size(); ++i) inactive[i] = (g[i] - ratio_[i] * w[i]) > 0;
+    for (Eigen::Index i = 0; i < w.size(); ++i) inactive[i] = (g[i] - ratio_[i] * w[i]) >= 0;
   }
 
   /// Up to `sweeps` sweeps of the fallback member (nrm) from z0 for ICP(q, A, ζ); the best iterate.
