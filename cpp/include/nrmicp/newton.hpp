@@ -383,9 +383,11 @@ class Newton {
   int levels() const { return 1 + static_cast<int>(coarse_.size()); }
 
   /// Solves ICP(q, A, ζ). The start: with prolongations, the nested coarse-to-fine solution
-  /// (z0 is not used: measured on the American put, n_space = 6400, a warm start from the previous
-  /// time step moved the exercise boundary one node per step, 38.7 steps per time step, while the
-  /// nested start took 1.2); without, z0 (zeros when null). The iteration fields of
+  /// (z0 is not used: measured on the American put, n_space = 6400, 100 time steps, a warm start
+  /// from the previous time step took 3.48 steps per time step and 1.53 CPU s for the march, the
+  /// nested start 1.18 steps (11.6 solves on all levels) and 0.84 s; at n_space = 800 the warm
+  /// start is faster, 0.07 against 0.16 s: pass hierarchy None for small time-stepping problems);
+  /// without, z0 (zeros when null). The iteration fields of
   /// `iteration_options` (tol, maxiter, record_history) override the constructor's.
   Result solve(const Vector& q, const Zeta<StorageIndex>& zeta = Zeta<StorageIndex>::none(), const Vector* z0 = nullptr,
                const Callback& callback = {}, const Poll& poll = {}, const Options* iteration_options = nullptr,
