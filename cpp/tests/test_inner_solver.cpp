@@ -118,3 +118,73 @@ TEST_CASE("UMFPACK out of memory is a memory error that points at 64-bit indices
   CHECK_NOTHROW(detail::check_umfpack<int>(UMFPACK_WARNING_singular_matrix, "M"));
 }
 #endif
+
+namespace {
+/// A random sparse matrix with about `per_row` entries per row, some of them explicit zeros.
+template <typename M>
+M random_sparse(Eigen::Index rows, Eigen::Index cols, int per_row, unsigned seed) {
+  std::vector<Eigen::Triplet<double>> t;
+  std::uint64_t s = seed;
+  auto next = [&s] { s = s * 6364136223846793005ull + 1442695040888963407ull; return s >> 33; };
+  for (Eigen::Index i = 0; i < rows; ++i)
+    for (int k = 0; k < per_row; ++k) {
+      const double v = (next() % 5 == 0) ? 0.0 : static_cast<double>(next() % 1000) / 100.0 - 5.0;
+      t.emplace_back(i, static_cast<Eigen::Index>(next() % static_cast<std::uint64_t>(cols)), v);
+    }
+  M A(rows, cols);
+  A.setFromTriplets(t.begin(), t.end());
+  A.makeCompressed();
+  return A;
+}
+}  // namespace
+
+TEST_CASE("the split sparse product (pattern once, values per step) equals Eigen's product") {
+  using RowMat = testing::SpMat<int, Eigen::RowMajor>;
+  using ColMat = testing::SpMat<int, Eigen::ColMajor>;
+  for (unsigned seed = 1; seed <= 5; ++seed) {
+    const RowMat L = random_sparse<RowMat>(40, 30, 4, seed), R = random_sparse<RowMat>(30, 25, 3, seed + 100);
+    const Eigen::MatrixXd expected = Eigen::MatrixXd(L) * Eigen::MatrixXd(R);
+    RowMat C = detail::product(L, R);
+    CHECK((Eigen::MatrixXd(C) - expected).cwiseAbs().maxCoeff() < 1e-12);
+    // The pattern holds every structural product term, zeros included: new values on the same
+    // patterns are recomputed in place.
+    RowMat L2 = L;
+    for (Eigen::Index p = 0; p < L2.nonZeros(); ++p) L2.valuePtr()[p] = 1.0 + 0.5 * static_cast<double>(p % 7);
+    std::vector<int> position;
+    REQUIRE(detail::product_values(L2, R, C, position));
+    CHECK((Eigen::MatrixXd(C) - Eigen::MatrixXd(L2) * Eigen::MatrixXd(R)).cwiseAbs().maxCoeff() < 1e-12);
+    // A column-major left factor gives the same result.
+    CHECK((Eigen::MatrixXd(detail::product(ColMat(L), R)) - expected).cwiseAbs().maxCoeff() < 1e-12);
+  }
+  // A term outside C's pattern is refused, not dropped.
+  RowMat L(2, 2), R(2, 2);
+  L.insert(0, 0) = 1.0;
+  R.insert(0, 0) = 2.0;
+  L.makeCompressed();
+  R.makeCompressed();
+  RowMat C = detail::product(L, R);
+  RowMat L3(2, 2);
+  L3.insert(0, 1) = 1.0;
+  L3.makeCompressed();
+  RowMat R3(2, 2);
+  R3.insert(1, 1) = 3.0;
+  R3.makeCompressed();
+  std::vector<int> position;
+  CHECK_FALSE(detail::product_values(L3, R3, C, position));
+}
+
+TEST_CASE("is_symmetric reads the mirror of every entry, stored or not") {
+  using ColMat = testing::SpMat<int, Eigen::ColMajor>;
+  ColMat S = testing::bai<int, Eigen::ColMajor>(4, 4.0, true);
+  S.makeCompressed();
+  CHECK(detail::is_symmetric(S));
+  CHECK_FALSE(detail::is_symmetric(testing::bai<int, Eigen::ColMajor>(4, 4.0, false)));
+  ColMat T = S;
+  T.coeffRef(0, 5) += 1e-3;  // a new entry whose mirror is not stored
+  T.makeCompressed();
+  CHECK_FALSE(detail::is_symmetric(T));
+  ColMat U = S;
+  U.coeffRef(1, 0) += 1e-20;  // below 1e-14 ‖S‖_F: symmetric to rounding
+  U.makeCompressed();
+  CHECK(detail::is_symmetric(U));
+}
