@@ -8,6 +8,7 @@
 #pragma once
 
 #include "iterate.hpp"
+#include "stopping.hpp"
 
 #include <Eigen/Dense>
 
@@ -106,6 +107,7 @@ class Accelerated {
   void update_z(Iterate& s) { ctx_.next_z(s); }
   const Vector& dx() const { return plain_.dx(); }
   void report(Result& r) const { plain_.report(r); }
+  const StepEnd* end() const { return plain_.end(); }
 
  private:
   Step& plain_;
