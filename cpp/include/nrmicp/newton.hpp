@@ -407,70 +407,27 @@ class Newton {
       return finish_outer(out, q);
     }
 
-    /// A callable ζ with its Jacobian J: semismooth Newton on the whole ICP. A step is the affine
-    /// step for the linearization ζ(z) + J(v − z) (B = J, c = ζ(z) − Jz, a new pattern each
-    /// step); Res is the ICP's. Start as for an affine ζ.
+    /// A callable ζ with its Jacobian J: semismooth Newton on the whole ICP, each step the affine
+    /// step of the linearization ζ(z) + J(v − z) (detail::JacobianLinearization); Res is the
+    /// ICP's. Start as for an affine ζ. Newton steps and fallback sweeps of the start count
+    /// against maxiter.
     Result semismooth(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0) {
+      using Step = detail::NewtonStep<MatrixType, detail::JacobianLinearization<MatrixType>>;
       const Eigen::Index n = q.size();
-      Vector psi(n), w(n), g(n), rhs(n), z_new(n), psi_new(n), w_new(n), g_new(n);
+      Vector psi(n);
       Result best;
       best.z = z0 ? *z0 : Vector::Zero(n);
       if (!zeta.eval(best.z, psi)) return zeta_failed(best, q);
-      Vector z = (z0 && !nest) ? *z0 : obstacle(q, psi, z0, nest, 0.0, std::min(100, o.maxiter), false).z;
-      auto icp_res = [&](const Vector& v, Vector& zv, Vector& wv, Vector& gv) -> double {
-        const double r = icp_residual(q, zeta, v, zv, wv);
-        if (!std::isnan(r)) gv = v - zv;
-        return r;
-      };
-      double r = icp_res(z, psi, w, g);
-      if (std::isnan(r)) return zeta_failed(best, q);
-      best.z = z;
-      best.residual = r;
-      detail::NonMonotone test(r);
-      bool exempt = true;
-      int sweep_run = 10;
-      Status status = Status::MaxIterations;
-      RowMatrix J;
-      std::vector<char> inactive;
+      Vector start = (z0 && !nest) ? *z0 : obstacle(q, psi, z0, nest, 0.0, std::min(100, o.maxiter), false).z;
       const auto t0 = std::chrono::steady_clock::now();
-      for (;;) {
-        record(r, t0);
-        if (r < o.tol) { status = Status::Converged; break; }
-        if (callback && callback(res.nit, z, r)) { status = Status::CallbackStop; break; }
-        if (poll) poll();
-        if (res.nit >= o.maxiter) { status = Status::MaxIterations; break; }
-        if (!zeta.jacobian(z, J)) return zeta_failed(best, q);
-        const Vector c = psi - J * z;
-        self.finest_->active_set(w, g, inactive);
-        const auto t_step = std::chrono::steady_clock::now();
-        auto K = self.finest_->affine_system(J);
-        bool ok = K->factorize(inactive);
-        if (ok) {
-          for (Eigen::Index i = 0; i < n; ++i) rhs[i] = inactive[i] ? -q[i] : c[i];
-          K->solve(rhs, z_new);
-          ++res.linear_solves; ++res.nit; ++res.iterations; ++res.level_steps[0];
-          res.level_seconds[0] += detail::ScopedTimer::seconds_since(t_step);
-          const double r_new = icp_res(z_new, psi_new, w_new, g_new);
-          ok = std::isfinite(r_new) && (exempt || test.acceptable(r_new));
-          if (ok) {
-            z.swap(z_new); psi.swap(psi_new); w.swap(w_new); g.swap(g_new); r = r_new;
-            test.push(r);
-            exempt = false;
-            if (r < best.residual) { best.z = z; best.residual = r; }
-            continue;
-          }
-        }
-        if (const auto stop = fallback(q, zeta, best, sweep_run, z)) { status = *stop; break; }
-        r = icp_res(z, psi, w, g);
-        test.reset(r);
-        exempt = true;
-        if (r < best.residual) { best.z = z; best.residual = r; }
-      }
-      Result out;
-      out.z = best.z;
-      out.residual = best.residual;
-      out.status = status;
-      return finish_outer(out, q);
+      Step plain(*self.finest_, {*self.finest_, q, zeta, {}, {}, {}}, std::move(start));
+      if (std::isnan(plain.residual())) return zeta_failed(best, q);
+      static const Vector no_shift;
+      auto control = finest_control(no_shift, o.tol, o.maxiter - res.nit, true);
+      control.sweep_budget = o.maxiter - res.fallback_sweeps;
+      const auto out = detail::newton_loop(plain, control);
+      absorb(out, 0, detail::ScopedTimer::seconds_since(t0));
+      return finish(out, out.z, q);
     }
 
     /// The history of the outer iterations (finest level): iterate res.nit with Res r.
