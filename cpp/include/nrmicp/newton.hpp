@@ -10,16 +10,19 @@
 // and x⁺ is recovered by the start formula x = γ/2 (Ω1⁻¹ g − Ω2⁻¹ w). For an LCP this is the
 // primal–dual active-set method; on each piece F is affine, so the step is exact there.
 //
-// Globalization: a step whose Res is not below the largest Res of the last 5 iterates (a
-// non-monotone test: the active-set steps are not monotone in Res — measured on the nested 2D
-// obstacle, 2813 → 1.6e-3 → 1.4e-2 → 1e-13 — but the reference value never grows; the first step
-// after a start is exempt: a start is not a Newton iterate), an active set seen before (a cycle),
-// or a singular reduced system hands over to sweeps of nrm (M = A, the paper's first member; it
-// converged on P-matrices where both nrmgs and the active-set steps cycle) from the best
-// iterate (10, then 20, 40, ... sweeps), after which Newton resumes. The result says which path
-// was taken. Every iterate goes to the family's stopping Monitor (detail/stopping.hpp), as in
-// Method 3.1's loop; the Newton-specific ends (a settled active set, a fallback that brings
-// nothing, maxiter Newton steps) are decided in newton_loop.
+// The structure: the step runs in the family's loop (detail::loop, solver.hpp) with the family's
+// stopping Monitor, like every member's step.
+//   detail/newton_level.hpp   one level: its matrix, the active-set test, the reduced systems, the
+//                             fallback member
+//   detail/newton_step.hpp    the plain step, with ζ's linearization as a policy: fixed (the
+//                             shifted LCP, an affine ζ) or the Jacobian of a callable ζ at each z
+//   detail/globalization.hpp  Globalized<Step>: non-monotone acceptance, cycles, fallback sweeps
+//                             of nrm from the best iterate, and the step's own ends (settled
+//                             active set, a fallback that brings nothing, maxiter Newton steps)
+//   this file                 newton_loop (one level: step + wrapper + Monitor) and nrmicp::Newton,
+//                             which orchestrates the levels of nested iteration, the start of an
+//                             affine/semismooth solve, the outer fixed point on a callable ζ
+//                             without Jacobian, and the result.
 #pragma once
 
 #include "detail/active_set.hpp"
@@ -361,50 +364,42 @@ class Newton {
     /// does not reduce Res hands over to sweeps of the fallback member on the ICP.
     Result functor(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0) {
       const Eigen::Index n = q.size();
-      Vector z = z0 ? *z0 : Vector::Zero(n), psi(n), w(n);
-      auto icp_res = [&](const Vector& v, Vector& zv) -> double { return icp_residual(q, zeta, v, zv, w); };
-      double r = icp_res(z, psi);
+      Vector z = z0 ? *z0 : Vector::Zero(n), psi(n), psi_new(n), w(n);
+      double r = icp_residual(q, zeta, z, psi, w);
       Result best;
       best.z = z;
       best.residual = r;
       if (std::isnan(r)) return zeta_failed(best, q);
-      bool first = true;
       int sweep_run = 10;
       detail::NonMonotone test(r);
       std::vector<char> set;  // the last inner solve's inactive set: the next one starts from it
       Status status = Status::MaxIterations;
       const auto t0 = std::chrono::steady_clock::now();
-      for (;;) {
+      for (bool first = true;; first = false) {
         record(r, t0);
         if (r < o.tol) { status = Status::Converged; break; }
-        if (res.nit >= o.maxiter) { status = Status::MaxIterations; break; }
+        if (res.nit >= o.maxiter) break;
         if (poll) poll();
         // The inner obstacle problem, solved to a settled active set (its own tol: 0).
         // The first inner solve without z0 starts at y = 0 (z = ψ): measured better than from z = 0.
         Result inner = obstacle(q, psi, (first && !z0) ? nullptr : &z, first && nest, 0.0, o.maxiter - res.nit, false,
                                 &set);
-        first = false;
         ++res.outer_iterations;
-        Vector psi_new(n);
-        const double r_new = icp_res(inner.z, psi_new);
+        const double r_new = icp_residual(q, zeta, inner.z, psi_new, w);
         if (std::isnan(r_new)) return zeta_failed(best, q);
         if (callback && callback(res.nit, inner.z, r_new)) { status = Status::CallbackStop; break; }
         if (test.acceptable(r_new)) {
-          z = inner.z; psi = psi_new; r = r_new;
+          z = inner.z; psi.swap(psi_new); r = r_new;
           test.push(r);
-          if (r < best.residual) { best.z = z; best.residual = r; }
-          continue;
+        } else {
+          if (const auto stop = fallback(q, zeta, best, sweep_run, z)) { status = *stop; break; }
+          r = icp_residual(q, zeta, z, psi, w);
+          test.reset(r);
         }
-        if (const auto stop = fallback(q, zeta, best, sweep_run, z)) { status = *stop; break; }
-        r = icp_res(z, psi);
-        test.reset(r);
         if (r < best.residual) { best.z = z; best.residual = r; }
       }
-      Result out;
-      out.z = best.z;
-      out.residual = best.residual;
-      out.status = status;
-      return finish_outer(out, q);
+      best.status = status;
+      return finish_outer(best, q);
     }
 
     /// A callable ζ with its Jacobian J: semismooth Newton on the whole ICP, each step the affine
@@ -447,7 +442,7 @@ class Newton {
       if (res.fallback_sweeps >= o.maxiter) return Status::MaxIterations;
       const int k = std::min(sweep_run, o.maxiter - res.fallback_sweeps);
       sweep_run *= 2;
-      const Result sw = sweep_icp(q, zeta, best.z, k);
+      const Result sw = self.finest_->sweep(q, zeta, best.z, k, o.tol);
       res.fallback_sweeps += sw.iterations;
       res.iterations += sw.iterations;
       if (!(sw.residual < best.residual)) return Status::Stagnated;
@@ -457,10 +452,6 @@ class Newton {
 
     double icp_residual(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector& v, Vector& zv, Vector& wv) {
       return self.finest_->icp_residual(q, zeta, v, zv, wv);
-    }
-
-    Result sweep_icp(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector& z, int sweeps) {
-      return self.finest_->sweep(q, zeta, z, sweeps, o.tol);
     }
 
     Result zeta_failed(const Result& best, const Vector& q) {
