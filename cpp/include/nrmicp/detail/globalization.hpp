@@ -123,7 +123,7 @@ class Globalized {
       if (!seen_.insert(h).second) return false;  // a cycle
     }
     if (!plain_.factorize(inactive_)) return false;
-    const double r = plain_.solve(inactive_, 0.1 * ctl_.tol);
+    const double r = plain_.solve(inactive_, ctl_.tol);
     if (!(std::isfinite(r) && (exempt_ || test_.acceptable(r)))) return false;
     accept(r, h);
     return true;

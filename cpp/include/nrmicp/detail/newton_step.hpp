@@ -111,12 +111,12 @@ class NewtonStep {
   /// The reduced system of the piece `inactive`; false when it is singular.
   bool factorize(const std::vector<char>& inactive) { return lin_.system().factorize(inactive); }
 
-  /// The trial iterate z⁺ of the piece `inactive` (after factorize); its Res. An iterative inner
-  /// solve (inner = cg) starts from z and stops at `target`.
-  double solve(const std::vector<char>& inactive, double target) {
+  /// The trial iterate z⁺ of the piece `inactive` (after factorize); its Res. The one inner solve
+  /// of the Newton member: an iterative one (inner = cg) starts from z and stops at tol / 10.
+  double solve(const std::vector<char>& inactive, double tol) {
     for (Eigen::Index i = 0; i < size(); ++i) rhs_[i] = inactive[i] ? -lin_.q[i] : lin_.c_at(i);
     z_new_ = z_;
-    lin_.system().solve(rhs_, z_new_, target);
+    lin_.system().solve(rhs_, z_new_, 0.1 * tol);
     ++solves_;
     ++steps_;
     return r_new_ = lin_.evaluate(z_new_, w_new_, g_new_, zeta_new_);
