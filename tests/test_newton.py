@@ -272,3 +272,24 @@ def test_newton_res_neither_overflows_nor_underflows(zkind, scale):
     assert true_res < 1e-8 * scale
     np.testing.assert_allclose(res.z, ref.z, rtol=1e-10, atol=1e-12)
     assert all(seen)
+
+
+@pytest.mark.parametrize("zkind", ["obstacle", "affine", "callable+jacobian"])
+def test_verbose_reports_every_newton_path_ending_with_the_result_message(zkind, caplog):
+    """Every Newton path runs in the family's loop with its Monitor: progress lines from iterate 0
+    on, the last one with the result's own message (before, the semismooth path printed nothing,
+    and a settled active set printed the Monitor's generic 'stagnated' text)."""
+    problem = scenes.obstacle_2d(15, exact=False)
+    n, psi = problem.n, problem.zeta
+    zero = sp.csr_matrix((n, n))
+    zeta, extra = {"obstacle": (psi, {}), "affine": (nrmicp.Affine(zero, psi), {}),
+                   "callable+jacobian": (lambda z: psi, {"zeta_jacobian": lambda z: zero})}[zkind]
+    with caplog.at_level("INFO", logger="nrmicp"):
+        res = nrmicp.solve(problem.A, problem.q, zeta, method="newton", hierarchy=None, tol=1e-300, verbose=1,
+                           **extra)
+    lines = [r.getMessage() for r in caplog.records if r.name == "nrmicp"]
+    assert res.status == nrmicp.Status.STAGNATED and res.nit >= 2
+    assert "iteration       0" in lines[0]
+    assert res.message.split(";")[0] in lines[-1]
+    if zkind != "callable+jacobian":  # a repeated active set ends only the fixed-system paths
+        assert "the active set has settled" in lines[-1]

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -162,4 +163,44 @@ TEST_CASE("the progress hook: silent at verbose = 0; first iterate and final sta
   CHECK(ks.back() == r.iterations);
   CHECK(messages.back() == r.message);
   CHECK(r.z == quiet.z);
+}
+
+namespace {
+// A toy step for the shared loop: Res 1, 1/2, 1/3, ...; after `limit` moves it ends the solve itself.
+struct EndingStep : detail::StepBase {
+  int moves = 0, limit = 3;
+  std::optional<detail::StepEnd> finished;
+  double evaluate(detail::Iterate& s) {
+    s.step = 1.0;
+    return 1.0 / (moves + 1);
+  }
+  void move_x(detail::Iterate&) {
+    if (++moves == limit) finished = detail::StepEnd{Status::Stagnated, "ended by the step"};
+  }
+  void update_z(detail::Iterate&) {}
+  const detail::StepEnd* end() const { return finished ? &*finished : nullptr; }
+};
+}  // namespace
+
+TEST_CASE("a step ends the shared loop with its own status and message (step.end())") {
+  Options o;
+  o.tol = 1e-3;  // without the step's end the loop would run to iterate 1000
+  o.record_history = true;
+  Result res;
+  const detail::Callback callback;
+  const detail::Poll poll;
+  const detail::Progress progress;
+  const Eigen::VectorXd shift;
+  detail::Monitor monitor(o, callback, poll, progress, shift, res, 2);
+  detail::Iterate s;
+  s.x = Eigen::VectorXd::Ones(2);
+  s.z = Eigen::VectorXd::Zero(2);
+  EndingStep step;
+  detail::loop(step, s, monitor);
+  monitor.finish(Eigen::VectorXd::Zero(2));
+  CHECK(step.moves == 3);
+  CHECK(res.status == Status::Stagnated);
+  CHECK(res.message == "ended by the step");
+  CHECK(res.history_iteration == std::vector<int>{0, 1, 2});  // the Monitor saw every iterate before the end
+  CHECK(res.residual == doctest::Approx(1.0 / 3));
 }

@@ -10,19 +10,25 @@
 // and x⁺ is recovered by the start formula x = γ/2 (Ω1⁻¹ g − Ω2⁻¹ w). For an LCP this is the
 // primal–dual active-set method; on each piece F is affine, so the step is exact there.
 //
-// Globalization: a step whose Res is not below the largest Res of the last 5 iterates (a
-// non-monotone test: the active-set steps are not monotone in Res — measured on the nested 2D
-// obstacle, 2813 → 1.6e-3 → 1.4e-2 → 1e-13 — but the reference value never grows; the first step
-// after a start is exempt: a start is not a Newton iterate), an active set seen before (a cycle),
-// or a singular reduced system hands over to sweeps of nrm (M = A, the paper's first member; it
-// converged on P-matrices where both nrmgs and the active-set steps cycle) from the best
-// iterate (10, then 20, 40, ... sweeps), after which Newton resumes. The result says which path
-// was taken. Every iterate goes to the family's stopping Monitor (detail/stopping.hpp), as in
-// Method 3.1's loop; the Newton-specific ends (a settled active set, a fallback that brings
-// nothing, maxiter Newton steps) are decided in newton_loop.
+// The structure: the step runs in the family's loop (detail::loop, solver.hpp) with the family's
+// stopping Monitor, like every member's step.
+//   detail/newton_level.hpp   one level: its matrix, the active-set test, the reduced systems, the
+//                             fallback member
+//   detail/newton_step.hpp    the plain step, with ζ's linearization as a policy: fixed (the
+//                             shifted LCP, an affine ζ) or the Jacobian of a callable ζ at each z
+//   detail/globalization.hpp  Globalized<Step>: non-monotone acceptance, cycles, fallback sweeps
+//                             of nrm from the best iterate, and the step's own ends (settled
+//                             active set, a fallback that brings nothing, maxiter Newton steps)
+//   this file                 newton_loop (one level: step + wrapper + Monitor) and nrmicp::Newton,
+//                             which orchestrates the levels of nested iteration, the start of an
+//                             affine/semismooth solve, the outer fixed point on a callable ζ
+//                             without Jacobian, and the result.
 #pragma once
 
 #include "detail/active_set.hpp"
+#include "detail/globalization.hpp"
+#include "detail/newton_level.hpp"
+#include "detail/newton_step.hpp"
 #include "detail/residual.hpp"
 #include "detail/sparse_product.hpp"
 #include "detail/timer.hpp"
@@ -37,7 +43,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <cstdint>
 #include <functional>
 #include <limits>
 #include <memory>
@@ -45,30 +50,11 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
-#include <unordered_set>
 #include <vector>
 
 namespace nrmicp {
 
 namespace detail {
-
-/// What the Newton loop on one level needs to know and may report to.
-struct NewtonControl {
-  double tol = 0;             ///< Res < tol ends the solve; 0: only a settled active set does
-  /// Warm start by active set: when not empty, the first step uses this inactive set instead of
-  /// the one of the start (after a change of the obstacle the old contact set is a far better
-  /// guess than the test on the old z: measured on thermoforming_1d, 1 step instead of 6).
-  std::vector<char> start_set;
-  int maxiter = 50;           ///< Newton steps
-  double forcing = 0;         ///< an iterative inner solve may stop at forcing × Res (inexact Newton)
-  int sweep_budget = 0;       ///< fallback sweeps allowed in all (0: no fallback)
-  bool record_history = false;
-  Callback callback;  ///< finest level only; called with z = y + shift
-  Poll poll;
-  Progress progress;  ///< finest level only: the verbose report (Options::verbose seconds apart)
-  int verbose = 0;
-  const Eigen::VectorXd* shift = nullptr;  ///< the constant obstacle of a shifted LCP (for the callback)
-};
 
 /// What the Newton loop on one level did.
 struct NewtonOutcome {
@@ -84,236 +70,48 @@ struct NewtonOutcome {
   std::vector<double> history_seconds, history_residual;
 };
 
-/// The non-monotone acceptance test (Grippo–Lampariello–Lucidi): a new Res is acceptable when it
-/// is below the largest of the last 5 accepted ones, so the reference value never grows.
-class NonMonotone {
- public:
-  explicit NonMonotone(double r) { reset(r); }
-  void reset(double r) { recent_.assign(1, r); }
-  bool acceptable(double r) const { return std::isfinite(r) && r < *std::max_element(recent_.begin(), recent_.end()); }
-  void push(double r) {
-    recent_.push_back(r);
-    if (recent_.size() > 5) recent_.erase(recent_.begin());
-  }
-
- private:
-  std::vector<double> recent_;
-};
-
-/// FNV-1a hash of an active set (to detect cycles).
-inline std::uint64_t hash_set(const std::vector<char>& inactive) {
-  std::uint64_t h = 1469598103934665603ull;
-  for (std::size_t i = 0; i < inactive.size(); ++i)
-    if (inactive[i]) { h ^= static_cast<std::uint64_t>(i) + 1; h *= 1099511628211ull; }
-  return h;
-}
-
-/// One level: its matrix, the weights Ω1/Ω2 of the active-set test, the reduced LCP system
-/// (analysed on first use, then only refactorized) and the fallback member (nrm, Ω2 as Newton's).
-template <typename MatrixType>
-class NewtonLevel {
- public:
-  using StorageIndex = typename MatrixType::StorageIndex;
-  using Vector = Eigen::VectorXd;
-  using RowMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, StorageIndex>;
-  using System = ActiveSetSystem<StorageIndex>;
-
-  /// `options` gives Ω1, Ω2 (empty: I and diag(A)) and the inner solver.
-  NewtonLevel(const MatrixType& A, const Options& options) : A_(A), inner_(options.inner) {
-    Options o = options;
-    o.method = Method::Newton;
-    const Parameters p = resolve_parameters(A, o);  // Ω2 = diag(A) by default: must be positive
-    ratio_ = p.omega1.cwiseQuotient(p.omega2);
-    fallback_options_.method = Method::NRM;
-    fallback_options_.omega1 = p.omega1;
-    fallback_options_.omega2 = p.omega2;
-    fallback_options_.inner = options.inner == Inner::CG ? Inner::Auto : options.inner;  // nrm factorizes
-  }
-
-  /// The prolongations below this level (P[0]: the next coarser level → this one), for the
-  /// multigrid-preconditioned CG inner solve; they must outlive this level.
-  void use_hierarchy(Prolongations<StorageIndex> below) { below_ = below; }
-
-  const MatrixType& matrix() const { return A_; }
-  Eigen::Index size() const { return A_.rows(); }
-
-  /// The reduced system of the (shifted) LCP, analysed once.
-  System& lcp_system() {
-    if (!lcp_system_) lcp_system_ = std::make_unique<System>(A_, nullptr, inner_, below_);
-    return *lcp_system_;
-  }
-  std::unique_ptr<System> affine_system(const RowMatrix& B) const { return std::make_unique<System>(A_, &B, inner_); }
-  const char* inner_name() const { return lcp_system_ ? lcp_system_->inner_name() : "none"; }
-
-  /// Res of z; w = Az + q and g = z − ζ(z) (ζ = Bz + c, or 0 when B is null).
-  double evaluate(const Vector& z, const Vector& q, const RowMatrix* B, const Vector* c, Vector& w, Vector& g) const {
-    w.noalias() = A_ * z;
-    w += q;
-    if (B) {
-      g.noalias() = -(*B * z);
-      g += z - *c;
-    } else {
-      g = z;
-    }
-    return stable_norm(w.cwiseMin(g));
-  }
-
-  /// Ω1 (g/Ω1 − w/Ω2) = g − (Ω1/Ω2) w: the modulus vector x up to the factor γ/(2Ω1).
-  void modulus(const Vector& w, const Vector& g, Vector& x) const { x = g - ratio_.cwiseProduct(w); }
-
-  /// The inactive set ℐ = {x ≥ 0} = {g/Ω1 − w/Ω2 ≥ 0}. A tie x = 0 (z = ζ and w = 0) counts as
-  /// inactive: if it is in fact active the solve puts it back at no cost, while holding every
-  /// tie at the obstacle peels a region of exact zeros one node per step. Measured on the
-  /// American put (n_space = 1600, warm start x0 = the previous time step, hierarchy None, where
-  /// the far field is z = ψ, w = 0 exactly): 9.09 steps per time step with ties active, 1.49
-  /// with ties inactive (the same as a plain scipy active-set loop with this rule).
-  void active_set(const Vector& w, const Vector& g, std::vector<char>& inactive) const {
-    inactive.resize(static_cast<std::size_t>(w.size()));
-    for (Eigen::Index i = 0; i < w.size(); ++i) inactive[i] = (g[i] - ratio_[i] * w[i]) >= 0;
-  }
-
-  /// Up to `sweeps` sweeps of the fallback member (nrm) from z0 for ICP(q, A, ζ); the best iterate.
-  Result sweep(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector& z0, int sweeps, double tol) {
-    if (!fallback_) fallback_.emplace(A_, fallback_options_);  // factorizes Ω2 + AΩ1 once
-    Options it = fallback_options_;
-    it.tol = tol > 0 ? tol : std::numeric_limits<double>::min();
-    it.maxiter = sweeps;
-    it.stall_iterations = std::max(1, sweeps);
-    return fallback_->solve(q, zeta, &z0, {}, {}, &it);
-  }
-  Result sweep(const Vector& q, const RowMatrix* B, const Vector* c, const Vector& z0, int sweeps, double tol) {
-    using Z = Zeta<StorageIndex>;
-    return sweep(q, B ? Z::affine(*B, *c) : Z::none(), z0, sweeps, tol);
-  }
-
- private:
-  const MatrixType& A_;
-  Inner inner_;
-  Vector ratio_;  // Ω1/Ω2: x > 0 ⇔ g − (Ω1/Ω2) w > 0
-  Options fallback_options_;
-  std::unique_ptr<System> lcp_system_;
-  Prolongations<StorageIndex> below_;
-  std::optional<Solver<MatrixType>> fallback_;
-};
-
-/// The globalized Newton loop on one level for the (shifted) LCP (B null) or the affine ICP
-/// ζ(z) = Bz + c, with the reduced system `K` (analysed for this problem), from z.
-template <typename MatrixType>
-NewtonOutcome newton_loop(NewtonLevel<MatrixType>& level, ActiveSetSystem<typename MatrixType::StorageIndex>& K,
-                          const Eigen::VectorXd& q, const typename NewtonLevel<MatrixType>::RowMatrix* B,
-                          const Eigen::VectorXd* c, Eigen::VectorXd z, const NewtonControl& ctl) {
-  using Vector = Eigen::VectorXd;
-  static const Vector no_shift;
-  const Eigen::Index n = level.size();
-  NewtonOutcome o;
-  // The family's Monitor decides convergence, divergence, the callback, the Ctrl-C poll and keeps
-  // the history and the best iterate; Newton's own ends (a settled active set, a fallback that
-  // brings nothing, maxiter Newton steps) are decided here.
+/// The Newton member on one level: the plain step `plain` (at its start), globalized, in the
+/// family's loop (detail::loop, solver.hpp) with the family's Monitor.
+template <typename Plain>
+NewtonOutcome newton_loop(Plain& plain, const NewtonControl& ctl) {
+  static const Eigen::VectorXd no_shift;
   Options mo;
   mo.tol = ctl.tol;
-  mo.maxiter = std::numeric_limits<int>::max();
+  mo.maxiter = std::numeric_limits<int>::max();  // Newton steps are counted by the step (ctl.maxiter)
   mo.record_history = ctl.record_history;
   mo.verbose = ctl.verbose;
   Result mres;
-  Monitor monitor(mo, ctl.callback, ctl.poll, ctl.progress, ctl.shift ? *ctl.shift : no_shift, mres, n);
-  Iterate s;  // what the Monitor reads: z, and x up to the factor γ/2 (Ω1⁻¹g − Ω2⁻¹w, times Ω1)
-  const Vector z_start = z;
-  Vector w(n), g(n), rhs(n), z_new(n), w_new(n), g_new(n), x_new(n);
-  double r = level.evaluate(z, q, B, c, w, g);
-  o.z = z;  // the best iterate, where a fallback starts
-  o.residual = r;
-  std::vector<char> inactive;
-  std::unordered_set<std::uint64_t> seen;
-  std::uint64_t last_set = 0;
-  bool have_last = false, exempt = true;
-  int sweep_run = 10, k = 0;
-  NonMonotone test(r);
-  auto observe = [&]() -> bool {  // iterate k to the Monitor; true: stop (mres.status says why)
-    level.modulus(w, g, x_new);
-    s.step = s.x.size() ? (x_new - s.x).template lpNorm<Eigen::Infinity>() : std::numeric_limits<double>::infinity();
-    s.x.swap(x_new);
-    s.z = z;
-    return monitor.stop(k++, r, s);
-  };
-  auto accept = [&](double r_new) {
-    z.swap(z_new); w.swap(w_new); g.swap(g_new); r = r_new;
-    if (r < o.residual || !std::isfinite(o.residual)) { o.residual = r; o.z = z; }
-    test.push(r);
-  };
-  // Sweeps of the fallback member from the best iterate; false when not allowed or no better iterate came.
-  auto fall_back = [&]() -> bool {
-    if (o.sweeps >= ctl.sweep_budget) return false;
-    const int sweeps = std::min(sweep_run, ctl.sweep_budget - o.sweeps);
-    sweep_run *= 2;
-    const Result fr = level.sweep(q, B, c, o.z, sweeps, ctl.tol);
-    o.sweeps += fr.iterations;
-    seen.clear();
-    have_last = false;
-    exempt = true;
-    if (!(fr.residual < o.residual)) return false;
-    z_new = fr.z;
-    const double r_fb = level.evaluate(z_new, q, B, c, w_new, g_new);
-    test.reset(r_fb);
-    z.swap(z_new); w.swap(w_new); g.swap(g_new); r = r_fb;
-    if (r < o.residual) { o.residual = r; o.z = z; }
-    return true;
-  };
-  std::optional<Status> own;  // an end decided here, not by the Monitor
-  while (!observe()) {
-    if (o.steps >= ctl.maxiter) { own = Status::MaxIterations; break; }
-    if (o.steps == 0 && !ctl.start_set.empty() && o.sweeps == 0)
-      inactive = ctl.start_set;
-    else
-      level.active_set(w, g, inactive);
-    const std::uint64_t h = hash_set(inactive);
-    if (have_last && h == last_set) {  // z solves its own active set's system: exact to rounding
-      o.settled = true;
-      own = Status::Stagnated;
-      break;
-    }
-    bool ok = seen.insert(h).second;  // a set seen before: a cycle
-    if (ok && K.factorize(inactive)) {
-      for (Eigen::Index i = 0; i < n; ++i) rhs[i] = inactive[i] ? -q[i] : (c ? (*c)[i] : 0.0);
-      z_new = z;  // the start of an iterative inner solve (inner = cg), which stops at tol / 10
-      o.inner_iterations += K.solve(rhs, z_new, std::max(0.1 * ctl.tol, ctl.forcing * r));
-      ++o.solves;
-      ++o.steps;
-      const double r_new = level.evaluate(z_new, q, B, c, w_new, g_new);
-      ok = std::isfinite(r_new) && (exempt || test.acceptable(r_new));
-      if (ok) {
-        // z did not move beyond rounding: only ties (g ≈ w ≈ 0) changed sides; nothing left to gain.
-        const double dz = (z_new - z).template lpNorm<Eigen::Infinity>();
-        const bool still = dz <= 1e-14 * z_new.template lpNorm<Eigen::Infinity>();
-        accept(r_new);
-        o.inactive = inactive;
-        last_set = h;
-        have_last = true;
-        exempt = false;
-        if (still && !(r < ctl.tol)) {  // report this iterate, then end: nothing left to gain
-          if (!observe()) {
-            o.settled = true;
-            own = Status::Stagnated;
-          }
-          break;
-        }
-        continue;
-      }
-    }
-    if (!fall_back()) {
-      own = o.sweeps >= ctl.sweep_budget && ctl.sweep_budget > 0 ? Status::MaxIterations : Status::Stagnated;
-      break;
-    }
-  }
-  if (own) monitor.result().status = *own;
+  Monitor monitor(mo, ctl.callback, ctl.poll, ctl.progress, ctl.shift ? *ctl.shift : no_shift, mres, plain.size());
+  const Eigen::VectorXd z_start = plain.z();
+  Iterate s;
+  Globalized<Plain> step(plain, ctl, s);
+  loop(step, s, monitor);
   monitor.finish(z_start);
+  NewtonOutcome o;
   o.z = std::move(mres.z);
   o.residual = mres.residual;
   o.status = mres.status;
   o.message = std::move(mres.message);
+  o.settled = step.settled();
+  o.inactive = step.inactive();
+  o.steps = plain.steps();
+  o.sweeps = step.sweeps();
+  o.solves = plain.solves();
+  o.inner_iterations = plain.inner_iterations();
   o.history_iteration = std::move(mres.history_iteration);
   o.history_seconds = std::move(mres.history_seconds);
   o.history_residual = std::move(mres.history_residual);
   return o;
+}
+
+/// The (shifted) LCP (B null) or the affine ICP ζ(z) = Bz + c on `level`, with the reduced system
+/// `K` (analysed for this problem), from z.
+template <typename MatrixType>
+NewtonOutcome newton_loop(NewtonLevel<MatrixType>& level, ActiveSetSystem<typename MatrixType::StorageIndex>& K,
+                          const Eigen::VectorXd& q, const typename NewtonLevel<MatrixType>::RowMatrix* B,
+                          const Eigen::VectorXd* c, Eigen::VectorXd z, const NewtonControl& ctl) {
+  NewtonStep<MatrixType, FixedLinearization<MatrixType>> plain(level, {level, K, q, B, c}, std::move(z));
+  return newton_loop(plain, ctl);
 }
 
 }  // namespace detail
@@ -579,116 +377,65 @@ class Newton {
     /// does not reduce Res hands over to sweeps of the fallback member on the ICP.
     Result functor(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0) {
       const Eigen::Index n = q.size();
-      Vector z = z0 ? *z0 : Vector::Zero(n), psi(n), w(n);
-      auto icp_res = [&](const Vector& v, Vector& zv) -> double { return icp_residual(q, zeta, v, zv, w); };
-      double r = icp_res(z, psi);
+      Vector z = z0 ? *z0 : Vector::Zero(n), psi(n), psi_new(n), w(n);
+      double r = icp_residual(q, zeta, z, psi, w);
       Result best;
       best.z = z;
       best.residual = r;
       if (std::isnan(r)) return zeta_failed(best, q);
-      bool first = true;
       int sweep_run = 10;
       detail::NonMonotone test(r);
       std::vector<char> set;  // the last inner solve's inactive set: the next one starts from it
       Status status = Status::MaxIterations;
       const auto t0 = std::chrono::steady_clock::now();
-      for (;;) {
+      for (bool first = true;; first = false) {
         const bool asked = record(z, r, t0);
         if (r < o.tol) { status = Status::Converged; break; }
         if (asked) { status = Status::CallbackStop; break; }
-        if (res.nit >= o.maxiter) { status = Status::MaxIterations; break; }
+        if (res.nit >= o.maxiter) break;
         if (poll) poll();
         // The inner obstacle problem, solved to a settled active set (its own tol: 0).
         // The first inner solve without z0 starts at y = 0 (z = ψ): measured better than from z = 0.
         Result inner = obstacle(q, psi, (first && !z0) ? nullptr : &z, first && nest, 0.0, o.maxiter - res.nit, false,
                                 &set);
-        first = false;
         ++res.outer_iterations;
-        Vector psi_new(n);
-        const double r_new = icp_res(inner.z, psi_new);
+        const double r_new = icp_residual(q, zeta, inner.z, psi_new, w);
         if (std::isnan(r_new)) return zeta_failed(best, q);
         if (test.acceptable(r_new)) {
-          z = inner.z; psi = psi_new; r = r_new;
+          z = inner.z; psi.swap(psi_new); r = r_new;
           test.push(r);
-          if (r < best.residual) { best.z = z; best.residual = r; }
-          continue;
+        } else {
+          if (const auto stop = fallback(q, zeta, best, sweep_run, z)) { status = *stop; break; }
+          r = icp_residual(q, zeta, z, psi, w);
+          test.reset(r);
         }
-        if (const auto stop = fallback(q, zeta, best, sweep_run, z)) { status = *stop; break; }
-        r = icp_res(z, psi);
-        test.reset(r);
         if (r < best.residual) { best.z = z; best.residual = r; }
       }
-      Result out;
-      out.z = best.z;
-      out.residual = best.residual;
-      out.status = status;
-      return finish_outer(out, q);
+      best.status = status;
+      return finish_outer(best, q);
     }
 
-    /// A callable ζ with its Jacobian J: semismooth Newton on the whole ICP. A step is the affine
-    /// step for the linearization ζ(z) + J(v − z) (B = J, c = ζ(z) − Jz, a new pattern each
-    /// step); Res is the ICP's. Start as for an affine ζ.
+    /// A callable ζ with its Jacobian J: semismooth Newton on the whole ICP, each step the affine
+    /// step of the linearization ζ(z) + J(v − z) (detail::JacobianLinearization); Res is the
+    /// ICP's. Start as for an affine ζ. Newton steps and fallback sweeps of the start count
+    /// against maxiter.
     Result semismooth(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0) {
+      using Step = detail::NewtonStep<MatrixType, detail::JacobianLinearization<MatrixType>>;
       const Eigen::Index n = q.size();
-      Vector psi(n), w(n), g(n), rhs(n), z_new(n), psi_new(n), w_new(n), g_new(n);
+      Vector psi(n);
       Result best;
       best.z = z0 ? *z0 : Vector::Zero(n);
       if (!zeta.eval(best.z, psi)) return zeta_failed(best, q);
-      Vector z = (z0 && !nest) ? *z0 : obstacle(q, psi, z0, nest, 0.0, std::min(100, o.maxiter), false).z;
-      auto icp_res = [&](const Vector& v, Vector& zv, Vector& wv, Vector& gv) -> double {
-        const double r = icp_residual(q, zeta, v, zv, wv);
-        if (!std::isnan(r)) gv = v - zv;
-        return r;
-      };
-      double r = icp_res(z, psi, w, g);
-      if (std::isnan(r)) return zeta_failed(best, q);
-      best.z = z;
-      best.residual = r;
-      detail::NonMonotone test(r);
-      bool exempt = true;
-      int sweep_run = 10;
-      Status status = Status::MaxIterations;
-      RowMatrix J;
-      std::vector<char> inactive;
+      Vector start = (z0 && !nest) ? *z0 : obstacle(q, psi, z0, nest, 0.0, std::min(100, o.maxiter), false).z;
       const auto t0 = std::chrono::steady_clock::now();
-      for (;;) {
-        const bool asked = record(z, r, t0);
-        if (r < o.tol) { status = Status::Converged; break; }
-        if (asked) { status = Status::CallbackStop; break; }
-        if (poll) poll();
-        if (res.nit >= o.maxiter) { status = Status::MaxIterations; break; }
-        if (!zeta.jacobian(z, J)) return zeta_failed(best, q);
-        const Vector c = psi - J * z;
-        self.finest_->active_set(w, g, inactive);
-        const auto t_step = std::chrono::steady_clock::now();
-        auto K = self.finest_->affine_system(J);
-        bool ok = K->factorize(inactive);
-        if (ok) {
-          for (Eigen::Index i = 0; i < n; ++i) rhs[i] = inactive[i] ? -q[i] : c[i];
-          res.inner_iterations += K->solve(rhs, z_new);
-          ++res.linear_solves; ++res.nit; ++res.iterations; ++res.level_steps[0];
-          res.level_seconds[0] += detail::ScopedTimer::seconds_since(t_step);
-          const double r_new = icp_res(z_new, psi_new, w_new, g_new);
-          ok = std::isfinite(r_new) && (exempt || test.acceptable(r_new));
-          if (ok) {
-            z.swap(z_new); psi.swap(psi_new); w.swap(w_new); g.swap(g_new); r = r_new;
-            test.push(r);
-            exempt = false;
-            if (r < best.residual) { best.z = z; best.residual = r; }
-            continue;
-          }
-        }
-        if (const auto stop = fallback(q, zeta, best, sweep_run, z)) { status = *stop; break; }
-        r = icp_res(z, psi, w, g);
-        test.reset(r);
-        exempt = true;
-        if (r < best.residual) { best.z = z; best.residual = r; }
-      }
-      Result out;
-      out.z = best.z;
-      out.residual = best.residual;
-      out.status = status;
-      return finish_outer(out, q);
+      Step plain(*self.finest_, {*self.finest_, q, zeta, {}, {}, {}}, std::move(start));
+      if (std::isnan(plain.residual())) return zeta_failed(best, q);
+      static const Vector no_shift;
+      auto control = finest_control(no_shift, o.tol, o.maxiter - res.nit, true);
+      control.sweep_budget = o.maxiter - res.fallback_sweeps;
+      const auto out = detail::newton_loop(plain, control);
+      absorb(out, 0, detail::ScopedTimer::seconds_since(t0));
+      return finish(out, out.z, q);
     }
 
     /// Iterate res.nit of the outer iterations (finest level), z with Res r, into the history and
@@ -712,7 +459,7 @@ class Newton {
       if (res.fallback_sweeps >= o.maxiter) return Status::MaxIterations;
       const int k = std::min(sweep_run, o.maxiter - res.fallback_sweeps);
       sweep_run *= 2;
-      const Result sw = sweep_icp(q, zeta, best.z, k);
+      const Result sw = self.finest_->sweep(q, zeta, best.z, k, o.tol);
       res.fallback_sweeps += sw.iterations;
       res.iterations += sw.iterations;
       if (!(sw.residual < best.residual)) return Status::Stagnated;
@@ -720,20 +467,8 @@ class Newton {
       return std::nullopt;
     }
 
-    /// Res of the ICP at v (ζ(v) in zv, Av + q in wv): NaN only when ζ failed; +inf for a
-    /// runaway v (non-finite, never handed to ζ) or an Av + q that overflowed.
     double icp_residual(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector& v, Vector& zv, Vector& wv) {
-      constexpr double inf = std::numeric_limits<double>::infinity();
-      if (!v.allFinite()) return inf;
-      if (!zeta.eval(v, zv)) return std::numeric_limits<double>::quiet_NaN();
-      wv.noalias() = self.A_ * v;
-      wv += q;
-      const double r = detail::stable_norm(wv.cwiseMin(v - zv));
-      return std::isnan(r) ? inf : r;
-    }
-
-    Result sweep_icp(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector& z, int sweeps) {
-      return self.finest_->sweep(q, zeta, z, sweeps, o.tol);
+      return self.finest_->icp_residual(q, zeta, v, zv, wv);
     }
 
     Result zeta_failed(const Result& best, const Vector& q) {
@@ -754,9 +489,6 @@ class Newton {
       r.residual = out.residual;
       r.status = out.status;
       r.message = out.message;
-      if (out.settled && r.status == Status::Stagnated)
-        r.message = "stagnated: the active set has settled and Res is at its rounding floor, above tol; "
-                    "returning the best iterate";
       r.path = r.fallback_sweeps ? (r.nit ? "newton+fallback" : "fallback") : "newton";
       return r;
     }

@@ -5,10 +5,10 @@
 // which is the paper's Lm x⁽ᵏ⁺¹⁾ = (N + φ)Ω1 x⁽ᵏ⁾ + (Ω2 − AΩ1)|x⁽ᵏ⁾| − γAζ(z⁽ᵏ⁾) − γq with
 // N = M − A rearranged (no cancellation of large terms). See docs/SPEC.md.
 //
-// The loop (Solver::run) is
+// The loop (detail::loop below, shared by Solver and the Newton member, newton.hpp) is
 //
 //   for k = 0, 1, ...:  r = step.evaluate(s);  if (monitor.stop(k, r, s)) break;
-//                       step.move_x(s);  step.update_z(s);
+//                       step.move_x(s);  if (step.end()) break;  step.update_z(s);
 //
 // THE STEP INTERFACE. A step is a small type (detail/steps.hpp) with one job: advance the
 // iterate s (detail::Iterate: the modulus vector s.x, s.z, ζ(z) in s.zeta_z, ζ(z⁽ᵏ⁻¹⁾) in
@@ -25,6 +25,15 @@
 //   const Eigen::VectorXd& dx()  x⁽ᵏ⁺¹⁾ − x⁽ᵏ⁾ of the plain step (Anderson mixes these).
 //   void report(Result&) const   extra counters (e.g. linear solves) into Result::counters;
 //                                inherit detail::StepBase for none.
+//   const StepEnd* end() const   the step's own end of the solve, asked after move_x: null to go
+//                                on (detail::StepBase), else the status (and message) that end the
+//                                loop at once (detail::Monitor::end). Only rules the Monitor cannot
+//                                know belong here: the Newton member ends on a settled active set,
+//                                a fallback that brings nothing, or maxiter Newton steps
+//                                (detail::Globalized, detail/globalization.hpp).
+//   The Newton member's step (detail/newton_step.hpp) works in z: its move_x takes the Newton
+//   step (or the fallback) and computes Res of the new z at once (the acceptance test needs it),
+//   so its evaluate only returns that Res and sets s.x from w and g.
 // Everything else is shared: the stopping rules, the history, the best iterate and the
 // Ctrl-C poll live in detail::Monitor (detail/stopping.hpp); Anderson acceleration wraps any
 // step (detail::Accelerated, detail/anderson.hpp); Res is defined once (detail/residual.hpp).
@@ -54,6 +63,26 @@
 
 namespace nrmicp {
 
+namespace detail {
+
+/// The loop of every member: evaluate Res(z⁽ᵏ⁾), ask the Monitor, step x, then (unless the step
+/// ended the solve) update z. The step interface is described at the top of this file.
+template <typename Step>
+void loop(Step& step, Iterate& s, Monitor& monitor) {
+  for (int k = 0;; ++k) {
+    const double r = step.evaluate(s);
+    if (monitor.stop(k, r, s)) break;
+    step.move_x(s);
+    if (const StepEnd* end = step.end()) {
+      monitor.end(*end);
+      break;
+    }
+    step.update_z(s);
+  }
+  step.report(monitor.result());
+}
+
+}  // namespace detail
 
 /// Set-up (splitting, factorization) once; solve(q, ζ) many times.
 /// `A` is held by reference: it must outlive the Solver (as with Eigen's solvers).
@@ -179,8 +208,8 @@ class Solver {
   }
 
   // Picks the step for the method: the one-pass sweep for the AOR-type members with the explicit
-  // update on a row-major A, the two-sweep step, or the generic splitting step. A new step kind
-  // (e.g. a Newton member) is one more branch here.
+  // update on a row-major A, the two-sweep step, or the generic splitting step. (The Newton
+  // member's step runs in the same detail::loop, driven by nrmicp::Newton: it has its own set-up.)
   void run_steps(detail::Context<MatrixType>& ctx, detail::Iterate& s, detail::Monitor& monitor,
                  const Options& o) const {
     const bool two_sweep = splitting_->two_sweep();
@@ -204,19 +233,9 @@ class Solver {
                   const Options& o) {
     if (o.accelerate == Accelerate::Anderson) {
       detail::Accelerated<Step, detail::Context<MatrixType>> accelerated(step, ctx, o.anderson_m);
-      return loop(accelerated, s, monitor);
+      return detail::loop(accelerated, s, monitor);
     }
-    loop(step, s, monitor);
-  }
-  template <typename Step>
-  static void loop(Step& step, detail::Iterate& s, detail::Monitor& monitor) {
-    for (int k = 0;; ++k) {
-      const double r = step.evaluate(s);
-      if (monitor.stop(k, r, s)) break;
-      step.move_x(s);
-      step.update_z(s);
-    }
-    step.report(monitor.result());
+    detail::loop(step, s, monitor);
   }
 
   const MatrixType& A_;

@@ -8,6 +8,7 @@
 #pragma once
 
 #include "iterate.hpp"
+#include "stopping.hpp"
 
 #include <Eigen/Dense>
 
@@ -111,6 +112,7 @@ class Accelerated {
     plain_.report(r);
     r.counters["anderson_rejections"] += rejections_;
   }
+  const StepEnd* end() const { return plain_.end(); }
 
  private:
   Step& plain_;

@@ -9,6 +9,7 @@
 #include "../splitting.hpp"
 #include "iterate.hpp"
 #include "residual.hpp"
+#include "stopping.hpp"
 #include "sweep.hpp"
 #include "timer.hpp"
 
@@ -20,9 +21,11 @@
 
 namespace nrmicp::detail {
 
-/// What a step reports beyond the loop's own counts (none by default).
+/// What a step reports beyond the loop's own counts (none by default), and its own end of the
+/// loop (none: the stationary members stop by the Monitor's rules only).
 struct StepBase {
   void report(Result&) const {}
+  const StepEnd* end() const { return nullptr; }
 };
 
 /// The AOR-type members with the explicit z-update on a row-major A: evaluate is one sweep over

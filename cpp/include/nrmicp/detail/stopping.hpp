@@ -29,6 +29,14 @@ using Poll = std::function<void()>;
 /// message is empty while iterating and the result's message at the end.
 using Progress = std::function<void(int, double, double, double, const std::string&)>;
 
+/// A step's own end of the loop (a rule only that step kind knows: the Newton member's settled
+/// active set, or a fallback that brings nothing): the status, and a message that replaces the
+/// status's standard one when not empty.
+struct StepEnd {
+  Status status;
+  std::string message;
+};
+
 class Monitor {
  public:
   using Vector = Eigen::VectorXd;
@@ -73,6 +81,12 @@ class Monitor {
 
   Result& result() { return res_; }
 
+  /// The step ended the solve after its last iterate was looked at (the loop's step.end()).
+  void end(const StepEnd& e) {
+    res_.status = e.status;
+    step_message_ = e.message;
+  }
+
   /// Seconds since the Monitor was made (the start of the iterations).
   double seconds() const { return ScopedTimer::seconds_since(t_start_); }
 
@@ -83,16 +97,7 @@ class Monitor {
     res_.nit = (res_.status == Status::Converged) ? res_.iterations : best_k_;
     res_.z = any ? std::move(best_z_) : z_start;
     res_.residual = any ? best_ : std::numeric_limits<double>::quiet_NaN();
-    res_.message = to_string(res_.status);
-    if (x_runaway_)
-      res_.message += " (the modulus vector x grew by more than divergence_factor while Res did not improve)";
-    if (res_.status == Status::Stagnated && out_of_reach_)
-      res_.message += " (the best Res was not improved in " + std::to_string(since_best_) +
-                      " iterations, and at the rate Res fell in the last " + std::to_string(o_.stall_iterations) +
-                      " it would not get back to it within maxiter)";
-    if (res_.status != Status::Converged && res_.status != Status::ZetaFailed)
-      res_.message += "; returning the best iterate (iteration " + std::to_string(best_k_) + ")";
-    if (res_.status == Status::ZetaFailed) res_.message += " at iteration " + std::to_string(res_.iterations);
+    res_.message = step_message_.empty() ? message() : step_message_;
     if (progress_) progress_(res_.iterations, res_.residual, res_.residual, seconds(), res_.message);
   }
 
@@ -103,6 +108,20 @@ class Monitor {
     if (!std::isfinite(r) || r > o_.divergence_factor * best_ || x_runaway_) return Status::Diverged;
     if (floor_count_ >= o_.stall_iterations || bad_windows_ >= 3 || out_of_reach_) return Status::Stagnated;
     return std::nullopt;
+  }
+
+  // The status's text, with why and which iterate is returned.
+  std::string message() const {
+    std::string m = to_string(res_.status);
+    if (x_runaway_) m += " (the modulus vector x grew by more than divergence_factor while Res did not improve)";
+    if (res_.status == Status::Stagnated && out_of_reach_)
+      m += " (the best Res was not improved in " + std::to_string(since_best_) +
+           " iterations, and at the rate Res fell in the last " + std::to_string(o_.stall_iterations) +
+           " it would not get back to it within maxiter)";
+    if (res_.status != Status::Converged && res_.status != Status::ZetaFailed)
+      m += "; returning the best iterate (iteration " + std::to_string(best_k_) + ")";
+    if (res_.status == Status::ZetaFailed) m += " at iteration " + std::to_string(res_.iterations);
+    return m;
   }
   bool finish_with(Status s, int k) {
     res_.status = s;
@@ -191,6 +210,7 @@ class Monitor {
   const Progress progress_;
   const Vector& shift_;
   Result& res_;
+  std::string step_message_;
   Vector best_z_;
   double best_ = std::numeric_limits<double>::infinity();
   int best_k_ = 0, floor_count_ = 0, win_count_ = 0, bad_windows_ = 0, since_best_ = 0;

@@ -1,0 +1,181 @@
+// nrmicp — the globalization of the Newton member: a wrapper that makes a plain Newton step
+// (detail/newton_step.hpp) a step of the family's loop (the interface at the top of solver.hpp),
+// in the spirit of detail::Accelerated, which guards a step with a fallback too.
+//
+// A Newton step is accepted when its Res is below the largest Res of the last 5 accepted iterates
+// (NonMonotone: the active-set steps are not monotone in Res — measured on the nested 2D
+// obstacle, 2813 → 1.6e-3 → 1.4e-2 → 1e-13 — but the reference value never grows; the first step
+// after a start is exempt: a start is not a Newton iterate). A step that is rejected, an active
+// set seen before (a cycle) or a singular reduced system hands over to sweeps of the fallback
+// member (nrm: M = A, the paper's first member; it converged on P-matrices where both nrmgs and
+// the active-set steps cycle) from the best iterate, 10, then 20, 40, ... sweeps, after which
+// Newton resumes. The step's own ends (StepEnd): the active set repeats, or z no longer moves
+// beyond rounding (STAGNATED: z solves its own piece, Res is at its rounding floor); the fallback
+// brings no better iterate (STAGNATED; MAX_ITERATIONS when it has spent its budget); maxiter
+// Newton steps (MAX_ITERATIONS); ζ's Jacobian failed (ZETA_FAILED). Everything else — tol,
+// divergence, the callback, Ctrl-C, the history — is the Monitor's (detail/stopping.hpp).
+#pragma once
+
+#include "../result.hpp"
+#include "iterate.hpp"
+#include "stopping.hpp"
+
+#include <Eigen/Core>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <optional>
+#include <string>
+#include <unordered_set>
+#include <vector>
+
+namespace nrmicp::detail {
+
+/// The non-monotone acceptance test (Grippo–Lampariello–Lucidi): a new Res is acceptable when it
+/// is below the largest of the last 5 accepted ones, so the reference value never grows.
+class NonMonotone {
+ public:
+  explicit NonMonotone(double r) { reset(r); }
+  void reset(double r) { recent_.assign(1, r); }
+  bool acceptable(double r) const { return std::isfinite(r) && r < *std::max_element(recent_.begin(), recent_.end()); }
+  void push(double r) {
+    recent_.push_back(r);
+    if (recent_.size() > 5) recent_.erase(recent_.begin());
+  }
+
+ private:
+  std::vector<double> recent_;
+};
+
+/// FNV-1a hash of an active set (to detect cycles).
+inline std::uint64_t hash_set(const std::vector<char>& inactive) {
+  std::uint64_t h = 1469598103934665603ull;
+  for (std::size_t i = 0; i < inactive.size(); ++i)
+    if (inactive[i]) { h ^= static_cast<std::uint64_t>(i) + 1; h *= 1099511628211ull; }
+  return h;
+}
+
+/// What the Newton loop on one level needs to know and may report to.
+struct NewtonControl {
+  double tol = 0;             ///< Res < tol ends the solve; 0: only a settled active set does
+  /// Warm start by active set: when not empty, the first step uses this inactive set instead of
+  /// the one of the start (after a change of the obstacle the old contact set is a far better
+  /// guess than the test on the old z: measured on thermoforming_1d, 1 step instead of 6).
+  std::vector<char> start_set;
+  int maxiter = 50;           ///< Newton steps
+  double forcing = 0;         ///< an iterative inner solve may stop at forcing × Res (inexact Newton)
+  int sweep_budget = 0;       ///< fallback sweeps allowed in all (0: no fallback)
+  bool record_history = false;
+  Callback callback;  ///< finest level only; called with z = y + shift
+  Poll poll;
+  Progress progress;  ///< finest level only: the verbose report (Options::verbose seconds apart)
+  int verbose = 0;
+  const Eigen::VectorXd* shift = nullptr;  ///< the constant obstacle of a shifted LCP (for the callback)
+};
+
+/// A plain Newton step (NewtonStep), globalized: a step of detail::loop.
+template <typename Plain>
+class Globalized {
+ public:
+  using Vector = Eigen::VectorXd;
+
+  Globalized(Plain& plain, const NewtonControl& ctl, Iterate& s)
+      : plain_(plain), ctl_(ctl), test_(plain.residual()), best_z_(plain.z()), best_r_(plain.residual()) {
+    s.z = plain.z();
+  }
+
+  /// Res of z (computed when z was made); s.x from z's w and g.
+  double evaluate(Iterate& s) {
+    plain_.modulus(x_);
+    s.step = s.x.size() ? (x_ - s.x).template lpNorm<Eigen::Infinity>() : std::numeric_limits<double>::infinity();
+    s.x.swap(x_);
+    return plain_.residual();
+  }
+  /// A Newton step, or the fallback, or the end.
+  void move_x(Iterate&) {
+    if (still_) return settle();
+    if (plain_.steps() >= ctl_.maxiter) return stop(Status::MaxIterations);
+    if (!plain_.linearize()) return stop(Status::ZetaFailed);
+    if (!newton()) fall_back();
+  }
+  void update_z(Iterate& s) { s.z = plain_.z(); }
+  const StepEnd* end() const { return end_ ? &*end_ : nullptr; }
+  void report(Result&) const {}
+
+  /// The active set repeated (or z stood still): z solves the problem to rounding.
+  bool settled() const { return settled_; }
+  /// The inactive set of the last accepted step (empty if none).
+  const std::vector<char>& inactive() const { return last_inactive_; }
+  int sweeps() const { return sweeps_; }
+
+ private:
+  // A Newton step on z's active set (or the guess); false when the fallback must take over.
+  bool newton() {
+    if (plain_.steps() == 0 && !ctl_.start_set.empty() && sweeps_ == 0)
+      inactive_ = ctl_.start_set;
+    else
+      plain_.active_set(inactive_);
+    std::uint64_t h = 0;
+    if constexpr (Plain::set_fixes_step) {
+      h = hash_set(inactive_);
+      if (have_last_ && h == last_set_) return settle(), true;
+      if (!seen_.insert(h).second) return false;  // a cycle
+    }
+    if (!plain_.factorize(inactive_)) return false;
+    const double r = plain_.solve(inactive_, ctl_.tol, ctl_.forcing);
+    if (!(std::isfinite(r) && (exempt_ || test_.acceptable(r)))) return false;
+    accept(r, h);
+    return true;
+  }
+  void accept(double r, std::uint64_t h) {
+    still_ = Plain::set_fixes_step && plain_.trial_still() && !(r < ctl_.tol);
+    plain_.accept();
+    if (r < best_r_ || !std::isfinite(best_r_)) { best_r_ = r; best_z_ = plain_.z(); }
+    test_.push(r);
+    last_inactive_ = inactive_;
+    last_set_ = h;
+    have_last_ = true;
+    exempt_ = false;
+  }
+  // Sweeps of the fallback member from the best iterate, each run twice as long as the last.
+  void fall_back() {
+    if (sweeps_ >= ctl_.sweep_budget) return give_up();
+    const int k = std::min(sweep_run_, ctl_.sweep_budget - sweeps_);
+    sweep_run_ *= 2;
+    const Result fr = plain_.sweep(best_z_, k, ctl_.tol);
+    sweeps_ += fr.iterations;
+    seen_.clear();
+    have_last_ = false;
+    exempt_ = true;
+    if (!(fr.residual < best_r_)) return give_up();
+    const double r = plain_.restart(fr.z);
+    test_.reset(r);
+    if (r < best_r_) { best_r_ = r; best_z_ = plain_.z(); }
+  }
+  void give_up() {
+    stop(sweeps_ >= ctl_.sweep_budget && ctl_.sweep_budget > 0 ? Status::MaxIterations : Status::Stagnated);
+  }
+  void settle() {
+    settled_ = true;
+    end_ = StepEnd{Status::Stagnated,
+                   "stagnated: the active set has settled and Res is at its rounding floor, above tol; "
+                   "returning the best iterate"};
+  }
+  void stop(Status s) { end_ = StepEnd{s, std::string()}; }
+
+  Plain& plain_;
+  const NewtonControl& ctl_;
+  NonMonotone test_;
+  Vector best_z_, x_;
+  double best_r_;
+  std::vector<char> inactive_, last_inactive_;
+  std::unordered_set<std::uint64_t> seen_;
+  std::uint64_t last_set_ = 0;
+  bool have_last_ = false, exempt_ = true, still_ = false, settled_ = false;
+  int sweep_run_ = 10, sweeps_ = 0;
+  std::optional<StepEnd> end_;
+};
+
+}  // namespace nrmicp::detail

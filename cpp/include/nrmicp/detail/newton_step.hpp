@@ -1,0 +1,155 @@
+// nrmicp — the plain Newton step of the Newton member on one level (docs/SPEC.md, "The Newton
+// member"). With the inactive set ℐ = {x ≥ 0} of the current z (NewtonLevel::active_set) it
+// solves the piece of the modulus equation on which x lies,
+//   (A z⁺ + q)_ℐ = 0,   (z⁺ − B z⁺)_𝒜 = c_𝒜         (detail/active_set.hpp)
+// for ζ's linearization ζ(v) ≈ Bv + c at z. What changes between problems is the linearization
+// (a policy type):
+//   FixedLinearization     the (shifted) LCP (B = 0, c = 0) or an affine ζ = Bz + c: the same
+//                          reduced system every step, analysed once
+//   JacobianLinearization  a callable ζ with its Jacobian J: B = J(z), c = ζ(z) − Jz, a new
+//                          system each step (semismooth Newton on the whole ICP)
+// The step only steps: the acceptance test, cycles, the fallback and the ends are the
+// globalization's (detail::Globalized, detail/globalization.hpp).
+#pragma once
+
+#include "../result.hpp"
+#include "../zeta.hpp"
+#include "active_set.hpp"
+#include "newton_level.hpp"
+
+#include <Eigen/SparseCore>
+
+#include <algorithm>
+#include <memory>
+#include <utility>
+#include <vector>
+
+namespace nrmicp::detail {
+
+/// ζ ≡ 0 (the shifted LCP, B null) or ζ(z) = Bz + c, with the reduced system K analysed for it.
+template <typename MatrixType>
+struct FixedLinearization {
+  using Level = NewtonLevel<MatrixType>;
+  using Vector = Eigen::VectorXd;
+  using System = ActiveSetSystem<typename MatrixType::StorageIndex>;
+  /// The active set alone fixes the step: a set seen before is a cycle, the last one a settled solve.
+  static constexpr bool set_fixes_step = true;
+
+  Level& level;
+  System& K;
+  const Vector& q;
+  const typename Level::RowMatrix* B;
+  const Vector* c;
+
+  /// Res of v; Av + q in w, v − ζ(v) in g (ζ(v) itself is not kept).
+  double evaluate(const Vector& v, Vector& w, Vector& g, Vector&) const { return level.evaluate(v, q, B, c, w, g); }
+  bool linearize(const Vector&, const Vector&) { return true; }  // nothing changes
+  System& system() { return K; }
+  double c_at(Eigen::Index i) const { return c ? (*c)[i] : 0.0; }
+  Result sweep(const Vector& z0, int sweeps, double tol) { return level.sweep(q, B, c, z0, sweeps, tol); }
+};
+
+/// A callable ζ with its Jacobian: linearized at each step's z.
+template <typename MatrixType>
+struct JacobianLinearization {
+  using Level = NewtonLevel<MatrixType>;
+  using Vector = Eigen::VectorXd;
+  using System = ActiveSetSystem<typename MatrixType::StorageIndex>;
+  static constexpr bool set_fixes_step = false;
+
+  Level& level;
+  const Vector& q;
+  const Zeta<typename MatrixType::StorageIndex>& zeta;
+  typename Level::RowMatrix J;
+  Vector c;
+  std::unique_ptr<System> K;
+
+  /// Res of the ICP at v; Av + q in w, v − ζ(v) in g, ζ(v) in zv. NaN when ζ failed.
+  double evaluate(const Vector& v, Vector& w, Vector& g, Vector& zv) const {
+    const double r = level.icp_residual(q, zeta, v, zv, w);
+    if (!std::isnan(r)) g = v - zv;
+    return r;
+  }
+  /// B = J(z), c = ζ(z) − Jz and a new system on their pattern; false when the Jacobian failed.
+  bool linearize(const Vector& z, const Vector& zeta_z) {
+    if (!zeta.jacobian(z, J)) return false;
+    c = zeta_z - J * z;
+    K = level.affine_system(J);
+    return true;
+  }
+  System& system() { return *K; }
+  double c_at(Eigen::Index i) const { return c[i]; }
+  Result sweep(const Vector& z0, int sweeps, double tol) { return level.sweep(q, zeta, z0, sweeps, tol); }
+};
+
+/// The current iterate z (with w = Az + q, g = z − ζ(z), ζ(z), Res) and a trial step from it.
+template <typename MatrixType, typename Linearization>
+class NewtonStep {
+ public:
+  using Vector = Eigen::VectorXd;
+  static constexpr bool set_fixes_step = Linearization::set_fixes_step;
+
+  NewtonStep(NewtonLevel<MatrixType>& level, Linearization lin, Vector z)
+      : level_(level), lin_(std::move(lin)), z_(std::move(z)) {
+    const Eigen::Index n = level.size();
+    w_.resize(n); g_.resize(n); zeta_z_.resize(n); rhs_.resize(n);
+    z_new_.resize(n); w_new_.resize(n); g_new_.resize(n); zeta_new_.resize(n);
+    r_ = lin_.evaluate(z_, w_, g_, zeta_z_);
+  }
+
+  Eigen::Index size() const { return z_.size(); }
+  const Vector& z() const { return z_; }
+  double residual() const { return r_; }
+  int steps() const { return steps_; }
+  int solves() const { return solves_; }
+  long long inner_iterations() const { return inner_iterations_; }
+
+  /// The inactive set ℐ = {x ≥ 0} of z.
+  void active_set(std::vector<char>& inactive) const { level_.active_set(w_, g_, inactive); }
+  /// x of z up to the factor γ/(2Ω1) (what the Monitor reads).
+  void modulus(Vector& x) const { level_.modulus(w_, g_, x); }
+  /// ζ's linearization at z; false when ζ's Jacobian failed.
+  bool linearize() { return lin_.linearize(z_, zeta_z_); }
+  /// The reduced system of the piece `inactive`; false when it is singular.
+  bool factorize(const std::vector<char>& inactive) { return lin_.system().factorize(inactive); }
+
+  /// The trial iterate z⁺ of the piece `inactive` (after factorize); its Res. The one inner solve
+  /// of the Newton member: an iterative one (inner = cg) starts from z and stops at tol / 10, or
+  /// at `forcing` × Res(z) if that is larger (inexact Newton; NewtonControl::forcing).
+  double solve(const std::vector<char>& inactive, double tol, double forcing = 0) {
+    for (Eigen::Index i = 0; i < size(); ++i) rhs_[i] = inactive[i] ? -lin_.q[i] : lin_.c_at(i);
+    z_new_ = z_;
+    inner_iterations_ += lin_.system().solve(rhs_, z_new_, std::max(0.1 * tol, forcing * r_));
+    ++solves_;
+    ++steps_;
+    return r_new_ = lin_.evaluate(z_new_, w_new_, g_new_, zeta_new_);
+  }
+  /// The trial z⁺ did not move beyond rounding (only ties g ≈ w ≈ 0 changed sides).
+  bool trial_still() const {
+    return (z_new_ - z_).template lpNorm<Eigen::Infinity>() <= 1e-14 * z_new_.template lpNorm<Eigen::Infinity>();
+  }
+  /// z ← the trial iterate.
+  void accept() {
+    z_.swap(z_new_); w_.swap(w_new_); g_.swap(g_new_); zeta_z_.swap(zeta_new_);
+    r_ = r_new_;
+  }
+  /// z ← v (the fallback's iterate); its Res.
+  double restart(const Vector& v) {
+    z_new_ = v;
+    r_new_ = lin_.evaluate(z_new_, w_new_, g_new_, zeta_new_);
+    accept();
+    return r_;
+  }
+  /// Sweeps of the fallback member on this problem from z0; its best iterate.
+  Result sweep(const Vector& z0, int sweeps, double tol) { return lin_.sweep(z0, sweeps, tol); }
+
+ private:
+  NewtonLevel<MatrixType>& level_;
+  Linearization lin_;
+  Vector z_, w_, g_, zeta_z_, rhs_, z_new_, w_new_, g_new_, zeta_new_;
+  double r_ = 0, r_new_ = 0;
+  int steps_ = 0, solves_ = 0;
+  long long inner_iterations_ = 0;
+};
+
+}  // namespace nrmicp::detail
