@@ -174,11 +174,12 @@ TEST_CASE("a prolongation of the wrong shape is refused, naming it") {
 
 TEST_CASE("a P-matrix on which the active-set steps cycle: the fallback is taken and the answer is right") {
   // A P-matrix, not an M-matrix (found by search: from z = 0 the plain active-set method cycles
-  // through three active sets). Its unique solution, by enumeration of the 8 active sets:
+  // through three active sets; q_0 = 0.1 > 0 keeps the start off a tie, which counts as inactive
+  // and would solve it in one step). Its unique solution, by enumeration of the 8 active sets:
   std::vector<Eigen::Triplet<double>> t{{0, 0, 1}, {0, 1, -3}, {0, 2, 2}, {1, 0, 2}, {1, 1, 1}, {1, 2, 1}, {2, 1, -1}, {2, 2, 1}};
   RowMat A(3, 3);
   A.setFromTriplets(t.begin(), t.end());
-  const Vec q = (Vec(3) << 0.0, -2.0, 1.0).finished();
+  const Vec q = (Vec(3) << 0.1, -2.0, 1.0).finished();
   Vec z_star;
   for (int mask = 0; mask < 8; ++mask) {
     Eigen::MatrixXd K = Eigen::MatrixXd::Identity(3, 3);
