@@ -299,7 +299,10 @@ class Newton {
     /// needs no more. Measured on obstacle_2d (m = 255, 511, 1023, hierarchy geometric and amg,
     /// inner cg, tol 1e-8): CG iterations on all levels 36 → 20, 55 → 22, 74 → 25 (and 33 → 16,
     /// 55 → 22, 76 → 27 with amg) against 1e-12 relative; the finest-level step counts (3, or 2)
-    /// and Res unchanged; 1e-4 and 1e-2 gave 39 and 30 at m = 1023.
+    /// and Res unchanged; 1e-4 and 1e-2 gave 39 and 30 at m = 1023. Not on the finest level:
+    /// there (m = 1023, forcing 0.1 / 0.01, an inexact step finished to tol / 10 when its set
+    /// repeated) CG iterations fell 25 → 16 but Newton took 5–8 steps instead of 3, each with its
+    /// own multigrid set-up: 2.59 → 2.33 / 2.17 CPU s geometric, 5.00 → 5.14 / 4.90 amg.
     static constexpr double coarse_forcing = 0.1;
 
     /// Nested start for LCP(q_shift, A) in y ≥ 0: `coarse_steps` Newton steps per coarse level,
