@@ -174,18 +174,21 @@ class ActiveSetSystem {
   ///
   /// An iterative solve that does not converge (max_iterations, a BiCGSTAB breakdown) is redone
   /// by the direct solve (analysed on first need), so the step is an exact Newton step whatever
-  /// the Krylov method did; the iterations are reported as MultigridKrylov::max_iterations + 1.
+  /// the Krylov method did; the iterations are reported as max_iterations + 1.
   int solve(const Vector& b, Vector& z, double target = 0) const {
     if (!krylov_) { solver_.solve(b, z); return 0; }
     if (lcp_)
       for (Eigen::Index i = 0; i < z.size(); ++i)
         if (!inactive_[i]) z[i] = b[i];
     const int k = krylov_->solve(b, z, target);
-    if (k <= MultigridKrylov<StorageIndex>::max_iterations) return k;
+    if (k <= krylov_->max_iterations()) return k;
     direct_solve(b, z);
     return k;
   }
   const char* inner_name() const { return krylov_ ? krylov_->name() : solver_.name(); }
+  /// The iterative solve's cap (MultigridKrylov::default_max_iterations); tests lower it to
+  /// reach the direct retry.
+  void set_max_iterations(int k) { if (krylov_) krylov_->set_max_iterations(k); }
 
   /// Whether `inner` (with K's size n and `levels` prolongations below) means the multigrid-
   /// preconditioned Krylov solve: always for cg with a hierarchy; for auto with a hierarchy and n ≥

@@ -79,7 +79,7 @@ class MultigridKrylov {
   /// residual keeps falling below the rounding floor of the true one, so any target is reached;
   /// if the true residual cannot follow, the Newton loop ends with its active set settled.
   static constexpr double rtol = 1e-12;
-  static constexpr int max_iterations = 500;
+  static constexpr int default_max_iterations = 500;
 
   /// The prolongations must outlive this object. `symmetric`: the systems K given to setup are
   /// symmetric (their column storage is their row storage; CG), else a row-major copy of each is
@@ -143,6 +143,8 @@ class MultigridKrylov {
   void precondition(const Vector& r, Vector& e) const { vcycle(0, r, e); }
 
   const char* name() const { return symmetric_ ? "cg" : "bicgstab"; }
+  int max_iterations() const { return max_iterations_; }
+  void set_max_iterations(int k) { max_iterations_ = k; }
   std::size_t levels() const { return levels_ + 1; }
 
  private:
@@ -161,7 +163,7 @@ class MultigridKrylov {
     vcycle(0, r, s);
     p = s;
     double rs = r.dot(s);
-    for (int k = 1; k <= max_iterations; ++k) {
+    for (int k = 1; k <= max_iterations_; ++k) {
       Kp.noalias() = K * p;
       const double alpha = rs / p.dot(Kp);
       z += alpha * p;
@@ -172,7 +174,7 @@ class MultigridKrylov {
       p = s + (rs_new / rs) * p;
       rs = rs_new;
     }
-    return max_iterations + 1;
+    return max_iterations_ + 1;
   }
 
   /// Eigen's preconditioned BiCGSTAB (its residual is the true one, b − Kz, relative to ‖b‖);
@@ -182,13 +184,13 @@ class MultigridKrylov {
     const double bn = b.norm();
     if (bn == 0) { z.setZero(); return 0; }
     auto& s = bicgstab_;
-    s.setMaxIterations(max_iterations);
+    s.setMaxIterations(max_iterations_);
     s.setTolerance(stop / bn);
     Vector x = s.solveWithGuess(b, z);
     const int k = static_cast<int>(s.iterations());
-    if (!x.allFinite()) return max_iterations + 1;
+    if (!x.allFinite()) return max_iterations_ + 1;
     z.swap(x);
-    return s.info() == Eigen::Success && (b - rows_ * z).norm() <= 2 * stop ? k : max_iterations + 1;
+    return s.info() == Eigen::Success && (b - rows_ * z).norm() <= 2 * stop ? k : max_iterations_ + 1;
   }
 
   /// K's column storage read as rows (K is symmetric).
@@ -271,6 +273,7 @@ class MultigridKrylov {
   std::vector<Vector> inv_diag_;          // 1 / diag(K_l), l < coarsest
   const ColMatrix* fine_ = nullptr;
   bool symmetric_;
+  int max_iterations_ = default_max_iterations;
   RowMatrix rows_;                        // K in row-major storage (nonsymmetric K)
   std::vector<StorageIndex> to_row_;      // K's storage position → rows_'
   InnerSolver<StorageIndex> coarsest_;
