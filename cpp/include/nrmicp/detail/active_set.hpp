@@ -205,7 +205,10 @@ class ActiveSetSystem {
   /// set-up, 3 fine steps, Res 2e-9), the direct solve was estimated at an hour. Below 10⁴ both take milliseconds
   /// and the direct solve is the exact one.
   static constexpr Eigen::Index auto_cg_min_n = 10000;
-  /// Measured: see README, "The iterative inner solve" (convection_diffusion_obstacle).
+  /// Measured (convection_diffusion_obstacle, hierarchy "amg", tol 1e-8, same run; README, "The
+  /// iterative inner solve"), CPU s direct (UMFPACK) → bicgstab, same steps: 2D n = 3,969: 0.07 →
+  /// 0.06; n = 10,201: 0.13 → 0.07; n = 261,121: 5.5 → 1.6; n = 10⁶: 234 → 46; 3D n = 103,823:
+  /// 48 → 0.92 (2.3 GB → 0.2 GB).
   static constexpr Eigen::Index auto_krylov_min_n = 10000;
 
  private:
