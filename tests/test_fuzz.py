@@ -122,6 +122,8 @@ def cases(draw):
         opts["hierarchy"] = draw(st.sampled_from([None, "auto", "amg", "list", "list"]))
         if opts["hierarchy"] == "list":
             opts["hierarchy"] = random_hierarchy(rng, n, dense=draw(st.booleans()))
+        if not corrupt and draw(st.integers(0, 2)) == 0:
+            opts["inner"] = "cg"  # the iterative inner solve: CG or BiCGSTAB, by K's symmetry
     jacobian = None
     if opts["method"] == "newton" and zkind in ("callable", "callable_f32") and draw(st.booleans()):
         jacobian = "valid"

@@ -166,6 +166,70 @@ TEST_CASE("inner = cg: multigrid-preconditioned CG on the reduced systems agrees
   CHECK_THROWS_WITH_AS(Solver<RowMat>(A, s), doctest::Contains("inner = 'cg'"), std::invalid_argument);
 }
 
+/// laplacian_2d(m) plus first-order upwind convection (b_x, b_y) ≥ 0: a nonsymmetric M-matrix.
+RowMat convection_2d(int m, double bx, double by) {
+  const double s = m + 1.0;
+  RowMat C(m * m, m * m);
+  std::vector<Eigen::Triplet<double>> t;
+  for (int b = 0; b < m; ++b)
+    for (int i = 0; i < m; ++i) {
+      const int r = b * m + i;
+      t.emplace_back(r, r, (bx + by) * s);
+      if (i > 0) t.emplace_back(r, r - 1, -bx * s);
+      if (b > 0) t.emplace_back(r, r - m, -by * s);
+    }
+  C.setFromTriplets(t.begin(), t.end());
+  return RowMat(laplacian_2d(m) + C);
+}
+
+TEST_CASE("inner = cg on a nonsymmetric A: BiCGSTAB preconditioned by the V-cycle agrees with the direct solve") {
+  const int m = 31;
+  const RowMat A = convection_2d(m, 40.0, 20.0);
+  const Vec psi = paraboloid(m), q = Vec::Zero(m * m);
+  std::vector<RowMat> P;
+  for (int mm = m; mm >= 7; mm = (mm - 1) / 2) P.push_back(interpolation_2d(mm));
+  Options o;
+  o.tol = 1e-10;
+  o.method = Method::Newton;
+  o.inner = Inner::Umfpack;
+  const Result rd = Newton<RowMat>(A, o, P).solve(q, Zeta<int>::constant(psi));
+  o.inner = Inner::CG;
+  const Result rk = Newton<RowMat>(A, o, P).solve(q, Zeta<int>::constant(psi));
+  CHECK(std::string(rk.inner) == "bicgstab");
+  CHECK(rk.status == Status::Converged);
+  CHECK(rk.residual < 1e-10);
+  CHECK(rk.inner_iterations > 0);
+  check_complementarity(A, q, rk.z, psi, 1e-10);
+  CHECK((rk.z - rd.z).lpNorm<Eigen::Infinity>() < 1e-10);
+  const Vec ref = projected_gauss_seidel(A, q, psi, 4000);  // A is an M-matrix: PGS converges
+  CHECK((rk.z - ref).lpNorm<Eigen::Infinity>() < 1e-8);
+}
+
+TEST_CASE("a Krylov solve that does not converge is redone by the direct solve: the exact step") {
+  const int m = 15;
+  const RowMat A = convection_2d(m, 40.0, 20.0);
+  std::vector<RowMat> P{interpolation_2d(m)}, R{RowMat(P[0].transpose())};
+  detail::ActiveSetSystem<int> iterative(A, nullptr, Inner::CG, {P.data(), R.data(), 1});
+  detail::ActiveSetSystem<int> direct(A, nullptr, Inner::Umfpack);
+  CHECK(std::string(iterative.inner_name()) == "bicgstab");
+  std::vector<char> inactive(m * m);
+  for (int i = 0; i < m * m; ++i) inactive[i] = (i % 7) != 0;
+  REQUIRE(iterative.factorize(inactive));
+  REQUIRE(direct.factorize(inactive));
+  const Vec b = Vec::LinSpaced(m * m, -1.0, 1.0);
+  Vec zd = Vec::Zero(m * m), zk = Vec::Zero(m * m);
+  direct.solve(b, zd);
+  iterative.set_max_iterations(1);
+  CHECK(iterative.solve(b, zk, 1e-14) == 2);  // not converged in 1 iteration: reported as max + 1
+  CHECK((zk - zd).lpNorm<Eigen::Infinity>() < 1e-12 * zd.lpNorm<Eigen::Infinity>());
+  iterative.set_max_iterations(500);  // converges: the Krylov iterate, to the target
+  zk.setZero();
+  const int k = iterative.solve(b, zk, 1e-10);
+  CHECK(k >= 1);
+  CHECK(k <= 500);
+  CHECK((zk - zd).lpNorm<Eigen::Infinity>() < 1e-8);
+}
+
 TEST_CASE("a prolongation of the wrong shape is refused, naming it") {
   const RowMat A = laplacian_2d(7);
   std::vector<RowMat> P{interpolation_2d(15)};

@@ -590,9 +590,14 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
     inner : {'auto', 'cholmod', 'umfpack', 'eigen_llt', 'eigen_lu', 'cg'}
         Factorization for Ω2 + (A + φ)Ω1 (nrm, nrmm) and for A ('solve' z-update). 'auto':
         CHOLMOD when symmetric positive definite, else UMFPACK (Eigen's solvers without SuiteSparse).
-        'cg' (method 'newton' only): the reduced systems by CG preconditioned with a multigrid
-        V-cycle on the hierarchy's prolongations, for symmetric A with a hierarchy (else the direct
-        solve); 'auto' picks it there from n = 10,000 on (measured 2.4-10x faster, 3D especially).
+        'cg' (method 'newton' only): the reduced systems by a Krylov method preconditioned with a
+        multigrid V-cycle on the hierarchy's prolongations (needs a hierarchy; else the direct
+        solve): CG when the reduced system is symmetric positive definite (an LCP or obstacle
+        problem with symmetric A), else BiCGSTAB (nonsymmetric A, affine ζ); ``Result.inner`` says
+        which ('cg' or 'bicgstab'). A Krylov solve that does not converge is redone by the direct
+        solve. 'auto' picks it with a hierarchy from n = 10,000 on (measured 2.4-10x faster with CG,
+        3D especially; 2.6-3.7x with BiCGSTAB on 2D convection-diffusion; README, "The iterative
+        inner solve").
     accelerate : {'none', 'anderson'}
         Safeguarded Anderson acceleration of the fixed-point map (memory ``anderson_m``).
     x0 : array_like (n,), optional
@@ -654,8 +659,8 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
     Result
         ``z``, ``w``, ``success``, ``status``, ``message``, ``nit``, ``residual``, ``history``,
         ``timings``. A solve that does not converge says so in ``status`` and returns its best iterate.
-        Method 'newton' adds ``linear_solves`` (all levels), ``inner_iterations`` (CG iterations of
-        ``inner='cg'``, all levels; 0 for direct solves), ``fallback_sweeps``, ``outer_iterations``
+        Method 'newton' adds ``linear_solves`` (all levels), ``inner_iterations`` (CG or BiCGSTAB
+        iterations of ``inner='cg'``, all levels; 0 for direct solves), ``fallback_sweeps``, ``outer_iterations``
         (callable ζ), ``level_steps`` and ``level_seconds`` (per level, finest first) and ``path``
         ('newton', 'newton+fallback' or 'fallback'); its ``nit`` counts finest-level Newton steps.
         Without a callable ζ, Res(z) is re-measured in numpy in the original variables before

@@ -41,7 +41,7 @@ enum class Inner {
   Umfpack,   ///< UMFPACK LU (SuiteSparse)
   EigenLLT,  ///< Eigen::SimplicialLLT (AMD ordering)
   EigenLU,   ///< Eigen::SparseLU (COLAMD ordering)
-  CG,        ///< method newton only: multigrid-preconditioned CG on the reduced systems (detail/multigrid.hpp)
+  CG,        ///< method newton only: the reduced systems by CG (SPD) or BiCGSTAB, multigrid-preconditioned (detail/multigrid.hpp)
 };
 
 /// Stabilizers beyond the paper.

@@ -17,6 +17,7 @@
 
 #include <Eigen/SparseCore>
 
+#include <limits>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -124,7 +125,7 @@ class ActiveSetSystem {
   using Vector = Eigen::VectorXd;
 
   /// B == nullptr: the (shifted) LCP. The symbolic analysis happens here, once.
-  /// `below`: the prolongations below this level, for inner = cg (detail/multigrid.hpp).
+  /// `below`: the prolongations below this level, for the iterative solve (detail/multigrid.hpp).
   template <typename MatrixType>
   ActiveSetSystem(const MatrixType& A, const RowMatrix* B, Inner inner, Prolongations<StorageIndex> below = {})
       : lcp_(B == nullptr) {
@@ -134,13 +135,16 @@ class ActiveSetSystem {
       use_union_pattern(A, B);
     const bool spd_candidate = lcp_ && is_symmetric(K_) && has_positive_diagonal(K_);
     // CG needs a symmetric positive definite K: the LCP of a symmetric A (an indefinite K shows
-    // as a failed coarsest Cholesky or CG breakdown; then the loop falls back). Otherwise the
-    // direct solve stays: there is no nonsymmetric Krylov path (GMRES/BiCGSTAB) yet.
-    if (use_cg(inner, spd_candidate, below.levels, A.rows())) {
-      cg_ = std::make_unique<MultigridCG<StorageIndex>>(below);
+    // as a failed coarsest Cholesky or CG breakdown; then the loop falls back). Any other K
+    // (a nonsymmetric A, an affine ζ) takes BiCGSTAB (detail/multigrid.hpp).
+    if (use_iterative(inner, spd_candidate, below.levels, A.rows())) {
+      krylov_ = std::make_unique<MultigridKrylov<StorageIndex>>(below, spd_candidate);
+      inner_ = inner;
+      spd_candidate_ = spd_candidate;
       return;
     }
     solver_.analyze(K_, inner == Inner::CG ? Inner::Auto : inner, spd_candidate);
+    analyzed_ = true;
   }
 
   /// Puts the values of the active set into K (inactive[i] != 0: i ∈ ℐ) and factorizes.
@@ -155,30 +159,44 @@ class ActiveSetSystem {
         // LCP: z_𝒜 = 0, so the active columns of the inactive rows are dropped (symmetry).
         v[p] = row_inactive ? ((lcp_ && !inactive[j]) ? 0.0 : inactive_values_[p]) : active_values_[p];
       }
-    if (cg_) inactive_ = inactive;
-    return cg_ ? cg_->setup(K_) : solver_.factorize(K_);
+    if (!krylov_) return solver_.factorize(K_);
+    inactive_ = inactive;
+    factorized_ = false;
+    return krylov_->setup(K_);
   }
 
-  /// z = K⁻¹ b after factorize(). An iterative solve (cg) starts from z's value and stops when
-  /// ‖b − Kz‖ ≤ `target` (absolute), or ≤ MultigridCG::rtol ‖b‖ when target is 0; a direct one
-  /// ignores both.
-  /// The residual is that of the inactive rows, i.e. of w = Az + q there, what Res measures: the
-  /// active rows (identity, zeroed columns) are set exactly first and the V-cycle keeps them so.
-  /// Returns the iterations of the iterative solve (0 for a direct one).
+  /// z = K⁻¹ b after factorize(). An iterative solve (inner = cg) starts from z's value and stops
+  /// when ‖b − Kz‖ ≤ `target` (absolute), or ≤ MultigridKrylov::rtol ‖b‖ when target is 0; a
+  /// direct one ignores both.
+  /// The residual is that of the inactive rows, i.e. of w = Az + q there, what Res measures: for
+  /// the LCP the active rows (identity, zeroed columns) are set exactly first and the V-cycle
+  /// keeps them so. Returns the iterations of the iterative solve (0 for a direct one).
+  ///
+  /// An iterative solve that does not converge (max_iterations, a BiCGSTAB breakdown) is redone
+  /// by the direct solve (analysed on first need), so the step is an exact Newton step whatever
+  /// the Krylov method did; the iterations are reported as max_iterations + 1.
   int solve(const Vector& b, Vector& z, double target = 0) const {
-    if (!cg_) { solver_.solve(b, z); return 0; }
-    for (Eigen::Index i = 0; i < z.size(); ++i)
-      if (!inactive_[i]) z[i] = b[i];
-    return cg_->solve(b, z, target);
+    if (!krylov_) { solver_.solve(b, z); return 0; }
+    if (lcp_)
+      for (Eigen::Index i = 0; i < z.size(); ++i)
+        if (!inactive_[i]) z[i] = b[i];
+    const int k = krylov_->solve(b, z, target);
+    if (k <= krylov_->max_iterations()) return k;
+    direct_solve(b, z);
+    return k;
   }
-  const char* inner_name() const { return cg_ ? "cg" : solver_.name(); }
+  const char* inner_name() const { return krylov_ ? krylov_->name() : solver_.name(); }
+  /// The iterative solve's cap (MultigridKrylov::default_max_iterations); tests lower it to
+  /// reach the direct retry.
+  void set_max_iterations(int k) { if (krylov_) krylov_->set_max_iterations(k); }
 
   /// Whether `inner` (with K's size n and `levels` prolongations below) means the multigrid-
-  /// preconditioned CG. Auto: only when a hierarchy exists, K is an SPD candidate and n ≥
-  /// auto_cg_min_n (the measurement is in that constant's comment).
-  static bool use_cg(Inner inner, bool spd_candidate, std::size_t levels, Eigen::Index n) {
-    if (!spd_candidate || levels == 0) return false;
-    return inner == Inner::CG || (inner == Inner::Auto && n >= auto_cg_min_n);
+  /// preconditioned Krylov solve: always for cg with a hierarchy; for auto with a hierarchy and n ≥
+  /// auto_cg_min_n (an SPD candidate: CG) or n ≥ auto_krylov_min_n (else: BiCGSTAB); the
+  /// measurements are in those constants' comments.
+  static bool use_iterative(Inner inner, bool spd_candidate, std::size_t levels, Eigen::Index n) {
+    if (levels == 0) return false;
+    return inner == Inner::CG || (inner == Inner::Auto && n >= (spd_candidate ? auto_cg_min_n : auto_krylov_min_n));
   }
   /// Measured (obstacle scenes, hierarchy "amg", tol 1e-8, one solve, OPENBLAS_NUM_THREADS=1,
   /// same run), Newton solve time direct (CHOLMOD) → cg, same steps and Res: 2D n = 16,129:
@@ -187,8 +205,27 @@ class ActiveSetSystem {
   /// set-up, 3 fine steps, Res 2e-9), the direct solve was estimated at an hour. Below 10⁴ both take milliseconds
   /// and the direct solve is the exact one.
   static constexpr Eigen::Index auto_cg_min_n = 10000;
+  /// Measured (convection_diffusion_obstacle, hierarchy "amg", tol 1e-8, same run; README, "The
+  /// iterative inner solve"), CPU s direct (UMFPACK) → bicgstab, same steps: 2D n = 3,969: 0.07 →
+  /// 0.06; n = 10,201: 0.13 → 0.07; n = 261,121: 5.5 → 1.6; n = 10⁶: 234 → 46; 3D n = 103,823:
+  /// 48 → 0.92 (2.3 GB → 0.2 GB).
+  static constexpr Eigen::Index auto_krylov_min_n = 10000;
 
  private:
+  /// The direct solve of K (its values already in place), when the iterative one failed.
+  void direct_solve(const Vector& b, Vector& z) const {
+    if (!analyzed_) {
+      solver_.analyze(K_, inner_ == Inner::CG ? Inner::Auto : inner_, spd_candidate_);
+      analyzed_ = true;
+    }
+    if (!factorized_ && !solver_.factorize(K_)) {
+      z.setConstant(std::numeric_limits<double>::quiet_NaN());  // singular: the step fails
+      return;
+    }
+    factorized_ = true;
+    solver_.solve(b, z);
+  }
+
   /// Whether every row of A has a stored diagonal entry.
   template <typename MatrixType>
   static bool has_full_diagonal(const MatrixType& A) {
@@ -253,9 +290,12 @@ class ActiveSetSystem {
   bool lcp_;
   ColMatrix K_;
   Vector inactive_values_, active_values_;
-  Refactorizer<StorageIndex> solver_;
-  std::unique_ptr<MultigridCG<StorageIndex>> cg_;
-  std::vector<char> inactive_;  // of the last factorize (cg)
+  mutable Refactorizer<StorageIndex> solver_;  // mutable: analysed on first need (direct_solve)
+  std::unique_ptr<MultigridKrylov<StorageIndex>> krylov_;
+  std::vector<char> inactive_;  // of the last factorize (iterative)
+  Inner inner_ = Inner::Auto;
+  bool spd_candidate_ = false;
+  mutable bool analyzed_ = false, factorized_ = false;
 };
 
 }  // namespace nrmicp::detail

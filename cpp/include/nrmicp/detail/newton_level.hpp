@@ -54,7 +54,7 @@ class NewtonLevel {
     if (!lcp_system_) lcp_system_ = std::make_unique<System>(A_, nullptr, inner_, below_);
     return *lcp_system_;
   }
-  std::unique_ptr<System> affine_system(const RowMatrix& B) const { return std::make_unique<System>(A_, &B, inner_); }
+  std::unique_ptr<System> affine_system(const RowMatrix& B) const { return std::make_unique<System>(A_, &B, inner_, below_); }
   const char* inner_name() const { return lcp_system_ ? lcp_system_->inner_name() : "none"; }
 
   /// Res of z; w = Az + q and g = z − ζ(z) (ζ = Bz + c, or 0 when B is null).
