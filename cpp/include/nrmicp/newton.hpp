@@ -289,12 +289,15 @@ class Newton {
       }
     }
 
-    /// Newton steps per coarse level. Nested iteration needs only a good start from each coarse
-    /// level, not its exact solution. Measured on obstacle_2d m = 511 (n = 261k, one run, CPU s):
-    /// to a settled set (≤ 100 steps) amg 25 solves, geometric 19, finest 3 steps both; 2 steps per
-    /// coarse level: amg 18 solves, geometric 17, finest still 3, the AMG level 1 (n = 131k,
-    /// denser than the finest) 2.2 instead of 2.8 s; 1 step: amg 10 finest steps (worse).
-    static constexpr int coarse_steps = 2;
+    /// Newton steps per coarse level: until its active set settles (at most this many). Nested
+    /// iteration needs only a good start from each coarse level, but a cut-short coarse solve
+    /// leaves a band of wrong active set that a finer level peels one layer per step. Measured
+    /// on obstacle_2d, amg, inner cg: exactly 2 steps per coarse level (faster at m = 511 and
+    /// 1023: 18 and 20 solves against 25 and 35 settled, +12% time at m = 1023) failed at
+    /// m = 2047 (n = 4.2M): 28 finest steps, Res 6.9e-4 falling 7% per step, 92 CPU s, against
+    /// 3 finest steps and 26.5 s settled. Stopping a coarse level at 2 steps once a step had cut
+    /// Res tenfold failed the same way (31 finest steps): Res does not show the band.
+    static constexpr int coarse_maxiter = 100;
     /// The inner solves on the coarse levels stop at this fraction of the iterate's Res: a start
     /// needs no more. Measured on obstacle_2d (m = 255, 511, 1023, hierarchy geometric and amg,
     /// inner cg, tol 1e-8): CG iterations on all levels 36 → 20, 55 → 22, 74 → 25 (and 33 → 16,
@@ -305,7 +308,7 @@ class Newton {
     /// own multigrid set-up: 2.59 → 2.33 / 2.17 CPU s geometric, 5.00 → 5.14 / 4.90 amg.
     static constexpr double coarse_forcing = 0.1;
 
-    /// Nested start for LCP(q_shift, A) in y ≥ 0: `coarse_steps` Newton steps per coarse level,
+    /// Nested start for LCP(q_shift, A) in y ≥ 0: Newton on each coarse level to a settled active set,
     /// coarse to fine.
     Vector nested_start(const Vector& q_shift) {
       const std::size_t L = self.coarse_.size();
@@ -317,7 +320,7 @@ class Newton {
         const auto t0 = std::chrono::steady_clock::now();
         CoarseLevel& lev = *self.coarse_[l - 1];
         detail::NewtonControl c;
-        c.maxiter = coarse_steps;
+        c.maxiter = coarse_maxiter;
         c.forcing = coarse_forcing;
         c.sweep_budget = 1000;
         const auto out = detail::newton_loop(lev, lev.lcp_system(), qs[l], nullptr, nullptr, y, c);
