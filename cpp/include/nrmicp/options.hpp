@@ -44,6 +44,10 @@ enum class Inner {
   CG,        ///< method newton only: the reduced systems by CG (SPD) or BiCGSTAB, multigrid-preconditioned (detail/multigrid.hpp)
 };
 
+/// The factorization `inner` asks for where one is needed (the fallback member, a direct retry):
+/// the iterative choice 'cg' leaves it to Auto.
+inline Inner direct_inner(Inner inner) { return inner == Inner::CG ? Inner::Auto : inner; }
+
 /// Stabilizers beyond the paper.
 enum class Accelerate {
   None,      ///< the plain fixed-point step

@@ -128,23 +128,19 @@ class ActiveSetSystem {
   /// `below`: the prolongations below this level, for the iterative solve (detail/multigrid.hpp).
   template <typename MatrixType>
   ActiveSetSystem(const MatrixType& A, const RowMatrix* B, Inner inner, Prolongations<StorageIndex> below = {})
-      : lcp_(B == nullptr) {
+      : lcp_(B == nullptr), inner_(inner) {
     if (lcp_ && has_full_diagonal(A))
       use_pattern_of(A);
     else
       use_union_pattern(A, B);
-    const bool spd_candidate = lcp_ && is_symmetric(K_) && has_positive_diagonal(K_);
+    spd_candidate_ = lcp_ && is_symmetric(K_) && has_positive_diagonal(K_);
     // CG needs a symmetric positive definite K: the LCP of a symmetric A (an indefinite K shows
     // as a failed coarsest Cholesky or CG breakdown; then the loop falls back). Any other K
     // (a nonsymmetric A, an affine ζ) takes BiCGSTAB (detail/multigrid.hpp).
-    if (use_iterative(inner, spd_candidate, below.levels, A.rows())) {
-      krylov_ = std::make_unique<MultigridKrylov<StorageIndex>>(below, spd_candidate);
-      inner_ = inner;
-      spd_candidate_ = spd_candidate;
-      return;
-    }
-    solver_.analyze(K_, inner == Inner::CG ? Inner::Auto : inner, spd_candidate);
-    analyzed_ = true;
+    if (use_iterative(inner, spd_candidate_, below.levels, A.rows()))
+      krylov_ = std::make_unique<MultigridKrylov<StorageIndex>>(below, spd_candidate_);
+    else
+      analyze();
   }
 
   /// Puts the values of the active set into K (inactive[i] != 0: i ∈ ℐ) and factorizes.
@@ -212,12 +208,15 @@ class ActiveSetSystem {
   static constexpr Eigen::Index auto_krylov_min_n = 10000;
 
  private:
+  /// The symbolic analysis of the direct solve (at construction, or on first need).
+  void analyze() const {
+    solver_.analyze(K_, direct_inner(inner_), spd_candidate_);
+    analyzed_ = true;
+  }
+
   /// The direct solve of K (its values already in place), when the iterative one failed.
   void direct_solve(const Vector& b, Vector& z) const {
-    if (!analyzed_) {
-      solver_.analyze(K_, inner_ == Inner::CG ? Inner::Auto : inner_, spd_candidate_);
-      analyzed_ = true;
-    }
+    if (!analyzed_) analyze();
     if (!factorized_ && !solver_.factorize(K_)) {
       z.setConstant(std::numeric_limits<double>::quiet_NaN());  // singular: the step fails
       return;

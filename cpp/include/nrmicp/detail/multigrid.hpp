@@ -202,12 +202,10 @@ class MultigridKrylov {
     return s.info() == Eigen::Success ? k : max_iterations_ + 1;
   }
 
-  /// K's column storage read as rows (K is symmetric).
-  static Eigen::Map<const RowMatrix> rows(const ColMatrix& K) {
-    return Eigen::Map<const RowMatrix>(K.rows(), K.cols(), K.nonZeros(), K.outerIndexPtr(), K.innerIndexPtr(),
-                                       K.valuePtr());
-  }
-  static Eigen::Map<const RowMatrix> rows(const RowMatrix& K) {
+  /// M's compressed storage read as rows: M's own rows when row-major, Mᵀ's when column-major
+  /// (= M for a symmetric M).
+  template <typename M>
+  static Eigen::Map<const RowMatrix> rows(const M& K) {
     return Eigen::Map<const RowMatrix>(K.rows(), K.cols(), K.nonZeros(), K.outerIndexPtr(), K.innerIndexPtr(),
                                        K.valuePtr());
   }

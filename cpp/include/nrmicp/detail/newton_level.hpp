@@ -39,7 +39,7 @@ class NewtonLevel {
     fallback_options_.method = Method::NRM;
     fallback_options_.omega1 = p.omega1;
     fallback_options_.omega2 = p.omega2;
-    fallback_options_.inner = options.inner == Inner::CG ? Inner::Auto : options.inner;  // nrm factorizes
+    fallback_options_.inner = direct_inner(options.inner);  // nrm factorizes
   }
 
   /// The prolongations below this level (P[0]: the next coarser level → this one), for the
