@@ -23,17 +23,7 @@ import scipy.sparse as sp
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests"))
 import nrmicp
 from nrmicp import scenes
-
-
-def impulse_jacobian(problem):
-    x, c = problem.reference["x"], problem.reference["prop"]
-    n, idx = x.size, np.arange(x.size)
-    def jacobian(z):
-        v = z - c * x
-        best = np.maximum.accumulate(v[::-1])[::-1]
-        first = np.minimum.accumulate(np.where(v == best, idx, n)[::-1])[::-1]
-        return sp.csr_matrix((np.ones(n), (idx, first)), shape=(n, n))
-    return jacobian
+from test_newton import impulse_jacobian  # tests/: the impulse-control Jacobian, written once
 
 
 def fields(res):

@@ -53,6 +53,13 @@ RowMat interpolation_2d(int m) {
   return P;
 }
 
+/// The geometric hierarchy of an m × m grid (m = 2^k − 1): prolongations down to 3 × 3.
+std::vector<RowMat> hierarchy_2d(int m) {
+  std::vector<RowMat> P;
+  for (int mm = m; mm >= 7; mm = (mm - 1) / 2) P.push_back(interpolation_2d(mm));
+  return P;
+}
+
 /// The membrane obstacle ψ = 0.1 − (x − ½)² − (y − ½)².
 Vec paraboloid(int m) {
   Vec psi(m * m);
@@ -113,8 +120,7 @@ TEST_CASE("Newton with user-supplied prolongations: the obstacle problem in 2D, 
   const int m = 31;  // 31 -> 15 -> 7 -> 3
   const RowMat A = laplacian_2d(m);
   const Vec psi = paraboloid(m), q = Vec::Zero(m * m);
-  std::vector<RowMat> P;
-  for (int mm = m; mm >= 7; mm = (mm - 1) / 2) P.push_back(interpolation_2d(mm));
+  const std::vector<RowMat> P = hierarchy_2d(m);
   Options o;
   o.tol = 1e-9;
   const Newton<RowMat> nested(A, o, P), cold(A, o);
@@ -138,8 +144,7 @@ TEST_CASE("inner = cg: multigrid-preconditioned CG on the reduced systems agrees
   const int m = 31;
   const RowMat A = laplacian_2d(m);
   const Vec psi = paraboloid(m), q = Vec::Zero(m * m);
-  std::vector<RowMat> P;
-  for (int mm = m; mm >= 7; mm = (mm - 1) / 2) P.push_back(interpolation_2d(mm));
+  const std::vector<RowMat> P = hierarchy_2d(m);
   Options o;
   o.tol = 1e-10;
   o.method = Method::Newton;
@@ -186,8 +191,7 @@ TEST_CASE("inner = cg on a nonsymmetric A: BiCGSTAB preconditioned by the V-cycl
   const int m = 31;
   const RowMat A = convection_2d(m, 40.0, 20.0);
   const Vec psi = paraboloid(m), q = Vec::Zero(m * m);
-  std::vector<RowMat> P;
-  for (int mm = m; mm >= 7; mm = (mm - 1) / 2) P.push_back(interpolation_2d(mm));
+  const std::vector<RowMat> P = hierarchy_2d(m);
   Options o;
   o.tol = 1e-10;
   o.method = Method::Newton;
