@@ -40,6 +40,7 @@ class NewtonLevel {
     fallback_options_.omega1 = p.omega1;
     fallback_options_.omega2 = p.omega2;
     fallback_options_.inner = direct_inner(options.inner);  // nrm factorizes
+    fallback_options_.accelerate = Accelerate::Anderson;
   }
 
   /// The prolongations below this level (P[0]: the next coarser level → this one), for the
