@@ -217,3 +217,23 @@ def qp(name, A, q, c, tol, *, eps_min=1e-14):
     return dict(z=y + c, status="converged" if ok else o["status"].lower().replace(" ", "_"), success=ok,
                 nit=max(o["iterations"], 0), residual=o["residual"], seconds=o["seconds"],
                 setting=f"eps={o['eps']:.0e}")
+
+
+# --------------------------------------------------------------------------- budgets
+
+def estimate(history, n, p_default, floor=1e-3):
+    """Seconds a peer would take at size n, extrapolated from [(n_i, seconds_i)] at smaller sizes
+    (a power law through the last two, its exponent clipped to [1, 2.5]; ``p_default`` with one
+    point); the benchmarks skip a peer whose estimate exceeds their budget. Times below ``floor``
+    count as ``floor`` (too short to fit). None without history."""
+    import math
+
+    if not history:
+        return None
+    if len(history) >= 2:
+        (n1, t1), (n2, t2) = history[-2], history[-1]
+        p = min(max(math.log(max(t2, floor) / max(t1, floor)) / math.log(n2 / n1), 1.0), 2.5)
+    else:
+        p = p_default
+    n0, t0 = history[-1]
+    return t0 * (n / n0) ** p
