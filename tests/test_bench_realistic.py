@@ -82,3 +82,13 @@ def test_unknown_scene_exits_nonzero(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "nrmicp", "bench", "--scenes", "nope", "--out", str(tmp_path)],
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode != 0 and "nope" in proc.stderr
+
+
+def test_plot_only_redraws_the_figure_from_the_csv(small_run, tmp_path):
+    out, curves = small_run
+    again = bench_realistic.read_csv([str(out / "realistic.csv")])
+    assert {(s, c) for s, (_, found) in again.items() for c in found} == set(curves)
+    proc = subprocess.run([sys.executable, "-m", "nrmicp", "bench", "--plot", str(out / "realistic.csv"),
+                           "--out", str(tmp_path)], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "work_precision.png").stat().st_size > 10_000

@@ -10,12 +10,13 @@ Rannacher start-up: 102 LCPs with one matrix): the scene registry's size "realis
 (nrmicp.scenes.SIZES). ``--small`` takes its "tiny" sizes, what a test can afford.
 
 Curves: the handful a user chooses between — ``newton`` with the grid's geometric hierarchy and
-with ``hierarchy="amg"``, ``nrmgs`` + Anderson, plain ``nrmgs`` (the fastest stationary member on
-these scenes in ``nrmicp bench --family``), red-black projected SOR (numpy, SOR's optimal ω) and
+with ``hierarchy="amg"``, ``nrmgs`` + Anderson, plain ``nrmgs`` (the default stationary member;
+``nrmicp bench --family`` compares it with the others), red-black projected SOR (numpy, SOR's optimal ω) and
 a QP solver (PIQP, else OSQP, when installed; symmetric LCPs only). x = CPU seconds from the
 call (set-up, hierarchy and factorizations included), y = Res. A stationary curve is one solve
 whose iterates are timed by a callback (``time.process_time``) until Res < 1e-10 or ``--budget``
-CPU seconds; PSOR's per-sweep wall clock is scaled to its CPU total; a QP solver is one run per
+CPU seconds; PSOR the same, on its own loop's clock (its red-black colouring and SOR's optimal
+ω are found untimed, as a user who knows the grid would); a QP solver is one run per
 eps (1e-3, 1e-6, 1e-9), each point its own CPU time. The march: one march per tol (1e-4 … 1e-10),
 x = CPU seconds of the whole march, y = the largest Res over its steps.
 
@@ -98,15 +99,11 @@ def _psor_curve(problem, budget):
     from . import _peers
 
     A, q, c = _peers.shifted_lcp(problem)
-    t0 = time.process_time()
-    colour, omega = _peers.colours(A), _peers.sor_omega(A)
-    tune = time.process_time() - t0
-    w0, c0 = time.perf_counter(), time.process_time()
+    colour, omega = _peers.colours(A), _peers.sor_omega(A)  # untimed: a user who knows the grid knows them
     out = _peers.psor(A, q, c, TARGET, omega=omega, colour=colour, maxiter=10**7, history=True,
-                      time_limit=budget)
-    cpu_per_wall = (time.process_time() - c0) / max(time.perf_counter() - w0, 1e-12)
+                      time_limit=budget, clock=time.process_time)
     h = out["history"]
-    return [(tune + s * cpu_per_wall, r) for s, r in zip(h["seconds"], h["residual"])]
+    return list(zip(h["seconds"], h["residual"]))
 
 
 def _qp_solver():
@@ -116,18 +113,38 @@ def _qp_solver():
     return have[0] if have else None
 
 
+def _qp_point(solver, A, q, eps, queue):
+    from . import _peers
+
+    t0 = time.process_time()
+    y, _, _ = _peers.qp_once(solver, A, q, eps)
+    queue.put((time.process_time() - t0, _peers._res(A, q, y)))
+
+
 def _qp_curve(problem, budget):
+    """One QP run per eps, each in a child process that is stopped after ``budget`` seconds of
+    wall time (an interior-point factorization in 3D can take many minutes)."""
+    import multiprocessing as mp
+
     from . import _peers
 
     solver = _qp_solver()
-    A, q, c = _peers.shifted_lcp(problem)
+    A, q, _ = _peers.shifted_lcp(problem)
+    ctx = mp.get_context("fork")
     points, spent = [], 0.0
     for eps in QP_EPS:
-        t0 = time.process_time()
-        y, _, _ = _peers.qp_once(solver, A, q, eps)
-        dt = time.process_time() - t0
-        points.append((dt, _peers._res(A, q, y)))
-        spent += dt
+        queue = ctx.Queue()
+        child = ctx.Process(target=_qp_point, args=(solver, A, q, eps, queue))
+        child.start()
+        child.join(budget)
+        if child.is_alive():
+            child.kill()
+            child.join()
+            break
+        if queue.empty():
+            break
+        points.append(queue.get())
+        spent += points[-1][0]
         if spent > budget:
             break
     return points
@@ -145,13 +162,12 @@ def _march_curve(problem, curve, small):
     n_space = parameter("american_put", SIZE[small])
     m = _March(400.0, 100.0, 0.05, 0.2, 1.0, n_space, N_TIME, 2)
     points = []
+    if curve == "psor":  # untimed, as on the other scenes
+        colour, omega = _peers.colours(m.A), _peers.sor_omega(m.A)
     for tol in MARCH_TOLS:
         t0 = time.process_time()
         v, worst = m.payoff.copy(), 0.0
-        if curve in ("psor", "qp"):
-            colour = _peers.colours(m.A) if curve == "psor" else None
-            omega = _peers.sor_omega(m.A) if curve == "psor" else None
-        else:
+        if curve not in ("psor", "qp"):
             label, options = CURVES[curve]
             options = dict(options)
             if options.get("hierarchy") == "geo":
@@ -177,9 +193,12 @@ def _march_curve(problem, curve, small):
     return points
 
 
-def run(scenes=tuple(SCENES), curves=tuple(CURVES), budget=30.0, small=False, progress=print):
-    """-> {scene: (label, {curve: [(seconds, Res)]})}."""
+def run(scenes=tuple(SCENES), curves=tuple(CURVES), budget=30.0, small=False, progress=print, csv_path=None):
+    """-> {scene: (label, {curve: [(seconds, Res)]})}; each curve is appended to ``csv_path`` as
+    soon as it is measured."""
     out = {}
+    if csv_path:
+        write_csv({}, csv_path)
     for scene in scenes:
         problem = build(scene, small)
         label = SCENES[scene].format(n=problem.n)
@@ -206,6 +225,8 @@ def run(scenes=tuple(SCENES), curves=tuple(CURVES), budget=30.0, small=False, pr
                     continue
                 pts = _solve_curve(problem, opts, budget)
             found[curve] = pts
+            if csv_path:
+                write_csv({scene: (label, {curve: pts})}, csv_path, append=True)
             progress(f"{scene} {curve}: {len(pts)} points, last Res {pts[-1][1]:.2e} at {pts[-1][0]:.2f} CPU s "
                      f"({time.perf_counter() - t0:.1f} s wall)")
         out[scene] = (label, found)
@@ -223,14 +244,32 @@ def curve_label(curve: str, scene: str) -> str:
     return label
 
 
-def write_csv(results, path):
-    with open(path, "w", newline="") as f:
+CSV_COLUMNS = ("scene", "label", "curve", "point", "cpu_seconds", "residual")
+
+
+def write_csv(results, path, append=False):
+    with open(path, "a" if append else "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(("scene", "curve", "point", "cpu_seconds", "residual"))
-        for scene, (_, found) in results.items():
+        if not append:
+            w.writerow(CSV_COLUMNS)
+        for scene, (label, found) in results.items():
             for curve, pts in found.items():
                 for i, (s, r) in enumerate(pts):
-                    w.writerow((scene, curve, i, f"{s:.6g}", f"{r:.6g}"))
+                    w.writerow((scene, label, curve, i, f"{s:.6g}", f"{r:.6g}"))
+
+
+def read_csv(paths):
+    """The results of one or more realistic.csv files (later files replace a scene's curves)."""
+    out = {}
+    for path in paths:
+        with open(path, newline="") as f:
+            for row in csv.DictReader(f):
+                label, found = out.setdefault(row["scene"], (row["label"], {}))
+                pts = found.setdefault(row["curve"], [])
+                if row["point"] == "0":
+                    pts.clear()
+                pts.append((float(row["cpu_seconds"]), float(row["residual"])))
+    return out
 
 
 def _spread(ys, gap):
@@ -290,6 +329,7 @@ def _parser(prog):
     p.add_argument("--budget", type=float, default=30.0, help="CPU seconds per curve (default 30)")
     p.add_argument("--small", action="store_true", help="small sizes (seconds; for tests)")
     p.add_argument("--out", default="bench-out", help="output directory (default bench-out/)")
+    p.add_argument("--plot", nargs="+", metavar="CSV", help="only draw the figure from these realistic.csv files")
     return p
 
 
@@ -304,8 +344,11 @@ def main(argv: Optional[list] = None, prog: str = "nrmicp bench") -> int:
         if c not in CURVES:
             raise SystemExit(f"{prog}: unknown curve {c!r}; choose from {', '.join(CURVES)}")
     os.makedirs(a.out, exist_ok=True)
-    results = run(scenes, curves, a.budget, a.small)
-    write_csv(results, os.path.join(a.out, "realistic.csv"))
+    if a.plot:
+        results = read_csv(a.plot)
+        results = {s: results[s] for s in SCENES if s in results}
+    else:
+        results = run(scenes, curves, a.budget, a.small, csv_path=os.path.join(a.out, "realistic.csv"))
     try:
         plot(results, os.path.join(a.out, "work_precision.png"))
     except ImportError:
