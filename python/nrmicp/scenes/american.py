@@ -119,9 +119,9 @@ def american_put(S_max: float = 400.0, K: float = 100.0, r: float = 0.05, sigma:
 
 def _nested_first_step(solver, A, method, solver_options):
     """The Solver for the march's first step. Started from the payoff, Newton without a hierarchy
-    moves the exercise boundary about one node per step (17-25 steps at n_space = 3200, 1.2 on
-    later steps): unless the caller chose a hierarchy, a Newton march without one takes its
-    first step from the nested start (the grid's geometric prolongations, else 'amg')."""
+    moves the exercise boundary about one node per step: unless the caller chose a hierarchy, a
+    Newton march without one takes its first step from the nested start (the grid's geometric
+    prolongations, else 'amg'; README "Which method for which problem")."""
     if method != "newton" or solver.levels > 1 or "hierarchy" in solver_options:
         return solver
     import nrmicp

@@ -93,7 +93,7 @@ class Monitor {
   /// The returned iterate: the best one (the last when converged), its Res, nit and message.
   /// `z_start` (finite) is returned when no finite Res was ever seen, and also when its Res
   /// `start_residual` is below every iterate's: iterate 0 is the modulus image of the start, not
-  /// the start itself, and can be worse (a 3×3 indefinite LCP: Res 1.41 against 1.0 at z = 0).
+  /// the start itself, and can be worse (docs/SPEC.md).
   void finish(const Vector& z_start, double start_residual = std::numeric_limits<double>::quiet_NaN()) {
     const bool any = std::isfinite(best_);
     const bool start = res_.status != Status::Converged && start_residual < best_;
