@@ -137,7 +137,7 @@ class ActiveSetSystem {
     // CG needs a symmetric positive definite K: the LCP of a symmetric A (an indefinite K shows
     // as a failed coarsest Cholesky or CG breakdown; then the loop falls back). Any other K
     // (a nonsymmetric A, an affine ζ) takes BiCGSTAB (detail/multigrid.hpp).
-    if (use_iterative(inner, spd_candidate_, below.levels, A.rows()))
+    if (use_iterative(inner, spd_candidate_, below.levels, A.rows(), K_.nonZeros()))
       krylov_ = std::make_unique<MultigridKrylov<StorageIndex>>(below, spd_candidate_);
     else
       analyze();
@@ -186,26 +186,26 @@ class ActiveSetSystem {
   /// reach the direct retry.
   void set_max_iterations(int k) { if (krylov_) krylov_->set_max_iterations(k); }
 
-  /// Whether `inner` (with K's size n and `levels` prolongations below) means the multigrid-
-  /// preconditioned Krylov solve: always for cg with a hierarchy; for auto with a hierarchy and n ≥
-  /// auto_cg_min_n (an SPD candidate: CG) or n ≥ auto_krylov_min_n (else: BiCGSTAB); the
-  /// measurements are in those constants' comments.
-  static bool use_iterative(Inner inner, bool spd_candidate, std::size_t levels, Eigen::Index n) {
+  /// Whether `inner` (with K's size n, its nonzeros nnz and `levels` prolongations below) means
+  /// the multigrid-preconditioned Krylov solve: always for cg with a hierarchy; for auto with a
+  /// hierarchy and n ≥ auto_cg_min_n (an SPD candidate: CG) or n ≥ auto_krylov_min_n (else:
+  /// BiCGSTAB), or nnz ≥ auto_iterative_min_nnz; the measurements are in those constants' comments.
+  static bool use_iterative(Inner inner, bool spd_candidate, std::size_t levels, Eigen::Index n, Eigen::Index nnz) {
     if (levels == 0) return false;
-    return inner == Inner::CG || (inner == Inner::Auto && n >= (spd_candidate ? auto_cg_min_n : auto_krylov_min_n));
+    if (inner == Inner::CG) return true;
+    return inner == Inner::Auto &&
+           (n >= (spd_candidate ? auto_cg_min_n : auto_krylov_min_n) || nnz >= auto_iterative_min_nnz);
   }
-  /// Measured (obstacle scenes, hierarchy "amg", tol 1e-8, one solve, OPENBLAS_NUM_THREADS=1,
-  /// same run), Newton solve time direct (CHOLMOD) → cg, same steps and Res: 2D n = 16,129:
-  /// 0.29 → 0.12 s; 2D n = 261,121: 11.9 → 4.0 s; 3D n = 29,791: 3.0 → 0.32 s; 3D n = 103,823:
-  /// 25.2 → 2.5 s (CHOLMOD's fill grows like n^{4/3} in 3D); 3D n = 10⁶: 47 s with cg (+15 s
-  /// set-up, 3 fine steps, Res 2e-9), the direct solve was estimated at an hour. Below 10⁴ both take milliseconds
-  /// and the direct solve is the exact one.
   static constexpr Eigen::Index auto_cg_min_n = 10000;
   /// Measured (convection_diffusion_obstacle, hierarchy "amg", tol 1e-8, same run; README, "The
   /// iterative inner solve"), CPU s direct (UMFPACK) → bicgstab, same steps: 2D n = 3,969: 0.07 →
   /// 0.06; n = 10,201: 0.13 → 0.07; n = 261,121: 5.5 → 1.6; n = 10⁶: 234 → 46; 3D n = 103,823:
   /// 48 → 0.92 (2.3 GB → 0.2 GB).
   static constexpr Eigen::Index auto_krylov_min_n = 10000;
+  /// A dense coarse operator (3D Ruge–Stüben levels: 33–100 nonzeros a row) fills in a direct
+  /// factorization long before n = 10⁴. Measured (obstacle_3d m = 47, amg, one solve): the level
+  /// of 8,652 unknowns and 57 nonzeros a row took 0.31 s by CHOLMOD (of 0.74 s for the solve).
+  static constexpr Eigen::Index auto_iterative_min_nnz = 50000;
 
  private:
   /// The symbolic analysis of the direct solve (at construction, or on first need).
