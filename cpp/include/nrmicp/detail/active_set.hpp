@@ -17,6 +17,7 @@
 
 #include <Eigen/SparseCore>
 
+#include <algorithm>
 #include <limits>
 #include <memory>
 #include <stdexcept>
@@ -153,7 +154,7 @@ class ActiveSetSystem {
       for (StorageIndex p = outer[j]; p < outer[j + 1]; ++p) {
         const bool row_inactive = inactive[row[p]];
         // LCP: z_𝒜 = 0, so the active columns of the inactive rows are dropped (symmetry).
-        v[p] = row_inactive ? ((lcp_ && !inactive[j]) ? 0.0 : inactive_values_[p]) : active_values_[p];
+        v[p] = row_inactive ? ((lcp_ && !inactive[j]) ? 0.0 : inactive_value_ptr_[p]) : active_value(p, row[p], j);
       }
     if (!krylov_) return solver_.factorize(K_);
     inactive_ = inactive;
@@ -243,11 +244,26 @@ class ActiveSetSystem {
   void use_pattern_of(const MatrixType& A) {
     K_ = A;
     K_.makeCompressed();
+    active_values_.resize(0);  // the identity's: active_value() gives them without storage
+    // A symmetric row-major A stores K's column order: K's inactive values are A's own (held by
+    // reference, as A is), not a copy (42 MB at n = 10⁶ on a 5-point grid).
+    if constexpr (MatrixType::IsRowMajor) {
+      if (A.isCompressed() && A.nonZeros() == K_.nonZeros() &&
+          std::equal(K_.innerIndexPtr(), K_.innerIndexPtr() + K_.nonZeros(), A.innerIndexPtr()) &&
+          std::equal(K_.valuePtr(), K_.valuePtr() + K_.nonZeros(), A.valuePtr())) {
+        inactive_values_.resize(0);
+        inactive_value_ptr_ = A.valuePtr();
+        return;
+      }
+    }
     inactive_values_ = Eigen::Map<const Vector>(K_.valuePtr(), K_.nonZeros());
-    active_values_ = Vector::Zero(K_.nonZeros());
-    for (Eigen::Index j = 0; j < K_.cols(); ++j)
-      for (StorageIndex p = K_.outerIndexPtr()[j]; p < K_.outerIndexPtr()[j + 1]; ++p)
-        if (K_.innerIndexPtr()[p] == j) active_values_[p] = 1.0;
+    inactive_value_ptr_ = inactive_values_.data();
+  }
+
+  /// The active-row value at storage position p (row i, column j): the identity's on A's own
+  /// pattern (the LCP), else the stored I − B.
+  double active_value(StorageIndex p, Eigen::Index i, Eigen::Index j) const {
+    return active_values_.size() ? active_values_[p] : (i == j ? 1.0 : 0.0);
   }
 
   /// Any other case: the union of the patterns of A, I and B.
@@ -283,12 +299,14 @@ class ActiveSetSystem {
     Kb.makeCompressed();
     if (Kb.nonZeros() != K_.nonZeros()) throw std::logic_error("ActiveSetSystem: patterns differ");
     inactive_values_ = Eigen::Map<const Vector>(K_.valuePtr(), K_.nonZeros());
+    inactive_value_ptr_ = inactive_values_.data();
     active_values_ = Eigen::Map<const Vector>(Kb.valuePtr(), Kb.nonZeros());
   }
 
   bool lcp_;
   ColMatrix K_;
   Vector inactive_values_, active_values_;
+  const double* inactive_value_ptr_ = nullptr;  // the inactive-row values: inactive_values_, or A's own
   mutable Refactorizer<StorageIndex> solver_;  // mutable: analysed on first need (direct_solve)
   std::unique_ptr<MultigridKrylov<StorageIndex>> krylov_;
   std::vector<char> inactive_;  // of the last factorize (iterative)
