@@ -204,3 +204,27 @@ TEST_CASE("a step ends the shared loop with its own status and message (step.end
   CHECK(res.history_iteration == std::vector<int>{0, 1, 2});  // the Monitor saw every iterate before the end
   CHECK(res.residual == doctest::Approx(1.0 / 3));
 }
+
+TEST_CASE("Anderson acceleration cuts the iterations on a slow problem, with few rejected steps") {
+  // Bai's matrix with mu = 0 (the 2D Laplacian's stencil, m = 16): plain NRMGS is slow there.
+  const RowMat A = testing::bai<int, Eigen::RowMajor>(16, 0.0, true);
+  const auto k = testing::known_solution(A.rows());
+  const Eigen::VectorXd q = k.w - A * k.g;
+  Options o;
+  o.method = Method::NRMGS;
+  o.tol = 1e-10;
+  o.maxiter = 5000;
+  const Result plain = solve(A, q, Zeta<int>::none(), o);
+  o.accelerate = Accelerate::Anderson;
+  const Result fast = solve(A, q, Zeta<int>::none(), o);
+  MESSAGE("plain ", plain.iterations, ", Anderson ", fast.iterations, ", rejected ",
+          fast.counters.at("anderson_rejections"));
+  REQUIRE(plain.status == Status::Converged);
+  REQUIRE(fast.status == Status::Converged);
+  CHECK((fast.z - k.g).lpNorm<Eigen::Infinity>() < 1e-8);
+  CHECK(2 * fast.iterations <= plain.iterations);
+  CHECK(10 * fast.counters.at("anderson_rejections") <= fast.iterations);
+  o.anderson_m = 1;  // anderson_m matters: a memory of one difference accelerates less
+  const Result short_memory = solve(A, q, Zeta<int>::none(), o);
+  CHECK(short_memory.iterations > fast.iterations);
+}
