@@ -145,7 +145,7 @@ def test_newton_counts_newton_steps(quick_run):
     out, _, _, rows = quick_run
     rs = [r for r in _rows(rows, "obstacle_2d", "newton") if r["reused_from_tol"] == ""]
     its = [int(r["iterations"]) for r in rs]
-    assert 1 <= max(its) <= 30
+    assert 1 <= max(its) <= 5 and len(set(its)) == 1, its  # measured: 3 steps at every tol on 8 x 8
     assert all(float(r["residual"]) < 1e-11 for r in rs)
     assert int(rs[-1]["linear_solves"]) >= its[-1]
 
