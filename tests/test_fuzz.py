@@ -89,7 +89,7 @@ VALID_EXAMPLES, CORRUPT_EXAMPLES = 6, 2
 
 
 def _fuzz_settings(per_test):
-    share = -(-_LONG_RUN // (len(COMBOS) + len(CORRUPTIONS))) if _LONG_RUN else per_test
+    share = max(per_test, -(-_LONG_RUN // (len(COMBOS) + len(CORRUPTIONS))))  # never less than CI's slice
     return settings(max_examples=share, deadline=None, derandomize=not _LONG_RUN, database=None,
                     suppress_health_check=list(HealthCheck))
 
