@@ -111,9 +111,15 @@ print("finished", flush=True)
 def gil_and_sigint(tmp_path_factory):
     script = tmp_path_factory.mktemp("gil") / "long_solve.py"
     script.write_text(_GIL_AND_SIGINT_SCRIPT)
-    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300,
-                          env=dict(os.environ, PYTHONUNBUFFERED="1"))
-    return proc
+    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    try:  # ~1 s normally; with the GIL held the script never ends (the hang guard then fails the tests)
+        out, err = proc.communicate(timeout=120)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, err = proc.communicate()
+        err += "\n[the script hung: the second thread never ran, so the loop held the GIL]"
+    return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
 
 
 @pytest.mark.skipif(sys.platform == "win32", reason="SIGINT delivery differs on Windows")
