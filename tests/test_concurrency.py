@@ -4,6 +4,7 @@ by benchmarks/gil_latency.py."""
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
@@ -111,8 +112,11 @@ print("finished", flush=True)
 def gil_and_sigint(tmp_path_factory):
     script = tmp_path_factory.mktemp("gil") / "long_solve.py"
     script.write_text(_GIL_AND_SIGINT_SCRIPT)
+    # (SIGINT's default action restored in the child: a background job of a non-interactive shell
+    # inherits it ignored, and Python then never raises KeyboardInterrupt)
     proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=dict(os.environ, PYTHONUNBUFFERED="1"))
+                            env=dict(os.environ, PYTHONUNBUFFERED="1"),
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:  # ~1 s normally; with the GIL held the script never ends (the hang guard then fails the tests)
         out, err = proc.communicate(timeout=120)
     except subprocess.TimeoutExpired:

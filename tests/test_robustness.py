@@ -25,8 +25,12 @@ def tridiag(n=4):
 def run_script(code, timeout=60, sigint_after=None):
     """Run `code` in a fresh interpreter -> (returncode, stdout, stderr). With `sigint_after`, send
     SIGINT once the script printed that line."""
+    # SIGINT's default action in the child even when this process ignores it (a job started in the
+    # background by a non-interactive shell does: Python would then never raise KeyboardInterrupt)
+    default_sigint = (lambda: signal.signal(signal.SIGINT, signal.SIG_DFL)) if sigint_after is not None else None
     proc = subprocess.Popen([sys.executable, "-c", textwrap.dedent(code)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+                            stderr=subprocess.PIPE, text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"),
+                            preexec_fn=default_sigint)
     try:
         if sigint_after is not None:
             line = proc.stdout.readline().strip()
