@@ -5,7 +5,7 @@ PY      ?= python3
 BUILD   ?= build
 APT_PKGS = libeigen3-dev libsuitesparse-dev libopenblas0-pthread doctest-dev
 PIP_PKGS = "numpy>=1.23" "scipy>=1.9" "pyamg>=5.0" "pybind11>=2.12" "scikit-build-core>=0.8" "matplotlib>=3.5" \
-           "pytest>=7" "hypothesis>=6" ninja "cmake>=3.18"
+           "pytest>=7" "hypothesis>=6" "piqp>=0.4" ninja "cmake>=3.18"
 SUDO    := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # Every recipe line fails on the first failing command, including inside a pipe: a failed
 # build must fail `make demo` and `make test`, never leave an older nrmicp importable.
@@ -15,12 +15,12 @@ SHELL   := /bin/bash
 export PIP_ROOT_USER_ACTION := ignore
 PIP     = $(PY) -m pip install -q --disable-pip-version-check
 
-.PHONY: demo test deps install ctest pytest sanitize bench clean
+.PHONY: demo test deps install ctest ctest-eigen pytest sanitize bench clean
 
 demo: install
 	$(PY) -m nrmicp demo
 
-test: install ctest pytest
+test: install ctest ctest-eigen pytest
 
 deps:
 	@missing=""; for p in $(APT_PKGS); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
@@ -38,10 +38,19 @@ install: deps
 	$(PIP) --no-build-isolation .
 	@cd /tmp && $(PY) -c "import nrmicp; print('nrmicp', nrmicp.__version__, 'installed; backends:', nrmicp.backends())"
 
+# SuiteSparse required here: a CMake that stops finding it fails, instead of dropping the
+# CHOLMOD/UMFPACK tests (the Python side: tests/test_required.py).
 ctest: deps
-	cmake -S . -B $(BUILD)/ctest -G Ninja -DNRMICP_BUILD_TESTS=ON -DCMAKE_BUILD_TYPE=Release
+	cmake -S . -B $(BUILD)/ctest -G Ninja -DNRMICP_BUILD_TESTS=ON -DNRMICP_REQUIRE_SUITESPARSE=ON -DCMAKE_BUILD_TYPE=Release
 	cmake --build $(BUILD)/ctest
 	ctest --test-dir $(BUILD)/ctest --output-on-failure
+
+# The Eigen-only configuration the README advertises (no SuiteSparse): test_methods in it.
+ctest-eigen: deps
+	cmake -S . -B $(BUILD)/ctest-eigen -G Ninja -DNRMICP_BUILD_TESTS=ON -DNRMICP_USE_SUITESPARSE=OFF \
+	  -DNRMICP_TESTS=test_methods -DCMAKE_BUILD_TYPE=Release
+	cmake --build $(BUILD)/ctest-eigen
+	ctest --test-dir $(BUILD)/ctest-eigen --output-on-failure
 
 pytest:
 	$(PY) -m pytest -q tests

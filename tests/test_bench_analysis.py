@@ -9,7 +9,10 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 import nrmicp
+from reference_impl import residual as reference_residual
 from nrmicp import bench
 
 
@@ -35,18 +38,19 @@ def test_per_digit_says_noise_when_the_runs_are_too_short_to_time():
     assert math.isnan(spd) and ipd == 1.5
 
 
-def _quick(tmp_path, *, without_matplotlib):
-    pre = "import sys; sys.modules['matplotlib'] = None; " if without_matplotlib else "import sys; "
-    code = pre + "from nrmicp.__main__ import main; sys.exit(main(sys.argv[1:]))"
-    out = tmp_path / "out"
+@pytest.fixture(scope="module")
+def quick_without_matplotlib(tmp_path_factory):
+    """One `bench --quick` run without matplotlib, shared by the tests that read it."""
+    code = "import sys; sys.modules['matplotlib'] = None; from nrmicp.__main__ import main; sys.exit(main(sys.argv[1:]))"
+    out = tmp_path_factory.mktemp("bench") / "out"
     proc = subprocess.run([sys.executable, "-c", code, "bench", "--family", "--quick", "--no-progress",
                            "--scenes", "bai_sym_icp,american_put", "--out", str(out)],
                           capture_output=True, text=True, timeout=300)
     return out, proc
 
 
-def test_without_matplotlib_the_numbers_are_written_and_the_run_ends_cleanly(tmp_path):
-    out, proc = _quick(tmp_path, without_matplotlib=True)
+def test_without_matplotlib_the_numbers_are_written_and_the_run_ends_cleanly(quick_without_matplotlib):
+    out, proc = quick_without_matplotlib
     assert proc.returncode == 0, proc.stderr
     assert "Traceback" not in proc.stderr
     assert "pip install nrmicp[plot]" in proc.stdout
@@ -56,8 +60,8 @@ def test_without_matplotlib_the_numbers_are_written_and_the_run_ends_cleanly(tmp
     assert "American put" in summary and "Bai" in summary
 
 
-def test_summary_has_no_negative_cost_and_records_the_environment(tmp_path):
-    out, proc = _quick(tmp_path, without_matplotlib=True)
+def test_summary_has_no_negative_cost_and_records_the_environment(quick_without_matplotlib):
+    out, proc = quick_without_matplotlib
     assert proc.returncode == 0, proc.stderr
     env = bench.environment()
     lines = (out / "summary.txt").read_text().splitlines()
@@ -111,13 +115,14 @@ def test_peers_solve_a_known_lcp_and_its_shifted_form():
     out = _peers.psor(Ash, qsh, csh, 1e-10, omega=omega, colour=colour, maxiter=10_000, history=True)
     assert out["success"] and out["residual"] < 1e-10
     assert np.max(np.abs(out["z"] - P.z_exact)) < 1e-9
-    assert nrmicp.residual(P.A, P.q, out["z"], P.zeta) < 1e-10
+    assert reference_residual(P.A, P.q, out["z"], P.zeta) < 1e-10
     assert len(out["history"]["residual"]) == out["nit"] + 1
-    for name in _peers.QP_SOLVERS:
-        if _peers.installed(name):
-            o = _peers.qp(name, Ash, qsh, csh, 1e-8)
-            assert o["success"] and nrmicp.residual(P.A, P.q, o["z"], P.zeta) < 1e-8, (name, o["status"])
-            assert np.max(np.abs(o["z"] - P.z_exact)) < 1e-6
+    installed = [name for name in _peers.QP_SOLVERS if _peers.installed(name)]
+    assert installed, f"none of the QP peers {_peers.QP_SOLVERS} is installed (make deps installs piqp)"
+    for name in installed:
+        o = _peers.qp(name, Ash, qsh, csh, 1e-8)
+        assert o["success"] and reference_residual(P.A, P.q, o["z"], P.zeta) < 1e-8, (name, o["status"])
+        assert np.max(np.abs(o["z"] - P.z_exact)) < 1e-6
 
 
 def test_peers_say_where_they_do_not_apply():

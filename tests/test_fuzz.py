@@ -9,11 +9,18 @@ an oracle that does not trust the library:
 - corrupt input -> TypeError/ValueError whose message names the corrupted argument (a raising
   zeta_jacobian: its own exception, unchanged).
 
-A few hundred cases in CI (deterministic); NRMICP_FUZZ_EXAMPLES=N runs N random cases, e.g.
+What is fuzzed is enumerated, not drawn: every listed corruption, and every method x ζ kind (x
+hierarchy for 'newton'), is a test of its own; Hypothesis draws only a seed, from which the sizes
+(n up to 300), the matrix and the values come (Hypothesis's preference for simple draws made most
+cases n <= 2 before). test_fuzz_coverage asserts what the slice reached: every corruption
+rejected, a number of oracle-checked converged solves per method, large n among them.
+
+CI runs a deterministic slice; NRMICP_FUZZ_EXAMPLES=N runs about N random cases, e.g.
 ``NRMICP_FUZZ_EXAMPLES=5000 python -m pytest -q tests/test_fuzz.py``.
 """
 from __future__ import annotations
 
+import collections
 import os
 import warnings
 
@@ -25,10 +32,6 @@ from hypothesis import strategies as st
 
 import nrmicp
 from snapshots import assert_unchanged, snapshot
-
-_LONG_RUN = int(os.environ.get("NRMICP_FUZZ_EXAMPLES", "0"))
-FUZZ = settings(max_examples=_LONG_RUN or 300, deadline=None, derandomize=not _LONG_RUN, database=None,
-                suppress_health_check=list(HealthCheck))
 
 METHODS = ["nrm", "nrmm", "nrmaor", "nrmsor", "nrmgs", "nrmj", "mms", "two_sweep", "newton"]
 EPS = np.finfo(float).eps
@@ -72,62 +75,120 @@ def random_matrix(rng, n, kind, scale):
     return R
 
 
-@st.composite
-def cases(draw):
-    seed = draw(st.integers(0, 2**32 - 1))
-    rng = np.random.default_rng(seed)
-    n = draw(st.integers(1, 12))
-    corrupt = draw(st.sampled_from(CORRUPTIONS)) if draw(st.integers(0, 3)) == 0 else None
-    # a corrupted case is otherwise valid, so that the error can only be about the corruption
-    kind = "hplus" if corrupt else draw(st.sampled_from(["hplus", "hplus", "posdiag", "random", "singular"]))
-    scale = 10.0 ** draw(st.sampled_from([0, 0, 0, -8, 8, -100, 100, -200, 200, -300, 300]))
-    A = random_matrix(rng, n, kind, scale)
-    if draw(st.booleans()):
-        A = sp.csr_matrix((A.data, A.indices.astype(np.int64), A.indptr.astype(np.int64)), shape=A.shape)
-    q = rng.uniform(-1, 1, n) * scale
-    zkind = draw(st.sampled_from(["none", "constant", "affine", "callable", "callable_f32"]))
-    c = rng.uniform(-1, 1, n)
-    B = sp.csr_matrix(0.1 * sp.random(n, n, density=0.4, random_state=rng))
-    opts = dict(method=draw(st.sampled_from(METHODS)), maxiter=draw(st.sampled_from([0, 1, 50, 300])),
-                tol=draw(st.sampled_from([1e-8, 1e-12, 1e-3])) * scale,
-                z_update=draw(st.sampled_from(["auto", "explicit", "solve"])),
-                accelerate=draw(st.sampled_from(["none", "anderson"])),
-                scale=draw(st.sampled_from([False, "rows", "both"])),
-                inner=draw(st.sampled_from(["auto", "auto", "umfpack", "cholmod", "eigen_lu", "eigen_llt"])),
-                stall_iterations=draw(st.sampled_from([5, 100])))
-    if corrupt or (opts["inner"] in ("cholmod", "umfpack") and not nrmicp.backends()[opts["inner"]]):
+STATIONARY = [m for m in METHODS if m != "newton"]
+ZETA_KINDS = ["none", "constant", "affine", "callable", "callable_f32"]
+HIERARCHIES = [None, "auto", "amg", "list", "dense list"]
+#: Every (method, ζ kind, hierarchy) the valid cases run; the hierarchy is 'newton''s argument.
+COMBOS = ([(m, z, None) for m in STATIONARY for z in ZETA_KINDS]
+          + [("newton", z, h) for z in ZETA_KINDS for h in HIERARCHIES])
+
+_LONG_RUN = int(os.environ.get("NRMICP_FUZZ_EXAMPLES", "0"))
+#: Examples per valid combination and per corruption in CI (deterministic); the long run spreads
+#: NRMICP_FUZZ_EXAMPLES over all of them, with fresh random seeds.
+VALID_EXAMPLES, CORRUPT_EXAMPLES = 6, 2
+
+
+def _fuzz_settings(per_test):
+    share = max(per_test, -(-_LONG_RUN // (len(COMBOS) + len(CORRUPTIONS))))  # never less than CI's slice
+    return settings(max_examples=share, deadline=None, derandomize=not _LONG_RUN, database=None,
+                    suppress_health_check=list(HealthCheck))
+
+
+#: What the fuzz slice reached in this session (checked by test_fuzz_coverage).
+REACHED = {"combos": collections.Counter(), "drawn": collections.Counter(), "rejected": collections.Counter(),
+           "converged": collections.Counter(), "n_converged": collections.defaultdict(list)}
+
+
+def _size(rng, small_only=False):
+    """n: about a third tiny (1..12, the edge cases), the rest 13..300."""
+    if small_only or rng.uniform() < 0.3:
+        return int(rng.integers(1, 13))
+    return int(rng.integers(13, 301))
+
+
+def _common_options(rng, method, n, scale, corrupt):
+    opts = dict(method=method, tol=float(rng.choice([1e-8, 1e-12, 1e-3])) * scale,
+                z_update=str(rng.choice(["auto", "explicit", "solve"])),
+                accelerate=str(rng.choice(["none", "anderson"])),
+                scale=[False, "rows", "both"][rng.integers(3)],
+                inner=str(rng.choice(["auto", "auto", "umfpack", "cholmod", "eigen_lu", "eigen_llt"])),
+                stall_iterations=int(rng.choice([5, 100])), polish=bool(rng.integers(2)))
+    if corrupt or not nrmicp.backends().get(opts["inner"], True):
         opts["inner"] = "auto"  # (a forced Cholesky of a nonsymmetric A would fail before the corruption is seen)
-    if opts["method"] in ("nrmaor", "nrmsor") and draw(st.booleans()):
-        opts["alpha"] = draw(st.floats(0.5, 1.5))
-    if opts["method"] == "two_sweep" and draw(st.booleans()):
-        opts["theta"] = draw(st.floats(0.3, 1.5))
-    if opts["method"] not in ("mms", "two_sweep") and draw(st.booleans()):
+    if method in ("nrmaor", "nrmsor") and rng.integers(2):
+        opts["alpha"] = float(rng.uniform(0.5, 1.5))
+    if method == "two_sweep" and rng.integers(2):
+        opts["theta"] = float(rng.uniform(0.3, 1.5))
+    if method not in ("mms", "two_sweep") and rng.integers(2):
         opts["omega1"] = rng.uniform(0.5, 2.0, n)
         opts["phi"] = rng.uniform(0.0, 1.0, n)
-    if draw(st.booleans()):
+    return opts
+
+
+def build_case(seed, method, zkind, hierarchy=None, corrupt=None):
+    """A case of the given method, ζ kind and hierarchy, everything else from `seed`: a corrupted
+    case is otherwise valid (an H+ matrix), so that the error can only be about the corruption."""
+    rng = np.random.default_rng(seed)
+    newton = method == "newton"
+    n = _size(rng, small_only=corrupt is not None and rng.uniform() < 0.5)
+    # half of the valid cases tame (H+ matrix, the method's defaults, maxiter 300): the ones that
+    # must converge, so that the oracle checks results of every method
+    tame = not corrupt and rng.uniform() < 0.5
+    if corrupt or tame:
+        kind = "hplus"
+    elif newton:
+        kind = str(rng.choice(["hplus", "hplus", "hplus", "posdiag"]))
+    else:
+        kind = str(rng.choice(["hplus", "hplus", "hplus", "posdiag", "random", "singular"]))
+    scale = 10.0 ** float(rng.choice([0, 0, 0, -8, 8, -100, 100, -200, 200, -300, 300]))
+    A = random_matrix(rng, n, kind, scale)
+    if rng.integers(2):
+        A = sp.csr_matrix((A.data, A.indices.astype(np.int64), A.indptr.astype(np.int64)), shape=A.shape)
+    q = rng.uniform(-1, 1, n) * scale
+    c = rng.uniform(-1, 1, n)
+    B = sp.csr_matrix(0.1 * sp.random(n, n, density=min(1.0, 3.0 / n), random_state=rng))
+    opts = _common_options(rng, method, n, scale, corrupt)
+    # Newton: enough iterations to converge (maxiter 0 and 1 are the stationary members' edge cases)
+    opts["maxiter"] = int(rng.choice([50, 100, 300] if newton else [0, 1, 50, 300, 300]))
+    if tame:
+        for k in ("omega1", "phi", "alpha", "theta"):
+            opts.pop(k, None)
+        opts.update(maxiter=300, inner="auto", tol=float(rng.choice([1e-8, 1e-12])) * scale)
+    elif rng.integers(2):
         opts["omega2"] = np.abs(A.diagonal()) + scale * rng.uniform(0.1, 1.0, n)
-    x0 = rng.uniform(0, 1, n) if draw(st.booleans()) else None
-    opts["polish"] = draw(st.booleans())
-    cname = corrupt[0] if corrupt else None
-    if cname in ("hierarchy", "zeta_jacobian"):  # the method these arguments belong to (or not)
-        method = "nrmgs" if corrupt[1] == "for a stationary method" else "newton"
-        if method != opts["method"] and not (method == "nrmgs" and cname == "hierarchy" and opts["method"] != "newton"):
-            opts["method"] = method
-            opts.pop("alpha", None)  # (options of the method drawn first)
-            opts.pop("theta", None)
-    if cname == "zeta_jacobian":
-        zkind = draw(st.sampled_from(["callable", "callable_f32"]))
-    if opts["method"] == "newton":
-        newton_options(opts)
-        opts["hierarchy"] = draw(st.sampled_from([None, "auto", "amg", "list", "list"]))
-        if opts["hierarchy"] == "list":
-            opts["hierarchy"] = random_hierarchy(rng, n, dense=draw(st.booleans()))
-        if not corrupt and draw(st.integers(0, 2)) == 0:
-            opts["inner"] = "cg"  # the iterative inner solve: CG or BiCGSTAB, by K's symmetry
+    x0 = rng.uniform(0, 1, n) if rng.integers(2) else None
     jacobian = None
-    if opts["method"] == "newton" and zkind in ("callable", "callable_f32") and draw(st.booleans()):
-        jacobian = "valid"
+    if newton:
+        newton_options(opts)
+        if hierarchy in ("list", "dense list"):
+            opts["hierarchy"] = random_hierarchy(rng, n, dense=hierarchy == "dense list")
+        else:
+            opts["hierarchy"] = hierarchy
+        if not corrupt and rng.integers(3) == 0:
+            opts["inner"] = "cg"  # the iterative inner solve: CG or BiCGSTAB, by K's symmetry
+        if zkind in ("callable", "callable_f32") and rng.integers(2):
+            jacobian = "valid"
     return dict(A=A, q=q, zkind=zkind, c=c, B=B, x0=x0, opts=opts, corrupt=corrupt, rng=rng, jacobian=jacobian)
+
+
+def corrupt_case(seed, corrupt):
+    """A valid case of a method the corrupted argument belongs to (or, for '... for a stationary
+    method', one it does not), then corrupted."""
+    rng = np.random.default_rng(seed)
+    name, how = corrupt
+    if name in ("hierarchy", "zeta_jacobian"):
+        method = str(rng.choice(STATIONARY)) if how == "for a stationary method" else "newton"
+    elif name in ("omega1", "phi"):
+        method = str(rng.choice(["nrm", "nrmgs", "nrmj", "nrmsor", "nrmaor"]))
+    else:
+        method = str(rng.choice(METHODS))
+    zkind = str(rng.choice(["callable", "callable_f32"] if name == "zeta_jacobian" else ZETA_KINDS))
+    hierarchy = str(rng.choice(["list", "list"] + ([] if name == "zeta_jacobian" else ["amg"])))
+    case = build_case(int(rng.integers(2**32)), method, zkind, hierarchy if method == "newton" else None, corrupt)
+    if name == "zeta_jacobian":
+        case["opts"]["maxiter"] = 50  # (the Jacobian is asked for at the first Newton step)
+        case["opts"]["tol"] = 1e-300
+    return case
 
 
 def newton_options(opts):
@@ -280,16 +341,15 @@ def stable_norm(v):
 
 
 #: Corruptions seen only when the library calls the corrupted callable (a Newton solve that stops
-#: before its first step never asks for the Jacobian): an exception is then required to be the
-#: right one, but a solve may also end normally.
+#: before its first step never asks for the Jacobian): corrupt_case makes the solve take steps.
 LAZY = {("zeta_jacobian", "wrong shape"), ("zeta_jacobian", "returns a string"), ("zeta_jacobian", "raises")}
 
 
-@FUZZ
-@given(case=cases())
-def test_fuzz_oracle(case):
+def check_case(case):
+    """Solve the case and check it against the oracle; records what it reached in REACHED."""
     zeta, zeta_ref = make_zeta(case["zkind"], case["c"], case["B"])
     if case["corrupt"] is not None:
+        REACHED["drawn"][case["corrupt"]] += 1
         zeta = apply_corruption(case, zeta)
     A, q, x0, opts = case["A"], case["q"], case["x0"], case["opts"]
     jac = zeta_jacobian if isinstance(case["jacobian"], str) else case["jacobian"]  # "valid"
@@ -305,6 +365,7 @@ def test_fuzz_oracle(case):
         event("corrupt input: the user's JacobianError")
         assert case["corrupt"] == ("zeta_jacobian", "raises")
         assert_unchanged(before, watched)
+        REACHED["rejected"][case["corrupt"]] += 1
         return
     except (TypeError, ValueError) as exc:  # numpy.linalg.LinAlgError is a ValueError
         msg = str(exc)
@@ -312,6 +373,7 @@ def test_fuzz_oracle(case):
         if case["corrupt"] is not None:
             name = case["corrupt"][0]
             assert name in msg, f"corrupt {case['corrupt']} -> {type(exc).__name__}: {msg}"
+            REACHED["rejected"][case["corrupt"]] += 1
         else:  # valid input that the method cannot take: still a clear error naming what
             assert isinstance(exc, (ValueError, np.linalg.LinAlgError)), msg
             assert any(s in msg for s in ("A[", "A (", "A is", "left matrix", "omega2", "alpha")), msg
@@ -321,14 +383,66 @@ def test_fuzz_oracle(case):
     assert_unchanged(before, watched)
     assert isinstance(res.status, nrmicp.Status)
     event(f"valid input: {res.status.name}")
-    if opts["method"] == "newton":
-        event(f"newton: {res.status.name}, path {res.path}")
     assert np.all(np.isfinite(res.z)), res.message
     if res.success:
         true_res, slack = oracle_residual(A, q, res.z, zeta_ref)
         assert true_res < opts["tol"] + slack, (res.residual, true_res, opts["tol"], res.message)
+        if case["corrupt"] is None:
+            REACHED["converged"][opts["method"]] += 1
+            REACHED["n_converged"][opts["method"]].append(A.shape[0])
 
 
-def test_fuzz_reports_its_size():
-    # The long run's size is whatever NRMICP_FUZZ_EXAMPLES says; CI runs the deterministic 300.
-    assert FUZZ.max_examples == (_LONG_RUN or 300)
+def _combo_id(combo):
+    return "-".join(str(x) for x in combo if x is not None)
+
+
+@pytest.mark.parametrize("method,zkind,hierarchy", COMBOS, ids=[_combo_id(c) for c in COMBOS])
+@_fuzz_settings(VALID_EXAMPLES)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_fuzz_valid(method, zkind, hierarchy, seed):
+    REACHED["combos"][(method, zkind, hierarchy)] += 1
+    check_case(build_case(seed, method, zkind, hierarchy))
+
+
+@pytest.mark.parametrize("corrupt", CORRUPTIONS, ids=[f"{a}-{b}".replace(" ", "_") for a, b in CORRUPTIONS])
+@_fuzz_settings(CORRUPT_EXAMPLES)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_fuzz_corrupt(corrupt, seed):
+    check_case(corrupt_case(seed, corrupt))
+
+
+#: What the CI slice must reach: oracle-checked converged solves per method, and per method the
+#: largest n among them.
+MIN_CONVERGED = {m: 10 for m in STATIONARY} | {"newton": 80}
+MIN_LARGEST_N = 100
+
+
+def test_fuzz_coverage():
+    """The slice reaches what it lists (tests deselected in this session are run here first):
+    every corruption drawn and rejected, every combination run, converged oracle-checked solves
+    of every method, with large n among them."""
+    for combo in COMBOS:
+        if not REACHED["combos"][combo]:
+            test_fuzz_valid(method=combo[0], zkind=combo[1], hierarchy=combo[2])
+    for corrupt in CORRUPTIONS:
+        if not REACHED["drawn"][corrupt]:
+            test_fuzz_corrupt(corrupt=corrupt)
+    missed = [c for c in CORRUPTIONS if not REACHED["rejected"][c]]
+    assert not missed, f"corruptions never rejected: {missed}"
+    for method, k in MIN_CONVERGED.items():
+        assert REACHED["converged"][method] >= k, (method, dict(REACHED["converged"]))
+        assert max(REACHED["n_converged"][method]) >= MIN_LARGEST_N, (method, REACHED["n_converged"][method])
+
+
+#: (method, ζ kind, hierarchy, seed) of cases the random long run found failing, kept in CI.
+REGRESSIONS = [
+    # the fallback's sweep run doubled past INT_MAX: "Options: maxiter must be >= 0, got -1610612736"
+    ("newton", "affine", "list", 2666965),
+]
+
+
+@pytest.mark.parametrize("method,zkind,hierarchy,regression", REGRESSIONS)
+@settings(max_examples=1, deadline=None, database=None)
+@given(seed=st.just(0))  # (run under Hypothesis, as check_case records events)
+def test_fuzz_regressions(method, zkind, hierarchy, regression, seed):
+    check_case(build_case(regression, method, zkind, hierarchy))

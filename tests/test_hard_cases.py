@@ -37,6 +37,7 @@ from typing import Callable, Optional
 import numpy as np
 import pytest
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
 import nrmicp
 from nrmicp.scenes.bai import bai_matrix
@@ -366,6 +367,48 @@ CONFIGS = {
 }
 
 
+#: The status of every (case x configuration) solve, one letter per configuration in the order of
+#: CONFIGS: C converged, S stagnated, M max_iterations, D diverged; V ValueError and L LinAlgError
+#: for the documented refusals. Iteration counts are deterministic, so a change of any pair (a
+#: regression from CONVERGED to STAGNATED, or an improvement) must be made here on purpose.
+STATUS_LETTER = {"CONVERGED": "C", "STAGNATED": "S", "MAX_ITERATIONS": "M", "DIVERGED": "D",
+                 "ValueError": "V", "LinAlgError": "L"}
+#                                   nrmgs, nrm, nrmgs+explicit, nrm+explicit, nrmgs+anderson,
+#                                   nrmgs+anderson+explicit, nrmgs+scale, nrmgs+scale_rows, nrm+scale
+EXPECTED_STATUS = {
+    "laplacian-cond1e+04-lcp": "CCCCCCCCC",
+    "laplacian-cond1e+04-icp": "CSCCCCCCS",
+    "laplacian-cond1e+07-lcp": "CCCCCCCCC",
+    "laplacian-cond1e+07-icp": "CSCCCCCCS",
+    "laplacian-mu0-icp":       "CCCCCCCCC",
+    "convection-upwind-p10":   "CCCCCCCCC",
+    "convection-central-p5":   "DCDCCCDDC",
+    "hplus-nonsym":            "CCCCCCCCC",
+    "p-not-hplus-2x2":         "DCDCCCDDC",
+    "p-not-hplus-upper-2x2":   "CCCCCCCCC",
+    "p-not-hplus-random-6":    "DCDCDDDDC",
+    "badly-scaled-lcp":        "CSCSCCCCC",
+    "badly-scaled-obstacle":   "CSCSCCCCC",
+    "degenerate-lcp":          "CCCCCCCCC",
+    "degenerate-icp":          "CCCCCCCCC",
+    "lipschitz-0.5":           "CCCSCCCCC",
+    "lipschitz-0.9":           "CCCSCCCCC",
+    "lipschitz-1.5":           "CCCSCCCCC",
+    "lipschitz-3.0":           "SCSSSSSSS",
+    "nonsmooth-zeta":          "CCCSCCCCC",
+    "near-singular":           "CCCCCCCCC",
+    "not-P-no-solution":       "SMSMSSSSM",
+    "not-P-three-solutions":   "CDCDCCCCD",
+    "not-P-negative-diag":     "VLVLVVVVL",
+    "n1-lcp":                  "CCCCCCCCC",
+    "n1-obstacle":             "CCCCCCCCC",
+    "n1-icp":                  "CCCCCCCCC",
+    "empty-row-col":           "CCCCCCCCC",
+    "explicit-zeros":          "CCCCCCCCC",
+    "duplicate-entries":       "CCCCCCCCC",
+}
+
+
 # ---------------------------------------------------------------------------------------------
 # the invariants
 
@@ -424,25 +467,41 @@ CASE_IDS = [c.name for c in CASES]
 @pytest.mark.parametrize("config", list(CONFIGS))
 @pytest.mark.parametrize("case", CASES, ids=CASE_IDS)
 def test_hard_case_is_honest(case, config):
+    expected = EXPECTED_STATUS[case.name][list(CONFIGS).index(config)]
     try:
         res = run(case, config)
     except (ValueError, np.linalg.LinAlgError) as exc:
         assert case.may_refuse, f"{case.name}/{config}: unexpected {type(exc).__name__}: {exc}"
         assert "omega2" in str(exc) or "left matrix" in str(exc) or "singular" in str(exc)
+        assert STATUS_LETTER[type(exc).__name__] == expected, f"{case.name}/{config}: {exc}"
         return
     check_honest(case, config, res)
     if config in case.must_converge:
         assert res.success, f"{case.name}/{config}: {res.message}"
+    assert STATUS_LETTER[res.status.name] == expected, f"{case.name}/{config}: {res.message} (expected {expected})"
 
 
-def test_documented_divergence_is_cured():
-    """Laplacian μ = 0, ζ = 0.05 sin z + s: the explicit z-update and Anderson+explicit converge
-    where the paper's z-update struggles (at this small size it may still converge)."""
-    case = next(c for c in CASES if c.name == "laplacian-mu0-icp")
-    for config in ("nrm+explicit", "nrmgs+anderson+explicit"):
-        res = run(case, config)
+def test_expected_status_covers_every_pair():
+    assert set(EXPECTED_STATUS) == set(CASE_IDS)
+    assert all(len(v) == len(CONFIGS) and set(v) <= set(STATUS_LETTER.values()) for v in EXPECTED_STATUS.values())
+
+
+@pytest.mark.parametrize("method", ["nrm", "nrmgs"])
+def test_documented_divergence_is_cured(method):
+    """Laplacian μ = 0, ζ = 0.05 sin z + s on a 48 x 48 grid (a size where it fails): the paper's
+    z-update ('solve') does not converge, the explicit z-update and explicit + Anderson do."""
+    case = _known_sin_icp("laplacian-mu0-icp-48", lap2d(48), 0.05)
+    paper = nrmicp.solve(case.A, case.q, case.zeta, method=method, z_update="solve", tol=TOL, maxiter=3000)
+    assert paper.status in (nrmicp.Status.STAGNATED, nrmicp.Status.MAX_ITERATIONS), paper.message
+    assert numpy_residual(case, paper.z)[0] >= TOL
+    for accelerate in ("none", "anderson"):
+        res = nrmicp.solve(case.A, case.q, case.zeta, method=method, z_update="explicit", accelerate=accelerate,
+                           tol=TOL, maxiter=3000)
         assert res.success, res.message
-        assert np.abs(res.z - case.z_star).max() < 1e-6
+        assert numpy_residual(case, res.z)[0] < TOL
+        # Chen–Xiang for this M-matrix (A = ⟨A⟩, A⁻¹ ≥ 0): κ = ||A⁻¹ max(Λ, 1)||_∞, one sparse solve
+        kappa = float(spla.spsolve(sp.csc_matrix(case.A), np.maximum(case.A.diagonal(), 1.0)).max())
+        assert np.abs(res.z - case.z_star).max() <= kappa * TOL / (1 - case.lipschitz)
 
 
 @pytest.mark.parametrize("config", ["nrmgs", "nrm", "nrmgs+anderson", "nrmgs+explicit", "nrmgs+scale"])
@@ -485,6 +544,57 @@ def test_duplicates_and_explicit_zeros_do_not_change_the_answer():
 
 
 # ---------------------------------------------------------------------------------------------
+# the README's stabilizer table ("Hard cases and stabilizers"): moderate size, nrmgs, maxiter 3000,
+# against the paper's z-update ('solve' for an ICP)
+
+STABILIZERS = {"explicit": dict(z_update="explicit"), "anderson": dict(accelerate="anderson", anderson_m=5),
+               "scale": dict(scale="both"),
+               "explicit+anderson": dict(accelerate="anderson", anderson_m=5, z_update="explicit")}
+_ANDERSON_FIXES = ["laplacian-mu0-icp", "convection-central-p5", "p-not-hplus-2x2", "lipschitz-3.0", "near-singular"]
+_EXPLICIT_FIXES = ["laplacian-cond1e+04-icp", "laplacian-cond1e+07-icp", "laplacian-mu0-icp"]
+#: stabilizer -> (cases it turns from failure into convergence, cases it turns into failure)
+README_STABILIZER_TABLE = {
+    "explicit": (_EXPLICIT_FIXES, []),
+    "anderson": (_ANDERSON_FIXES, ["lipschitz-1.5"]),
+    "scale": ([], []),
+    "explicit+anderson": (sorted(set(_EXPLICIT_FIXES + _ANDERSON_FIXES) - {"lipschitz-3.0"}), []),
+}
+
+
+def _converges(case, method, opts):
+    opts = dict({"z_update": "explicit" if case.zeta is None else "solve"}, **opts, **case.setup)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", nrmicp.ConversionWarning)
+            res = nrmicp.solve(case.A, case.q, case.zeta, method=method, tol=TOL, maxiter=3000, **opts)
+    except (ValueError, np.linalg.LinAlgError):
+        return False
+    return res.success and numpy_residual(case, res.z)[0] < TOL
+
+
+@pytest.fixture(scope="module")
+def moderate_cases():
+    return build_cases("moderate")
+
+
+def test_readme_stabilizer_table(moderate_cases):
+    plain = {c.name: _converges(c, "nrmgs", {}) for c in moderate_cases}
+    for name, opts in STABILIZERS.items():
+        ok = {c.name: _converges(c, "nrmgs", opts) for c in moderate_cases}
+        fixed = sorted(n for n in ok if ok[n] and not plain[n])
+        broke = sorted(n for n in ok if plain[n] and not ok[n])
+        assert (fixed, broke) == tuple(sorted(x) for x in README_STABILIZER_TABLE[name]), name
+        # "No setting converges on p-not-hplus-random-6 ... or on not-P-no-solution"
+        assert not ok["p-not-hplus-random-6"] and not ok["not-P-no-solution"], name
+
+
+def test_readme_scaling_fixes_nrm_on_the_badly_scaled_cases(moderate_cases):
+    for case in moderate_cases:
+        if case.name.startswith("badly-scaled"):
+            assert not _converges(case, "nrm", {}) and _converges(case, "nrm", {"scale": "both"}), case.name
+
+
+# ---------------------------------------------------------------------------------------------
 # certificate verdicts
 
 
@@ -497,15 +607,22 @@ def certificate_table(cases=None, methods=("nrmgs", "nrm")):
                 cert = nrmicp.convergence_bound(case.A, method=method, lipschitz=case.lipschitz,
                                                 **({"omega2": case.setup["omega2"]} if "omega2" in case.setup else {}))
                 verdicts.append(f"{'certified' if cert.certified else 'not certified'} (rho={cert.rho:.3g})")
-            except Exception as exc:  # the certificate refuses some matrices (e.g. zero diagonal)
+            except ValueError as exc:  # the certificate refuses some matrices (a non-positive diagonal, a singular left matrix)
+                assert "omega2" in str(exc) or "left matrix" in str(exc), str(exc)
                 verdicts.append(f"n/a ({type(exc).__name__})")
         rows.append((case.name, *verdicts))
     return rows
 
 
+#: The (case, method) pairs the certificate refuses, with a ValueError naming why.
+CERTIFICATE_NA = {("not-P-three-solutions", "nrm"), ("not-P-negative-diag", "nrmgs"), ("not-P-negative-diag", "nrm")}
+
+
 def test_certificate_runs_on_every_case():
     rows = certificate_table()
     assert len(rows) == len(CASES)
+    na = {(row[0], method) for row in rows for method, v in zip(("nrmgs", "nrm"), row[1:]) if v.startswith("n/a")}
+    assert na == CERTIFICATE_NA
     # a certified case must converge with that method
     for case, row in zip(CASES, rows):
         for method, verdict in zip(("nrmgs", "nrm"), row[1:]):

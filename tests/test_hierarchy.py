@@ -6,8 +6,6 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-pytest.importorskip("nrmicp")
-pytest.importorskip("pyamg")
 from nrmicp._hierarchy import amg_prolongations, resolve_hierarchy  # noqa: E402
 
 

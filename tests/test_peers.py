@@ -1,8 +1,7 @@
 """nrmicp._peers's shared pieces, which the bench and benchmarks/ (qp_peers.py, scipy_modulus.py)
-use alike: the stopping rule, the QP eps tuning and PSOR's time limit."""
+use alike: the stopping rule, the QP eps tuning and PSOR's time limit. Time limits run on a fake
+clock (_peers.clock replaced), so no test depends on how fast the machine is."""
 from __future__ import annotations
-
-import time
 
 import numpy as np
 import pytest
@@ -19,9 +18,30 @@ def test_verdict(res, k, expected):
     assert _peers.verdict(res, 1e-8, k, 10) == expected
 
 
-def test_verdict_time_limit():
-    assert _peers.verdict(1.0, 1e-8, 0, 10, time.perf_counter() - 5, time_limit=1.0) == "time_limit"
-    assert _peers.verdict(1.0, 1e-8, 0, 10, time.perf_counter(), time_limit=100.0) is None
+class FakeClock:
+    """Each reading is `step` seconds after the previous one."""
+
+    def __init__(self, step):
+        self.now, self.step = 0.0, step
+
+    def __call__(self):
+        self.now += self.step
+        return self.now
+
+
+@pytest.fixture
+def fake_clock(monkeypatch):
+    def install(step):
+        clock = FakeClock(step)
+        monkeypatch.setattr(_peers, "clock", clock)
+        return clock
+    return install
+
+
+def test_verdict_time_limit(fake_clock):
+    fake_clock(1.0)  # the verdict's reading is 1 s after t0 = 0
+    assert _peers.verdict(1.0, 1e-8, 0, 10, 0.0, time_limit=0.5) == "time_limit"
+    assert _peers.verdict(1.0, 1e-8, 0, 10, 0.0, time_limit=100.0) is None
 
 
 def _lcp(n=6):
@@ -52,23 +72,21 @@ def test_tune_eps_stops_at_eps_min_and_on_an_error():
     assert not o["reached"] and o["y"] is None and o["status"] == "error: boom" and len(o["attempts"]) == 1
 
 
-def test_tune_eps_budget():
+def test_tune_eps_budget(fake_clock):
     A, q, y_star = _lcp()
-
-    def slow(eps):
-        time.sleep(0.02)
-        return y_star + 1.0, "stuck", 1
-
-    o = _peers.tune_eps(slow, A, q, 1e-6, time_budget=0.01)
-    assert o["status"] == "stuck (tuning budget exhausted)" and len(o["attempts"]) == 1
+    fake_clock(1.0)  # every attempt takes 1 s on this clock
+    stuck = lambda eps: (y_star + 1.0, "stuck", 1)  # noqa: E731
+    o = _peers.tune_eps(stuck, A, q, 1e-6, time_budget=2.5)
+    assert o["status"] == "stuck (tuning budget exhausted)" and len(o["attempts"]) == 3
 
 
-def test_psor_time_limit_and_max_iterations():
+def test_psor_time_limit_and_max_iterations(fake_clock):
     n = 400
     A = sp.diags([-np.ones(n - 1), 2.0 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1], format="csr")  # slow
     q = -np.ones(n)
     colour = _peers.colours(A)
-    o = _peers.psor(A, q, np.zeros(n), 1e-14, omega=1.0, colour=colour, maxiter=10**9, time_limit=0.05)
-    assert o["status"] == "time_limit" and not o["success"] and o["nit"] > 0
+    fake_clock(1.0)
+    o = _peers.psor(A, q, np.zeros(n), 1e-14, omega=1.0, colour=colour, maxiter=10**9, time_limit=20.0)
+    assert o["status"] == "time_limit" and not o["success"] and 0 < o["nit"] < 20
     o = _peers.psor(A, q, np.zeros(n), 1e-14, omega=1.0, colour=colour, maxiter=5)
     assert o["status"] == "max_iterations" and o["nit"] == 5

@@ -220,6 +220,11 @@ SPEC_DEFAULTS = {   # SPEC.md's method table, for the methods whose every defaul
     "nrmm": lambda A: dict(omega1=1.0, alpha=A.diagonal().mean(), phi=0.0),
     "nrmgs": lambda A: dict(omega1=1.0, omega2=A.diagonal(), phi=0.0),
     "nrmj": lambda A: dict(omega1=1.0, omega2=A.diagonal(), phi=0.0),
+    # the table's Ω1 = I, Ω2 = D, φ = 0, with solve()'s documented α = 1, β = α (and θ = 1)
+    "nrmaor": lambda A: dict(omega1=1.0, omega2=A.diagonal(), phi=0.0, alpha=1.0, beta=1.0),
+    "nrmsor": lambda A: dict(omega1=1.0, omega2=A.diagonal(), phi=0.0, alpha=1.0),
+    "mms": lambda A: dict(omega2=A.diagonal(), alpha=1.0, beta=1.0),
+    "two_sweep": lambda A: dict(omega2=A.diagonal(), alpha=1.0, beta=1.0, theta=1.0),
 }
 
 
@@ -227,8 +232,8 @@ SPEC_DEFAULTS = {   # SPEC.md's method table, for the methods whose every defaul
 def test_default_parameters_follow_spec_table(method):
     """nrmicp.solve with only `method` given iterates like the reference with SPEC's defaults."""
     P = problem("icp", M_SMALL, False)
-    # SPEC: 'auto' is explicit, except 'solve' for nrm with its default Omega2 = I on an ICP.
-    expected_update = "solve" if method == "nrm" else "explicit"
+    # SPEC: 'auto' is explicit, except 'solve' on an ICP for nrm with its default Omega2 = I and for mms.
+    expected_update = "solve" if method in ("nrm", "mms") else "explicit"
     ref = reference_solve(P.A, P.q, P.zeta, method=method, z_update=expected_update, gamma=1.0,
                           tol=TOL, maxiter=3, **SPEC_DEFAULTS[method](P.A))
     res = nrmicp.solve(P.A, P.q, P.zeta, method=method, maxiter=3, record_history=True)

@@ -472,7 +472,7 @@ class Newton {
                                    int& sweep_run, Vector& z) {
       if (res.fallback_sweeps >= o.maxiter) return Status::MaxIterations;
       const int k = std::min(sweep_run, o.maxiter - res.fallback_sweeps);
-      sweep_run *= 2;
+      sweep_run = std::min(sweep_run, std::numeric_limits<int>::max() / 2) * 2;  // no overflow to a negative run
       const Result sw = self.finest_->sweep(q, zeta, best.z, k, o.tol);
       res.fallback_sweeps += sw.iterations;
       res.iterations += sw.iterations;

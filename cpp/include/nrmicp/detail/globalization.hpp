@@ -153,7 +153,7 @@ class Globalized {
   void fall_back() {
     if (sweeps_ >= ctl_.sweep_budget) return give_up();
     const int k = std::min(sweep_run_, ctl_.sweep_budget - sweeps_);
-    sweep_run_ *= 2;
+    sweep_run_ = std::min(sweep_run_, std::numeric_limits<int>::max() / 2) * 2;  // no overflow to a negative run
     const Result fr = plain_.sweep(best_z_, k, ctl_.tol);
     sweeps_ += fr.iterations;
     seen_.clear();
