@@ -7,9 +7,9 @@ import sys
 import numpy as np
 import pytest
 
-nrmicp = pytest.importorskip("nrmicp")
-pytest.importorskip("matplotlib")
-pytest.importorskip("pyamg")
+import nrmicp
+import matplotlib  # noqa: F401  (required: a missing one fails, not skips)
+import pyamg  # noqa: F401  (required: a missing one fails, not skips)
 from nrmicp import bench_realistic, scenes  # noqa: E402
 
 

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-nrmicp = pytest.importorskip("nrmicp")
-scenes = pytest.importorskip("nrmicp.scenes")
+import nrmicp
+import nrmicp.scenes as scenes
 
 
 def recompute(problem, z):
