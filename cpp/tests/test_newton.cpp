@@ -320,3 +320,48 @@ TEST_CASE("Newton: warm start from the solution, maxiter, callback stop, tol bel
   CHECK(r.status == Status::Stagnated);
   CHECK(r.residual < 1e-12);
 }
+
+// Traps of the C++ API (issue 13): each of these ran silently before.
+TEST_CASE("nrmicp::Solver refuses Method::Newton, naming nrmicp::Newton") {
+  const RowMat A = testing::bai<int, Eigen::RowMajor>(4, 4.0, true);
+  Options o;
+  o.method = Method::Newton;
+  CHECK_THROWS_WITH_AS(Solver<RowMat>(A, o), doctest::Contains("nrmicp::Newton"), std::invalid_argument);
+  CHECK_FALSE(is_aor_type(Method::Newton));
+}
+
+TEST_CASE("nrmicp::Newton refuses phi, accelerate and z_update, at set-up and per solve") {
+  const RowMat A = testing::bai<int, Eigen::RowMajor>(4, 4.0, true);
+  const Vec q = -Vec::Ones(A.rows());
+  for (Method m : {Method::Newton, Method::NRMGS}) {  // the class is the Newton member, whatever method says
+    CAPTURE(to_string(m));
+    Options phi, anderson, solve_update;
+    phi.method = anderson.method = solve_update.method = m;
+    phi.phi = Vec::Constant(A.rows(), 0.1);
+    anderson.accelerate = Accelerate::Anderson;
+    solve_update.z_update = ZUpdate::Solve;
+    CHECK_THROWS_WITH_AS(Newton<RowMat>(A, phi), doctest::Contains("phi"), std::invalid_argument);
+    CHECK_THROWS_WITH_AS(Newton<RowMat>(A, anderson), doctest::Contains("accelerate"), std::invalid_argument);
+    CHECK_THROWS_WITH_AS(Newton<RowMat>(A, solve_update), doctest::Contains("z_update"), std::invalid_argument);
+    const Newton<RowMat> newton(A, Options());
+    CHECK_THROWS_WITH_AS(newton.solve(q, Zeta<int>::none(), nullptr, {}, {}, &anderson),
+                         doctest::Contains("accelerate"), std::invalid_argument);
+  }
+  Options o;
+  o.method = Method::Newton;
+  CHECK_NOTHROW(o.check(A.rows()));
+}
+
+TEST_CASE("nrmicp::Newton fills timings.iterations") {
+  const RowMat A = laplacian_2d(31);
+  const Vec psi = paraboloid(31), q = Vec::Zero(31 * 31);
+  Options o;
+  o.record_history = true;
+  for (const auto& zeta : {Zeta<int>::constant(psi), Zeta<int>::affine(Zeta<int>::RowMatrix(A.rows(), A.rows()), psi)}) {
+    const Result r = Newton<RowMat>(A, o).solve(q, zeta);
+    REQUIRE(r.status == Status::Converged);
+    CHECK(r.timings.iterations > 0);
+    CHECK(r.timings.iterations <= r.timings.total);
+    CHECK(r.timings.iterations >= r.history_seconds.back());
+  }
+}

@@ -31,18 +31,6 @@ def check_polish(polish) -> bool:
     return bool(polish)
 
 
-def check_options(*, phi, accelerate, z_update):
-    """Options of the stationary members that method 'newton' does not have."""
-    if phi is not None:
-        raise ValueError("phi is a parameter of the stationary members; method 'newton' has none")
-    if (accelerate or "none").lower() != "none":
-        raise ValueError(f"accelerate={accelerate!r} applies to the stationary members; method 'newton' "
-                         "takes Newton steps (use accelerate='none')")
-    if not isinstance(z_update, str) or z_update.lower() != "auto":
-        raise ValueError(f"z_update={z_update!r} applies to the stationary members; method 'newton' "
-                         "recovers z from its linear solves (use z_update='auto')")
-
-
 def check_no_hierarchy(hierarchy, method):
     if hierarchy is not None and not (isinstance(hierarchy, str) and hierarchy == "auto"):
         raise ValueError(f"hierarchy is the nested iteration of method 'newton'; method {method!r} has none "
@@ -126,7 +114,7 @@ def jacobian_argument(zeta_jacobian, solver, kind, dc) -> dict:
         return {}
     if not callable(zeta_jacobian):
         raise TypeError(f"zeta_jacobian must be callable, got {type(zeta_jacobian).__name__}")
-    if solver.method != "newton" or kind != 3:
+    if solver.method != "newton" or kind != _core.ZetaKind.functor:
         raise ValueError("zeta_jacobian is used by method 'newton' with a callable zeta only")
     import scipy.sparse as sp
     from ._inputs import as_csr

@@ -133,16 +133,16 @@ class Newton {
   using Poll = detail::Poll;
   using Progress = detail::Progress;
 
+  /// `options.method` is taken as Method::Newton (this class is the Newton member), so the
+  /// options the Newton member does not have (phi, accelerate, z_update) are refused.
   Newton(const MatrixType& A, Options options, std::vector<RowMatrix> prolongations = {})
-      : A_(A), options_(std::move(options)), P_(std::move(prolongations)) {
+      : A_(A), options_(as_newton(std::move(options))), P_(std::move(prolongations)) {
     if (A.rows() != A.cols())
       throw std::invalid_argument("Newton: A must be square, got " + std::to_string(A.rows()) + "x" +
                                   std::to_string(A.cols()));
     options_.check(A.rows());
     const auto t0 = std::chrono::steady_clock::now();
-    Options o = options_;
-    o.method = Method::Newton;
-    params_ = resolve_parameters(A_, o);
+    params_ = resolve_parameters(A_, options_);
     finest_ = std::make_unique<detail::NewtonLevel<MatrixType>>(A_, options_);
     Eigen::Index rows = A.rows();
     for (std::size_t l = 0; l < P_.size(); ++l) {
@@ -180,26 +180,15 @@ class Newton {
   /// Number of levels (1 without prolongations).
   int levels() const { return 1 + static_cast<int>(coarse_.size()); }
 
-  /// Solves ICP(q, A, ζ). The start: with prolongations, the nested coarse-to-fine solution
-  /// (z0 is not used: measured on the American put, n_space = 6400, 100 time steps, a warm start
-  /// from the previous time step took 3.48 steps per time step and 1.53 CPU s for the march, the
-  /// nested start 1.18 steps (11.6 solves on all levels) and 0.84 s; at n_space = 800 the warm
-  /// start is faster, 0.07 against 0.16 s: pass hierarchy None for small time-stepping problems);
-  /// without, z0 (zeros when null). The iteration fields of
-  /// `iteration_options` (tol, maxiter, record_history) override the constructor's.
+  /// Solves ICP(q, A, ζ). The start: with prolongations, the nested coarse-to-fine solution (z0
+  /// is not used; warm starts win only on small time-stepping problems: README, the American
+  /// put); without, z0 (zeros when null). `solve_options`, when given, replace the constructor's
+  /// per-solve options (SolveOptions says which the Newton member uses).
   Result solve(const Vector& q, const Zeta<StorageIndex>& zeta = Zeta<StorageIndex>::none(), const Vector* z0 = nullptr,
-               const Callback& callback = {}, const Poll& poll = {}, const Options* iteration_options = nullptr,
+               const Callback& callback = {}, const Poll& poll = {}, const SolveOptions* solve_options = nullptr,
                const Progress& progress = {}) const {
     std::lock_guard<std::mutex> lock(mutex_);
-    const auto t0 = std::chrono::steady_clock::now();
-    Options o = options_;
-    if (iteration_options) {
-      iteration_options->check(A_.rows());
-      o.tol = iteration_options->tol;
-      o.maxiter = iteration_options->maxiter;
-      o.record_history = iteration_options->record_history;
-      o.verbose = iteration_options->verbose;
-    }
+    const Options o = solve_options ? options_.with(solve_options, A_.rows()) : options_;
     return run(q, zeta, z0, callback, poll, o, !coarse_.empty(), progress);
   }
 
@@ -224,16 +213,23 @@ class Newton {
     zeta.check(n);
     Run run(*this, o, callback, poll, nest, progress);
     Result r;
+    const auto t_iterations = std::chrono::steady_clock::now();
     switch (zeta.kind()) {
       case ZetaKind::None: r = run.obstacle(q, Vector::Zero(n), z0, nest); break;
       case ZetaKind::Constant: r = run.obstacle(q, zeta.c(), z0, nest); break;
       case ZetaKind::Affine: r = run.affine(q, zeta, z0); break;
       case ZetaKind::Functor: r = zeta.has_jacobian() ? run.semismooth(q, zeta, z0) : run.functor(q, zeta, z0); break;
     }
+    r.timings.iterations = detail::ScopedTimer::seconds_since(t_iterations);  // all levels, nested start included
     r.timings.setup = setup_seconds_;
     r.timings.total = detail::ScopedTimer::seconds_since(t0);
     r.inner = finest_->inner_name();
     return r;
+  }
+
+  static Options as_newton(Options o) {
+    o.method = Method::Newton;
+    return o;
   }
 
   using Level = detail::NewtonLevel<MatrixType>;
@@ -289,23 +285,12 @@ class Newton {
       }
     }
 
-    /// Newton steps per coarse level: until its active set settles (at most this many). Nested
-    /// iteration needs only a good start from each coarse level, but a cut-short coarse solve
-    /// leaves a band of wrong active set that a finer level peels one layer per step. Measured
-    /// on obstacle_2d, amg, inner cg: exactly 2 steps per coarse level (faster at m = 511 and
-    /// 1023: 18 and 20 solves against 25 and 35 settled, +12% time at m = 1023) failed at
-    /// m = 2047 (n = 4.2M): 28 finest steps, Res 6.9e-4 falling 7% per step, 92 CPU s, against
-    /// 3 finest steps and 26.5 s settled. Stopping a coarse level at 2 steps once a step had cut
-    /// Res tenfold failed the same way (31 finest steps): Res does not show the band.
+    /// Newton steps per coarse level: until its active set settles (at most this many), since a
+    /// cut-short coarse solve leaves a band of wrong active set that Res does not show
+    /// (measured: docs/MEASUREMENTS.md, coarse_maxiter).
     static constexpr int coarse_maxiter = 100;
     /// The inner solves on the coarse levels stop at this fraction of the iterate's Res: a start
-    /// needs no more. Measured on obstacle_2d (m = 255, 511, 1023, hierarchy geometric and amg,
-    /// inner cg, tol 1e-8): CG iterations on all levels 36 → 20, 55 → 22, 74 → 25 (and 33 → 16,
-    /// 55 → 22, 76 → 27 with amg) against 1e-12 relative; the finest-level step counts (3, or 2)
-    /// and Res unchanged; 1e-4 and 1e-2 gave 39 and 30 at m = 1023. Not on the finest level:
-    /// there (m = 1023, forcing 0.1 / 0.01, an inexact step finished to tol / 10 when its set
-    /// repeated) CG iterations fell 25 → 16 but Newton took 5–8 steps instead of 3, each with its
-    /// own multigrid set-up: 2.59 → 2.33 / 2.17 CPU s geometric, 5.00 → 5.14 / 4.90 amg.
+    /// needs no more; not on the finest level (docs/MEASUREMENTS.md, coarse_forcing).
     static constexpr double coarse_forcing = 0.1;
 
     /// Nested start for LCP(q_shift, A) in y ≥ 0: Newton on each coarse level to a settled active set,
