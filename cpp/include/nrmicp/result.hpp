@@ -11,9 +11,10 @@ namespace nrmicp {
 
 enum class Status {
   Converged = 0,      ///< Res(z) < tol
-  MaxIterations = 1,  ///< maxiter x-updates done without reaching tol
+  MaxIterations = 1,  ///< maxiter x-updates (Newton: Newton steps, or fallback sweeps) done without reaching tol
   Diverged = 2,       ///< Res became non-finite or grew beyond divergence_factor × best
-  Stagnated = 3,      ///< the best Res did not improve for stall_iterations iterations
+  Stagnated = 3,      ///< Res stopped decreasing before tol (the rules of Options::stall_iterations; Newton: also
+                      ///< a fallback that did not improve the best Res, or a settled active set short of tol)
   CallbackStop = 4,   ///< the callback asked to stop
   ZetaFailed = 5,     ///< ζ(z) returned non-finite values
 };
@@ -63,11 +64,11 @@ struct Result {
   Eigen::VectorXd z;         ///< best iterate (smallest Res seen); the last one when converged
   Eigen::VectorXd w;         ///< A z + q
   Status status = Status::MaxIterations;
-  int nit = 0;               ///< x-updates performed to reach the returned z
-  int iterations = 0;        ///< x-updates performed in all
+  int nit = 0;               ///< x-updates performed to reach the returned z (Newton: finest-level Newton steps)
+  int iterations = 0;        ///< x-updates performed in all (Newton: finest-level Newton steps + fallback sweeps)
   double residual = 0;       ///< Res(z) of the returned z
   std::string message;
-  std::string inner;         ///< the inner solver used for Lm
+  std::string inner;         ///< the inner solver used for Lm (Newton: for the reduced systems)
   // history (filled when Options::record_history)
   std::vector<int> history_iteration;
   std::vector<double> history_seconds;

@@ -12,6 +12,16 @@
 namespace nrmicp {
 
 enum class ZetaKind { None, Constant, Affine, Functor };
+inline constexpr ZetaKind all_zeta_kinds[] = {ZetaKind::None, ZetaKind::Constant, ZetaKind::Affine, ZetaKind::Functor};
+inline const char* to_string(ZetaKind k) {
+  switch (k) {
+    case ZetaKind::None: return "none";
+    case ZetaKind::Constant: return "constant";
+    case ZetaKind::Affine: return "affine";
+    case ZetaKind::Functor: return "functor";
+  }
+  return "?";
+}
 
 template <typename StorageIndex = int>
 class Zeta {
