@@ -229,14 +229,7 @@ py::dict result_dict(const nrmicp::Result& r, bool record_history) {
   t["inner_solve"] = r.timings.inner_solve;
   t["total"] = r.timings.total;
   d["timings"] = t;
-  // the Newton member (empty for the stationary members)
-  d["linear_solves"] = r.linear_solves;
-  d["inner_iterations"] = r.inner_iterations;
-  d["fallback_sweeps"] = r.fallback_sweeps;
-  d["outer_iterations"] = r.outer_iterations;
-  d["level_steps"] = r.level_steps;
-  d["level_seconds"] = r.level_seconds;
-  d["path"] = r.path;
+  d["newton"] = r.newton;  // the Newton member's statistics (bound NewtonStats; empty for the others)
   return d;
 }
 
@@ -460,6 +453,22 @@ PYBIND11_MODULE(_core, m) {
     return std::string(nrmicp::to_string(nrmicp::resolve_z_update(nrmicp::ZUpdate::Auto, method, omega2_given, is_icp)));
   }, py::arg("method"), py::arg("omega2_given"), py::arg("is_icp"),
      "The z-update 'auto' means for this method (is_icp: a zeta that is not None or constant).");
+
+  // The Newton member's statistics; `fields` lists them for the Python result (by reflection).
+  py::class_<nrmicp::NewtonStats> stats(m, "NewtonStats");
+  std::vector<std::string> stat_fields;
+  auto stat = [&](const char* name, auto member) {
+    stats.def_readonly(name, member);
+    stat_fields.emplace_back(name);
+  };
+  stat("linear_solves", &nrmicp::NewtonStats::linear_solves);
+  stat("inner_iterations", &nrmicp::NewtonStats::inner_iterations);
+  stat("fallback_sweeps", &nrmicp::NewtonStats::fallback_sweeps);
+  stat("outer_iterations", &nrmicp::NewtonStats::outer_iterations);
+  stat("level_steps", &nrmicp::NewtonStats::level_steps);
+  stat("level_seconds", &nrmicp::NewtonStats::level_seconds);
+  stat("path", &nrmicp::NewtonStats::path);
+  stats.attr("fields") = py::tuple(py::cast(stat_fields));
 
   py::class_<SolveOptions>(m, "SolveOptions")
       .def(py::init<>())

@@ -104,9 +104,9 @@ TEST_CASE("Newton solves Bai's LCP and constant-obstacle problems with known sol
     Result r = newton.solve(q);
     CHECK(r.status == Status::Converged);
     CHECK((r.z - k.g).lpNorm<Eigen::Infinity>() < 1e-12);
-    CHECK(r.path == "newton");
+    CHECK(r.newton.path == "newton");
     CHECK(r.nit <= 5);
-    CHECK(r.linear_solves == r.nit);
+    CHECK(r.newton.linear_solves == r.nit);
     // ζ ≡ c: z* = g* + c.
     const Vec c = Vec::LinSpaced(A.rows(), -1.0, 1.0);
     const Vec qc = k.w - A * (k.g + c);
@@ -131,9 +131,9 @@ TEST_CASE("Newton with user-supplied prolongations: the obstacle problem in 2D, 
   CHECK(rc.status == Status::Converged);
   CHECK(rn.nit <= 3);          // started from the coarse solutions
   CHECK(rn.nit < rc.nit);      // the cold start peels the contact set
-  CHECK(rn.level_steps.size() == 4);
-  CHECK(rn.level_seconds.size() == 4);
-  CHECK(rn.linear_solves > rn.nit);  // coarse levels solve too
+  CHECK(rn.newton.level_steps.size() == 4);
+  CHECK(rn.newton.level_seconds.size() == 4);
+  CHECK(rn.newton.linear_solves > rn.nit);  // coarse levels solve too
   check_complementarity(A, q, rn.z, psi, 1e-9);
   const Vec ref = projected_gauss_seidel(A, q, psi, 4000);
   CHECK((rn.z - ref).lpNorm<Eigen::Infinity>() < 1e-8);
@@ -202,7 +202,7 @@ TEST_CASE("inner = cg on a nonsymmetric A: BiCGSTAB preconditioned by the V-cycl
   CHECK(std::string(rk.inner) == "bicgstab");
   CHECK(rk.status == Status::Converged);
   CHECK(rk.residual < 1e-10);
-  CHECK(rk.inner_iterations > 0);
+  CHECK(rk.newton.inner_iterations > 0);
   check_complementarity(A, q, rk.z, psi, 1e-10);
   CHECK((rk.z - rd.z).lpNorm<Eigen::Infinity>() < 1e-10);
   const Vec ref = projected_gauss_seidel(A, q, psi, 4000);  // A is an M-matrix: PGS converges
@@ -262,8 +262,8 @@ TEST_CASE("a P-matrix on which the active-set steps cycle: the fallback is taken
   o.tol = 1e-10;
   const Result r = Newton<RowMat>(A, o).solve(q);
   CHECK(r.status == Status::Converged);
-  CHECK(r.fallback_sweeps > 0);
-  CHECK(r.path.find("fallback") != std::string::npos);
+  CHECK(r.newton.fallback_sweeps > 0);
+  CHECK(r.newton.path.find("fallback") != std::string::npos);
   CHECK((r.z - z_star).lpNorm<Eigen::Infinity>() < 1e-9);
 }
 
@@ -294,7 +294,7 @@ TEST_CASE("Newton on ICPs: affine ζ (full system) and a functor ζ (outer fixed
   });
   r = newton.solve(q, zeta);
   CHECK(r.status == Status::Converged);
-  CHECK(r.outer_iterations >= 2);
+  CHECK(r.newton.outer_iterations >= 2);
   CHECK((r.z - z_star).lpNorm<Eigen::Infinity>() < 1e-10);
 }
 

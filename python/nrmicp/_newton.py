@@ -100,11 +100,9 @@ def polish(solver, problem, z, res, original_residual, dc):
 
 
 def result_fields(d) -> dict:
-    """The Newton member's result fields from the core's dict."""
-    return {"linear_solves": int(d["linear_solves"]), "inner_iterations": int(d["inner_iterations"]),
-            "fallback_sweeps": int(d["fallback_sweeps"]),
-            "outer_iterations": int(d["outer_iterations"]), "level_steps": list(d["level_steps"]),
-            "level_seconds": list(d["level_seconds"]), "path": d["path"]}
+    """The Newton member's result fields: every field of the core's NewtonStats (result.hpp)."""
+    stats = d["newton"]
+    return {name: getattr(stats, name) for name in _core.NewtonStats.fields}
 
 
 def jacobian_argument(zeta_jacobian, solver, kind, dc) -> dict:

@@ -215,10 +215,12 @@ class Newton {
     Result r;
     const auto t_iterations = std::chrono::steady_clock::now();
     switch (zeta.kind()) {
-      case ZetaKind::None: r = run.obstacle(q, Vector::Zero(n), z0, nest); break;
-      case ZetaKind::Constant: r = run.obstacle(q, zeta.c(), z0, nest); break;
-      case ZetaKind::Affine: r = run.affine(q, zeta, z0); break;
-      case ZetaKind::Functor: r = zeta.has_jacobian() ? run.semismooth(q, zeta, z0) : run.functor(q, zeta, z0); break;
+      case ZetaKind::None: r = run.solve_obstacle(q, Vector::Zero(n), z0, nest); break;
+      case ZetaKind::Constant: r = run.solve_obstacle(q, zeta.c(), z0, nest); break;
+      case ZetaKind::Affine: r = run.solve_affine(q, zeta, z0); break;
+      case ZetaKind::Functor:
+        r = zeta.has_jacobian() ? run.solve_semismooth(q, zeta, z0) : run.solve_outer_fixed_point(q, zeta, z0);
+        break;
     }
     r.timings.iterations = detail::ScopedTimer::seconds_since(t_iterations);  // all levels, nested start included
     r.timings.setup = setup_seconds_;
@@ -246,8 +248,8 @@ class Newton {
     Result res;
     Run(const Newton& s, const Options& opts, const Callback& cb, const Poll& p, bool nested, const Progress& pr)
         : self(s), o(opts), callback(cb), poll(p), nest(nested), progress(pr) {
-      res.level_steps.assign(s.levels(), 0);
-      res.level_seconds.assign(s.levels(), 0.0);
+      res.newton.level_steps.assign(s.levels(), 0);
+      res.newton.level_seconds.assign(s.levels(), 0.0);
     }
 
     /// `report`: this loop is the problem being solved (history, callback), not an inner one.
@@ -268,12 +270,12 @@ class Newton {
       return c;
     }
     void absorb(const detail::NewtonOutcome& out, int level, double seconds) {
-      res.level_steps[level] += out.steps;
-      res.level_seconds[level] += seconds;
-      res.linear_solves += out.solves;
-      res.inner_iterations += out.inner_iterations;
+      res.newton.level_steps[level] += out.steps;
+      res.newton.level_seconds[level] += seconds;
+      res.newton.linear_solves += out.solves;
+      res.newton.inner_iterations += out.inner_iterations;
       if (level == 0) {
-        res.fallback_sweeps += out.sweeps;
+        res.newton.fallback_sweeps += out.sweeps;
         const int base = res.nit;
         for (std::size_t i = 0; i < out.history_iteration.size(); ++i) {
           res.history_iteration.push_back(base + out.history_iteration[i]);
@@ -318,7 +320,7 @@ class Newton {
     /// The obstacle problem z ≥ ψ (ψ = 0: the LCP) as LCP(q + Aψ, A) in y = z − ψ.
     /// `nest`: without z0, start from the nested solution.
     /// `set` (optional): the inactive set to start from, replaced by the final one.
-    Result obstacle(const Vector& q, const Vector& psi, const Vector* z0, bool nest, double tol = -1,
+    Result solve_obstacle(const Vector& q, const Vector& psi, const Vector* z0, bool nest, double tol = -1,
                     int maxiter = -1, bool report = true, std::vector<char>* set = nullptr) {
       Vector q_shift = q;
       q_shift.noalias() += self.A_ * psi;
@@ -349,11 +351,12 @@ class Newton {
 
     /// ζ(z) = Bz + c: Newton on the full system, from the obstacle problem with ψ = ζ(z0) (or
     /// from z0 itself when it is given and there is no nesting).
-    Result affine(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0) {
+    Result solve_affine(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0) {
       const Eigen::Index n = q.size();
       Vector psi(n);
       zeta.eval(z0 ? *z0 : Vector::Zero(n), psi);
-      const Vector start = (z0 && !nest) ? *z0 : obstacle(q, psi, z0, nest, 0.0, std::min(100, o.maxiter), false).z;
+      const Vector start =
+          (z0 && !nest) ? *z0 : solve_obstacle(q, psi, z0, nest, 0.0, std::min(100, o.maxiter), false).z;
       const auto t0 = std::chrono::steady_clock::now();
       auto K = self.finest_->affine_system(zeta.B());
       const Vector& c = zeta.c();
@@ -366,7 +369,7 @@ class Newton {
     /// A callable ζ: the outer fixed point z ← S(ζ(z)), S(ψ) = the obstacle problem's solution,
     /// each solved by Newton warm-started from z (nested the first time); an outer step that
     /// does not reduce Res hands over to sweeps of the fallback member on the ICP.
-    Result functor(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0) {
+    Result solve_outer_fixed_point(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0) {
       const Eigen::Index n = q.size();
       Vector z = z0 ? *z0 : Vector::Zero(n), psi(n), psi_new(n), w(n);
       double r = icp_residual(q, zeta, z, psi, w);
@@ -387,9 +390,9 @@ class Newton {
         if (poll) poll();
         // The inner obstacle problem, solved to a settled active set (its own tol: 0).
         // The first inner solve without z0 starts at y = 0 (z = ψ): measured better than from z = 0.
-        Result inner = obstacle(q, psi, (first && !z0) ? nullptr : &z, first && nest, 0.0, o.maxiter - res.nit, false,
-                                &set);
-        ++res.outer_iterations;
+        Result inner = solve_obstacle(q, psi, (first && !z0) ? nullptr : &z, first && nest, 0.0,
+                                      o.maxiter - res.nit, false, &set);
+        ++res.newton.outer_iterations;
         const double r_new = icp_residual(q, zeta, inner.z, psi_new, w);
         if (std::isnan(r_new)) return zeta_failed(best, q);
         if (test.acceptable(r_new)) {
@@ -410,20 +413,21 @@ class Newton {
     /// step of the linearization ζ(z) + J(v − z) (detail::JacobianLinearization); Res is the
     /// ICP's. Start as for an affine ζ. Newton steps and fallback sweeps of the start count
     /// against maxiter.
-    Result semismooth(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0) {
+    Result solve_semismooth(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0) {
       using Step = detail::NewtonStep<MatrixType, detail::JacobianLinearization<MatrixType>>;
       const Eigen::Index n = q.size();
       Vector psi(n);
       Result best;
       best.z = z0 ? *z0 : Vector::Zero(n);
       if (!zeta.eval(best.z, psi)) return zeta_failed(best, q);
-      Vector start = (z0 && !nest) ? *z0 : obstacle(q, psi, z0, nest, 0.0, std::min(100, o.maxiter), false).z;
+      Vector start =
+          (z0 && !nest) ? *z0 : solve_obstacle(q, psi, z0, nest, 0.0, std::min(100, o.maxiter), false).z;
       const auto t0 = std::chrono::steady_clock::now();
       Step plain(*self.finest_, {*self.finest_, q, zeta, {}, {}, {}}, std::move(start));
       if (std::isnan(plain.residual())) return zeta_failed(best, q);
       static const Vector no_shift;
       auto control = finest_control(no_shift, o.tol, o.maxiter - res.nit, true);
-      control.sweep_budget = o.maxiter - res.fallback_sweeps;
+      control.sweep_budget = o.maxiter - res.newton.fallback_sweeps;
       const auto out = detail::newton_loop(plain, control);
       absorb(out, 0, detail::ScopedTimer::seconds_since(t0));
       return finish(out, out.z, q);
@@ -447,11 +451,11 @@ class Newton {
     /// sweeps did not improve on the best Res.
     std::optional<Status> fallback(const Vector& q, const Zeta<StorageIndex>& zeta, const Result& best,
                                    int& sweep_run, Vector& z) {
-      if (res.fallback_sweeps >= o.maxiter) return Status::MaxIterations;
-      const int k = std::min(sweep_run, o.maxiter - res.fallback_sweeps);
+      if (res.newton.fallback_sweeps >= o.maxiter) return Status::MaxIterations;
+      const int k = std::min(sweep_run, o.maxiter - res.newton.fallback_sweeps);
       sweep_run *= 2;
       const Result sw = self.finest_->sweep(q, zeta, best.z, k, o.tol);
-      res.fallback_sweeps += sw.iterations;
+      res.newton.fallback_sweeps += sw.iterations;
       res.iterations += sw.iterations;
       if (!(sw.residual < best.residual)) return Status::Stagnated;
       z = sw.z;
@@ -474,24 +478,22 @@ class Newton {
 
     /// The result of a finest-level loop: z (original variables), w, status and message.
     Result finish(const detail::NewtonOutcome& out, const Vector& z, const Vector& q) {
+      return finish(z, out.residual, out.status, out.message, q);
+    }
+    /// The result of the outer fixed point: its best iterate.
+    Result finish_outer(const Result& best, const Vector& q) {
+      std::string message = to_string(best.status);
+      if (best.status != Status::Converged) message += "; returning the best iterate";
+      return finish(best.z, best.residual, best.status, std::move(message), q);
+    }
+    Result finish(const Vector& z, double residual, Status status, std::string message, const Vector& q) {
       Result r = res;
       r.z = z;
       r.w = self.A_ * z + q;
-      r.residual = out.residual;
-      r.status = out.status;
-      r.message = out.message;
-      r.path = r.fallback_sweeps ? (r.nit ? "newton+fallback" : "fallback") : "newton";
-      return r;
-    }
-    Result finish_outer(Result out, const Vector& q) {
-      Result r = res;
-      r.z = out.z;
-      r.w = self.A_ * out.z + q;
-      r.residual = out.residual;
-      r.status = out.status;
-      r.message = to_string(r.status);
-      if (r.status != Status::Converged) r.message += "; returning the best iterate";
-      r.path = r.fallback_sweeps ? (r.nit ? "newton+fallback" : "fallback") : "newton";
+      r.residual = residual;
+      r.status = status;
+      r.message = std::move(message);
+      r.newton.path = r.newton.fallback_sweeps ? (r.nit ? "newton+fallback" : "fallback") : "newton";
       return r;
     }
   };

@@ -60,6 +60,18 @@ struct Timings {
   double total = 0;          ///< this solve, from entry to return
 };
 
+/// The Newton member's statistics (newton.hpp; polish); zero/empty for the stationary members.
+/// The Python result takes every field of this struct by name (reflection over the binding).
+struct NewtonStats {
+  int linear_solves = 0;               ///< reduced linear systems solved, on all levels
+  long long inner_iterations = 0;      ///< iterations of the iterative inner solve (inner = "cg"), all levels
+  int fallback_sweeps = 0;             ///< sweeps of the fallback member (nrm) on the finest level
+  int outer_iterations = 0;            ///< callable ζ: outer fixed-point steps on ζ
+  std::vector<int> level_steps;        ///< Newton steps per level of nested iteration, finest first
+  std::vector<double> level_seconds;   ///< seconds per level, finest first
+  std::string path;                    ///< "newton", "newton+fallback" (Newton steps and fallback sweeps), "fallback"
+};
+
 struct Result {
   Eigen::VectorXd z;         ///< best iterate (smallest Res seen); the last one when converged
   Eigen::VectorXd w;         ///< A z + q
@@ -76,14 +88,7 @@ struct Result {
   Timings timings;
   /// Counts a step kind reports beyond the iterations (e.g. linear solves), by name.
   std::map<std::string, long long> counters;
-  // The Newton member (newton.hpp) and polish; zero/empty for the stationary members.
-  int linear_solves = 0;               ///< reduced linear systems solved, on all levels
-  long long inner_iterations = 0;      ///< iterations of the iterative inner solve (inner = "cg"), all levels
-  int fallback_sweeps = 0;             ///< sweeps of the fallback member (nrm) on the finest level
-  int outer_iterations = 0;            ///< callable ζ: outer fixed-point steps on ζ
-  std::vector<int> level_steps;        ///< Newton steps per level of nested iteration, finest first
-  std::vector<double> level_seconds;   ///< seconds per level, finest first
-  std::string path;                    ///< "newton", "newton+fallback" (Newton steps and fallback sweeps), "fallback"
+  NewtonStats newton;        ///< the Newton member's statistics (empty for the stationary members)
   bool success() const { return status == Status::Converged; }
 };
 
