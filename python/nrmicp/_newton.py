@@ -9,11 +9,7 @@ from . import _core
 from ._hierarchy import resolve_hierarchy
 
 #: hierarchy="auto" builds the AMG hierarchy (pyamg) for method "newton" from this many unknowns
-#: on, and starts cold below. Measured on obstacle_2d (tol 1e-8, one solve, set-up included, a
-#: loaded 2-core machine): n = 1,024: cold 12 steps 0.011 s, amg 2 steps 0.008 s; n = 4,096: cold
-#: 24 steps 0.10 s, amg 2 steps 0.29 s (AMG set-up dominates a single solve); n = 16,384: cold 49
-#: steps 6.4 s, amg 3 steps 1.4 s. A Solver pays the set-up once: the American put march at
-#: n = 6,399 took 1.9 s nested against 32 s warm-started. pyamg's import costs 1-4 s once.
+#: on, and starts cold below, where AMG's set-up outweighs the steps it saves (docs/MEASUREMENTS.md).
 AUTO_AMG_MIN_N = 4096
 
 
