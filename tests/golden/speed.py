@@ -4,8 +4,8 @@ check that a refactoring did not slow anything down; not a CI test):
     OPENBLAS_NUM_THREADS=1 python tests/golden/speed.py OLD_SITE NEW_SITE [--repeats 3]
 
 OLD_SITE/NEW_SITE: directories holding an installed nrmicp package (e.g. pip install --target).
-Cases: the 2D obstacle at n = 10^6 (newton with the geometric hierarchy; nrmgs + Anderson, 300
-iterations) and the 3D obstacle at n = 10^6 (newton, geometric). Prints each case's CPU seconds
+Cases: the 2D obstacle at n = 10^6 (nrmgs + Anderson, 300 iterations: fixed work) and at
+n = 261,121 (newton with the geometric hierarchy, to tol 1e-8). Prints each case's CPU seconds
 per build (the minimum over the repeats) and the ratio new/old.
 """
 import json
@@ -19,10 +19,8 @@ import numpy as np
 import nrmicp
 from nrmicp import scenes
 case = sys.argv[2]
-if case.startswith("obstacle_2d"):
-    p = scenes.obstacle_2d(1000, exact=False)
-else:
-    p = scenes.obstacle_3d(100, exact=False)
+m = int(case.split("/")[0].split("_")[-1])
+p = scenes.obstacle_2d(m, exact=False)
 if case.endswith("newton"):
     kw = dict(method="newton", hierarchy=p.prolongations(), tol=1e-8)
 else:
@@ -33,7 +31,7 @@ cpu = time.process_time() - t
 print(json.dumps({"cpu": cpu, "nit": int(r.nit), "residual": float(r.residual), "file": nrmicp.__file__}))
 '''
 
-CASES = ("obstacle_2d/newton", "obstacle_2d/nrmgs+anderson", "obstacle_3d/newton")
+CASES = ("obstacle_2d_1000/nrmgs+anderson", "obstacle_2d_511/newton")
 
 
 def main():

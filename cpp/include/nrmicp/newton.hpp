@@ -56,58 +56,45 @@ namespace nrmicp {
 
 namespace detail {
 
-/// What the Newton loop on one level did.
-struct NewtonOutcome {
-  Eigen::VectorXd z;          ///< best iterate (smallest Res)
-  double residual = std::numeric_limits<double>::infinity();
-  Status status = Status::MaxIterations;
-  std::string message;
-  bool settled = false;       ///< the active set repeated: z solves the problem to rounding
-  std::vector<char> inactive; ///< the inactive set of z's last step (empty if no step was taken)
-  int steps = 0, sweeps = 0, solves = 0;
-  long long inner_iterations = 0;  ///< of the iterative inner solve (inner = cg)
-  std::vector<int> history_iteration;
-  std::vector<double> history_seconds, history_residual;
+/// What the Newton loop on one level did, as a Result (z: the best iterate; its Res, status,
+/// message and history; newton.linear_solves, .inner_iterations, .fallback_sweeps), and what
+/// nested iteration and the outer fixed point take on from it.
+struct LevelOutcome : Result {
+  int steps = 0;               ///< Newton steps (the Monitor's nit is the best iterate's index)
+  bool settled = false;        ///< the active set repeated: z solves the problem to rounding
+  std::vector<char> inactive;  ///< the inactive set of z's last step (empty if no step was taken)
 };
 
 /// The Newton member on one level: the plain step `plain` (at its start), globalized, in the
 /// family's loop (detail::loop, solver.hpp) with the family's Monitor.
 template <typename Plain>
-NewtonOutcome newton_loop(Plain& plain, const NewtonControl& ctl) {
+LevelOutcome newton_loop(Plain& plain, const NewtonControl& ctl) {
   static const Eigen::VectorXd no_shift;
   Options mo;
   mo.tol = ctl.tol;
   mo.maxiter = std::numeric_limits<int>::max();  // Newton steps are counted by the step (ctl.maxiter)
   mo.record_history = ctl.record_history;
   mo.verbose = ctl.verbose;
-  Result mres;
-  Monitor monitor(mo, ctl.callback, ctl.poll, ctl.progress, ctl.shift ? *ctl.shift : no_shift, mres, plain.size());
+  LevelOutcome o;
+  Monitor monitor(mo, ctl.callback, ctl.poll, ctl.progress, ctl.shift ? *ctl.shift : no_shift, o, plain.size());
   const Eigen::VectorXd z_start = plain.z();
   Iterate s;
   Globalized<Plain> step(plain, ctl, s);
   loop(step, s, monitor);
   monitor.finish(z_start);
-  NewtonOutcome o;
-  o.z = std::move(mres.z);
-  o.residual = mres.residual;
-  o.status = mres.status;
-  o.message = std::move(mres.message);
+  o.steps = plain.steps();
   o.settled = step.settled();
   o.inactive = step.inactive();
-  o.steps = plain.steps();
-  o.sweeps = step.sweeps();
-  o.solves = plain.solves();
-  o.inner_iterations = plain.inner_iterations();
-  o.history_iteration = std::move(mres.history_iteration);
-  o.history_seconds = std::move(mres.history_seconds);
-  o.history_residual = std::move(mres.history_residual);
+  o.newton.fallback_sweeps = step.sweeps();
+  o.newton.linear_solves = plain.solves();
+  o.newton.inner_iterations = plain.inner_iterations();
   return o;
 }
 
 /// The (shifted) LCP (B null) or the affine ICP ζ(z) = Bz + c on `level`, with the reduced system
 /// `K` (analysed for this problem), from z.
 template <typename MatrixType>
-NewtonOutcome newton_loop(NewtonLevel<MatrixType>& level, ActiveSetSystem<typename MatrixType::StorageIndex>& K,
+LevelOutcome newton_loop(NewtonLevel<MatrixType>& level, ActiveSetSystem<typename MatrixType::StorageIndex>& K,
                           const Eigen::VectorXd& q, const typename NewtonLevel<MatrixType>::RowMatrix* B,
                           const Eigen::VectorXd* c, Eigen::VectorXd z, const NewtonControl& ctl) {
   NewtonStep<MatrixType, FixedLinearization<MatrixType>> plain(level, {level, K, q, B, c}, std::move(z));
@@ -269,13 +256,13 @@ class Newton {
       c.poll = poll;
       return c;
     }
-    void absorb(const detail::NewtonOutcome& out, int level, double seconds) {
+    void absorb(const detail::LevelOutcome& out, int level, double seconds) {
       res.newton.level_steps[level] += out.steps;
       res.newton.level_seconds[level] += seconds;
-      res.newton.linear_solves += out.solves;
-      res.newton.inner_iterations += out.inner_iterations;
+      res.newton.linear_solves += out.newton.linear_solves;
+      res.newton.inner_iterations += out.newton.inner_iterations;
       if (level == 0) {
-        res.newton.fallback_sweeps += out.sweeps;
+        res.newton.fallback_sweeps += out.newton.fallback_sweeps;
         const int base = res.nit;
         for (std::size_t i = 0; i < out.history_iteration.size(); ++i) {
           res.history_iteration.push_back(base + out.history_iteration[i]);
@@ -283,7 +270,7 @@ class Newton {
           res.history_residual.push_back(out.history_residual[i]);
         }
         res.nit += out.steps;
-        res.iterations += out.steps + out.sweeps;
+        res.iterations += out.steps + out.newton.fallback_sweeps;
       }
     }
 
@@ -477,7 +464,7 @@ class Newton {
     }
 
     /// The result of a finest-level loop: z (original variables), w, status and message.
-    Result finish(const detail::NewtonOutcome& out, const Vector& z, const Vector& q) {
+    Result finish(const detail::LevelOutcome& out, const Vector& z, const Vector& q) {
       return finish(z, out.residual, out.status, out.message, q);
     }
     /// The result of the outer fixed point: its best iterate.
