@@ -130,10 +130,11 @@ class Solver {
                const SolveOptions* solve_options = nullptr, const Progress& progress = {}) const {
     const auto t0 = std::chrono::steady_clock::now();
     const Eigen::Index n = A_.rows();
-    const Options o = solve_options ? options_.with(solve_options, n) : options_;
+    Options o = solve_options ? options_.with(solve_options, n) : options_;
     if (q.size() != n) throw std::invalid_argument("Solver::solve: q has length " + std::to_string(q.size()) + ", expected n = " + std::to_string(n));
     if (z0 && z0->size() != n) throw std::invalid_argument("Solver::solve: x0 has length " + std::to_string(z0->size()) + ", expected n = " + std::to_string(n));
     zeta.check(n);
+    resolve_tolerance(o, q, zeta);
     Result r;
     if (zeta.kind() == ZetaKind::Constant) {
       // ζ ≡ c: LCP(q + Ac, A) in y = z − c. Res and w are the same in both variables.
