@@ -48,9 +48,9 @@ import time
 
 import numpy as np
 import scipy.sparse as sp
+from nrmicp._peers import estimate
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
 
 TOL = 1e-8
 GRIDS = {"2d": [127, 255, 511, 1023, 2047], "3d": [47, 103]}
@@ -67,12 +67,10 @@ SPLU_MAX_N = {"2d": 1_100_000, "3d": 150_000}   # SuperLU's fill: > 10 GB beyond
 
 # ----------------------------------------------------------------------------- child side
 def build(dim, m):
-    """(A, q, problem): the h²-scaled shifted LCP of obstacle_2d / obstacle_3d."""
+    """(A, q, problem): the h²-scaled shifted LCP of obstacle_2d / obstacle_3d (the scene registry's)."""
     from nrmicp import scenes
     P = (scenes.obstacle_2d if dim == "2d" else scenes.obstacle_3d)(m, exact=False)
-    h2 = P.reference["h"] ** 2
-    A = sp.csr_matrix(P.A * h2)
-    q = h2 * (P.q + P.A @ P.zeta)
+    A, q = scenes.scaled_lcp(P)
     return A, q, P
 
 
@@ -164,18 +162,6 @@ def available(peer):
         except ImportError:
             return False
     return True
-
-
-def estimate(hist, n, p_default):
-    if not hist:
-        return None
-    if len(hist) >= 2:
-        (n1, t1), (n2, t2) = hist[-2], hist[-1]
-        p = min(max(math.log(max(t2, 1e-3) / max(t1, 1e-3)) / math.log(n2 / n1), 1.0), 2.5)
-    else:
-        p = p_default
-    n0, t0 = hist[-1]
-    return t0 * (n / n0) ** p
 
 
 def obstacle_section(args, log):

@@ -188,7 +188,9 @@ def _iteration_options(opts, *, tol, maxiter, z_update, accelerate, anderson_m, 
     opts.theta = _scalar(theta, "theta")
     opts.record_history = bool(record_history)
     opts.stall_iterations = _scalar(stall_iterations, "stall_iterations", integer=True)
-    opts.verbose = _scalar(verbose, "verbose", integer=True)
+    # True/False mean on/off, as scikit-learn's verbose and scipy's disp: 1 and 0
+    opts.verbose = _scalar(int(verbose) if isinstance(verbose, (bool, np.bool_)) else verbose, "verbose",
+                           integer=True)
     return opts
 
 
@@ -275,6 +277,25 @@ def _core_callback(callback: Callable[..., Any], dc: Optional[np.ndarray],
     return hook
 
 
+def _omega2_hint(A, method, omega2, accelerate) -> str:
+    """What to try when the paper's nrm (Omega2 = I) does not converge, added to its message: only
+    advice that applies to this A (omega2=A.diagonal(), nrmm and nrmgs need a positive diagonal)."""
+    if method != "nrm" or omega2 is not None:
+        return ""
+    d = A.diagonal()
+    if not np.all(d > 0):
+        i = int(np.flatnonzero(~(d > 0))[0])
+        tried = (accelerate or "none").lower() == "anderson"
+        return (f"; note: A[{i},{i}] = {d[i]:.3g}, so the advice for a positive diagonal (omega2=A.diagonal(), "
+                f"'nrmm', 'nrmgs') does not apply: try method 'newton'"
+                f"{'' if tried else ' or accelerate=' + repr('anderson')}")
+    dmean = float(np.mean(np.abs(d)))
+    if 0.1 <= dmean <= 10:
+        return ""
+    return (f"; note: method 'nrm' uses the paper's Omega2 = I, while mean |diag(A)| = "
+            f"{dmean:.3g}: pass omega2=A.diagonal() or use method 'nrmm' or 'nrmgs'")
+
+
 #: With scaling, at most this many re-solves with a tighter tolerance when the scaled problem
 #: converged but Res in the original variables is still >= tol.
 MAX_REFINEMENTS = 3
@@ -313,12 +334,7 @@ class Solver:
         self.n = n
         self.method = _choice(method, METHODS, "method")
         # The paper's NRM fixes Omega2 = I, which only suits diag(A) of order 1; say so on failure.
-        self._omega2_hint = ""
-        if self.method == "nrm" and omega2 is None:
-            dmean = float(np.mean(np.abs(self.A.diagonal())))
-            if not 0.1 <= dmean <= 10:
-                self._omega2_hint = (f"; note: method 'nrm' uses the paper's Omega2 = I, while mean |diag(A)| = "
-                                     f"{dmean:.3g}: pass omega2=A.diagonal() or use method 'nrmm' or 'nrmgs'")
+        self._omega2_hint = _omega2_hint(self.A, self.method, omega2, accelerate)
         self.scale = _scale_choice(scale)
         opts = _core.Options()
         opts.method = getattr(_core.Method, self.method)
@@ -684,8 +700,8 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
         for this many iterations, when 3 consecutive windows of this many iterations bring no lower
         Res, or when the best Res has not improved for 10 windows and, at the rate Res falls, would
         not be reached again within maxiter (README "What a solve returns").
-    verbose : int >= 0
-        0 (default): silent. k > 0: a progress line (iteration, Res, best Res, elapsed seconds) at
+    verbose : int >= 0 or bool
+        0 or False (default): silent; True means 1. k > 0: a progress line (iteration, Res, best Res, elapsed seconds) at
         the first iterate, then about every k seconds, and a final line with the status. Lines go
         to the ``logging`` logger ``"nrmicp"`` at level INFO, and to stderr when logging is not
         configured. The C++ loop decides when to report: there is no per-iteration Python call.

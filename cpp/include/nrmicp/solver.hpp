@@ -193,7 +193,7 @@ class Solver {
     }
     run_steps(ctx, s, monitor, o);
     res.timings.iterations = monitor.seconds();
-    monitor.finish(z0 ? *z0 : Vector::Zero(A_.rows()));
+    monitor.finish(z0 ? *z0 : Vector::Zero(A_.rows()), ctx.start_residual);
     Vector Az(A_.rows());
     ctx.spmv(res.z, Az);  // w of the returned iterate (honest even if it is not the last one)
     res.w = Az + q;

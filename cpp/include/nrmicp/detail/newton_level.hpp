@@ -34,12 +34,13 @@ class NewtonLevel {
   NewtonLevel(const MatrixType& A, const Options& options) : A_(A), inner_(options.inner) {
     Options o = options;
     o.method = Method::Newton;
-    const Parameters p = resolve_parameters(A, o);  // Ω2 = diag(A) by default: must be positive
+    const Parameters p = resolve_parameters(A, o);  // Ω2: diag(A), or the row maximum where a_ii ≤ 0
     ratio_ = p.omega1.cwiseQuotient(p.omega2);
     fallback_options_.method = Method::NRM;
     fallback_options_.omega1 = p.omega1;
     fallback_options_.omega2 = p.omega2;
     fallback_options_.inner = direct_inner(options.inner);  // nrm factorizes
+    fallback_options_.accelerate = Accelerate::Anderson;  // plain nrm diverged on zero-diagonal LCPs (SPEC)
   }
 
   /// The prolongations below this level (P[0]: the next coarser level → this one), for the
