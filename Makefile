@@ -15,7 +15,7 @@ SHELL   := /bin/bash
 export PIP_ROOT_USER_ACTION := ignore
 PIP     = $(PY) -m pip install -q --disable-pip-version-check
 
-.PHONY: demo test deps install ctest ctest-eigen pytest sanitize bench clean
+.PHONY: demo test deps install ctest ctest-eigen pytest sanitize bench golden golden-diff clean
 
 demo: install
 	$(PY) -m nrmicp demo
@@ -75,6 +75,20 @@ sanitize: deps
 
 bench: install
 	$(PY) -m nrmicp bench
+
+# The golden master (tests/golden/): every observable of ~650 stationary-member and ~730 Newton
+# solves, recorded to $(GOLDEN).family.pkl / $(GOLDEN).newton.pkl. A developer's check that a
+# refactoring changes nothing, bit for bit: record on the old build, then on the new one, and
+#   make golden GOLDEN=before; (change, rebuild) make golden GOLDEN=after; make golden-diff BEFORE=before GOLDEN=after
+GOLDEN ?= $(BUILD)/golden/current
+golden: install
+	mkdir -p $(dir $(GOLDEN))
+	OPENBLAS_NUM_THREADS=1 $(PY) tests/golden/family.py $(GOLDEN).family.pkl
+	OPENBLAS_NUM_THREADS=1 $(PY) tests/golden/newton.py $(GOLDEN).newton.pkl
+
+golden-diff:
+	$(PY) tests/golden/family.py --diff $(BEFORE).family.pkl $(GOLDEN).family.pkl
+	$(PY) tests/golden/newton.py --diff $(BEFORE).newton.pkl $(GOLDEN).newton.pkl
 
 clean:
 	rm -rf $(BUILD)

@@ -24,6 +24,7 @@
 
 namespace py = pybind11;
 using nrmicp::Options;
+using nrmicp::SolveOptions;
 
 namespace {
 
@@ -146,27 +147,29 @@ struct CallableJacobian {
   }
 };
 
-// ζ from the Python layer's (kind, c, B, fn): 0 none, 1 constant c, 2 Affine(B, c), 3 callable.
+// ζ from the Python layer's (kind, c, B, fn): none, constant c, Affine(B, c) or a callable
+// (with its Jacobian when given).
 template <typename I>
-nrmicp::Zeta<I> make_zeta(Eigen::Index n, int zeta_kind, py::object zeta_c, py::object b_indptr, py::object b_indices,
-                          py::object b_data, py::object zeta_fn, py::object jacobian_fn = py::none()) {
+nrmicp::Zeta<I> make_zeta(Eigen::Index n, nrmicp::ZetaKind kind, py::object zeta_c, py::object b_indptr,
+                          py::object b_indices, py::object b_data, py::object zeta_fn,
+                          py::object jacobian_fn = py::none()) {
   using Z = nrmicp::Zeta<I>;
-  switch (zeta_kind) {
-    case 0: return Z::none();
-    case 1: return Z::constant(to_vector(zeta_c.cast<py::array>(), "zeta"));
-    case 2: {
+  switch (kind) {
+    case nrmicp::ZetaKind::None: return Z::none();
+    case nrmicp::ZetaKind::Constant: return Z::constant(to_vector(zeta_c.cast<py::array>(), "zeta"));
+    case nrmicp::ZetaKind::Affine: {
       py::array bp = b_indptr.cast<py::array>(), bi = b_indices.cast<py::array>(), bd = b_data.cast<py::array>();
       CsrMap<I> B(n, n, bd.shape(0), checked_data<I>(bp, "zeta.B.indptr"), checked_data<I>(bi, "zeta.B.indices"),
                   checked_data<double>(bd, "zeta.B.data"));
       return Z::affine(typename Z::RowMatrix(B), to_vector(zeta_c.cast<py::array>(), "zeta.c"));
     }
-    case 3: {
+    case nrmicp::ZetaKind::Functor: {
       typename Z::Jacobian jac;
       if (!jacobian_fn.is_none()) jac = CallableJacobian<I>{jacobian_fn};
       return Z::functor(CallableZeta(zeta_fn), jac);
     }
-    default: throw py::value_error("unknown zeta kind");
   }
+  throw py::value_error("unknown zeta kind");
 }
 
 using CoreCallback = std::function<bool(int, const Eigen::VectorXd&, double)>;
@@ -226,14 +229,7 @@ py::dict result_dict(const nrmicp::Result& r, bool record_history) {
   t["inner_solve"] = r.timings.inner_solve;
   t["total"] = r.timings.total;
   d["timings"] = t;
-  // the Newton member (empty for the stationary members)
-  d["linear_solves"] = r.linear_solves;
-  d["inner_iterations"] = r.inner_iterations;
-  d["fallback_sweeps"] = r.fallback_sweeps;
-  d["outer_iterations"] = r.outer_iterations;
-  d["level_steps"] = r.level_steps;
-  d["level_seconds"] = r.level_seconds;
-  d["path"] = r.path;
+  d["newton"] = r.newton;  // the Newton member's statistics (bound NewtonStats; empty for the others)
   return d;
 }
 
@@ -255,63 +251,76 @@ struct MappedCsr {
   }
 };
 
-template <typename I>
-class PySolver {
+// What PySolver and PyNewton share: A mapped zero-copy, the core, and the solve.
+template <typename I, typename Core>
+class PyCore {
  public:
-  PySolver(py::array indptr, py::array indices, py::array data, Eigen::Index n) : A_(indptr, indices, data, n) {}
-  void build(const Options& o) { solver_.emplace(A_.A, o); }
+  PyCore(py::array indptr, py::array indices, py::array data, Eigen::Index n) : A_(indptr, indices, data, n) {}
 
-  py::dict solve(py::array q, int zeta_kind, py::object zeta_c, py::object b_indptr, py::object b_indices,
-                 py::object b_data, py::object zeta_fn, py::object z0, py::object callback, const Options& it,
-                 py::object progress) {
+  py::dict solve(py::array q, nrmicp::ZetaKind zeta_kind, py::object zeta_c, py::object b_indptr,
+                 py::object b_indices, py::object b_data, py::object zeta_fn, py::object z0, py::object callback,
+                 const SolveOptions& it, py::object zeta_jacobian, py::object progress) {
     const Eigen::Index n = A_.A.rows();
     Eigen::VectorXd qv = to_vector(q, "q");
     std::optional<Eigen::VectorXd> z0v;
     if (!z0.is_none()) z0v = to_vector(z0.cast<py::array>(), "x0");
-    const auto zeta = make_zeta<I>(n, zeta_kind, zeta_c, b_indptr, b_indices, b_data, zeta_fn);
+    const auto zeta = make_zeta<I>(n, zeta_kind, zeta_c, b_indptr, b_indices, b_data, zeta_fn, zeta_jacobian);
     const auto cb = make_callback(callback);
     const auto report = make_progress(progress);
     nrmicp::Result r =
-        without_gil([&] { return solver_->solve(qv, zeta, z0v ? &*z0v : nullptr, cb, poll_signals, &it, report); });
+        without_gil([&] { return core_->solve(qv, zeta, z0v ? &*z0v : nullptr, cb, poll_signals, &it, report); });
     return result_dict(r, it.record_history);
   }
 
+  /// The solve's arguments, for both bindings.
+  template <typename Class>
+  static void def_solve(Class& cls) {
+    cls.def("solve", &PyCore::solve, py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("b_indptr"),
+            py::arg("b_indices"), py::arg("b_data"), py::arg("zeta_fn"), py::arg("x0"), py::arg("callback"),
+            py::arg("options"), py::arg("zeta_jacobian") = py::none(), py::arg("progress") = py::none());
+  }
+
+ protected:
+  MappedCsr<I> A_;
+  std::optional<Core> core_;
+};
+
+template <typename I>
+class PySolver : public PyCore<I, nrmicp::Solver<CsrMap<I>>> {
+ public:
+  using PyCore<I, nrmicp::Solver<CsrMap<I>>>::PyCore;
+  void build(const Options& o) { this->core_.emplace(this->A_.A, o); }
+
   py::dict parameters() const {
-    const auto& p = solver_->parameters();
+    const auto& p = this->core_->parameters();
     py::dict d;
     d["omega1"] = p.omega1; d["omega2"] = p.omega2; d["phi"] = p.phi;
     d["gamma"] = p.gamma; d["alpha"] = p.alpha; d["beta"] = p.beta;
-    d["inner"] = std::string(solver_->inner_name());
+    d["inner"] = std::string(this->core_->inner_name());
     return d;
   }
-
- private:
-  MappedCsr<I> A_;
-  std::optional<nrmicp::Solver<CsrMap<I>>> solver_;
 };
 
 template <typename I>
 void bind_solver(py::module_& m, const char* name) {
-  py::class_<PySolver<I>>(m, name)
-      .def(py::init([](py::array indptr, py::array indices, py::array data, Eigen::Index n, const Options& o) {
+  py::class_<PySolver<I>> cls(m, name);
+  cls.def(py::init([](py::array indptr, py::array indices, py::array data, Eigen::Index n, const Options& o) {
              auto s = std::make_unique<PySolver<I>>(indptr, indices, data, n);
              without_gil([&] { s->build(o); return true; });  // factorization may take a while
              return s;
            }),
            py::arg("indptr"), py::arg("indices"), py::arg("data"), py::arg("n"), py::arg("options"))
-      .def("solve", &PySolver<I>::solve, py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("b_indptr"),
-           py::arg("b_indices"), py::arg("b_data"), py::arg("zeta_fn"), py::arg("x0"), py::arg("callback"),
-           py::arg("options"), py::arg("progress") = py::none())
       .def("parameters", &PySolver<I>::parameters);
+  PySolver<I>::def_solve(cls);
 }
 
 // The Newton member: A mapped as for PySolver; prolongations as a list of CSR triples
 // (indptr, indices, data, rows, cols) with A's index type, copied into the core.
 template <typename I>
-class PyNewton {
+class PyNewton : public PyCore<I, nrmicp::Newton<CsrMap<I>>> {
  public:
   using Core = nrmicp::Newton<CsrMap<I>>;
-  PyNewton(py::array indptr, py::array indices, py::array data, Eigen::Index n) : A_(indptr, indices, data, n) {}
+  using PyCore<I, Core>::PyCore;
   static std::vector<typename Core::RowMatrix> prolongations(const py::list& ps) {
     std::vector<typename Core::RowMatrix> out;
     for (std::size_t l = 0; l < ps.size(); ++l) {
@@ -326,49 +335,33 @@ class PyNewton {
     }
     return out;
   }
-  void build(const Options& o, std::vector<typename Core::RowMatrix> P) { newton_.emplace(A_.A, o, std::move(P)); }
-
-  py::dict solve(py::array q, int zeta_kind, py::object zeta_c, py::object b_indptr, py::object b_indices,
-                 py::object b_data, py::object zeta_fn, py::object z0, py::object callback, const Options& it,
-                 py::object zeta_jacobian, py::object progress) {
-    const Eigen::Index n = A_.A.rows();
-    Eigen::VectorXd qv = to_vector(q, "q");
-    std::optional<Eigen::VectorXd> z0v;
-    if (!z0.is_none()) z0v = to_vector(z0.cast<py::array>(), "x0");
-    const auto zeta = make_zeta<I>(n, zeta_kind, zeta_c, b_indptr, b_indices, b_data, zeta_fn, zeta_jacobian);
-    const auto cb = make_callback(callback);
-    const auto report = make_progress(progress);
-    nrmicp::Result r =
-        without_gil([&] { return newton_->solve(qv, zeta, z0v ? &*z0v : nullptr, cb, poll_signals, &it, report); });
-    return result_dict(r, it.record_history);
+  void build(const Options& o, std::vector<typename Core::RowMatrix> P) {
+    this->core_.emplace(this->A_.A, o, std::move(P));
   }
+
   // One Newton step from z (polish).
-  py::dict polish(py::array q, int zeta_kind, py::object zeta_c, py::object b_indptr, py::object b_indices,
-                  py::object b_data, py::object zeta_fn, py::array z, double tol) {
-    const Eigen::Index n = A_.A.rows();
+  py::dict polish(py::array q, nrmicp::ZetaKind zeta_kind, py::object zeta_c, py::object b_indptr,
+                  py::object b_indices, py::object b_data, py::object zeta_fn, py::array z, double tol) {
+    const Eigen::Index n = this->A_.A.rows();
     Eigen::VectorXd qv = to_vector(q, "q"), zv = to_vector(z, "z");
     const auto zeta = make_zeta<I>(n, zeta_kind, zeta_c, b_indptr, b_indices, b_data, zeta_fn);
-    nrmicp::Result r = without_gil([&] { return newton_->polish(qv, zeta, zv, tol); });
+    nrmicp::Result r = without_gil([&] { return this->core_->polish(qv, zeta, zv, tol); });
     return result_dict(r, false);
   }
-  int levels() const { return newton_->levels(); }
+  int levels() const { return this->core_->levels(); }
   py::dict parameters() const {
-    const auto& p = newton_->parameters();
+    const auto& p = this->core_->parameters();
     py::dict d;
     d["omega1"] = p.omega1; d["omega2"] = p.omega2; d["gamma"] = p.gamma;
-    d["inner"] = std::string(newton_->inner_name());
+    d["inner"] = std::string(this->core_->inner_name());
     return d;
   }
-
- private:
-  MappedCsr<I> A_;
-  std::optional<Core> newton_;
 };
 
 template <typename I>
 void bind_newton(py::module_& m, const char* name) {
-  py::class_<PyNewton<I>>(m, name)
-      .def(py::init([](py::array indptr, py::array indices, py::array data, Eigen::Index n, const Options& o,
+  py::class_<PyNewton<I>> cls(m, name);
+  cls.def(py::init([](py::array indptr, py::array indices, py::array data, Eigen::Index n, const Options& o,
                        const py::list& prolongations) {
              auto s = std::make_unique<PyNewton<I>>(indptr, indices, data, n);
              auto P = PyNewton<I>::prolongations(prolongations);
@@ -377,13 +370,11 @@ void bind_newton(py::module_& m, const char* name) {
            }),
            py::arg("indptr"), py::arg("indices"), py::arg("data"), py::arg("n"), py::arg("options"),
            py::arg("prolongations"))
-      .def("solve", &PyNewton<I>::solve, py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("b_indptr"),
-           py::arg("b_indices"), py::arg("b_data"), py::arg("zeta_fn"), py::arg("x0"), py::arg("callback"),
-           py::arg("options"), py::arg("zeta_jacobian") = py::none(), py::arg("progress") = py::none())
       .def("polish", &PyNewton<I>::polish, py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"),
            py::arg("b_indptr"), py::arg("b_indices"), py::arg("b_data"), py::arg("zeta_fn"), py::arg("z"), py::arg("tol"))
       .def_property_readonly("levels", &PyNewton<I>::levels)
       .def("parameters", &PyNewton<I>::parameters);
+  PyNewton<I>::def_solve(cls);
 }
 
 template <typename E, std::size_t N, typename Name>
@@ -449,6 +440,7 @@ PYBIND11_MODULE(_core, m) {
   bind_enum(m, "ZUpdate", nrmicp::all_z_updates, [](nrmicp::ZUpdate v) { return nrmicp::to_string(v); });
   bind_enum(m, "Inner", nrmicp::all_inners, [](nrmicp::Inner v) { return nrmicp::to_string(v); });
   bind_enum(m, "Accelerate", nrmicp::all_accelerations, [](nrmicp::Accelerate v) { return nrmicp::to_string(v); });
+  bind_enum(m, "ZetaKind", nrmicp::all_zeta_kinds, [](nrmicp::ZetaKind v) { return nrmicp::to_string(v); });
   bind_enum(m, "Status", nrmicp::all_statuses, [](nrmicp::Status v) { return nrmicp::status_name(v); });
   m.def("status_message", [](int code) {
     for (nrmicp::Status s : nrmicp::all_statuses)
@@ -462,28 +454,46 @@ PYBIND11_MODULE(_core, m) {
   }, py::arg("method"), py::arg("omega2_given"), py::arg("is_icp"),
      "The z-update 'auto' means for this method (is_icp: a zeta that is not None or constant).");
 
-  py::class_<Options>(m, "Options")
+  // The Newton member's statistics; `fields` lists them for the Python result (by reflection).
+  py::class_<nrmicp::NewtonStats> stats(m, "NewtonStats");
+  std::vector<std::string> stat_fields;
+  auto stat = [&](const char* name, auto member) {
+    stats.def_readonly(name, member);
+    stat_fields.emplace_back(name);
+  };
+  stat("linear_solves", &nrmicp::NewtonStats::linear_solves);
+  stat("inner_iterations", &nrmicp::NewtonStats::inner_iterations);
+  stat("fallback_sweeps", &nrmicp::NewtonStats::fallback_sweeps);
+  stat("outer_iterations", &nrmicp::NewtonStats::outer_iterations);
+  stat("level_steps", &nrmicp::NewtonStats::level_steps);
+  stat("level_seconds", &nrmicp::NewtonStats::level_seconds);
+  stat("path", &nrmicp::NewtonStats::path);
+  stats.attr("fields") = py::tuple(py::cast(stat_fields));
+
+  py::class_<SolveOptions>(m, "SolveOptions")
+      .def(py::init<>())
+      .def_readwrite("tol", &SolveOptions::tol)
+      .def_readwrite("rtol", &SolveOptions::rtol)
+      .def_readwrite("maxiter", &SolveOptions::maxiter)
+      .def_readwrite("theta", &SolveOptions::theta)
+      .def_readwrite("z_update", &SolveOptions::z_update)
+      .def_readwrite("accelerate", &SolveOptions::accelerate)
+      .def_readwrite("anderson_m", &SolveOptions::anderson_m)
+      .def_readwrite("record_history", &SolveOptions::record_history)
+      .def_readwrite("stall_iterations", &SolveOptions::stall_iterations)
+      .def_readwrite("divergence_factor", &SolveOptions::divergence_factor)
+      .def_readwrite("verbose", &SolveOptions::verbose);
+  py::class_<Options, SolveOptions>(m, "Options")
       .def(py::init<>())
       .def_readwrite("method", &Options::method)
-      .def_readwrite("tol", &Options::tol)
-      .def_readwrite("rtol", &Options::rtol)
       .def("target", &Options::target, py::arg("res0"))
-      .def_readwrite("maxiter", &Options::maxiter)
       .def_readwrite("omega1", &Options::omega1)
       .def_readwrite("omega2", &Options::omega2)
       .def_readwrite("gamma", &Options::gamma)
       .def_readwrite("phi", &Options::phi)
       .def_readwrite("alpha", &Options::alpha)
       .def_readwrite("beta", &Options::beta)
-      .def_readwrite("theta", &Options::theta)
-      .def_readwrite("z_update", &Options::z_update)
       .def_readwrite("inner", &Options::inner)
-      .def_readwrite("accelerate", &Options::accelerate)
-      .def_readwrite("anderson_m", &Options::anderson_m)
-      .def_readwrite("record_history", &Options::record_history)
-      .def_readwrite("stall_iterations", &Options::stall_iterations)
-      .def_readwrite("divergence_factor", &Options::divergence_factor)
-      .def_readwrite("verbose", &Options::verbose)
       .def("check", &Options::check, py::arg("n"));
 
   bind_solver<std::int32_t>(m, "SolverI32");

@@ -37,7 +37,7 @@ void lcp_for_all_methods(bool symmetric) {
   const auto A = testing::bai<I, Order>(12, 4.0, symmetric);
   const auto k = testing::known_solution(A.rows());
   const Eigen::VectorXd q = k.w - A * k.g;  // ζ ≡ 0: z* = g*
-  for (Method m : all_methods) {
+  for (Method m : stationary_methods) {
     for (ZUpdate zu : {ZUpdate::Explicit, ZUpdate::Solve}) {
       CAPTURE(to_string(m));
       CAPTURE(static_cast<int>(zu));
@@ -69,7 +69,7 @@ TEST_CASE("ICP with an affine zeta evaluated in C++") {
   const Eigen::VectorXd c = z_star - k.g - B * z_star;
   const Eigen::VectorXd q = k.w - A * z_star;
   const auto zeta = Zeta<int>::affine(B, c);
-  for (Method m : all_methods) {
+  for (Method m : stationary_methods) {
     for (ZUpdate zu : {ZUpdate::Explicit, ZUpdate::Solve}) {
       CAPTURE(to_string(m));
       Options o = tuned(m);
@@ -107,7 +107,7 @@ TEST_CASE("the callback sees every iterate of the history, the converged one las
   const auto A = testing::bai(8, 4.0, true);
   const auto k = testing::known_solution(A.rows());
   const Eigen::VectorXd q = k.w - A * k.g;
-  for (Method m : all_methods) {
+  for (Method m : stationary_methods) {
     Options o = tuned(m);
     o.record_history = true;
     std::vector<int> ks;

@@ -104,9 +104,9 @@ TEST_CASE("Newton solves Bai's LCP and constant-obstacle problems with known sol
     Result r = newton.solve(q);
     CHECK(r.status == Status::Converged);
     CHECK((r.z - k.g).lpNorm<Eigen::Infinity>() < 1e-12);
-    CHECK(r.path == "newton");
+    CHECK(r.newton.path == "newton");
     CHECK(r.nit <= 5);
-    CHECK(r.linear_solves == r.nit);
+    CHECK(r.newton.linear_solves == r.nit);
     // ζ ≡ c: z* = g* + c.
     const Vec c = Vec::LinSpaced(A.rows(), -1.0, 1.0);
     const Vec qc = k.w - A * (k.g + c);
@@ -131,9 +131,9 @@ TEST_CASE("Newton with user-supplied prolongations: the obstacle problem in 2D, 
   CHECK(rc.status == Status::Converged);
   CHECK(rn.nit <= 3);          // started from the coarse solutions
   CHECK(rn.nit < rc.nit);      // the cold start peels the contact set
-  CHECK(rn.level_steps.size() == 4);
-  CHECK(rn.level_seconds.size() == 4);
-  CHECK(rn.linear_solves > rn.nit);  // coarse levels solve too
+  CHECK(rn.newton.level_steps.size() == 4);
+  CHECK(rn.newton.level_seconds.size() == 4);
+  CHECK(rn.newton.linear_solves > rn.nit);  // coarse levels solve too
   check_complementarity(A, q, rn.z, psi, 1e-9);
   const Vec ref = projected_gauss_seidel(A, q, psi, 4000);
   CHECK((rn.z - ref).lpNorm<Eigen::Infinity>() < 1e-8);
@@ -202,7 +202,7 @@ TEST_CASE("inner = cg on a nonsymmetric A: BiCGSTAB preconditioned by the V-cycl
   CHECK(std::string(rk.inner) == "bicgstab");
   CHECK(rk.status == Status::Converged);
   CHECK(rk.residual < 1e-10);
-  CHECK(rk.inner_iterations > 0);
+  CHECK(rk.newton.inner_iterations > 0);
   check_complementarity(A, q, rk.z, psi, 1e-10);
   CHECK((rk.z - rd.z).lpNorm<Eigen::Infinity>() < 1e-10);
   const Vec ref = projected_gauss_seidel(A, q, psi, 4000);  // A is an M-matrix: PGS converges
@@ -262,8 +262,8 @@ TEST_CASE("a P-matrix on which the active-set steps cycle: the fallback is taken
   o.tol = 1e-10;
   const Result r = Newton<RowMat>(A, o).solve(q);
   CHECK(r.status == Status::Converged);
-  CHECK(r.fallback_sweeps > 0);
-  CHECK(r.path.find("fallback") != std::string::npos);
+  CHECK(r.newton.fallback_sweeps > 0);
+  CHECK(r.newton.path.find("fallback") != std::string::npos);
   CHECK((r.z - z_star).lpNorm<Eigen::Infinity>() < 1e-9);
 }
 
@@ -294,7 +294,7 @@ TEST_CASE("Newton on ICPs: affine ζ (full system) and a functor ζ (outer fixed
   });
   r = newton.solve(q, zeta);
   CHECK(r.status == Status::Converged);
-  CHECK(r.outer_iterations >= 2);
+  CHECK(r.newton.outer_iterations >= 2);
   CHECK((r.z - z_star).lpNorm<Eigen::Infinity>() < 1e-10);
 }
 
@@ -319,6 +319,51 @@ TEST_CASE("Newton: warm start from the solution, maxiter, callback stop, tol bel
   r = newton.solve(q, Zeta<int>::none(), nullptr, {}, {}, &it);
   CHECK(r.status == Status::Stagnated);
   CHECK(r.residual < 1e-12);
+}
+
+// Traps of the C++ API (issue 13): each of these ran silently before.
+TEST_CASE("nrmicp::Solver refuses Method::Newton, naming nrmicp::Newton") {
+  const RowMat A = testing::bai<int, Eigen::RowMajor>(4, 4.0, true);
+  Options o;
+  o.method = Method::Newton;
+  CHECK_THROWS_WITH_AS(Solver<RowMat>(A, o), doctest::Contains("nrmicp::Newton"), std::invalid_argument);
+  CHECK_FALSE(is_aor_type(Method::Newton));
+}
+
+TEST_CASE("nrmicp::Newton refuses phi, accelerate and z_update, at set-up and per solve") {
+  const RowMat A = testing::bai<int, Eigen::RowMajor>(4, 4.0, true);
+  const Vec q = -Vec::Ones(A.rows());
+  for (Method m : {Method::Newton, Method::NRMGS}) {  // the class is the Newton member, whatever method says
+    CAPTURE(to_string(m));
+    Options phi, anderson, solve_update;
+    phi.method = anderson.method = solve_update.method = m;
+    phi.phi = Vec::Constant(A.rows(), 0.1);
+    anderson.accelerate = Accelerate::Anderson;
+    solve_update.z_update = ZUpdate::Solve;
+    CHECK_THROWS_WITH_AS(Newton<RowMat>(A, phi), doctest::Contains("phi"), std::invalid_argument);
+    CHECK_THROWS_WITH_AS(Newton<RowMat>(A, anderson), doctest::Contains("accelerate"), std::invalid_argument);
+    CHECK_THROWS_WITH_AS(Newton<RowMat>(A, solve_update), doctest::Contains("z_update"), std::invalid_argument);
+    const Newton<RowMat> newton(A, Options());
+    CHECK_THROWS_WITH_AS(newton.solve(q, Zeta<int>::none(), nullptr, {}, {}, &anderson),
+                         doctest::Contains("accelerate"), std::invalid_argument);
+  }
+  Options o;
+  o.method = Method::Newton;
+  CHECK_NOTHROW(o.check(A.rows()));
+}
+
+TEST_CASE("nrmicp::Newton fills timings.iterations") {
+  const RowMat A = laplacian_2d(31);
+  const Vec psi = paraboloid(31), q = Vec::Zero(31 * 31);
+  Options o;
+  o.record_history = true;
+  for (const auto& zeta : {Zeta<int>::constant(psi), Zeta<int>::affine(Zeta<int>::RowMatrix(A.rows(), A.rows()), psi)}) {
+    const Result r = Newton<RowMat>(A, o).solve(q, zeta);
+    REQUIRE(r.status == Status::Converged);
+    CHECK(r.timings.iterations > 0);
+    CHECK(r.timings.iterations <= r.timings.total);
+    CHECK(r.timings.iterations >= r.history_seconds.back());
+  }
 }
 
 TEST_CASE("Newton stops at the rounding floor of Res, in a few steps, and says what the floor was") {

@@ -22,7 +22,7 @@ Options options_for(Method m, Eigen::Index n) {
 
 TEST_CASE("every splitting satisfies A = M - N") {
   const auto A = testing::bai(6, 4.0, false);
-  for (Method m : all_methods) {
+  for (Method m : stationary_methods) {
     CAPTURE(to_string(m));
     const auto o = options_for(m, A.rows());
     const auto p = resolve_parameters(A, o);
@@ -34,7 +34,7 @@ TEST_CASE("every splitting satisfies A = M - N") {
 TEST_CASE("the left matrix is Omega2 + (M + phi) Omega1 and is triangular for AOR types") {
   const auto A = testing::bai(6, 4.0, false);
   const Eigen::Index n = A.rows();
-  for (Method m : all_methods) {
+  for (Method m : stationary_methods) {
     CAPTURE(to_string(m));
     const auto o = options_for(m, n);
     Solver<testing::SpMat<>> s(A, o);

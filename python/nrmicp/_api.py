@@ -177,7 +177,7 @@ def _scalar(value, name, *, low=None, low_inclusive=False, high=None, allow_none
 
 def _iteration_options(opts, *, tol, maxiter, z_update, accelerate, anderson_m, theta, record_history,
                        stall_iterations, verbose=0, rtol=0.0):
-    """Fill the iteration fields of a core Options, checking types here; values are checked by
+    """Fill a core SolveOptions (the per-solve options), checking types here; values are checked by
     the core (Options.check), which knows the rules."""
     opts.tol = _scalar(tol, "tol")
     opts.rtol = _scalar(rtol, "rtol")
@@ -222,18 +222,22 @@ def _checked(opts, n):
     return opts
 
 
+ZetaKind = _core.ZetaKind  # the C++ core's (zeta.hpp): none, constant, affine, functor
+
+
 def _make_zeta(zeta, n):
-    """Validate ζ -> (kind, c, B, fn): kind 0 None, 1 constant c, 2 Affine (B canonical CSR, c), 3 callable."""
+    """Validate ζ -> (kind, c, B, fn): a ZetaKind, the constant c (constant, affine), B canonical
+    CSR (affine), the callable (functor)."""
     if zeta is None:
-        return 0, None, None, None
+        return ZetaKind.none, None, None, None
     if isinstance(zeta, Affine):
         B = as_csr(zeta.B, "zeta.B")
         if B.shape != (n, n):
             raise ValueError(f"zeta.B must have shape ({n}, {n}), got {B.shape}")
-        return 2, as_constant(zeta.c, n, "zeta.c"), B, None
+        return ZetaKind.affine, as_constant(zeta.c, n, "zeta.c"), B, None
     if callable(zeta):
-        return 3, None, None, zeta
-    return 1, as_constant(zeta, n, "zeta"), None, None
+        return ZetaKind.functor, None, None, zeta
+    return ZetaKind.constant, as_constant(zeta, n, "zeta"), None, None
 
 
 def _scale_choice(scale):
@@ -346,9 +350,6 @@ class Solver:
                               anderson_m=anderson_m, record_history=record_history,
                               stall_iterations=stall_iterations, verbose=verbose)
         _checked(_iteration_options(opts, **self._defaults), n)
-        if self.method in ("mms", "two_sweep") and (omega1 is not None or phi is not None):
-            raise ValueError(f"method {self.method!r} fixes omega1 = I and phi = 0; "
-                             "use an NRM-family method to set them")
         if self.scale is None:
             self._dr = self._dc = None
             A_core = self.A
@@ -359,7 +360,6 @@ class Solver:
         self.polish = _newton.check_polish(polish)
         self._polisher = None
         if self.method == "newton":
-            _newton.check_options(phi=phi, accelerate=accelerate, z_update=z_update)
             self._core = _newton.make_core(A_core, opts, hierarchy, self.A, self._dc)
             return
         _newton.check_no_hierarchy(hierarchy, self.method)
@@ -391,15 +391,7 @@ class Solver:
               **iteration_options: Any) -> Result:
         """Solve ICP(q, A, ζ). See :func:`nrmicp.solve` for the arguments."""
         n = self.n
-        unknown = set(iteration_options) - set(self._defaults)
-        if unknown:
-            raise TypeError(f"Solver.solve() got unexpected keyword argument(s) {sorted(unknown)}; the splitting "
-                            "options (method, omega1, omega2, gamma, phi, alpha, beta, inner, scale) are fixed at "
-                            "set-up")
-        it = dict(self._defaults, **iteration_options)
-        checked_opts = _iteration_options(_core.Options(), **it)
-        checked_opts.method = getattr(_core.Method, self.method)
-        _checked(checked_opts, n)  # validates every iteration option once, against this method
+        it, checked_opts = self._solve_options(iteration_options)
         tol = float(it["tol"])
         qv = as_vector(q, n, "q")
         z0 = None if x0 is None else as_vector(x0, n, "x0")
@@ -407,18 +399,51 @@ class Solver:
         if callback is not None and not callable(callback):
             raise TypeError(f"callback must be callable, got {type(callback).__name__}")
         core_kw = _newton.jacobian_argument(zeta_jacobian, self, kind, self._dc)
-
-        dr, dc = self._dr, self._dc
-        scaled = dr is not None
-        # The problem handed to the core (scaled variables y = D_c⁻¹ z when scaled).
         checked = None if fn is None else CheckedZeta(fn, n)  # read-only input, checked output: one per solve
-        if scaled:
+        problem, z0s = self._core_problem(qv, z0, kind, c, B, checked)
+        measure = _OriginalResidual(self.A, qv, kind, c, B, checked)
+        # Res is re-measured in the original variables whenever that costs no call of a user ζ
+        # (constant: the core iterated the shifted LCP; Affine), and always with scaling (then a
+        # callable ζ is called once more per round): success is never declared on the strength of
+        # a different residual. An unscaled LCP needs no re-check: the core's Res is already
+        # min(Az + q, z) of the returned z in the original variables.
+        verify = kind in (ZetaKind.constant, ZetaKind.affine) or self._dr is not None
+        if checked_opts.rtol > 0:
+            # The core's rule (Options::target): max(tol, rtol · Res(0)), Res(0) in the original
+            # variables; the core then gets the absolute target.
+            tol = checked_opts.target(measure(np.zeros(n))[1])
+            it = dict(it, tol=tol, rtol=0.0)
+        rounds = _Rounds(self, problem, it, callback, core_kw, measure if verify else None)
+        rounds.run(z0s, tol)
+        polished = polish_core = None
+        if self.polish:
+            polished, polish_core = _newton.polish(self, problem, rounds.z, rounds.res, measure, self._dc)
+        return self._assemble(rounds, polished, polish_core, tol)
+
+    def _solve_options(self, iteration_options: dict) -> dict:
+        """The set-up's per-solve options overridden by the solve's, checked against the method."""
+        unknown = set(iteration_options) - set(self._defaults)
+        if unknown:
+            raise TypeError(f"Solver.solve() got unexpected keyword argument(s) {sorted(unknown)}; the splitting "
+                            "options (method, omega1, omega2, gamma, phi, alpha, beta, inner, scale) are fixed at "
+                            "set-up")
+        it = dict(self._defaults, **iteration_options)
+        checked = _iteration_options(_core.Options(), **it)
+        checked.method = getattr(_core.Method, self.method)
+        _checked(checked, self.n)  # validates every iteration option once, against this method
+        return it, checked
+
+    def _core_problem(self, qv, z0, kind, c, B, checked):
+        """The problem handed to the core, (q, kind, c, B-indptr, B-indices, B-data, fn), and its
+        start: in the scaled variables y = D_c⁻¹ z when scaled."""
+        dr, dc = self._dr, self._dc
+        if dr is not None:
             qs = dr * qv
             z0s = None if z0 is None else z0 / dc
             cs = None if c is None else c / dc
             Bs = None if B is None else scale_matrix(B, 1.0 / dc, dc)
-            fns = None if fn is None else (checked if np.all(dc == 1.0) else
-                                           CheckedZeta(ScaledCallable(checked, dc), n))
+            fns = None if checked is None else (checked if np.all(dc == 1.0) else
+                                                CheckedZeta(ScaledCallable(checked, dc), self.n))
         else:
             qs, z0s, cs, Bs, fns = qv, z0, c, B, checked
         if Bs is not None:
@@ -427,119 +452,21 @@ class Solver:
             bd = Bs.data
         else:
             bp = bi = bd = None
+        return (qs, kind, cs, bp, bi, bd, fns), z0s
 
-        cb_offset = [0]  # the callback's nit counts on over re-solves, as the history's
-        cb = None if callback is None else _core_callback(callback, dc if scaled else None, cb_offset)
-
-        # Res is re-measured in the original variables whenever that costs no call of a user ζ
-        # (constant: the core iterated the shifted LCP; Affine), and always with scaling (then a
-        # callable ζ is called once more per round): success is never declared on the strength of
-        # a different residual. An unscaled LCP needs no re-check: the core's Res is already
-        # min(Az + q, z) of the returned z in the original variables.
-        verify = kind in (1, 2) or scaled
-
-        def original_residual(z):
-            w = self.A @ z + qv
-            if kind == 0:
-                g = z
-            elif kind == 1:
-                g = z - c
-            elif kind == 2:
-                g = z - (B @ z + c)
-            else:
-                g = z - checked(z)  # on a read-only copy: ζ never sees (or writes into) the result
-            return w, _norm(np.minimum(w, g))
-
-        if checked_opts.rtol > 0:
-            # The core's rule (Options::target): max(tol, rtol · Res(0)), Res(0) in the original
-            # variables; the core then gets the absolute target.
-            tol = checked_opts.target(original_residual(np.zeros(n))[1])
-            it = dict(it, tol=tol, rtol=0.0)
-        tol_k, x0k = tol, z0s
-        best = None
-        done_iters = 0
-        rounds = []
-        histories = []
-        timings = None
-        counters: dict[str, int] = {}
-        refined = 0
-        while True:
-            cb_offset[0] = done_iters
-            opts = _iteration_options(_core.Options(), **dict(it, tol=tol_k))
-            core_kw["progress"] = _progress_hook(self.method, n) if opts.verbose > 0 else None
-            d = self._core.solve(qs, kind, cs, bp, bi, bd, fns, x0k, cb, opts, **core_kw)
-            status = Status(d["status"])
-            if status == Status.ZETA_FAILED:
-                raise ValueError(f"{d['message']} (NaN or Inf)")
-            z = d["z"] * dc if scaled else d["z"]
-            if verify:
-                w, res = original_residual(z)
-            else:
-                w, res = d["w"], d["residual"]
-            key = res if res == res else math.inf
-            if best is None or key < best[0]:
-                best = (key, z, w, res, done_iters + d["nit"], d)
-            if d["history"] is not None:
-                h = d["history"]
-                histories.append((h["iteration"] + done_iters, h["seconds"], h["residual"]))
-            t = d["timings"]
-            if timings is None:
-                timings = dict(t)
-            else:
-                for name in t:
-                    if name != "setup":
-                        timings[name] += t[name]
-            for name, count in d["counters"].items():
-                counters[name] = counters.get(name, 0) + int(count)
-            done_iters += d["iterations"]
-            rounds.append((tol_k, status, res))
-            if status != Status.CONVERGED or res < tol or not verify:
-                break
-            # The core met tol_k on its own residual, but Res(z) >= tol: tighten and re-solve
-            # from where it stopped, at most MAX_REFINEMENTS times.
-            if refined >= MAX_REFINEMENTS:
-                break
-            ratio = res / d["residual"] if d["residual"] > 0 else math.inf
-            new_tol = min(0.5 * tol_k, 0.5 * tol / ratio) if math.isfinite(ratio) else 0.0
-            if not (new_tol >= 1e-300):
-                break
-            tol_k, x0k = new_tol, d["z"]
-            refined += 1
-
-        d_last = d
-        _, z, w, res, nit, d = best
-        polished = None
-        if self.polish:
-            polished, polish_core = _newton.polish(self, (qs, kind, cs, bp, bi, bd, fns), z, res,
-                                                   original_residual, dc if scaled else None)
-            if polished is not None:
-                z, w, res = polished
-        last_status = rounds[-1][1]
-        if not verify:
-            status, message = last_status, d_last["message"]
-        elif res < tol:
-            status, message = Status.CONVERGED, _core.status_message(int(Status.CONVERGED))
-            if refined:
-                message += f" (after {refined} re-solve(s) with a tighter tolerance on the scaled problem)"
-        elif last_status == Status.CONVERGED:
-            status = Status.STAGNATED
-            message = (f"stagnated: the {'scaled' if scaled else 'shifted'} problem met its tolerance {tol_k:.3g} "
-                       f"but Res(z) = {res:.3g} >= tol = {tol:.3g} in the original variables"
-                       f"{' after %d re-solve(s)' % refined if refined else ''}; returning the best iterate")
-        else:
-            status = last_status
-            message = f"{d_last['message']}; Res(z) = {res:.3g} in the original variables"
-        history = None
-        if histories:
-            history = {"iteration": np.concatenate([h[0] for h in histories]),
-                       "seconds": np.concatenate([h[1] for h in histories]),
-                       "residual": np.concatenate([h[2] for h in histories])}
-        extra = {}
-        if scaled:
-            extra["scaling"] = {"kind": self.scale, "refinements": refined,
-                                "rounds": [(float(tk), Status(s).name, float(r)) for tk, s, r in rounds]}
+    def _assemble(self, rounds: "_Rounds", polished, polish_core, tol: float) -> Result:
+        """The result: the best round's z, the status re-decided as docs/SPEC.md says ("When the
+        Python layer changes the core's status"), the rounds' history, timings and counters."""
+        z, w, res = rounds.z, rounds.w, rounds.res
+        if polished is not None:
+            z, w, res = polished
+        status, message = rounds.status(res, tol)
         if status != Status.CONVERGED and self._omega2_hint:
             message += self._omega2_hint
+        extra = {}
+        if self._dr is not None:
+            extra["scaling"] = {"kind": self.scale, "refinements": rounds.refined,
+                                "rounds": [(float(tk), Status(s).name, float(r)) for tk, s, r in rounds.rounds]}
         if self.polish:
             extra["polished"] = polished is not None
             if polished is not None and res < tol and status != Status.CONVERGED:
@@ -548,10 +475,134 @@ class Solver:
                   and "rounding floor" in polish_core["message"]):
                 status, message = Status.STAGNATED, f"{message}; polish: {polish_core['message']}"
         if self.method == "newton":
-            extra.update(_newton.result_fields(d))
-        return Result(z=z, w=w, success=status == Status.CONVERGED, status=status, message=message, nit=nit,
-                      iterations=done_iters, residual=res, history=history, timings=timings, method=self.method,
-                      inner=d["inner"], counters=counters, **extra)
+            extra.update(_newton.result_fields(rounds.best_d))
+        return Result(z=z, w=w, success=status == Status.CONVERGED, status=status, message=message,
+                      nit=rounds.nit, iterations=rounds.done_iters, residual=res, history=rounds.history(),
+                      timings=rounds.timings, method=self.method, inner=rounds.best_d["inner"],
+                      counters=rounds.counters, **extra)
+
+
+class _OriginalResidual:
+    """(w, Res(z)) in the original variables, in numpy: w = Az + q, g = z − ζ(z)."""
+
+    def __init__(self, A, qv, kind, c, B, checked):
+        self.A, self.qv, self.kind, self.c, self.B, self.checked = A, qv, kind, c, B, checked
+
+    def __call__(self, z):
+        w = self.A @ z + self.qv
+        if self.kind == ZetaKind.none:
+            g = z
+        elif self.kind == ZetaKind.constant:
+            g = z - self.c
+        elif self.kind == ZetaKind.affine:
+            g = z - (self.B @ z + self.c)
+        else:
+            g = z - self.checked(z)  # on a read-only copy: ζ never sees (or writes into) the result
+        return w, _norm(np.minimum(w, g))
+
+
+class _Rounds:
+    """The core's solves of one Solver.solve: the first, then (when `measure` re-measures Res in
+    the original variables and the core met its tol but Res(z) >= tol) at most MAX_REFINEMENTS
+    re-solves with a tighter tolerance. Keeps the best iterate and sums what the rounds report."""
+
+    def __init__(self, solver, problem, it, callback, core_kw, measure):
+        self.solver, self.problem, self.it, self.core_kw, self.measure = solver, problem, it, core_kw, measure
+        self.scaled = solver._dr is not None
+        self.cb_offset = [0]  # the callback's nit counts on over re-solves, as the history's
+        self.cb = None if callback is None else _core_callback(callback, solver._dc if self.scaled else None,
+                                                               self.cb_offset)
+        self.best = None
+        self.done_iters = 0
+        self.rounds, self.histories = [], []
+        self.timings = None
+        self.counters: dict[str, int] = {}
+        self.refined = 0
+        self.last = None
+
+    def run(self, z0s, tol):
+        tol_k, x0k = tol, z0s
+        while True:
+            d, status = self.round(tol_k, x0k)
+            if status != Status.CONVERGED or self.rounds[-1][2] < tol or self.measure is None:
+                return
+            # The core met tol_k on its own residual, but Res(z) >= tol: tighten and re-solve
+            # from where it stopped, at most MAX_REFINEMENTS times.
+            if self.refined >= MAX_REFINEMENTS:
+                return
+            res = self.rounds[-1][2]
+            ratio = res / d["residual"] if d["residual"] > 0 else math.inf
+            new_tol = min(0.5 * tol_k, 0.5 * tol / ratio) if math.isfinite(ratio) else 0.0
+            if not (new_tol >= 1e-300):
+                return
+            tol_k, x0k = new_tol, d["z"]
+            self.refined += 1
+
+    def round(self, tol_k, x0k):
+        """One solve by the core at tolerance tol_k from x0k; its outcome folded in."""
+        solver = self.solver
+        self.cb_offset[0] = self.done_iters
+        opts = _iteration_options(_core.SolveOptions(), **dict(self.it, tol=tol_k))
+        self.core_kw["progress"] = _progress_hook(solver.method, solver.n) if opts.verbose > 0 else None
+        d = solver._core.solve(*self.problem, x0k, self.cb, opts, **self.core_kw)
+        status = Status(d["status"])
+        if status == Status.ZETA_FAILED:
+            raise ValueError(f"{d['message']} (NaN or Inf)")
+        z = d["z"] * solver._dc if self.scaled else d["z"]
+        w, res = self.measure(z) if self.measure is not None else (d["w"], d["residual"])
+        key = res if res == res else math.inf
+        if self.best is None or key < self.best[0]:
+            self.best = (key, z, w, res, self.done_iters + d["nit"], d)
+        if d["history"] is not None:
+            h = d["history"]
+            self.histories.append((h["iteration"] + self.done_iters, h["seconds"], h["residual"]))
+        self.add_timings(d["timings"])
+        for name, count in d["counters"].items():
+            self.counters[name] = self.counters.get(name, 0) + int(count)
+        self.done_iters += d["iterations"]
+        self.rounds.append((tol_k, status, res))
+        self.last = d
+        return d, status
+
+    def add_timings(self, t):
+        if self.timings is None:
+            self.timings = dict(t)
+            return
+        for name in t:
+            if name != "setup":
+                self.timings[name] += t[name]
+
+    z = property(lambda self: self.best[1])
+    w = property(lambda self: self.best[2])
+    res = property(lambda self: self.best[3])
+    nit = property(lambda self: self.best[4])
+    best_d = property(lambda self: self.best[5])
+
+    def status(self, res, tol):
+        """Status and message of the returned z with Res `res` (rule 1 of docs/SPEC.md, "When the
+        Python layer changes the core's status")."""
+        last_status, last_message = self.rounds[-1][1], self.last["message"]
+        if self.measure is None:
+            return last_status, last_message
+        if res < tol:
+            message = _core.status_message(int(Status.CONVERGED))
+            if self.refined:
+                message += f" (after {self.refined} re-solve(s) with a tighter tolerance on the scaled problem)"
+            return Status.CONVERGED, message
+        if last_status == Status.CONVERGED:
+            tol_k = self.rounds[-1][0]
+            return Status.STAGNATED, (
+                f"stagnated: the {'scaled' if self.scaled else 'shifted'} problem met its tolerance {tol_k:.3g} "
+                f"but Res(z) = {res:.3g} >= tol = {tol:.3g} in the original variables"
+                f"{' after %d re-solve(s)' % self.refined if self.refined else ''}; returning the best iterate")
+        return last_status, f"{last_message}; Res(z) = {res:.3g} in the original variables"
+
+    def history(self):
+        if not self.histories:
+            return None
+        return {"iteration": np.concatenate([h[0] for h in self.histories]),
+                "seconds": np.concatenate([h[1] for h in self.histories]),
+                "residual": np.concatenate([h[2] for h in self.histories])}
 
 
 def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "nrmgs", tol: float = 1e-8,
@@ -674,9 +725,8 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
         projected onto z ≥ ζ and used as the next start; 'amg' builds classical Ruge–Stüben
         prolongations with pyamg; None starts cold (from x0 or zeros). 'auto': 'amg' for
         n >= 4096 when pyamg is installed, else None (measured: README "Mesh-independent solves").
-        With a hierarchy the start is the nested solution and ``x0`` is not used (measured on the
-        American put at n_space = 6400: warm starts from the previous time step took 38.7 Newton
-        steps per time step, moving the exercise boundary one node per step; nested starts 1.2).
+        With a hierarchy the start is the nested solution and ``x0`` is not used (the American put
+        measured both ways: README "Mesh-independent solves").
     zeta_jacobian : callable, optional
         Method 'newton' with a callable ζ: ``zeta_jacobian(z)`` returns a generalized Jacobian of ζ
         at z as an (n, n) sparse matrix; then Newton works on the whole ICP (a semismooth Newton

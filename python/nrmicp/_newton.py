@@ -9,11 +9,7 @@ from . import _core
 from ._hierarchy import resolve_hierarchy
 
 #: hierarchy="auto" builds the AMG hierarchy (pyamg) for method "newton" from this many unknowns
-#: on, and starts cold below. Measured on obstacle_2d (tol 1e-8, one solve, set-up included, a
-#: loaded 2-core machine): n = 1,024: cold 12 steps 0.011 s, amg 2 steps 0.008 s; n = 4,096: cold
-#: 24 steps 0.10 s, amg 2 steps 0.29 s (AMG set-up dominates a single solve); n = 16,384: cold 49
-#: steps 6.4 s, amg 3 steps 1.4 s. A Solver pays the set-up once: the American put march at
-#: n = 6,399 took 1.9 s nested against 32 s warm-started. pyamg's import costs 1-4 s once.
+#: on, and starts cold below, where AMG's set-up outweighs the steps it saves (docs/MEASUREMENTS.md).
 AUTO_AMG_MIN_N = 4096
 
 
@@ -29,18 +25,6 @@ def check_polish(polish) -> bool:
     if not isinstance(polish, (bool, np.bool_)):
         raise TypeError(f"polish must be True or False, got {polish!r}")
     return bool(polish)
-
-
-def check_options(*, phi, accelerate, z_update):
-    """Options of the stationary members that method 'newton' does not have."""
-    if phi is not None:
-        raise ValueError("phi is a parameter of the stationary members; method 'newton' has none")
-    if (accelerate or "none").lower() != "none":
-        raise ValueError(f"accelerate={accelerate!r} applies to the stationary members; method 'newton' "
-                         "takes Newton steps (use accelerate='none')")
-    if not isinstance(z_update, str) or z_update.lower() != "auto":
-        raise ValueError(f"z_update={z_update!r} applies to the stationary members; method 'newton' "
-                         "recovers z from its linear solves (use z_update='auto')")
 
 
 def check_no_hierarchy(hierarchy, method):
@@ -114,11 +98,9 @@ def polish(solver, problem, z, res, original_residual, dc):
 
 
 def result_fields(d) -> dict:
-    """The Newton member's result fields from the core's dict."""
-    return {"linear_solves": int(d["linear_solves"]), "inner_iterations": int(d["inner_iterations"]),
-            "fallback_sweeps": int(d["fallback_sweeps"]),
-            "outer_iterations": int(d["outer_iterations"]), "level_steps": list(d["level_steps"]),
-            "level_seconds": list(d["level_seconds"]), "path": d["path"]}
+    """The Newton member's result fields: every field of the core's NewtonStats (result.hpp)."""
+    stats = d["newton"]
+    return {name: getattr(stats, name) for name in _core.NewtonStats.fields}
 
 
 def jacobian_argument(zeta_jacobian, solver, kind, dc) -> dict:
@@ -128,7 +110,7 @@ def jacobian_argument(zeta_jacobian, solver, kind, dc) -> dict:
         return {}
     if not callable(zeta_jacobian):
         raise TypeError(f"zeta_jacobian must be callable, got {type(zeta_jacobian).__name__}")
-    if solver.method != "newton" or kind != 3:
+    if solver.method != "newton" or kind != _core.ZetaKind.functor:
         raise ValueError("zeta_jacobian is used by method 'newton' with a callable zeta only")
     import scipy.sparse as sp
     from ._inputs import as_csr

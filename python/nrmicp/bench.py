@@ -284,8 +284,6 @@ def _run_nrmicp(problem, method, z_update_used, maxiter):
                    nit=int(res.nit), residual=float(res.residual), setup=tm.get("setup", ""),
                    factorization=tm.get("factorization", ""), iterations=tm.get("iterations", ""),
                    linear_solves=getattr(res, "linear_solves", ""))
-        if base == "newton":  # its time is per level (the stationary clocks stay 0)
-            out["iterations"] = float(sum(getattr(res, "level_seconds", []) or [0.0]))
         if history and res.history is not None:
             h = {k: np.asarray(v, dtype=float) for k, v in res.history.items()}
             if getattr(res, "polished", False):  # the polishing step is not in the member's history

@@ -56,58 +56,45 @@ namespace nrmicp {
 
 namespace detail {
 
-/// What the Newton loop on one level did.
-struct NewtonOutcome {
-  Eigen::VectorXd z;          ///< best iterate (smallest Res)
-  double residual = std::numeric_limits<double>::infinity();
-  Status status = Status::MaxIterations;
-  std::string message;
-  bool settled = false;       ///< the active set repeated: z solves the problem to rounding
-  std::vector<char> inactive; ///< the inactive set of z's last step (empty if no step was taken)
-  int steps = 0, sweeps = 0, solves = 0;
-  long long inner_iterations = 0;  ///< of the iterative inner solve (inner = cg)
-  std::vector<int> history_iteration;
-  std::vector<double> history_seconds, history_residual;
+/// What the Newton loop on one level did, as a Result (z: the best iterate; its Res, status,
+/// message and history; newton.linear_solves, .inner_iterations, .fallback_sweeps), and what
+/// nested iteration and the outer fixed point take on from it.
+struct LevelOutcome : Result {
+  int steps = 0;               ///< Newton steps (the Monitor's nit is the best iterate's index)
+  bool settled = false;        ///< the active set repeated: z solves the problem to rounding
+  std::vector<char> inactive;  ///< the inactive set of z's last step (empty if no step was taken)
 };
 
 /// The Newton member on one level: the plain step `plain` (at its start), globalized, in the
 /// family's loop (detail::loop, solver.hpp) with the family's Monitor.
 template <typename Plain>
-NewtonOutcome newton_loop(Plain& plain, const NewtonControl& ctl) {
+LevelOutcome newton_loop(Plain& plain, const NewtonControl& ctl) {
   static const Eigen::VectorXd no_shift;
   Options mo;
   mo.tol = ctl.tol;
   mo.maxiter = std::numeric_limits<int>::max();  // Newton steps are counted by the step (ctl.maxiter)
   mo.record_history = ctl.record_history;
   mo.verbose = ctl.verbose;
-  Result mres;
-  Monitor monitor(mo, ctl.callback, ctl.poll, ctl.progress, ctl.shift ? *ctl.shift : no_shift, mres, plain.size());
+  LevelOutcome o;
+  Monitor monitor(mo, ctl.callback, ctl.poll, ctl.progress, ctl.shift ? *ctl.shift : no_shift, o, plain.size());
   const Eigen::VectorXd z_start = plain.z();
   Iterate s;
   Globalized<Plain> step(plain, ctl, s);
   loop(step, s, monitor);
   monitor.finish(z_start);
-  NewtonOutcome o;
-  o.z = std::move(mres.z);
-  o.residual = mres.residual;
-  o.status = mres.status;
-  o.message = std::move(mres.message);
+  o.steps = plain.steps();
   o.settled = step.settled();
   o.inactive = step.inactive();
-  o.steps = plain.steps();
-  o.sweeps = step.sweeps();
-  o.solves = plain.solves();
-  o.inner_iterations = plain.inner_iterations();
-  o.history_iteration = std::move(mres.history_iteration);
-  o.history_seconds = std::move(mres.history_seconds);
-  o.history_residual = std::move(mres.history_residual);
+  o.newton.fallback_sweeps = step.sweeps();
+  o.newton.linear_solves = plain.solves();
+  o.newton.inner_iterations = plain.inner_iterations();
   return o;
 }
 
 /// The (shifted) LCP (B null) or the affine ICP ζ(z) = Bz + c on `level`, with the reduced system
 /// `K` (analysed for this problem), from z.
 template <typename MatrixType>
-NewtonOutcome newton_loop(NewtonLevel<MatrixType>& level, ActiveSetSystem<typename MatrixType::StorageIndex>& K,
+LevelOutcome newton_loop(NewtonLevel<MatrixType>& level, ActiveSetSystem<typename MatrixType::StorageIndex>& K,
                           const Eigen::VectorXd& q, const typename NewtonLevel<MatrixType>::RowMatrix* B,
                           const Eigen::VectorXd* c, Eigen::VectorXd z, const NewtonControl& ctl) {
   NewtonStep<MatrixType, FixedLinearization<MatrixType>> plain(level, {level, K, q, B, c}, std::move(z));
@@ -133,16 +120,16 @@ class Newton {
   using Poll = detail::Poll;
   using Progress = detail::Progress;
 
+  /// `options.method` is taken as Method::Newton (this class is the Newton member), so the
+  /// options the Newton member does not have (phi, accelerate, z_update) are refused.
   Newton(const MatrixType& A, Options options, std::vector<RowMatrix> prolongations = {})
-      : A_(A), options_(std::move(options)), P_(std::move(prolongations)) {
+      : A_(A), options_(as_newton(std::move(options))), P_(std::move(prolongations)) {
     if (A.rows() != A.cols())
       throw std::invalid_argument("Newton: A must be square, got " + std::to_string(A.rows()) + "x" +
                                   std::to_string(A.cols()));
     options_.check(A.rows());
     const auto t0 = std::chrono::steady_clock::now();
-    Options o = options_;
-    o.method = Method::Newton;
-    params_ = resolve_parameters(A_, o);
+    params_ = resolve_parameters(A_, options_);
     finest_ = std::make_unique<detail::NewtonLevel<MatrixType>>(A_, options_);
     Eigen::Index rows = A.rows();
     for (std::size_t l = 0; l < P_.size(); ++l) {
@@ -180,27 +167,15 @@ class Newton {
   /// Number of levels (1 without prolongations).
   int levels() const { return 1 + static_cast<int>(coarse_.size()); }
 
-  /// Solves ICP(q, A, ζ). The start: with prolongations, the nested coarse-to-fine solution
-  /// (z0 is not used: measured on the American put, n_space = 6400, 100 time steps, a warm start
-  /// from the previous time step took 3.48 steps per time step and 1.53 CPU s for the march, the
-  /// nested start 1.18 steps (11.6 solves on all levels) and 0.84 s; at n_space = 800 the warm
-  /// start is faster, 0.07 against 0.16 s: pass hierarchy None for small time-stepping problems);
-  /// without, z0 (zeros when null). The iteration fields of
-  /// `iteration_options` (tol, maxiter, record_history) override the constructor's.
+  /// Solves ICP(q, A, ζ). The start: with prolongations, the nested coarse-to-fine solution (z0
+  /// is not used; warm starts win only on small time-stepping problems: README, the American
+  /// put); without, z0 (zeros when null). `solve_options`, when given, replace the constructor's
+  /// per-solve options (SolveOptions says which the Newton member uses).
   Result solve(const Vector& q, const Zeta<StorageIndex>& zeta = Zeta<StorageIndex>::none(), const Vector* z0 = nullptr,
-               const Callback& callback = {}, const Poll& poll = {}, const Options* iteration_options = nullptr,
+               const Callback& callback = {}, const Poll& poll = {}, const SolveOptions* solve_options = nullptr,
                const Progress& progress = {}) const {
     std::lock_guard<std::mutex> lock(mutex_);
-    const auto t0 = std::chrono::steady_clock::now();
-    Options o = options_;
-    if (iteration_options) {
-      iteration_options->check(A_.rows());
-      o.tol = iteration_options->tol;
-      o.rtol = iteration_options->rtol;
-      o.maxiter = iteration_options->maxiter;
-      o.record_history = iteration_options->record_history;
-      o.verbose = iteration_options->verbose;
-    }
+    const Options o = solve_options ? options_.with(solve_options, A_.rows()) : options_;
     return run(q, zeta, z0, callback, poll, o, !coarse_.empty(), progress);
   }
 
@@ -232,16 +207,25 @@ class Newton {
     resolve_tolerance(resolved, q, zeta);
     Run run(*this, resolved, callback, poll, nest, progress);
     Result r;
+    const auto t_iterations = std::chrono::steady_clock::now();
     switch (zeta.kind()) {
-      case ZetaKind::None: r = run.obstacle(q, Vector::Zero(n), z0, nest); break;
-      case ZetaKind::Constant: r = run.obstacle(q, zeta.c(), z0, nest); break;
-      case ZetaKind::Affine: r = run.affine(q, zeta, z0); break;
-      case ZetaKind::Functor: r = zeta.has_jacobian() ? run.semismooth(q, zeta, z0) : run.functor(q, zeta, z0); break;
+      case ZetaKind::None: r = run.solve_obstacle(q, Vector::Zero(n), z0, nest); break;
+      case ZetaKind::Constant: r = run.solve_obstacle(q, zeta.c(), z0, nest); break;
+      case ZetaKind::Affine: r = run.solve_affine(q, zeta, z0); break;
+      case ZetaKind::Functor:
+        r = zeta.has_jacobian() ? run.solve_semismooth(q, zeta, z0) : run.solve_outer_fixed_point(q, zeta, z0);
+        break;
     }
+    r.timings.iterations = detail::ScopedTimer::seconds_since(t_iterations);  // all levels, nested start included
     r.timings.setup = setup_seconds_;
     r.timings.total = detail::ScopedTimer::seconds_since(t0);
     r.inner = finest_->inner_name();
     return r;
+  }
+
+  static Options as_newton(Options o) {
+    o.method = Method::Newton;
+    return o;
   }
 
   using Level = detail::NewtonLevel<MatrixType>;
@@ -258,8 +242,8 @@ class Newton {
     Result res;
     Run(const Newton& s, const Options& opts, const Callback& cb, const Poll& p, bool nested, const Progress& pr)
         : self(s), o(opts), callback(cb), poll(p), nest(nested), progress(pr) {
-      res.level_steps.assign(s.levels(), 0);
-      res.level_seconds.assign(s.levels(), 0.0);
+      res.newton.level_steps.assign(s.levels(), 0);
+      res.newton.level_seconds.assign(s.levels(), 0.0);
     }
 
     /// `report`: this loop is the problem being solved (history, callback), not an inner one.
@@ -279,13 +263,13 @@ class Newton {
       c.poll = poll;
       return c;
     }
-    void absorb(const detail::NewtonOutcome& out, int level, double seconds) {
-      res.level_steps[level] += out.steps;
-      res.level_seconds[level] += seconds;
-      res.linear_solves += out.solves;
-      res.inner_iterations += out.inner_iterations;
+    void absorb(const detail::LevelOutcome& out, int level, double seconds) {
+      res.newton.level_steps[level] += out.steps;
+      res.newton.level_seconds[level] += seconds;
+      res.newton.linear_solves += out.newton.linear_solves;
+      res.newton.inner_iterations += out.newton.inner_iterations;
       if (level == 0) {
-        res.fallback_sweeps += out.sweeps;
+        res.newton.fallback_sweeps += out.newton.fallback_sweeps;
         const int base = res.nit;
         for (std::size_t i = 0; i < out.history_iteration.size(); ++i) {
           res.history_iteration.push_back(base + out.history_iteration[i]);
@@ -293,27 +277,16 @@ class Newton {
           res.history_residual.push_back(out.history_residual[i]);
         }
         res.nit += out.steps;
-        res.iterations += out.steps + out.sweeps;
+        res.iterations += out.steps + out.newton.fallback_sweeps;
       }
     }
 
-    /// Newton steps per coarse level: until its active set settles (at most this many). Nested
-    /// iteration needs only a good start from each coarse level, but a cut-short coarse solve
-    /// leaves a band of wrong active set that a finer level peels one layer per step. Measured
-    /// on obstacle_2d, amg, inner cg: exactly 2 steps per coarse level (faster at m = 511 and
-    /// 1023: 18 and 20 solves against 25 and 35 settled, +12% time at m = 1023) failed at
-    /// m = 2047 (n = 4.2M): 28 finest steps, Res 6.9e-4 falling 7% per step, 92 CPU s, against
-    /// 3 finest steps and 26.5 s settled. Stopping a coarse level at 2 steps once a step had cut
-    /// Res tenfold failed the same way (31 finest steps): Res does not show the band.
+    /// Newton steps per coarse level: until its active set settles (at most this many), since a
+    /// cut-short coarse solve leaves a band of wrong active set that Res does not show
+    /// (measured: docs/MEASUREMENTS.md, coarse_maxiter).
     static constexpr int coarse_maxiter = 100;
     /// The inner solves on the coarse levels stop at this fraction of the iterate's Res: a start
-    /// needs no more. Measured on obstacle_2d (m = 255, 511, 1023, hierarchy geometric and amg,
-    /// inner cg, tol 1e-8): CG iterations on all levels 36 → 20, 55 → 22, 74 → 25 (and 33 → 16,
-    /// 55 → 22, 76 → 27 with amg) against 1e-12 relative; the finest-level step counts (3, or 2)
-    /// and Res unchanged; 1e-4 and 1e-2 gave 39 and 30 at m = 1023. Not on the finest level:
-    /// there (m = 1023, forcing 0.1 / 0.01, an inexact step finished to tol / 10 when its set
-    /// repeated) CG iterations fell 25 → 16 but Newton took 5–8 steps instead of 3, each with its
-    /// own multigrid set-up: 2.59 → 2.33 / 2.17 CPU s geometric, 5.00 → 5.14 / 4.90 amg.
+    /// needs no more; not on the finest level (docs/MEASUREMENTS.md, coarse_forcing).
     static constexpr double coarse_forcing = 0.1;
 
     /// Nested start for LCP(q_shift, A) in y ≥ 0: Newton on each coarse level to a settled active set,
@@ -341,7 +314,7 @@ class Newton {
     /// The obstacle problem z ≥ ψ (ψ = 0: the LCP) as LCP(q + Aψ, A) in y = z − ψ.
     /// `nest`: without z0, start from the nested solution.
     /// `set` (optional): the inactive set to start from, replaced by the final one.
-    Result obstacle(const Vector& q, const Vector& psi, const Vector* z0, bool nest, double tol = -1,
+    Result solve_obstacle(const Vector& q, const Vector& psi, const Vector* z0, bool nest, double tol = -1,
                     int maxiter = -1, bool report = true, std::vector<char>* set = nullptr) {
       Vector q_shift = q;
       q_shift.noalias() += self.A_ * psi;
@@ -372,11 +345,12 @@ class Newton {
 
     /// ζ(z) = Bz + c: Newton on the full system, from the obstacle problem with ψ = ζ(z0) (or
     /// from z0 itself when it is given and there is no nesting).
-    Result affine(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0) {
+    Result solve_affine(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0) {
       const Eigen::Index n = q.size();
       Vector psi(n);
       zeta.eval(z0 ? *z0 : Vector::Zero(n), psi);
-      const Vector start = (z0 && !nest) ? *z0 : obstacle(q, psi, z0, nest, 0.0, std::min(100, o.maxiter), false).z;
+      const Vector start =
+          (z0 && !nest) ? *z0 : solve_obstacle(q, psi, z0, nest, 0.0, std::min(100, o.maxiter), false).z;
       const auto t0 = std::chrono::steady_clock::now();
       auto K = self.finest_->affine_system(zeta.B());
       const Vector& c = zeta.c();
@@ -389,7 +363,7 @@ class Newton {
     /// A callable ζ: the outer fixed point z ← S(ζ(z)), S(ψ) = the obstacle problem's solution,
     /// each solved by Newton warm-started from z (nested the first time); an outer step that
     /// does not reduce Res hands over to sweeps of the fallback member on the ICP.
-    Result functor(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0) {
+    Result solve_outer_fixed_point(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0) {
       const Eigen::Index n = q.size();
       Vector z = z0 ? *z0 : Vector::Zero(n), psi(n), psi_new(n), w(n);
       double r = icp_residual(q, zeta, z, psi, w);
@@ -410,9 +384,9 @@ class Newton {
         if (poll) poll();
         // The inner obstacle problem, solved to a settled active set (its own tol: 0).
         // The first inner solve without z0 starts at y = 0 (z = ψ): measured better than from z = 0.
-        Result inner = obstacle(q, psi, (first && !z0) ? nullptr : &z, first && nest, 0.0, o.maxiter - res.nit, false,
-                                &set);
-        ++res.outer_iterations;
+        Result inner = solve_obstacle(q, psi, (first && !z0) ? nullptr : &z, first && nest, 0.0,
+                                      o.maxiter - res.nit, false, &set);
+        ++res.newton.outer_iterations;
         const double r_new = icp_residual(q, zeta, inner.z, psi_new, w);
         if (std::isnan(r_new)) return zeta_failed(best, q);
         if (test.acceptable(r_new)) {
@@ -433,20 +407,21 @@ class Newton {
     /// step of the linearization ζ(z) + J(v − z) (detail::JacobianLinearization); Res is the
     /// ICP's. Start as for an affine ζ. Newton steps and fallback sweeps of the start count
     /// against maxiter.
-    Result semismooth(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0) {
+    Result solve_semismooth(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0) {
       using Step = detail::NewtonStep<MatrixType, detail::JacobianLinearization<MatrixType>>;
       const Eigen::Index n = q.size();
       Vector psi(n);
       Result best;
       best.z = z0 ? *z0 : Vector::Zero(n);
       if (!zeta.eval(best.z, psi)) return zeta_failed(best, q);
-      Vector start = (z0 && !nest) ? *z0 : obstacle(q, psi, z0, nest, 0.0, std::min(100, o.maxiter), false).z;
+      Vector start =
+          (z0 && !nest) ? *z0 : solve_obstacle(q, psi, z0, nest, 0.0, std::min(100, o.maxiter), false).z;
       const auto t0 = std::chrono::steady_clock::now();
       Step plain(*self.finest_, {*self.finest_, q, zeta, {}, {}, {}}, std::move(start));
       if (std::isnan(plain.residual())) return zeta_failed(best, q);
       static const Vector no_shift;
       auto control = finest_control(no_shift, o.tol, o.maxiter - res.nit, true);
-      control.sweep_budget = o.maxiter - res.fallback_sweeps;
+      control.sweep_budget = o.maxiter - res.newton.fallback_sweeps;
       const auto out = detail::newton_loop(plain, control);
       absorb(out, 0, detail::ScopedTimer::seconds_since(t0));
       return finish(out, out.z, q);
@@ -470,11 +445,11 @@ class Newton {
     /// sweeps did not improve on the best Res.
     std::optional<Status> fallback(const Vector& q, const Zeta<StorageIndex>& zeta, const Result& best,
                                    int& sweep_run, Vector& z) {
-      if (res.fallback_sweeps >= o.maxiter) return Status::MaxIterations;
-      const int k = std::min(sweep_run, o.maxiter - res.fallback_sweeps);
+      if (res.newton.fallback_sweeps >= o.maxiter) return Status::MaxIterations;
+      const int k = std::min(sweep_run, o.maxiter - res.newton.fallback_sweeps);
       sweep_run = std::min(sweep_run, std::numeric_limits<int>::max() / 2) * 2;  // no overflow to a negative run
       const Result sw = self.finest_->sweep(q, zeta, best.z, k, o.tol);
-      res.fallback_sweeps += sw.iterations;
+      res.newton.fallback_sweeps += sw.iterations;
       res.iterations += sw.iterations;
       if (!(sw.residual < best.residual)) return Status::Stagnated;
       z = sw.z;
@@ -496,25 +471,23 @@ class Newton {
     }
 
     /// The result of a finest-level loop: z (original variables), w, status and message.
-    Result finish(const detail::NewtonOutcome& out, const Vector& z, const Vector& q) {
+    Result finish(const detail::LevelOutcome& out, const Vector& z, const Vector& q) {
+      return finish(z, out.residual, out.status, out.message, q);
+    }
+    /// The result of the outer fixed point: its best iterate.
+    Result finish_outer(const Result& best, const Vector& q) {
+      std::string message = to_string(best.status);
+      if (best.status != Status::Converged) message += "; returning the best iterate";
+      return finish(best.z, best.residual, best.status, std::move(message), q);
+    }
+    Result finish(const Vector& z, double residual, Status status, std::string message, const Vector& q) {
       Result r = res;
       r.z = z;
       r.w = self.A_ * z + q;
-      r.residual = out.residual;
-      r.status = out.status;
-      r.message = out.message;
-      r.path = r.fallback_sweeps ? (r.nit ? "newton+fallback" : "fallback") : "newton";
-      return r;
-    }
-    Result finish_outer(Result out, const Vector& q) {
-      Result r = res;
-      r.z = out.z;
-      r.w = self.A_ * out.z + q;
-      r.residual = out.residual;
-      r.status = out.status;
-      r.message = to_string(r.status);
-      if (r.status != Status::Converged) r.message += "; returning the best iterate";
-      r.path = r.fallback_sweeps ? (r.nit ? "newton+fallback" : "fallback") : "newton";
+      r.residual = residual;
+      r.status = status;
+      r.message = std::move(message);
+      r.newton.path = r.newton.fallback_sweeps ? (r.nit ? "newton+fallback" : "fallback") : "newton";
       return r;
     }
   };

@@ -4,8 +4,10 @@
 #include <Eigen/Core>
 
 #include <algorithm>
+#include <array>
 #include <cfloat>
 #include <cmath>
+#include <iterator>
 #include <limits>
 #include <sstream>
 #include <stdexcept>
@@ -34,8 +36,9 @@ enum class ZUpdate {
   Solve,     ///< A z = Ω2(|x| − x)/γ − q — the paper's Step 1 (a factorization of A)
 };
 
-/// Which sparse direct solver factorizes Lm (NRM, NRMM) and A (Solve z-update).
-/// The AOR-type left matrices never need one: they are triangular or diagonal.
+/// How the linear systems are solved: the sparse factorization of Lm (NRM, NRMM), of A (Solve
+/// z-update) and of the Newton member's reduced systems, or, for the Newton member only, CG /
+/// BiCGSTAB. The AOR-type left matrices never need one: they are triangular or diagonal.
 enum class Inner {
   Auto,      ///< CHOLMOD if symmetric positive definite, else UMFPACK; Eigen's solvers without SuiteSparse
   Cholmod,   ///< CHOLMOD supernodal LLᵀ (SuiteSparse)
@@ -56,6 +59,8 @@ enum class Accelerate {
 };
 
 inline const char* to_string(Method m);
+inline const char* to_string(ZUpdate z);
+inline const char* to_string(Accelerate a);
 
 /// A number for an error message (%g: small values stay readable).
 inline std::string to_text(double v) {
@@ -64,24 +69,17 @@ inline std::string to_text(double v) {
   return s.str();
 }
 
-/// Every option of the iteration, with its default. Vectors left empty take the method's
-/// default (docs/SPEC.md); a NaN alpha/beta takes the method's default too.
-struct Options {
-  Method method = Method::NRMGS;
+/// The options a solve may change: Solver::solve and Newton::solve take them whole, overriding
+/// the set-up's. The Newton member uses tol, rtol, maxiter, record_history and verbose (its
+/// globalization has its own stopping rules) and refuses z_update, theta and accelerate.
+struct SolveOptions {
   double tol = 1e-8;               ///< stop when Res(z) = ‖min(Az + q, z − ζ(z))‖₂ < target(Res(0)) (scipy's atol)
   /// Relative tolerance (scipy.sparse.linalg's rtol): the target is max(tol, rtol · Res(0)),
   /// Res(0) = ‖min(q, −ζ(0))‖₂ the residual at z = 0 (scipy's ‖b‖: independent of the start).
   double rtol = 0.0;
-  int maxiter = 10000;             ///< at most this many x-updates
-  Eigen::VectorXd omega1;          ///< Ω1 (positive), length n or empty
-  Eigen::VectorXd omega2;          ///< Ω2 (positive), length n or empty
-  double gamma = 1.0;              ///< γ > 0
-  Eigen::VectorXd phi;             ///< relaxation diagonal φ (≥ 0), length n or empty
-  double alpha = std::numeric_limits<double>::quiet_NaN();  ///< AOR α (NRMM: Ω2 = αI)
-  double beta = std::numeric_limits<double>::quiet_NaN();   ///< AOR β
+  int maxiter = 10000;             ///< at most this many x-updates (Newton: Newton steps on the finest level)
   double theta = 1.0;              ///< relaxation of the two-sweep step, 0 < θ ≤ 2 (two_sweep only: others need 1)
   ZUpdate z_update = ZUpdate::Auto;
-  Inner inner = Inner::Auto;
   Accelerate accelerate = Accelerate::None;
   int anderson_m = 5;              ///< Anderson memory (number of past differences kept)
   bool record_history = false;     ///< keep (iteration, seconds, Res) of every iterate
@@ -97,6 +95,28 @@ struct Options {
   /// Progress report: 0 silent; k > 0 calls the solve's progress hook at the first iterate, then
   /// whenever k seconds have passed since the last report, and once at the end.
   int verbose = 0;
+};
+
+/// Every option, with its default: the set-up's (the method and its splitting, the inner
+/// solver) and the defaults of the per-solve ones (SolveOptions). Vectors left empty take the
+/// method's default (docs/SPEC.md); a NaN alpha/beta takes the method's default too.
+struct Options : SolveOptions {
+  Method method = Method::NRMGS;
+  Eigen::VectorXd omega1;          ///< Ω1 (positive), length n or empty
+  Eigen::VectorXd omega2;          ///< Ω2 (positive), length n or empty
+  double gamma = 1.0;              ///< γ > 0
+  Eigen::VectorXd phi;             ///< relaxation diagonal φ (≥ 0), length n or empty
+  double alpha = std::numeric_limits<double>::quiet_NaN();  ///< AOR α (NRMM: Ω2 = αI)
+  double beta = std::numeric_limits<double>::quiet_NaN();   ///< AOR β
+  Inner inner = Inner::Auto;       ///< how the linear systems are solved (a sparse factorization, or 'cg': newton's iterative solve)
+
+  /// These options with the per-solve ones replaced by `s` (when given), checked.
+  Options with(const SolveOptions* s, Eigen::Index n) const {
+    Options o = *this;
+    if (s) static_cast<SolveOptions&>(o) = *s;
+    o.check(n);
+    return o;
+  }
 
   /// The absolute Res target of a solve whose Res at z = 0 is `res0`: max(tol, rtol · res0).
   /// (A zero target, tol = 0 with Res(0) = 0, is the smallest normal number: z = 0 solves.)
@@ -145,6 +165,23 @@ struct Options {
     if (stall_iterations < 1) fail("stall_iterations must be >= 1, got " + std::to_string(stall_iterations));
     if (!(divergence_factor > 1)) fail("divergence_factor must be > 1, got " + num(divergence_factor));
     if (verbose < 0) fail("verbose must be >= 0 (seconds between progress lines; 0: silent), got " + std::to_string(verbose));
+    if ((method == Method::MMS || method == Method::TwoSweep) && (omega1.size() || phi.size()))
+      fail("method '" + std::string(to_string(method)) + "' fixes omega1 = I and phi = 0; use an NRM-family "
+           "method to set them");
+    if (method == Method::Newton) check_newton(fail);
+  }
+
+ private:
+  /// The options of the stationary members that the Newton member does not have.
+  template <typename Fail>
+  void check_newton(const Fail& fail) const {
+    if (phi.size()) fail("phi is a parameter of the stationary members; method 'newton' has none");
+    if (accelerate != Accelerate::None)
+      fail("accelerate='" + std::string(to_string(accelerate)) + "' applies to the stationary members; method "
+           "'newton' takes Newton steps (use accelerate='none')");
+    if (z_update != ZUpdate::Auto)
+      fail("z_update='" + std::string(to_string(z_update)) + "' applies to the stationary members; method "
+           "'newton' recovers z from its linear solves (use z_update='auto')");
   }
 };
 
@@ -163,8 +200,12 @@ inline const char* to_string(Method m) {
   return "?";
 }
 
-/// True for the members whose M is the AOR lower-triangular part (no factorization of Lm).
-inline bool is_aor_type(Method m) { return m != Method::NRM && m != Method::NRMM; }
+/// True for the stationary members (Method 3.1 with a splitting: nrmicp::Solver); the Newton
+/// member is nrmicp::Newton (newton.hpp).
+inline bool is_stationary(Method m) { return m != Method::Newton; }
+
+/// True for the stationary members whose M is the AOR lower-triangular part (no factorization of Lm).
+inline bool is_aor_type(Method m) { return is_stationary(m) && m != Method::NRM && m != Method::NRMM; }
 
 inline const char* to_string(ZUpdate z) {
   switch (z) {
@@ -199,6 +240,12 @@ inline const char* to_string(Accelerate a) {
 inline constexpr Method all_methods[] = {Method::NRM,   Method::NRMM, Method::NRMAOR, Method::NRMSOR,
                                          Method::NRMGS, Method::NRMJ, Method::MMS,    Method::TwoSweep,
                                          Method::Newton};
+/// The methods of nrmicp::Solver: all_methods but the Newton member's (the last).
+inline constexpr auto stationary_methods = [] {
+  std::array<Method, std::size(all_methods) - 1> out{};
+  for (std::size_t i = 0; i < out.size(); ++i) out[i] = all_methods[i];
+  return out;
+}();
 inline constexpr ZUpdate all_z_updates[] = {ZUpdate::Auto, ZUpdate::Explicit, ZUpdate::Solve};
 inline constexpr Inner all_inners[] = {Inner::Auto, Inner::Cholmod, Inner::Umfpack, Inner::EigenLLT, Inner::EigenLU,
                                        Inner::CG};

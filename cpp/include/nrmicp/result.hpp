@@ -11,9 +11,10 @@ namespace nrmicp {
 
 enum class Status {
   Converged = 0,      ///< Res(z) < tol
-  MaxIterations = 1,  ///< maxiter x-updates done without reaching tol
+  MaxIterations = 1,  ///< maxiter x-updates (Newton: Newton steps, or fallback sweeps) done without reaching tol
   Diverged = 2,       ///< Res became non-finite or grew beyond divergence_factor × best
-  Stagnated = 3,      ///< the best Res did not improve for stall_iterations iterations
+  Stagnated = 3,      ///< Res stopped decreasing before tol (the rules of Options::stall_iterations; Newton: also
+                      ///< a fallback that did not improve the best Res, or a settled active set short of tol)
   CallbackStop = 4,   ///< the callback asked to stop
   ZetaFailed = 5,     ///< ζ(z) returned non-finite values
 };
@@ -59,23 +60,9 @@ struct Timings {
   double total = 0;          ///< this solve, from entry to return
 };
 
-struct Result {
-  Eigen::VectorXd z;         ///< best iterate (smallest Res seen); the last one when converged
-  Eigen::VectorXd w;         ///< A z + q
-  Status status = Status::MaxIterations;
-  int nit = 0;               ///< x-updates performed to reach the returned z
-  int iterations = 0;        ///< x-updates performed in all
-  double residual = 0;       ///< Res(z) of the returned z
-  std::string message;
-  std::string inner;         ///< the inner solver used for Lm
-  // history (filled when Options::record_history)
-  std::vector<int> history_iteration;
-  std::vector<double> history_seconds;
-  std::vector<double> history_residual;
-  Timings timings;
-  /// Counts a step kind reports beyond the iterations (e.g. linear solves), by name.
-  std::map<std::string, long long> counters;
-  // The Newton member (newton.hpp) and polish; zero/empty for the stationary members.
+/// The Newton member's statistics (newton.hpp; polish); zero/empty for the stationary members.
+/// The Python result takes every field of this struct by name (reflection over the binding).
+struct NewtonStats {
   int linear_solves = 0;               ///< reduced linear systems solved, on all levels
   long long inner_iterations = 0;      ///< iterations of the iterative inner solve (inner = "cg"), all levels
   int fallback_sweeps = 0;             ///< sweeps of the fallback member (nrm) on the finest level
@@ -83,6 +70,25 @@ struct Result {
   std::vector<int> level_steps;        ///< Newton steps per level of nested iteration, finest first
   std::vector<double> level_seconds;   ///< seconds per level, finest first
   std::string path;                    ///< "newton", "newton+fallback" (Newton steps and fallback sweeps), "fallback"
+};
+
+struct Result {
+  Eigen::VectorXd z;         ///< best iterate (smallest Res seen); the last one when converged
+  Eigen::VectorXd w;         ///< A z + q
+  Status status = Status::MaxIterations;
+  int nit = 0;               ///< x-updates performed to reach the returned z (Newton: finest-level Newton steps)
+  int iterations = 0;        ///< x-updates performed in all (Newton: finest-level Newton steps + fallback sweeps)
+  double residual = 0;       ///< Res(z) of the returned z
+  std::string message;
+  std::string inner;         ///< the inner solver used for Lm (Newton: for the reduced systems)
+  // history (filled when Options::record_history)
+  std::vector<int> history_iteration;
+  std::vector<double> history_seconds;
+  std::vector<double> history_residual;
+  Timings timings;
+  /// Counts a step kind reports beyond the iterations (e.g. linear solves), by name.
+  std::map<std::string, long long> counters;
+  NewtonStats newton;        ///< the Newton member's statistics (empty for the stationary members)
   bool success() const { return status == Status::Converged; }
 };
 

@@ -103,6 +103,9 @@ class Solver {
     if (A.rows() != A.cols())
       throw std::invalid_argument("Solver: A must be square, got " + std::to_string(A.rows()) + "x" +
                                   std::to_string(A.cols()));
+    if (!is_stationary(options_.method))
+      throw std::invalid_argument("Solver: method 'newton' is the Newton member: use nrmicp::Newton (newton.hpp), "
+                                  "not nrmicp::Solver");
     options_.check(A.rows());
     const auto t0 = std::chrono::steady_clock::now();
     params_ = resolve_parameters(A, options_);
@@ -119,26 +122,15 @@ class Solver {
   const char* inner_name() const { return splitting_->inner_name(); }
   const Splitting<StorageIndex>& splitting() const { return *splitting_; }
 
-  /// Solves ICP(q, A, ζ) from the initial guess z0 (zeros when null). The iteration fields of
-  /// `iteration_options` (tol, maxiter, z_update, accelerate, anderson_m, theta, record_history,
-  /// stall_iterations, divergence_factor, verbose) override the constructor's; the splitting (method and
-  /// its parameters) stays, and the merged options are checked against it.
+  /// Solves ICP(q, A, ζ) from the initial guess z0 (zeros when null). `solve_options`, when
+  /// given, replace the constructor's per-solve options (the splitting stays); the merged
+  /// options are checked against the method.
   Result solve(const Vector& q, const Zeta<StorageIndex>& zeta = Zeta<StorageIndex>::none(),
                const Vector* z0 = nullptr, const Callback& callback = {}, const Poll& poll = {},
-               const Options* iteration_options = nullptr, const Progress& progress = {}) const {
+               const SolveOptions* solve_options = nullptr, const Progress& progress = {}) const {
     const auto t0 = std::chrono::steady_clock::now();
     const Eigen::Index n = A_.rows();
-    Options o = options_;
-    if (iteration_options) {
-      o.tol = iteration_options->tol; o.rtol = iteration_options->rtol; o.maxiter = iteration_options->maxiter;
-      o.z_update = iteration_options->z_update; o.accelerate = iteration_options->accelerate;
-      o.anderson_m = iteration_options->anderson_m; o.theta = iteration_options->theta;
-      o.record_history = iteration_options->record_history;
-      o.stall_iterations = iteration_options->stall_iterations;
-      o.divergence_factor = iteration_options->divergence_factor;
-      o.verbose = iteration_options->verbose;
-      o.check(n);
-    }
+    Options o = solve_options ? options_.with(solve_options, n) : options_;
     if (q.size() != n) throw std::invalid_argument("Solver::solve: q has length " + std::to_string(q.size()) + ", expected n = " + std::to_string(n));
     if (z0 && z0->size() != n) throw std::invalid_argument("Solver::solve: x0 has length " + std::to_string(z0->size()) + ", expected n = " + std::to_string(n));
     zeta.check(n);

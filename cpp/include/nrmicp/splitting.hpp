@@ -103,10 +103,6 @@ Parameters resolve_parameters(const MatrixType& A, const Options& o) {
       p.alpha = 1; p.beta = (o.method == Method::NRMJ) ? 0 : 1;
       break;
   }
-  const bool fixed_omega1_phi = (o.method == Method::MMS || o.method == Method::TwoSweep);
-  if (fixed_omega1_phi && (o.omega1.size() || o.phi.size()))
-    throw std::invalid_argument(std::string("Options: method '") + to_string(o.method) +
-                                "' fixes omega1 = I and phi = 0; use an NRM-family method to set them");
   p.omega1 = o.omega1.size() ? o.omega1 : Eigen::VectorXd::Ones(n);
   p.phi = o.phi.size() ? o.phi : Eigen::VectorXd::Zero(n);
   if (o.omega2.size()) {

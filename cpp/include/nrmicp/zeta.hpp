@@ -16,6 +16,16 @@
 namespace nrmicp {
 
 enum class ZetaKind { None, Constant, Affine, Functor };
+inline constexpr ZetaKind all_zeta_kinds[] = {ZetaKind::None, ZetaKind::Constant, ZetaKind::Affine, ZetaKind::Functor};
+inline const char* to_string(ZetaKind k) {
+  switch (k) {
+    case ZetaKind::None: return "none";
+    case ZetaKind::Constant: return "constant";
+    case ZetaKind::Affine: return "affine";
+    case ZetaKind::Functor: return "functor";
+  }
+  return "?";
+}
 
 template <typename StorageIndex = int>
 class Zeta {
@@ -90,7 +100,7 @@ template <typename StorageIndex>
 double residual_at_zero(const Eigen::VectorXd& q, const Zeta<StorageIndex>& zeta) {
   Eigen::VectorXd zeta0;
   if (!zeta.eval(Eigen::VectorXd::Zero(q.size()), zeta0)) return std::numeric_limits<double>::quiet_NaN();
-  return detail::stable_norm(q.cwiseMin(-zeta0));
+  return detail::residual_of(q, -zeta0);
 }
 
 /// `o` with its relative tolerance resolved for this problem: tol = target(Res(0)), rtol = 0.

@@ -68,7 +68,7 @@ class NewtonLevel {
     } else {
       g = z;
     }
-    return stable_norm(w.cwiseMin(g));
+    return residual_of(w, g);
   }
 
   /// Res of the ICP at v (ζ(v) in zv, Av + q in wv) for any ζ: NaN only when ζ failed; +inf for
@@ -80,7 +80,7 @@ class NewtonLevel {
     if (!zeta.eval(v, zv)) return std::numeric_limits<double>::quiet_NaN();
     wv.noalias() = A_ * v;
     wv += q;
-    const double r = stable_norm(wv.cwiseMin(v - zv));
+    const double r = residual_of(wv, v - zv);
     return std::isnan(r) ? inf : r;
   }
 

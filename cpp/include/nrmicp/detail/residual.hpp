@@ -1,9 +1,10 @@
 // nrmicp — the paper's accuracy measure Res(z) = ‖min(Az + q, z − ζ(z))‖₂, defined once.
-// The passes over A (the one-pass sweep, the fused product, the generic step) accumulate the
-// plain sum of squares row by row with ResidualSum as they go (no cost added to the sweep);
-// Context::residual_norm takes its square root, or, when the plain sum overflowed or may have
-// lost terms to underflow, recomputes Res with a scaled norm (stable_norm). Nothing else
-// computes Res.
+// The stationary members' passes over A (the one-pass sweep, the fused product, the generic
+// step) accumulate the plain sum of squares row by row with ResidualSum as they go (no cost added
+// to the sweep); Context::residual_norm takes its square root, or, when the plain sum overflowed
+// or may have lost terms to underflow, recomputes Res with stable_norm. The Newton member, which
+// has w and g as vectors, calls residual_of(w, g). (Python's nrmicp.residual is an independent numpy
+// check, on purpose.)
 #pragma once
 
 #include <Eigen/Core>
@@ -33,5 +34,8 @@ inline double stable_norm(const Eigen::VectorXd& m) {
   if (!(scale > 0) || !std::isfinite(scale)) return m.size() ? std::sqrt(m.squaredNorm()) : 0.0;
   return scale * (m / scale).norm();
 }
+
+/// Res = ‖min(w, g)‖₂ of whole vectors w = Az + q, g = z − ζ(z), without overflow or underflow.
+inline double residual_of(const Eigen::VectorXd& w, const Eigen::VectorXd& g) { return stable_norm(w.cwiseMin(g)); }
 
 }  // namespace nrmicp::detail

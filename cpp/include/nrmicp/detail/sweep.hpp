@@ -2,7 +2,8 @@
 // z-update, as a single pass over the rows of a row-major A. Lm's strictly lower part is
 // (β/α) a_ij Ω1_j, the same pattern as A's, so the product with A, Res, the right-hand
 // side, the forward substitution and the x/z update share one read of A. This is the same
-// arithmetic as the generic loop in solver.hpp (up to rounding order); the tests check
+// arithmetic as the generic splitting step (SplittingStep, steps.hpp) up to rounding order;
+// SweepStep (steps.hpp) calls it from the one loop, detail::loop (solver.hpp). The tests check
 // both against the reference implementation.
 #pragma once
 

@@ -8,45 +8,20 @@ callable + zeta_jacobian, tol 1e-8 / 1e-10 / 1e-16 (a settled active set), small
 inner="cg", scale="both", a callback stop, polish=True on nrmgs / nrm / nrmsor, and every case
 of tests/test_hard_cases.py.
 
-    python benchmarks/newton_snapshot.py before.pkl      # on the old build
-    python benchmarks/newton_snapshot.py after.pkl       # on the new build
-    python benchmarks/newton_snapshot.py --diff before.pkl after.pkl
+    python tests/golden/newton.py before.pkl      # on the old build (or: make golden)
+    python tests/golden/newton.py after.pkl       # on the new build
+    python tests/golden/newton.py --diff before.pkl after.pkl
 """
 import os
-import pickle
 import sys
-import warnings
 
 import numpy as np
 import scipy.sparse as sp
 
+from harness import main  # tests/golden/harness.py; puts tests/ on the path
 import nrmicp
 from nrmicp import scenes
-from tests_modules import load
-
-impulse_jacobian = load("test_newton").impulse_jacobian  # tests/: the impulse-control Jacobian, written once
-
-
-def fields(res):
-    d = {}
-    for k in ("z", "w", "nit", "iterations", "residual", "status", "message", "success", "linear_solves",
-              "fallback_sweeps", "outer_iterations", "level_steps", "path", "inner", "polished"):
-        if hasattr(res, k):
-            v = getattr(res, k)
-            d[k] = np.array(v) if isinstance(v, np.ndarray) else (str(v) if k == "status" else v)
-    h = getattr(res, "history", None)
-    if h is not None:
-        d["history"] = {k: (np.array(v) if k != "seconds" else len(v)) for k, v in h.items()}
-    return d
-
-
-def run(fn):
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            return fields(fn())
-    except Exception as exc:
-        return {"exception": f"{type(exc).__name__}: {exc}"}
+from test_newton import impulse_jacobian  # tests/: the impulse-control Jacobian, written once
 
 
 def hierarchies(p):
@@ -196,42 +171,5 @@ def cases():
     return C
 
 
-def diff(a, b, path=""):
-    out = []
-    if isinstance(a, dict) and isinstance(b, dict):
-        for k in sorted(set(a) | set(b)):
-            if k not in a or k not in b:
-                out.append(f"{path}/{k}: missing on one side")
-            else:
-                out += diff(a[k], b[k], f"{path}/{k}")
-        return out
-    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
-        a, b = np.asarray(a), np.asarray(b)
-        if a.shape != b.shape or not np.array_equal(a, b, equal_nan=a.dtype.kind == "f"):
-            out.append(f"{path}: arrays differ" + (f" max {np.nanmax(np.abs(a - b)):.3g}" if a.shape == b.shape and a.dtype.kind == 'f' else f" {a.shape} vs {b.shape}"))
-        return out
-    if isinstance(a, float) and isinstance(b, float) and np.isnan(a) and np.isnan(b):
-        return out
-    if a != b:
-        out.append(f"{path}: {a!r} != {b!r}")
-    return out
-
-
 if __name__ == "__main__":
-    if sys.argv[1] == "--diff":
-        A = pickle.load(open(sys.argv[2], "rb"))
-        B = pickle.load(open(sys.argv[3], "rb"))
-        nd = 0
-        for k in A:
-            d = diff(A[k], B.get(k, {}))
-            if d:
-                nd += 1
-                print(k, d[:6])
-        print(f"{len(A)} solves compared, {nd} differ; {len(set(B) - set(A))} only in second")
-        sys.exit(0)
-    out = {}
-    for name, fn in cases():
-        out[name] = run(fn)
-    pickle.dump(out, open(sys.argv[1], "wb"))
-    ex = sum("exception" in v for v in out.values())
-    print(len(out), "solves,", ex, "exceptions")
+    main(cases)
