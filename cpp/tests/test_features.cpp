@@ -56,8 +56,8 @@ TEST_CASE("Newton with a zeta Jacobian: semismooth Newton on the whole ICP") {
   CHECK(jacobian_calls > 0);  // the Jacobian path was taken
   CHECK(p.res(with.z) < 1e-11);
   CHECK((with.z - p.z_star).lpNorm<Eigen::Infinity>() < 1e-10);
-  CHECK(with.outer_iterations == 0);      // no outer fixed point on ζ
-  CHECK(without.outer_iterations >= 2);   // which the Jacobian-free path needs
+  CHECK(with.newton.outer_iterations == 0);      // no outer fixed point on ζ
+  CHECK(without.newton.outer_iterations >= 2);   // which the Jacobian-free path needs
 }
 
 TEST_CASE("polish: one Newton step from an approximate solution gains orders of magnitude") {
