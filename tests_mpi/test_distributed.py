@@ -1,0 +1,64 @@
+"""nrmicp.distributed under mpirun: agreement with serial nrmicp, partition independence, bad
+input on one rank (the same exception on every rank, no hang), nothing mutated."""
+import pytest
+
+from conftest import mpirun
+
+AGREE = 1e-10
+
+
+@pytest.fixture(scope="module", params=[1, 2, 3])
+def agreement(request):
+    return request.param, mpirun(request.param, "agreement")
+
+
+def test_every_member_agrees_with_serial_nrmicp(agreement):
+    np_, rows = agreement
+    assert {r["problem"] for r in rows} == {"obstacle_2d", "obstacle_3d", "convection", "lcp", "affine"}
+    assert {r["method"] for r in rows} == {"newton", "nrmj", "nrmgs", "nrmsor", "nrmaor"}
+    for r in rows:
+        where = f"np={np_} {r['problem']} {r['method']}"
+        assert r["status"] == "CONVERGED", where
+        assert r["err"] < AGREE, where
+        # Res by the numpy oracle: the returned z meets the tolerance it was asked for
+        assert r["res"] < (1e-9 if r["method"] == "newton" else 1e-10) * 1.0001, where
+
+
+def test_newton_nests_finest_steps_few(agreement):
+    _, rows = agreement
+    for r in rows:
+        if r["method"] == "newton" and r["problem"] != "affine":
+            assert len(r["level_steps"]) > 1, r
+            assert r["level_steps"][0] <= 5, r
+
+
+def test_answer_does_not_depend_on_the_partition():
+    diffs = mpirun(3, "partition")
+    assert diffs["newton"] < AGREE
+    assert diffs["nrmgs"] < AGREE
+
+
+BAD = {
+    "layout": ("ValueError", "does not match A's rows"),
+    "nonsquare": ("ValueError", "must together be square"),
+    "zero_diagonal": ("ValueError", "diagonal must be positive"),
+    "nan_q": ("ValueError", "q has a non-finite entry"),
+    "zeta_raises": ("RuntimeError", "zeta failed here"),
+    "zeta_nan": ("ValueError", "NaN or Inf"),
+    "bad_option": ("ValueError", "tol"),
+    "bad_method": ("ValueError", "method must be one of"),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(BAD))
+@pytest.mark.parametrize("method", ["newton", "nrmgs"])
+def test_bad_input_raises_the_same_exception_on_every_rank(kind, method):
+    outcomes = mpirun(2, "bad", kind, method, timeout=120)
+    kind_name, text = BAD[kind]
+    assert len(outcomes) == 2
+    assert outcomes[0] == outcomes[1], outcomes  # the same type and message on both ranks
+    name, message, untouched = outcomes[0]
+    assert name == kind_name, outcomes
+    assert text in message, outcomes
+    assert message.startswith("rank "), outcomes
+    assert untouched, "an input was modified"
