@@ -15,7 +15,7 @@ import nrmicp  # noqa: E402
 from nrmicp import distributed as dist  # noqa: E402
 from nrmicp.scenes.convection import convection_diffusion_obstacle  # noqa: E402
 from nrmicp.scenes.obstacle import obstacle_2d, obstacle_3d  # noqa: E402
-from problems import make_affine_icp, make_lcp  # noqa: E402
+from problems import make_affine_icp, make_icp, make_lcp  # noqa: E402
 from reference_impl import residual as oracle_residual  # noqa: E402
 
 COMM = PETSc.COMM_WORLD
@@ -59,6 +59,10 @@ def problems():
     B, c = sp.csr_matrix(aff.zeta.B), aff.zeta.c
     out.append(("affine", sp.csr_matrix(aff.A), aff.q, nrmicp.Affine(B, c),
                 lambda M, lo, hi: nrmicp.Affine(mat(B, lo, hi), c[lo:hi])))
+    icp = make_icp(16, c=0.1)
+    s = icp.zeta(np.zeros(icp.A.shape[0]))  # zeta(z) = 0.1 sin(z) + s, entry-wise: each rank evaluates its rows
+    out.append(("icp_callable", sp.csr_matrix(icp.A), icp.q, icp.zeta,
+                lambda M, lo, hi: (lambda z, s=s[lo:hi]: 0.1 * np.sin(z) + s)))
     return out
 
 

@@ -14,7 +14,8 @@ def agreement(request):
 
 def test_every_member_agrees_with_serial_nrmicp(agreement):
     np_, rows = agreement
-    assert {r["problem"] for r in rows} == {"obstacle_2d", "obstacle_3d", "convection", "lcp", "affine"}
+    assert {r["problem"] for r in rows} == {"obstacle_2d", "obstacle_3d", "convection", "lcp", "affine",
+                                             "icp_callable"}
     assert {r["method"] for r in rows} == {"newton", "nrmj", "nrmgs", "nrmsor", "nrmaor"}
     for r in rows:
         where = f"np={np_} {r['problem']} {r['method']}"
@@ -27,7 +28,7 @@ def test_every_member_agrees_with_serial_nrmicp(agreement):
 def test_newton_nests_finest_steps_few(agreement):
     _, rows = agreement
     for r in rows:
-        if r["method"] == "newton" and r["problem"] != "affine":
+        if r["method"] == "newton" and r["problem"] in ("obstacle_2d", "obstacle_3d", "convection"):
             assert len(r["level_steps"]) > 1, r
             assert r["level_steps"][0] <= 5, r
 
@@ -62,3 +63,17 @@ def test_bad_input_raises_the_same_exception_on_every_rank(kind, method):
     assert text in message, outcomes
     assert message.startswith("rank "), outcomes
     assert untouched, "an input was modified"
+
+
+def test_readme_example_runs_on_two_ranks():
+    import os
+    import subprocess
+    import shutil
+    from conftest import PYTHON, TIMEOUT
+    here = os.path.dirname(os.path.abspath(__file__))
+    cmd = [shutil.which("mpirun"), "-n", "2", "--oversubscribe"] + (["--allow-run-as-root"] if os.geteuid() == 0 else [])
+    out = subprocess.run(cmd + [PYTHON, os.path.join(here, "..", "examples", "distributed_obstacle.py")],
+                         capture_output=True, text=True, timeout=TIMEOUT)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.startswith("CONVERGED finest steps"), out.stdout
+    assert "on 2 ranks" in out.stdout

@@ -54,8 +54,15 @@ def worker(dim, m, log):
     stage.push()
     r = dist.solve(M, q, pb.zeta[lo:hi], method="newton", hierarchy="amg", tol=1e-8)
     stage.pop()
+    serial = None
+    if size == 1:  # the same problem by serial nrmicp in the same process (the layer's overhead)
+        import time
+        import nrmicp
+        t0 = time.perf_counter()
+        rs = nrmicp.solve(A, pb.q, pb.zeta, method="newton", tol=1e-8)
+        serial = {"seconds": time.perf_counter() - t0, "finest": rs.nit, "status": str(rs.status), "res": rs.residual}
     if rank == 0:
-        print("RESULT " + json.dumps({"n": n, "seconds": r.timings["total"], "setup": r.timings["setup"],
+        print("RESULT " + json.dumps({"n": n, "serial": serial, "seconds": r.timings["total"], "setup": r.timings["setup"],
                                       "finest": r.nit, "level_steps": r.level_steps, "res": r.residual,
                                       "status": str(r.status), "linear_solves": r.linear_solves,
                                       "inner_iterations": r.inner_iterations}), flush=True)
@@ -120,14 +127,16 @@ def main():
             row["cold"] = run_peer(exe, dim, m, np_, False) if n <= a.cold_max_n else None
             rows.append(row)
             print(json.dumps(row), flush=True)
-    print("\n| scene | n | np | ours: finest steps, s | vinewtonrsls cold: steps, s | grid sequencing: finest, s |"
+    print("\n| scene | n | np | serial nrmicp newton: finest, s | ours: finest steps, s | vinewtonrsls cold: steps, s | grid sequencing: finest, s |"
           " msgs/rank/step | bytes/rank/step |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         o, c, g = r["ours"], r["cold"], r["gs"]
         steps = sum(o["level_steps"])
         cold = f"{c['finest']}, {c['seconds']:.2f}" if c else "not run (n > --cold-max-n)"
-        print(f"| {r['scene']} | {r['n']:,} | {r['np']} | {o['finest']}, {o['seconds']:.2f} | {cold} | "
+        se = o["serial"]
+        serial = f"{se['finest']}, {se['seconds']:.2f} ({se['status']})" if se else "–"
+        print(f"| {r['scene']} | {r['n']:,} | {r['np']} | {serial} | {o['finest']}, {o['seconds']:.2f} | {cold} | "
               f"{g['finest']}, {g['seconds']:.2f} | {o['messages'] / r['np'] / steps:.0f} | "
               f"{o['bytes'] / r['np'] / steps:.3g} |")
 
