@@ -81,12 +81,16 @@ def case_agreement(weights=None):
         oracle_zeta = None if zeta is None else (zeta if callable(zeta) else (lambda z, c=zeta: c))
         for method, kw in OPTIONS.items():
             tol = 1e-9 if method == "newton" else 1e-10
-            r = dist.solve(M, vec(M, q), dzeta(M, lo, hi), method=method, tol=tol, maxiter=100000, **kw)
+            qv, zv = vec(M, q), dzeta(M, lo, hi)
+            before = _snapshot(M, qv, zv)
+            r = dist.solve(M, qv, zv, method=method, tol=tol, maxiter=100000, **kw)
+            untouched = _snapshot(M, qv, zv) == before
             z = dist.gather(r.z)
             if RANK == 0:
                 rows.append({"problem": name, "method": method, "status": str(r.status), "nit": r.nit,
                              "err": float(np.max(np.abs(z - serial.z))), "res": oracle_residual(A, q, z, oracle_zeta),
-                             "level_steps": r.get("level_steps"), "serial_res": float(serial.residual)})
+                             "level_steps": r.get("level_steps"), "serial_res": float(serial.residual),
+                             "untouched": untouched})
     return rows
 
 
@@ -174,6 +178,8 @@ def _snapshot(*objs):
             out.append(o.toarray().tolist())
         elif isinstance(o, np.ndarray):
             out.append(np.nan_to_num(o, nan=1e300).tolist())
+        elif isinstance(o, nrmicp.Affine):
+            out.append(_snapshot(o.B, np.asarray(o.c)))
     return out
 
 

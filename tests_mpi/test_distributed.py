@@ -21,6 +21,7 @@ def test_every_member_agrees_with_serial_nrmicp(agreement):
         where = f"np={np_} {r['problem']} {r['method']}"
         assert r["status"] == "CONVERGED", where
         assert r["err"] < AGREE, where
+        assert r["untouched"], where + ": an input was modified"
         # Res by the numpy oracle: the returned z meets the tolerance it was asked for
         assert r["res"] < (1e-9 if r["method"] == "newton" else 1e-10) * 1.0001, where
 

@@ -21,7 +21,11 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from petsc4py import PETSc
+try:
+    from petsc4py import PETSc
+except ImportError as exc:  # the core package needs no MPI; this module does
+    raise ImportError("nrmicp.distributed needs petsc4py, PETSc (with hypre) and MPI: README, 'Beyond one machine' "
+                      f"(make mpideps installs them on Debian); {exc}") from exc
 
 from . import _core
 from ._api import Affine, Result, Status, _checked, _choice, _iteration_options, _scalar
@@ -303,6 +307,8 @@ def _ksp(comm, M, kind, rtol, atol):
         ksp.setPCSide(PETSc.PC.Side.RIGHT)
     ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
     ksp.setTolerances(rtol=rtol, atol=atol, max_it=1000)
+    ksp.setOptionsPrefix("nrmicp_inner_")  # -nrmicp_inner_pc_hypre_boomeramg_... tunes the reduced solves
+    ksp.setFromOptions()
     return ksp
 
 
