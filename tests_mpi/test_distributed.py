@@ -34,10 +34,21 @@ def test_newton_nests_finest_steps_few(agreement):
             assert r["level_steps"][0] <= 5, r
 
 
-def test_answer_does_not_depend_on_the_partition():
-    diffs = mpirun(3, "partition")
+@pytest.fixture(scope="module")
+def partition_run():
+    return mpirun(3, "partition")
+
+
+def test_answer_does_not_depend_on_the_partition(partition_run):
+    diffs = partition_run
     assert diffs["newton"] < AGREE
     assert diffs["nrmgs"] < AGREE
+
+
+def test_cycling_active_sets_hand_over_to_the_fallback_sweeps(partition_run):
+    fb = partition_run["fallback"]
+    assert fb["status"] == "CONVERGED" and fb["sweeps"] > 0 and fb["path"] == "newton+fallback", fb
+    assert fb["err"] < AGREE, fb
 
 
 BAD = {

@@ -517,11 +517,13 @@ def _nested_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats):
 
 def _lcp_fallback(prob, comm, stats):
     """Fallback sweeps of nrmgs (synchronous multisplitting) on the level's LCP."""
-    member = _AOR(prob.A, 1.0, 1.0, None, None, 1.0)
     zeta = _Zeta(None, prob.A, comm)
+    member = []  # built on first use: most solves never fall back
 
     def run(y, k):
-        res, _, _, done = _stationary(prob.A, prob.b, zeta, member, y, 0.0, k, stats)
+        if not member:
+            member.append(_AOR(prob.A, 1.0, 1.0, None, None, 1.0))
+        res, _, _, done = _stationary(prob.A, prob.b, zeta, member[0], y, 0.0, k, stats)
         return res, done
     return run
 
