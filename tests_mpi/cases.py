@@ -224,8 +224,9 @@ def case_fuzz(examples):
         zeta = None if rng.random() < 0.5 else rng.normal(size=n)
         method = str(rng.choice(list(OPTIONS)))
         lo, hi = split(n, rng.uniform(0.2, 1.0, SIZE).tolist())
+        polish = bool(rng.random() < 0.3)
         r = dist.solve(A[lo:hi], q[lo:hi], None if zeta is None else zeta[lo:hi], method=method, tol=1e-9,
-                       maxiter=100000, **OPTIONS[method])
+                       maxiter=100000, polish=polish, **OPTIONS[method])
         z = dist.gather(r.z)
         if RANK == 0:
             serial = nrmicp.solve(A, q, zeta, method="newton", tol=1e-11, polish=True)
