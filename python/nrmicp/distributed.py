@@ -266,12 +266,16 @@ class _Newton:
         self.p, self.comm, self.stats = prob, comm, stats
         self.ksp_type = "cg" if symmetric else "bcgs"
 
-    def step(self, y, rtol, atol):
-        """One Newton step from y (w of y in self.p.w): the new iterate, and the set's fingerprint."""
+    def step(self, y, rtol, atol, last=None):
+        """One Newton step from y (w of y in self.p.w): the new iterate and the set's fingerprint;
+        (None, fingerprint) without solving when the set is `last` (a settled coarse level)."""
         p = self.p
         lo, _ = p.A.getOwnershipRange()
         ya, wa, da = y.getArray(readonly=True), p.w.getArray(readonly=True), p.d.getArray(readonly=True)
         inactive = ya - wa / da >= 0
+        h = _fingerprint(self.comm, lo, inactive)
+        if last is not None and h == last:
+            return None, h
         delta = y.duplicate()
         delta.setArray(np.where(inactive, 0.0, -ya))
         rhs = y.duplicate()
@@ -293,7 +297,7 @@ class _Newton:
             AII.destroy()
         ynew = y.copy()
         ynew.axpy(1.0, delta)
-        return ynew, _fingerprint(self.comm, lo, inactive)
+        return ynew, h
 
 
 def _ksp(comm, M, kind, rtol, atol):
@@ -447,7 +451,9 @@ def _newton_loop(residual, step, fallback, y, *, tol, maxiter, settle, sweep_bud
             return best[1], best[0], steps, sweeps, Status.CONVERGED
         if steps >= maxiter:
             return best[1], best[0], steps, sweeps, Status.MAX_ITERATIONS
-        ynew, h = step(y)
+        ynew, h = step(y, last if settle else None)
+        if ynew is None:  # the set y's own test gives is the one y solves: settled, no solve needed
+            return best[1], best[0], steps, sweeps, Status.STAGNATED
         steps += 1
         rnew = residual(ynew)
         repeated = h == last
@@ -504,10 +510,11 @@ def _nested_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats):
             y = yf
         finest = level == 0
         nt = _Newton(prob, comm, symmetric, stats)
-        atol = 0.1 * tol if finest else 0.0
+        # finest: the inner solve aims at tol/10 absolute (a step short of it costs a whole extra step)
+        rtol, atol = (1e-14, 0.1 * tol) if finest else (_RTOL, 0.0)
         fallback = _lcp_fallback(prob, comm, stats) if finest else None
         y, res, steps, sweeps, status = _newton_loop(
-            prob.residual, lambda v: nt.step(v, _RTOL, atol), fallback, y, tol=tol if finest else 0.0,
+            prob.residual, lambda v, last: nt.step(v, rtol, atol, last), fallback, y, tol=tol if finest else 0.0,
             maxiter=maxiter if finest else 50, settle=not finest, sweep_budget=maxiter)
         stats["level_steps"].insert(0, steps)
         stats["level_seconds"].insert(0, time.perf_counter() - t0)
@@ -539,7 +546,7 @@ def _affine_newton(A, q, zeta, z, tol, maxiter, comm, stats):
     def residual(v):
         return _icp_residual(A, q, zeta, v, w, g, zt)
 
-    def step(v):
+    def step(v, last):
         inactive = g.getArray(readonly=True) - w.getArray(readonly=True) / d >= 0
         mI = _vec(A, inactive.astype(float))
         mA = _vec(A, 1.0 - inactive)
