@@ -1,6 +1,6 @@
 # The two commands of the README:
 #   make demo   install what is missing, build, run every method on a built-in problem
-#   make test   install what is missing, build, run ctest and pytest
+#   make test   install what is missing, build, run ctest, pytest and the MPI tests (mpitest)
 PY      ?= python3
 BUILD   ?= build
 APT_PKGS = libeigen3-dev libsuitesparse-dev libopenblas0-pthread doctest-dev
