@@ -20,10 +20,11 @@ import warnings
 import numpy as np
 import scipy.sparse as sp
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests"))
 import nrmicp
 from nrmicp import scenes
-from test_newton import impulse_jacobian  # tests/: the impulse-control Jacobian, written once
+from tests_modules import load
+
+impulse_jacobian = load("test_newton").impulse_jacobian  # tests/: the impulse-control Jacobian, written once
 
 
 def fields(res):

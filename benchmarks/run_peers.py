@@ -39,10 +39,10 @@ import numpy as np
 import scipy.sparse as sp
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
 
-import qp_peers  # noqa: E402
+import qp_peers  # noqa: E402  (this directory is on sys.path when a script here runs)
 import scipy_modulus  # noqa: E402
+from peers_impl import _peers  # noqa: E402
 
 REPO = os.path.dirname(HERE)
 
@@ -66,15 +66,12 @@ def _load_scenes():
 SCENES_MOD, SCENES_SRC = _load_scenes()
 
 
-def build_scene(name, n):
-    """Return (A csr, q, info dict)."""
+def peer_lcp(name, n):
+    """(A csr, q, info) of a peer-table scene, from the scene registry (nrmicp.scenes):
+    'obstacle0' is obstacle_2d as the h²-scaled pure LCP (scenes.scaled_lcp), 'bai4' Bai's μ = 4 LCP."""
     m = int(round(math.sqrt(n)))
     if name == "obstacle0":
-        h = 1.0 / (m + 1)
-        P = SCENES_MOD.obstacle_2d(m, exact=False)
-        A = sp.csr_matrix(P.A * h**2)
-        psi = np.asarray(P.zeta, dtype=float)
-        q = h**2 * (np.asarray(P.q, dtype=float) + P.A @ psi)
+        A, q = SCENES_MOD.scaled_lcp(SCENES_MOD.obstacle_2d(m, exact=False))
         mu = 0.0
     elif name == "bai4":
         mu = 4.0
@@ -135,20 +132,6 @@ FIELDS = ["scene", "scenes_source", "mu", "n", "nnz", "target", "peer", "family"
           "setup_seconds", "ratio_vs_nrmicp_same", "ratio_vs_best_nrmicp", "note"]
 
 
-def estimate(hist, n, default_p):
-    """Time estimate at size n from earlier sizes of the same peer (power-law fit)."""
-    if not hist:
-        return None
-    if len(hist) >= 2:
-        (n1, t1), (n2, t2) = hist[-2], hist[-1]
-        p = math.log(max(t2, 1e-4) / max(t1, 1e-4)) / math.log(n2 / n1)
-        p = min(max(p, 1.0), 2.5)
-    else:
-        p = default_p
-    n0, t0 = hist[-1]
-    return t0 * (n / n0) ** p
-
-
 def main_run(args):
     log = lambda s: print(s, flush=True)  # noqa: E731
     have = nrmicp_available()
@@ -181,7 +164,7 @@ def main_run(args):
     for scene in args.scenes:
         tuned = dict(alpha_default=seeded_alpha[scene]) if scene in seeded_alpha else None
         for n in sizes:
-            A, q, info = build_scene(scene, n)
+            A, q, info = peer_lcp(scene, n)
             n = info["n"]
             # mu = 0: iterations grow ~n and time per iteration grows faster than n once the
             # working set leaves cache (measured 1e4 -> 1e5: exponent 2.2-2.5)
@@ -217,7 +200,7 @@ def main_run(args):
                     return row
 
                 def should_skip(key):
-                    est = estimate(hist.get(key, []), n, default_p)
+                    est = _peers.estimate(hist.get(key, []), n, default_p)
                     if key in skip_note:
                         return skip_note[key]
                     if est is not None and est > args.budget:
@@ -384,7 +367,7 @@ def print_tables(rows):
 # ----------------------------------------------------------------------------- scale mode
 def run_case(spec):
     """Child process: one case, prints one JSON line with its own peak RSS."""
-    A, q, info = build_scene(spec["scene"], spec["n"])
+    A, q, info = peer_lcp(spec["scene"], spec["n"])
     out = dict(spec, n=info["n"], nnz=A.nnz)
     meth, kw = spec["method"], dict(spec.get("kw", {}))
     rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
@@ -425,7 +408,7 @@ def main_scale(args):
     hist = {}
     for c in cases:
         key = (c["peer"], c["method"])
-        est = estimate(hist.get(key, []), c["n"], 1.3)
+        est = _peers.estimate(hist.get(key, []), c["n"], 1.3)
         if c["peer"] != "baseline" and est is not None and est > args.scale_budget:
             r = dict(c, status=f"skipped (est. > {est:.0f}s)")
             rows.append(r)

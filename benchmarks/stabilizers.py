@@ -25,12 +25,11 @@ import warnings
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, "..", "tests"))
-
 import nrmicp  # noqa: E402
-import problems  # noqa: E402
-import test_hard_cases as hc  # noqa: E402
+from tests_modules import load  # noqa: E402
+
+problems = load("problems")
+hc = load("test_hard_cases")
 
 STABILIZERS = {
     "plain": dict(),

@@ -183,6 +183,8 @@ def reference_solve(A, q, zeta=None, *, method, z_update, gamma, omega1=None, om
         k += 1
 
     z_out = z if converged else best_z
+    if not converged and residual(A, q, z_init, zeta) < best_res:
+        z_out = z_init  # the start itself, when no iterate had a lower Res (SPEC: the best iterate)
     return ReferenceResult(z=z_out, nit=k, converged=converged,
                            residuals=np.array(residuals), x_iterates=x_iterates,
                            z_iterates=z_iterates)

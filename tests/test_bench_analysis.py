@@ -39,7 +39,7 @@ def _quick(tmp_path, *, without_matplotlib):
     pre = "import sys; sys.modules['matplotlib'] = None; " if without_matplotlib else "import sys; "
     code = pre + "from nrmicp.__main__ import main; sys.exit(main(sys.argv[1:]))"
     out = tmp_path / "out"
-    proc = subprocess.run([sys.executable, "-c", code, "bench", "--quick", "--no-progress",
+    proc = subprocess.run([sys.executable, "-c", code, "bench", "--family", "--quick", "--no-progress",
                            "--scenes", "bai_sym_icp,american_put", "--out", str(out)],
                           capture_output=True, text=True, timeout=300)
     return out, proc
@@ -132,7 +132,7 @@ def test_a_missing_qp_solver_is_a_note_not_an_error(tmp_path):
     code = ("import sys; sys.modules['matplotlib'] = None; sys.modules['piqp'] = None; "
             "sys.modules['osqp'] = None; from nrmicp.__main__ import main; sys.exit(main(sys.argv[1:]))")
     out = tmp_path / "out"
-    proc = subprocess.run([sys.executable, "-c", code, "bench", "--quick", "--no-progress", "--scenes",
+    proc = subprocess.run([sys.executable, "-c", code, "bench", "--family", "--quick", "--no-progress", "--scenes",
                            "obstacle_2d", "--methods", "nrmgs", "--out", str(out)],
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr

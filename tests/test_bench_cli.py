@@ -12,6 +12,7 @@ import pytest
 nrmicp = pytest.importorskip("nrmicp")
 pytest.importorskip("matplotlib")
 bench = pytest.importorskip("nrmicp.bench")
+scenes = pytest.importorskip("nrmicp.scenes")
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 EXPECTED_COLUMNS = {"scene", "size", "n", "method", "z_update", "z_update_used", "tol", "status", "converged",
@@ -28,7 +29,7 @@ def _installed_qp():
 @pytest.fixture(scope="module")
 def quick_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("bench")
-    proc = subprocess.run([sys.executable, "-m", "nrmicp", "bench", "--quick", "--out", str(out)],
+    proc = subprocess.run([sys.executable, "-m", "nrmicp", "bench", "--family", "--quick", "--out", str(out)],
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, f"stdout:\n{proc.stdout}\nstderr:\n{proc.stderr}"
     with open(out / "work_precision.csv", newline="") as f:
@@ -85,7 +86,7 @@ def test_converged_row_reproduced_independently(quick_run, scene):
             and r["method"] in ("nrmgs", "nrmm")]
     assert rows
     r = min(rows, key=lambda r: float(r["tol"]))
-    P = bench.build_scene(scene, r["size"])
+    P = scenes.build(scene, r["size"])
     assert P.n == int(r["n"])
     res = nrmicp.solve(P.A, P.q, P.zeta, method=r["method"], tol=float(r["tol"]), z_update=r["z_update"])
     assert res.success
@@ -98,7 +99,7 @@ def test_converged_row_reproduced_independently(quick_run, scene):
 
 
 def test_bad_arguments_exit_nonzero(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "nrmicp", "bench", "--quick", "--methods", "nope",
+    proc = subprocess.run([sys.executable, "-m", "nrmicp", "bench", "--family", "--quick", "--methods", "nope",
                            "--out", str(tmp_path)], capture_output=True, text=True, timeout=120)
     assert proc.returncode != 0
     assert "nope" in proc.stderr
@@ -113,7 +114,7 @@ def test_newton_polish_and_the_peers_are_in_the_same_sweep(quick_run):
     and their answers agree with the scene's exact discrete solution (policy iteration)."""
     _, proc, _, rows = quick_run
     methods = ["newton", "nrmgs+polish", "psor"] + ([_installed_qp()] if _installed_qp() else [])
-    P = bench.build_scene("obstacle_2d", "tiny")
+    P = scenes.build("obstacle_2d", "tiny")
     for m in methods:
         rs = _rows(rows, "obstacle_2d", m)
         assert [float(r["tol"]) for r in rs] == list(bench.QUICK_TOLS), m
@@ -149,7 +150,7 @@ def test_newton_counts_newton_steps(quick_run):
 @pytest.mark.parametrize("method", ["newton", "nrmgs+polish"])
 def test_newton_and_polish_rows_reproduced_independently(quick_run, method):
     r = _rows(quick_run[3], "obstacle_2d", method)[-1]
-    P = bench.build_scene("obstacle_2d", "tiny")
+    P = scenes.build("obstacle_2d", "tiny")
     base, kw = bench.split_method(method)
     res = nrmicp.solve(P.A, P.q, P.zeta, method=base, tol=float(r["tol"]), **kw)
     assert int(res.nit) == int(r["iterations"])

@@ -60,9 +60,13 @@ def test_slow_return_within_budget_is_not_cut():
     """nrm on obstacle_2d(32) needs 965 iterations to get back below its first Res, then keeps
     improving (converging after ~89,000): at maxiter = 3000 it must run to maxiter."""
     P = scenes.obstacle_2d(32)
-    res = nrmicp.solve(P.A, P.q, P.zeta, method="nrm", maxiter=3000)
+    res = nrmicp.solve(P.A, P.q, P.zeta, method="nrm", maxiter=3000, record_history=True)
     assert res.status == nrmicp.Status.MAX_ITERATIONS, res.message
-    assert res.nit == 3000  # still improving at the end
+    r = res.history["residual"]
+    assert np.argmin(r) == len(r) - 1 == 3000  # still improving at the end
+    # (the start z = 0 has a lower Res than every iterate so far, and is what is returned)
+    assert res.residual == pytest.approx(_numpy_res(P.A, P.q, np.zeros(P.n), P.zeta))
+    assert res.residual < r.min()
 
 
 def test_res_jumping_up_then_falling_steadily_is_not_cut():

@@ -44,7 +44,7 @@ def assert_complementary(problem, z, tol):
 # ---------------------------------------------------------------------------------------
 
 def all_scenes():
-    return scenes.catalog("small") + [scenes.bai(8, kind="affine")]
+    return scenes.catalog("tiny")
 
 
 @pytest.mark.parametrize("problem", all_scenes(), ids=lambda p: p.name)
@@ -190,3 +190,45 @@ def test_american_put_price_matches_binomial_tree():
     assert abs(price - tree) < 1e-3, (price, tree)
     exact = scenes.american_put_price(S_max=300.0, n_space=1200, n_time=200, method="exact", **args)
     assert abs(price - exact) < 1e-6
+
+
+# ---------------------------------------------------------------------------------------
+# The scene registry: one meaning of each size name
+# ---------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("name", scenes.NAMES)
+def test_registry_builds_every_scene_with_its_sizes_grid_parameter(name):
+    P = scenes.build(name, "tiny")
+    m = scenes.parameter(name, "tiny")
+    expected = {"obstacle_3d": m**3, "american_put": m - 1, "p_matrix_cycling": 4 * m}
+    if name.startswith("bai_") or name in ("obstacle_2d", "thermoforming_2d", "convection_obstacle"):
+        assert P.n == m * m
+    elif name in expected:
+        assert P.n == expected[name]
+    else:
+        assert P.n == m
+    assert [p.name for p in scenes.catalog("tiny")] == [scenes.build(n, "tiny").name for n in scenes.NAMES]
+
+
+def test_registry_sizes_are_the_benchs():
+    from nrmicp import bench
+
+    assert bench.SIZES is scenes.SIZES
+    for a, b in zip(("tiny", "small", "medium", "large"), ("small", "medium", "large", "realistic")):
+        assert scenes.parameter("obstacle_2d", a) < scenes.parameter("obstacle_2d", b)
+
+
+def test_registry_rejects_unknown_names_and_sizes():
+    with pytest.raises(ValueError, match="unknown scene 'nope'"):
+        scenes.build("nope")
+    with pytest.raises(ValueError, match="size must be one of"):
+        scenes.build("obstacle_2d", "huge")
+
+
+def test_scaled_lcp_is_the_obstacle_problem_times_h2_in_y():
+    P = scenes.obstacle_2d(15, exact=True)
+    A, q = scenes.scaled_lcp(P)
+    y = P.z_exact - P.zeta
+    assert y.min() >= -1e-12
+    assert np.linalg.norm(np.minimum(A @ y + q, y)) < 1e-10
+    assert abs(A.diagonal() - 4.0).max() < 1e-12

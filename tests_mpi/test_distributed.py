@@ -89,3 +89,12 @@ def test_readme_example_runs_on_two_ranks():
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.startswith("CONVERGED finest steps"), out.stdout
     assert "on 2 ranks" in out.stdout
+
+
+def test_the_documented_example_is_the_one_the_tests_run():
+    import os
+    import re
+    root = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+    doc = open(os.path.join(root, "docs", "DISTRIBUTED.md"), encoding="utf-8").read()
+    block = re.findall(r"^```py\n(.*?)^```", doc, flags=re.S | re.M)[0]
+    assert block == open(os.path.join(root, "examples", "distributed_obstacle.py"), encoding="utf-8").read()

@@ -59,17 +59,17 @@ def _res(A, q, y):
     return float(np.linalg.norm(np.minimum(A @ y + q, y)))
 
 
-def verdict(res, tol, k, maxiter, t0=None, time_limit=None):
+def verdict(res, tol, k, maxiter, t0=None, time_limit=None, clock=time.perf_counter):
     """Why an iteration stops at iterate k with Res ``res``, or None to go on: 'converged'
     (Res < tol), 'diverged' (Res not finite), 'max_iterations' (k >= maxiter) or 'time_limit'
-    (more than ``time_limit`` seconds since ``t0``)."""
+    (more than ``time_limit`` seconds of ``clock`` since ``t0``)."""
     if res < tol:
         return "converged"
     if not np.isfinite(res):
         return "diverged"
     if k >= maxiter:
         return "max_iterations"
-    if time_limit is not None and time.perf_counter() - t0 > time_limit:
+    if time_limit is not None and clock() - t0 > time_limit:
         return "time_limit"
     return None
 
@@ -109,25 +109,25 @@ def sor_omega(A) -> float:
     return 2.0 / (1.0 + np.sqrt(1.0 - rho * rho)) if rho < 1 else 1.0
 
 
-def psor(A, q, c, tol, *, omega, colour, maxiter, history=False, time_limit=None):
+def psor(A, q, c, tol, *, omega, colour, maxiter, history=False, time_limit=None, clock=time.perf_counter):
     """Projected SOR y_i ← max(0, y_i − ω (Ay + q)_i / a_ii) colour by colour, from y = 0, until
     Res < tol (checked every sweep, one SpMV; see :func:`verdict`). Returns z = y + c and the
-    outcome; ``setup + iterations`` is the whole time."""
-    t0 = time.perf_counter()
+    outcome; ``setup + iterations`` is the whole time, on ``clock`` (e.g. time.process_time)."""
+    t0 = clock()
     blocks = []
     for k in np.unique(colour):
         rows = np.flatnonzero(colour == k)
         Ak = A[rows]
         blocks.append((rows, Ak, omega / Ak[np.arange(len(rows)), rows].A1, q[rows]))
-    setup = time.perf_counter() - t0
+    setup = clock() - t0
     y = np.zeros(A.shape[0])
     hist = ([], [], []) if history else None
     k = 0
     while True:
         res = _res(A, q, y)
         if hist is not None:
-            hist[0].append(k), hist[1].append(time.perf_counter() - t0), hist[2].append(res)
-        status = verdict(res, tol, k, maxiter, t0, time_limit)
+            hist[0].append(k), hist[1].append(clock() - t0), hist[2].append(res)
+        status = verdict(res, tol, k, maxiter, t0, time_limit, clock)
         if status:
             break
         for rows, Ak, wd, qk in blocks:
@@ -135,7 +135,7 @@ def psor(A, q, c, tol, *, omega, colour, maxiter, history=False, time_limit=None
             np.maximum(yk, 0.0, out=yk)
             y[rows] = yk
         k += 1
-    total = time.perf_counter() - t0
+    total = clock() - t0
     out = dict(z=y + c, status=status, success=status == "converged", nit=k, residual=res,
                setup=setup, iterations=total - setup)
     if hist is not None:
@@ -217,3 +217,23 @@ def qp(name, A, q, c, tol, *, eps_min=1e-14):
     return dict(z=y + c, status="converged" if ok else o["status"].lower().replace(" ", "_"), success=ok,
                 nit=max(o["iterations"], 0), residual=o["residual"], seconds=o["seconds"],
                 setting=f"eps={o['eps']:.0e}")
+
+
+# --------------------------------------------------------------------------- budgets
+
+def estimate(history, n, p_default, floor=1e-3):
+    """Seconds a peer would take at size n, extrapolated from [(n_i, seconds_i)] at smaller sizes
+    (a power law through the last two, its exponent clipped to [1, 2.5]; ``p_default`` with one
+    point); the benchmarks skip a peer whose estimate exceeds their budget. Times below ``floor``
+    count as ``floor`` (too short to fit). None without history."""
+    import math
+
+    if not history:
+        return None
+    if len(history) >= 2:
+        (n1, t1), (n2, t2) = history[-2], history[-1]
+        p = min(max(math.log(max(t2, floor) / max(t1, floor)) / math.log(n2 / n1), 1.0), 2.5)
+    else:
+        p = p_default
+    n0, t0 = history[-1]
+    return t0 * (n / n0) ** p

@@ -1,13 +1,14 @@
-"""Work–precision benchmark: what each extra digit of accuracy costs in time.
+"""The family sweep (``nrmicp bench --family``; plain ``nrmicp bench`` is the realistic-scene
+figure, nrmicp/bench_realistic.py): what each extra digit of accuracy costs in time.
 
-    python -m nrmicp bench [--quick] [--scenes ...] [--methods ...] [--peers psor,qp] [--z-updates ...]
+    python -m nrmicp bench --family [--quick] [--scenes ...] [--methods ...] [--peers psor,qp] [--z-updates ...]
                            [--tols ... | --tol-min 1e-12 --tol-max 1e-2] [--size small]
                            [--repeat 1] [--maxiter 10000] [--out bench-out]
 
 For every scene, method and z-update it sweeps ``tol`` (default 1e-2, 1e-3, …, 1e-12). The
 methods are nrmicp's members, ``newton`` (its 'iterations' are Newton steps on the finest level;
-``hierarchy='auto'``) and any member with ``+polish`` (``polish=True``: one Newton step on the
-settled active set); next to them, in the same diagrams, the peers a user would otherwise
+``hierarchy='auto'``) and any member with ``+polish`` (``polish=True``: Newton steps on the
+settled active set, to the rounding floor); next to them, in the same diagrams, the peers a user would otherwise
 reach for (nrmicp/_peers.py): red-black projected SOR in numpy with SOR's optimal ω, and a QP
 solver (PIQP, else OSQP) on min ½zᵀAz + qᵀz, z ≥ 0, its eps tightened from tol by 10× until
 Res < tol (the time of that last run). The peers run on the scenes that are LCPs (ζ constant),
@@ -84,29 +85,19 @@ EXTRA_SCENES = ("bai_sym_affine", "obstacle_1d", "thermoforming_1d", "obstacle_3
 SCENES = DEFAULT_SCENES + EXTRA_SCENES
 
 #: Default methods: nrmaor and nrmsor with their default parameters (α = β = 1) are nrmgs.
-#: 'nrmgs+polish' is nrmgs with polish=True (one Newton step on the settled active set).
+#: 'nrmgs+polish' is nrmgs with polish=True (Newton steps on the settled active set, to the rounding floor).
 DEFAULT_METHODS = ("nrm", "nrmm", "nrmgs", "nrmj", "mms", "two_sweep", "newton", "nrmgs+polish")
 QUICK_METHODS = ("nrmgs", "nrmm", "newton", "nrmgs+polish")
 QUICK_TOLS = (1e-2, 1e-4, 1e-6, 1e-8)
 #: Target tolerances of the "fastest method" summary.
 TARGETS = (1e-6, 1e-10)
 
-#: Grid parameter per scene and size: m (n = m²) for the 2D scenes and Bai, n for the 1D ones,
-#: n_space (n = n_space − 1) for the American put. 'tiny' is what --quick uses.
-SIZES = {
-    "tiny":   dict(bai=8,   obstacle_2d=8,   thermoforming_2d=8,   impulse_control=33,  american_put=100,
-                   obstacle_1d=63,   thermoforming_1d=63, obstacle_3d=6, convection_obstacle=8),
-    "small":  dict(bai=64,  obstacle_2d=32,  thermoforming_2d=32,  impulse_control=65,  american_put=1600,
-                   obstacle_1d=255,  thermoforming_1d=255, obstacle_3d=12, convection_obstacle=32),
-    "medium": dict(bai=128, obstacle_2d=64,  thermoforming_2d=64,  impulse_control=129, american_put=3200,
-                   obstacle_1d=1023, thermoforming_1d=1023, obstacle_3d=20, convection_obstacle=64),
-    "large":  dict(bai=256, obstacle_2d=128, thermoforming_2d=128, impulse_control=255, american_put=6400,
-                   obstacle_1d=4095, thermoforming_1d=4095, obstacle_3d=32, convection_obstacle=128),
-}
-# 'small' is chosen so that the default sweep takes about a minute on one core yet every solve
-# takes well over the ~0.1 ms Python overhead of a call: Bai's iteration counts do not grow with
-# n (so n = 4096), while the PDE scenes' grow like h⁻² (so 32 × 32 grids already take ~10³
-# iterations; 'medium' quadruples them).
+#: The sizes (--size) are the scene registry's (nrmicp.scenes.SIZES): 'tiny' is what --quick uses.
+#: 'small' is chosen so that the default sweep takes about a minute on one core yet every solve
+#: takes well over the ~0.1 ms Python overhead of a call: Bai's iteration counts do not grow with
+#: n (so n = 4096), while the PDE scenes' grow like h⁻² (so 32 × 32 grids already take ~10³
+#: iterations; 'medium' quadruples them).
+from .scenes._registry import SIZES  # noqa: E402
 
 _LABELS = {
     "bai_sym_lcp": "Bai, symmetric, LCP",
@@ -123,28 +114,6 @@ _LABELS = {
     "impulse_control": "impulse control (QVI, Lipschitz 1)",
     "american_put": "American put, one step (shifted LCP)",
 }
-
-
-def build_scene(name: str, size: str = "small"):
-    """The :class:`nrmicp.scenes.Problem` that the benchmark runs for ``name`` at ``size``."""
-    from . import scenes
-
-    if size not in SIZES:
-        raise ValueError(f"size must be one of {', '.join(SIZES)}; got {size!r}")
-    s = SIZES[size]
-    if name.startswith("bai_"):
-        _, sym, kind = name.split("_")
-        if sym not in ("sym", "nonsym") or kind not in ("lcp", "icp", "affine"):
-            raise ValueError(f"unknown scene {name!r}")
-        return scenes.bai(s["bai"], symmetric=sym == "sym", kind=kind)
-    builders = {"obstacle_1d": scenes.obstacle_1d, "obstacle_2d": scenes.obstacle_2d,
-                "obstacle_3d": scenes.obstacle_3d, "convection_obstacle": scenes.convection_diffusion_obstacle,
-                "thermoforming_1d": scenes.thermoforming_1d, "thermoforming_2d": scenes.thermoforming_2d,
-                "impulse_control": scenes.impulse_control,
-                "american_put": lambda n_space: scenes.american_put(n_space=n_space)}
-    if name not in builders:
-        raise ValueError(f"unknown scene {name!r}; choose from {', '.join(SCENES)}")
-    return builders[name](s[name])
 
 
 def scene_label(name: str) -> str:
@@ -815,7 +784,7 @@ def _tols(args):
     return sorted(set(float(f"{t:.6g}") for t in tols), reverse=True)
 
 
-def _parser(prog: str = "python -m nrmicp bench"):
+def _parser(prog: str = "python -m nrmicp bench --family"):
     import nrmicp
 
     p = argparse.ArgumentParser(
@@ -850,8 +819,10 @@ def _parser(prog: str = "python -m nrmicp bench"):
     return p
 
 
-def main(argv: Optional[list[str]] = None, prog: str = "python -m nrmicp bench") -> int:
+def main(argv: Optional[list[str]] = None, prog: str = "python -m nrmicp bench --family") -> int:
     import nrmicp
+
+    from . import scenes
 
     args = _parser(prog).parse_args(argv)
     scenes_ = _split(args.scenes) if args.scenes else list(DEFAULT_SCENES)
@@ -894,7 +865,7 @@ def main(argv: Optional[list[str]] = None, prog: str = "python -m nrmicp bench")
           f"repeat {args.repeat}; maxiter {args.maxiter}", flush=True)
     problems = {}
     for s in scenes_:  # build first: exact references are not part of any timing
-        problems[s] = build_scene(s, size)
+        problems[s] = scenes.build(s, size)
     peers, notes = resolve_peers(peer_names, problems)
     for note in notes:
         print(note, flush=True)

@@ -33,6 +33,21 @@ Eigen::VectorXd diagonal(const MatrixType& A) {
   return d;
 }
 
+/// The Newton member's default Ω2: diag(A) where it is positive (not subnormal), else the row's
+/// largest |a_ij| (1 for an empty row). Ω2 only weighs w against z − ζ in the active-set test
+/// and sets the fallback member's Ω2, so a zero diagonal (contact, games) needs no refusal.
+template <typename MatrixType>
+Eigen::VectorXd newton_default_omega2(const MatrixType& A, const Eigen::VectorXd& d) {
+  Eigen::VectorXd row_max = Eigen::VectorXd::Zero(A.rows());
+  for (Eigen::Index k = 0; k < A.outerSize(); ++k)
+    for (typename MatrixType::InnerIterator it(A, k); it; ++it)
+      row_max[it.row()] = std::max(row_max[it.row()], std::abs(it.value()));
+  Eigen::VectorXd omega2 = d;
+  for (Eigen::Index i = 0; i < d.size(); ++i)
+    if (!(d[i] >= DBL_MIN)) omega2[i] = row_max[i] >= DBL_MIN && std::isfinite(row_max[i]) ? row_max[i] : 1.0;
+  return omega2;
+}
+
 /// The method's parameters with every default resolved (docs/SPEC.md).
 struct Parameters {
   Eigen::VectorXd omega1, omega2, phi;
@@ -41,7 +56,8 @@ struct Parameters {
 };
 
 /// Resolves the method defaults: Ω1 = I; Ω2 = I (NRM), αI (NRMM, α = mean diag A),
-/// D = diag(A) (AOR types, MMS, two-sweep); φ = 0; α, β by the method's definition.
+/// D = diag(A) (AOR types, MMS, two-sweep), newton_default_omega2 (Newton); φ = 0; α, β by the
+/// method's definition.
 template <typename MatrixType>
 Parameters resolve_parameters(const MatrixType& A, const Options& o) {
   const Eigen::Index n = A.rows();
@@ -99,13 +115,17 @@ Parameters resolve_parameters(const MatrixType& A, const Options& o) {
     p.omega2 = Eigen::VectorXd::Ones(n);
   } else if (o.method == Method::NRMM) {
     p.omega2 = Eigen::VectorXd::Constant(n, p.alpha);
+  } else if (o.method == Method::Newton) {
+    p.omega2 = newton_default_omega2(A, d);
   } else {
     for (Eigen::Index i = 0; i < n; ++i)
       if (!(d[i] >= DBL_MIN))
         throw std::invalid_argument(std::string("Options: method '") + to_string(o.method) +
                                     "' takes omega2 = diag(A) by default, which needs a positive (not subnormal) "
                                     "diagonal, but A[" + std::to_string(i) + "," + std::to_string(i) + "] = " +
-                                    to_text(d[i]) + "; pass omega2 explicitly, or rescale A");
+                                    to_text(d[i]) + " (it divides by the diagonal); on such a matrix use "
+                                    "method 'newton', whose default omega2 needs no diagonal, or pass omega2 "
+                                    "explicitly (e.g. the row maxima of |A|) with accelerate='anderson'");
     p.omega2 = d;
   }
   if (!(p.omega2.array() >= DBL_MIN).all())

@@ -37,6 +37,11 @@ should converge to), computed by construction or by a direct policy-iteration so
 (:func:`solve_exact_obstacle`); quantities of the continuous model, such as a sampled
 closed-form solution or a price, live in ``reference``.
 
+The registry (one meaning of each size name, for tests, the bench and benchmarks/):
+``build(name, size)`` builds any scene of ``NAMES`` at a size of ``SIZES`` ("tiny", "small",
+"medium", "large", "realistic"); ``catalog(size)`` builds them all; ``scaled_lcp(problem)`` is
+a grid obstacle as the h²-scaled pure LCP the peer tables use.
+
 Grid scenes record their grid (``Problem.grid``) and offer its geometric hierarchy for nested
 iteration, ``Problem.prolongations()`` (linear / bilinear / trilinear interpolation, for
 m = 2^k − 1 nodes per axis), to pass as ``hierarchy=``.
@@ -68,7 +73,12 @@ __all__ = [
     "binomial_american_put",
     "solve_exact_obstacle",
     "evaluate_zeta",
+    "NAMES",
+    "SIZES",
+    "build",
     "catalog",
+    "parameter",
+    "scaled_lcp",
 ]
 
 ZetaLike = Union[None, np.ndarray, Callable[[np.ndarray], np.ndarray], Any]
@@ -187,30 +197,4 @@ from .thermoforming import thermoforming_1d, thermoforming_2d  # noqa: E402
 from .impulse import impulse_control  # noqa: E402
 from .american import american_put, american_put_price, binomial_american_put  # noqa: E402
 
-
-def catalog(size: str = "small") -> list:
-    """One instance of every scene, for smoke tests and benchmark sweeps.
-
-    ``size`` is ``"small"`` (n of a few hundred, milliseconds to build) or ``"medium"``
-    (n of tens of thousands).
-    """
-    if size == "small":
-        m1, m2, m3 = 255, 16, 7
-    elif size == "medium":
-        m1, m2, m3 = 4095, 128, 31
-    else:
-        raise ValueError(f"size must be 'small' or 'medium', got {size!r}")
-    return [
-        bai(m2, kind="lcp"),
-        bai(m2, kind="lcp", symmetric=False),
-        bai(m2, kind="icp"),
-        obstacle_1d(m1),
-        obstacle_2d(m2),
-        obstacle_3d(m3),
-        convection_diffusion_obstacle(m2),
-        p_matrix_cycling(m2),
-        thermoforming_1d(m1),
-        thermoforming_2d(m2),
-        impulse_control(m1),
-        american_put(n_space=m1 + 1),
-    ]
+from ._registry import NAMES, SIZES, build, catalog, parameter, scaled_lcp  # noqa: E402

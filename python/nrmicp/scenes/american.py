@@ -117,6 +117,21 @@ def american_put(S_max: float = 400.0, K: float = 100.0, r: float = 0.05, sigma:
         lipschitz=0.0, grid=(n_space - 1,))
 
 
+def _nested_first_step(solver, A, method, solver_options):
+    """The Solver for the march's first step. Started from the payoff, Newton without a hierarchy
+    moves the exercise boundary about one node per step: unless the caller chose a hierarchy, a
+    Newton march without one takes its first step from the nested start (the grid's geometric
+    prolongations, else 'amg'; README "Which method for which problem")."""
+    if method != "newton" or solver.levels > 1 or "hierarchy" in solver_options:
+        return solver
+    import nrmicp
+
+    from ._operators import grid_prolongations
+
+    hierarchy = grid_prolongations((A.shape[0],)) or "amg"
+    return nrmicp.Solver(A, method=method, **dict(solver_options, hierarchy=hierarchy))
+
+
 def american_put_price(S0: float, K: float = 100.0, r: float = 0.05, sigma: float = 0.2,
                        T: float = 1.0, S_max=None, n_space: int = 800, n_time: int = 100,
                        rannacher: int = 2, method: str = "nrmgs", tol: float = 1e-9,
@@ -125,7 +140,10 @@ def american_put_price(S0: float, K: float = 100.0, r: float = 0.05, sigma: floa
 
     ``method`` is an nrmicp method name: ``nrmicp.Solver(A, method=method, **solver_options)``
     is built once and ``solver.solve(q_k, zeta=payoff, x0=previous, tol=tol,
-    maxiter=maxiter)`` is called at each step (warm start). ``method="exact"`` uses the
+    maxiter=maxiter)`` is called at each step (warm start). With ``method="newton"`` and no
+    ``hierarchy`` given, the first step (whose start, the payoff, is far from its solution) is
+    solved from the nested start of a second Solver with the grid's prolongations ('amg' when
+    the grid does not coarsen). ``method="exact"`` uses the
     policy-iteration reference solver instead (no nrmicp needed). The price is read off a
     cubic spline through the grid values at S0. ``S_max`` defaults to 4·max(K, S0).
 
@@ -150,8 +168,9 @@ def american_put_price(S0: float, K: float = 100.0, r: float = 0.05, sigma: floa
         import nrmicp
 
         solver = nrmicp.Solver(m.A, method=method, **solver_options)
-        for kind in m.steps():
-            res = solver.solve(m.q(kind, v), zeta=m.payoff, x0=v, tol=tol, maxiter=maxiter)
+        first = _nested_first_step(solver, m.A, method, solver_options)
+        for step, kind in enumerate(m.steps()):
+            res = (first if step == 0 else solver).solve(m.q(kind, v), zeta=m.payoff, x0=v, tol=tol, maxiter=maxiter)
             v = np.asarray(res.z, dtype=float).copy()
             nits.append(res.nit)
             ress.append(res.residual)

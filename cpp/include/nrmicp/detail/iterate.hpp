@@ -45,6 +45,7 @@ class Context {
   const Vector& q;
   const Zeta<StorageIndex>& zeta;
   const Parameters& p;
+  double start_residual = std::numeric_limits<double>::infinity();  ///< Res(z0), set by start()
   const ZUpdate zu;  ///< Explicit or Solve (never Auto)
   Timings& tm;
 
@@ -118,7 +119,7 @@ class Context {
     return stable_norm(work_);
   }
   /// x⁽⁰⁾ = γ/2 (Ω1⁻¹(z0 − ζ(z0)) − Ω2⁻¹(Az0 + q)) and z⁽⁰⁾ from it; false when ζ(z0) failed
-  /// (then s.z = z0).
+  /// (then s.z = z0). Res(z0) goes to start_residual (a candidate for the best iterate).
   bool start(const Vector* z0, Iterate& s) {
     s.zeta_z = Vector::Zero(n());
     s.zeta_prev = Vector::Zero(n());
@@ -130,7 +131,10 @@ class Context {
     }
     Vector Az(n());
     spmv(zs, Az);
-    s.x = p.gamma / 2 * ((zs - s.zeta_prev).cwiseQuotient(p.omega1) - (Az + q).cwiseQuotient(p.omega2));
+    Az += q;
+    start_residual = stable_norm(Az.cwiseMin(zs - s.zeta_prev));
+    if (std::isnan(start_residual)) start_residual = std::numeric_limits<double>::infinity();
+    s.x = p.gamma / 2 * ((zs - s.zeta_prev).cwiseQuotient(p.omega1) - Az.cwiseQuotient(p.omega2));
     s.z.resize(n());
     z_update(s);
     return true;

@@ -34,12 +34,13 @@ class NewtonLevel {
   NewtonLevel(const MatrixType& A, const Options& options) : A_(A), inner_(options.inner) {
     Options o = options;
     o.method = Method::Newton;
-    const Parameters p = resolve_parameters(A, o);  // Ω2 = diag(A) by default: must be positive
+    const Parameters p = resolve_parameters(A, o);  // Ω2: diag(A), or the row maximum where a_ii ≤ 0
     ratio_ = p.omega1.cwiseQuotient(p.omega2);
     fallback_options_.method = Method::NRM;
     fallback_options_.omega1 = p.omega1;
     fallback_options_.omega2 = p.omega2;
     fallback_options_.inner = direct_inner(options.inner);  // nrm factorizes
+    fallback_options_.accelerate = Accelerate::Anderson;  // plain nrm diverged on zero-diagonal LCPs (SPEC)
   }
 
   /// The prolongations below this level (P[0]: the next coarser level → this one), for the
@@ -81,6 +82,15 @@ class NewtonLevel {
     wv += q;
     const double r = stable_norm(wv.cwiseMin(v - zv));
     return std::isnan(r) ? inf : r;
+  }
+
+  /// The rounding level of Res at z: ε (‖|A||z| + |q|‖₂ + ‖|z| + |ζ(z)|‖₂), the size of the rounding
+  /// error in w = Az + q and g = z − ζ(z) (ζ(z) = z − g), below which no step brings Res.
+  double rounding_level(const Vector& z, const Vector& q, const Vector& g) const {
+    Vector t = q.cwiseAbs();
+    t.noalias() += A_.cwiseAbs() * z.cwiseAbs();
+    constexpr double eps = std::numeric_limits<double>::epsilon();
+    return eps * (stable_norm(t) + stable_norm(z.cwiseAbs() + (z - g).cwiseAbs()));
   }
 
   /// Ω1 (g/Ω1 − w/Ω2) = g − (Ω1/Ω2) w: the modulus vector x up to the factor γ/(2Ω1).

@@ -91,13 +91,17 @@ class Monitor {
   double seconds() const { return ScopedTimer::seconds_since(t_start_); }
 
   /// The returned iterate: the best one (the last when converged), its Res, nit and message.
-  /// `z_start` (finite) is returned when no finite Res was ever seen.
-  void finish(const Vector& z_start) {
+  /// `z_start` (finite) is returned when no finite Res was ever seen, and also when its Res
+  /// `start_residual` is below every iterate's: iterate 0 is the modulus image of the start, not
+  /// the start itself, and can be worse (docs/SPEC.md).
+  void finish(const Vector& z_start, double start_residual = std::numeric_limits<double>::quiet_NaN()) {
     const bool any = std::isfinite(best_);
+    const bool start = res_.status != Status::Converged && start_residual < best_;
     res_.nit = (res_.status == Status::Converged) ? res_.iterations : best_k_;
-    res_.z = any ? std::move(best_z_) : z_start;
-    res_.residual = any ? best_ : std::numeric_limits<double>::quiet_NaN();
-    res_.message = step_message_.empty() ? message() : step_message_;
+    res_.z = any && !start ? std::move(best_z_) : z_start;
+    res_.residual = start ? start_residual : any ? best_ : std::numeric_limits<double>::quiet_NaN();
+    if (start) res_.nit = 0;
+    res_.message = step_message_.empty() ? message(start) : step_message_;
     if (progress_) progress_(res_.iterations, res_.residual, res_.residual, seconds(), res_.message);
   }
 
@@ -111,14 +115,16 @@ class Monitor {
   }
 
   // The status's text, with why and which iterate is returned.
-  std::string message() const {
+  std::string message(bool start) const {
     std::string m = to_string(res_.status);
     if (x_runaway_) m += " (the modulus vector x grew by more than divergence_factor while Res did not improve)";
     if (res_.status == Status::Stagnated && out_of_reach_)
       m += " (the best Res was not improved in " + std::to_string(since_best_) +
            " iterations, and at the rate Res fell in the last " + std::to_string(o_.stall_iterations) +
            " it would not get back to it within maxiter)";
-    if (res_.status != Status::Converged && res_.status != Status::ZetaFailed)
+    if (start)
+      m += "; returning the initial guess z0 (no iterate had a lower Res)";
+    else if (res_.status != Status::Converged && res_.status != Status::ZetaFailed)
       m += "; returning the best iterate (iteration " + std::to_string(best_k_) + ")";
     if (res_.status == Status::ZetaFailed) m += " at iteration " + std::to_string(res_.iterations);
     return m;
