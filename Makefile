@@ -1,6 +1,6 @@
 # The two commands of the README:
 #   make demo   install what is missing, build, run every method on a built-in problem
-#   make test   install what is missing, build, run ctest and pytest
+#   make test   install what is missing, build, run ctest, pytest and the MPI tests (mpitest)
 PY      ?= python3
 BUILD   ?= build
 APT_PKGS = libeigen3-dev libsuitesparse-dev libopenblas0-pthread doctest-dev
@@ -15,12 +15,20 @@ SHELL   := /bin/bash
 export PIP_ROOT_USER_ACTION := ignore
 PIP     = $(PY) -m pip install -q --disable-pip-version-check
 
-.PHONY: demo test deps install ctest ctest-eigen pytest sanitize bench golden golden-diff clean
+# The distributed part (nrmicp.distributed, README "Beyond one machine"): Debian's PETSc 3.18 with
+# hypre and Open MPI. Debian's petsc4py is built against numpy 1.x, so its tests run in a venv with
+# numpy<2 that also sees $(PY)'s packages (nrmicp); a Python other than 3.11 builds petsc4py
+# 3.18.5 from source against the same PETSc instead (numpy 2 works; measured 2.3 CPU-minutes).
+MPI_APT  = petsc-dev python3-petsc4py-real openmpi-bin libopenmpi-dev
+PETSC_DIR_DEB = /usr/lib/petscdir/petsc3.18/x86_64-linux-gnu-real
+MPI_VENV = $(abspath $(BUILD)/mpi-venv)
+
+.PHONY: demo test deps install ctest ctest-eigen pytest mpideps mpitest sanitize bench golden golden-diff clean
 
 demo: install
 	$(PY) -m nrmicp demo
 
-test: install ctest ctest-eigen pytest
+test: install ctest ctest-eigen pytest mpitest
 
 deps:
 	@missing=""; for p in $(APT_PKGS); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
@@ -54,6 +62,32 @@ ctest-eigen: deps
 
 pytest:
 	$(PY) -m pytest -q tests
+
+# Writes $(MPI_VENV)/python-path: the Python that has petsc4py and nrmicp.
+mpideps: install
+	@missing=""; for p in $(MPI_APT); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
+	if [ -n "$$missing" ]; then \
+	  echo "installing Debian packages:$$missing"; \
+	  $(SUDO) apt-get update -qq && DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq $$missing >/dev/null; \
+	fi
+	@mkdir -p $(MPI_VENV); \
+	if [ "$$($(PY) -c 'import sys; print(sys.version_info[:2] == (3, 11))')" = True ]; then \
+	  [ -x $(MPI_VENV)/bin/python ] || $(PY) -m venv --system-site-packages $(MPI_VENV); \
+	  $(MPI_VENV)/bin/python -m pip install -q --disable-pip-version-check "numpy<2"; \
+	  site=$$($(MPI_VENV)/bin/python -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])'); \
+	  { echo /usr/lib/petsc/lib/python3/dist-packages; \
+	    $(PY) -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])'; } > $$site/nrmicp_mpi.pth; \
+	  echo $(MPI_VENV)/bin/python > $(MPI_VENV)/python-path; \
+	else \
+	  PETSC_DIR=$(PETSC_DIR_DEB) PETSC_ARCH= $(PIP) --no-build-isolation --no-binary petsc4py "petsc4py==3.18.5"; \
+	  $(PY) -c 'import sys; print(sys.executable)' > $(MPI_VENV)/python-path; \
+	fi
+	@cd /tmp && $$(cat $(MPI_VENV)/python-path) -c "import numpy, nrmicp.distributed; from petsc4py import PETSc; \
+	  print('nrmicp.distributed ready: PETSc', PETSc.Sys.getVersion(), 'numpy', numpy.__version__)"
+
+# The distributed tests, each under mpirun -n 1/2/3 (--oversubscribe; as root --allow-run-as-root).
+mpitest: mpideps
+	NRMICP_MPI_PYTHON=$$(cat $(MPI_VENV)/python-path) $$(cat $(MPI_VENV)/python-path) -m pytest -q tests_mpi
 
 # The Python module built with ASan + UBSan (a separate build, imported through PYTHONPATH with
 # libasan preloaded, and libstdc++ too: ASan's __cxa_throw interceptor needs it at start-up;

@@ -1,0 +1,775 @@
+"""nrmicp beyond one machine: the Newton member and the AOR-type NRM members on PETSc over MPI.
+
+Run under ``mpirun -n P python script.py``; every rank calls :func:`solve` with the same
+arguments for its own rows. A is a petsc4py ``Mat`` (MPIAIJ; or each rank's CSR row block, a
+scipy matrix of shape (n_local, n)), q a petsc4py ``Vec`` with A's row layout (or each rank's
+rows as a numpy array). The heavy work is PETSc's: products, PtAP, KSP (CG / BiCGSTAB) with
+hypre BoomerAMG, whose classical prolongations (P >= 0, read through PCHMG) are the hierarchy
+of the nested iteration. Option names, their checks, the statuses and the result fields are the
+serial library's (nrmicp._api, nrmicp._core): one definition.
+
+What is distributed: everything per iteration (products, reductions, the reduced solves, ζ on
+each rank's rows). What is not: the hierarchy's set-up is hypre's (itself parallel); a callable
+ζ sees only the rank's own rows (an entry-wise or row-local ζ); :func:`gather` copies z to
+rank 0 (small problems only).
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import scipy.sparse as sp
+
+try:
+    from petsc4py import PETSc
+except ImportError as exc:  # the core package needs no MPI; this module does
+    raise ImportError("nrmicp.distributed needs petsc4py, PETSc (with hypre) and MPI: README, 'Beyond one machine' "
+                      f"(make mpideps installs them on Debian); {exc}") from exc
+
+from . import _core
+from ._api import Affine, Result, Status, _checked, _choice, _iteration_options, _scalar
+from ._inputs import as_constant, as_diagonal, as_vector
+from ._zeta import CheckedZeta
+
+__all__ = ["solve", "gather", "METHODS", "DistributedError"]
+
+#: The distributed members: Newton, and the AOR-type NRM members as synchronous multisplitting.
+METHODS = ("newton", "nrmj", "nrmgs", "nrmsor", "nrmaor")
+#: AOR parameters (alpha, beta) the members fix; None: the user's (default 1, beta = alpha).
+_AOR_FIXED = {"nrmj": (1.0, 0.0), "nrmgs": (1.0, 1.0)}
+#: Longest error message exchanged between ranks (bytes, UTF-8).
+_MSG_LEN = 1024
+#: Exception types re-raised as themselves on every rank; others become DistributedError.
+_KNOWN = {e.__name__: e for e in (ValueError, TypeError, ZeroDivisionError, FloatingPointError,
+                                  ArithmeticError, RuntimeError, KeyError, IndexError, MemoryError)}
+#: Newton steps' acceptance window (the serial member's non-monotone rule: detail/globalization.hpp).
+_WINDOW = 5
+
+
+class DistributedError(RuntimeError):
+    """An exception of a type this module does not re-create, raised on one rank; every rank
+    raises it with the original type's name and message."""
+
+
+# ----------------------------------------------------------------------------- collectives
+def _flag_max(comm, value: float) -> float:
+    """max over ranks of one float (a one-entry-per-rank Vec: PETSc's own allreduce)."""
+    v = PETSc.Vec().createMPI((1, PETSc.DECIDE), comm=comm)
+    v.setValue(v.getOwnershipRange()[0], value)
+    v.assemble()
+    out = v.max()[1]
+    v.destroy()
+    return out
+
+
+def _agree(comm, exc: BaseException | None) -> None:
+    """Every rank calls this after a step that may fail on some ranks only. When any rank
+    failed, every rank raises the same exception (type and message of the lowest failing rank,
+    prefixed 'rank r: '); else returns. Collective: no rank is left waiting."""
+    if not _flag_max(comm, 0.0 if exc is None else 1.0):
+        return
+    size = comm.getSize()
+    buf = np.zeros(_MSG_LEN)
+    if exc is not None:
+        text = f"{type(exc).__name__}\x01{exc}".encode("utf-8")[: _MSG_LEN - 1]
+        buf[: len(text)] = np.frombuffer(text, dtype=np.uint8)
+    v = PETSc.Vec().createMPI((_MSG_LEN, PETSc.DECIDE), comm=comm)
+    v.setArray(buf)
+    scatter, out = PETSc.Scatter.toAll(v)
+    scatter.scatter(v, out, PETSc.InsertMode.INSERT, PETSc.ScatterMode.FORWARD)
+    rows = out.getArray().reshape(size, _MSG_LEN)
+    for r in range(size):
+        if rows[r, 0]:
+            raw = bytes(rows[r][rows[r] > 0].astype(np.uint8)).decode("utf-8", "replace")
+            name, _, msg = raw.partition("\x01")
+            cls = _KNOWN.get(name)
+            err = cls(f"rank {r}: {msg}") if cls else DistributedError(f"rank {r}: {name}: {msg}")
+            raise err from exc
+
+
+def _collective(comm, fn, *args):
+    """fn(*args) on every rank; an exception on any rank is raised on all (see _agree)."""
+    try:
+        out, exc = fn(*args), None
+    except Exception as e:  # noqa: BLE001 - re-raised on every rank by _agree
+        out, exc = None, e
+    _agree(comm, exc)
+    return out
+
+
+# ----------------------------------------------------------------------------- inputs
+def _check_mat(A):
+    """A's local checks: a square AIJ Mat with equal row and column layouts, or a scipy row block
+    (returned as canonical float64 CSR)."""
+    if isinstance(A, PETSc.Mat):
+        if "aij" not in A.getType():
+            raise TypeError(f"A must be an AIJ (sparse) PETSc matrix, got type {A.getType()!r}")
+        (m, n), (M, N) = A.getLocalSize(), A.getSize()
+        if M != N:
+            raise ValueError(f"A must be square, got shape ({M}, {N})")
+        if m != n:
+            raise ValueError(f"A's local row and column sizes differ on this rank ({m} rows, {n} columns): "
+                             "create A with the same row and column layout")
+        return A
+    if not sp.issparse(A):
+        raise TypeError(f"A must be a petsc4py Mat or this rank's scipy.sparse row block, got {type(A).__name__}")
+    B = sp.csr_matrix(A, dtype=np.float64, copy=True)
+    B.sum_duplicates()
+    B.sort_indices()
+    if not np.all(np.isfinite(B.data)):
+        raise ValueError("A must be finite (this rank's rows hold NaN or Inf)")
+    return B
+
+
+def _as_mat(B, comm):
+    """This rank's CSR rows -> an MPIAIJ Mat (collective); ValueError when not square in all."""
+    mat = PETSc.Mat().createAIJ(size=((B.shape[0], PETSc.DECIDE), (B.shape[0], PETSc.DECIDE)), comm=comm)
+    N = mat.getSize()[1]
+
+    def columns():
+        if B.shape[1] != N:
+            raise ValueError(f"A's row blocks must together be square: this rank's block has {B.shape[1]} "
+                             f"columns, the blocks have {N} rows in all")
+    _collective(comm, columns)
+    mat.setPreallocationCSR((B.indptr.astype(PETSc.IntType), B.indices.astype(PETSc.IntType), B.data))
+    mat.assemble()
+    return mat
+
+
+def _local(v, A, name, *, scalar_ok=False):
+    """q, zeta's c, x0 -> this rank's rows as a new float64 array (local checks only: no rank
+    waits for another here; the user's object is never modified)."""
+    lo, hi = A.getOwnershipRange()
+    if isinstance(v, PETSc.Vec):
+        if v.getOwnershipRange() != (lo, hi) or v.getSize() != A.getSize()[0]:
+            raise ValueError(f"{name}'s layout (rows {v.getOwnershipRange()} of {v.getSize()}) does not match "
+                             f"A's rows ({lo}, {hi}) of {A.getSize()[0]}")
+        v = v.getArray(readonly=True)
+    try:
+        return np.array(as_constant(v, hi - lo, name) if scalar_ok else as_vector(v, hi - lo, name))
+    except ValueError as exc:
+        raise ValueError(f"{exc} (indices of this rank's rows, which start at global row {lo})") from None
+
+
+def _vec(A, arr):
+    """A new Vec in A's row layout holding arr (collective)."""
+    out = A.createVecLeft()
+    out.setArray(arr)
+    return out
+
+
+def _check_options(method, n, tol, maxiter, omega1, omega2, gamma, alpha, beta, nloc):
+    """The serial library's checks (nrmicp._api and the core's Options.check)."""
+    method = _choice(method, METHODS, "method")
+    opts = _iteration_options(_core.Options(), tol=tol, maxiter=maxiter, z_update="auto", accelerate="none",
+                              anderson_m=5, theta=1.0, record_history=False, stall_iterations=100)
+    opts.method = getattr(_core.Method, method)
+    opts.gamma = _scalar(gamma, "gamma")
+    if method in _AOR_FIXED and (alpha is not None or beta is not None):
+        raise ValueError(f"method {method!r} fixes alpha and beta; use 'nrmaor' or 'nrmsor' to set them")
+    opts.alpha = math.nan if alpha is None else _scalar(alpha, "alpha")
+    opts.beta = math.nan if beta is None else _scalar(beta, "beta")
+    _checked(opts, n)
+    w1 = as_diagonal(omega1, nloc, "omega1", positive=True)
+    w2 = as_diagonal(omega2, nloc, "omega2", positive=True)
+    return method, w1, w2
+
+
+class _Zeta:
+    """ζ on this rank's rows: kind 0 none, 1 constant Vec c, 2 Affine (B Mat, c Vec), 3 callable."""
+
+    def __init__(self, zeta, A, comm):
+        """Local checks only; make() creates the vectors (collective)."""
+        self.comm, self.B, self.c, self.fn = comm, None, None, None
+        n = A.getSize()[0]
+        if zeta is None:
+            self.kind = 0
+        elif isinstance(zeta, Affine):
+            self.kind = 2
+            if not isinstance(zeta.B, PETSc.Mat):
+                raise TypeError(f"zeta.B must be a petsc4py Mat in A's layout, got {type(zeta.B).__name__}")
+            if zeta.B.getSize() != (n, n) or zeta.B.getOwnershipRange() != A.getOwnershipRange():
+                raise ValueError(f"zeta.B must be ({n}, {n}) with A's row layout, got {zeta.B.getSize()} "
+                                 f"rows {zeta.B.getOwnershipRange()}")
+            self.B, self.c = zeta.B, _local(zeta.c, A, "zeta.c", scalar_ok=True)
+        elif callable(zeta):
+            self.kind, self.fn = 3, CheckedZeta(zeta, A.getLocalSize()[0])
+        else:
+            self.kind, self.c = 1, _local(zeta, A, "zeta", scalar_ok=True)
+
+    def _checked(self, z):
+        r = self.fn(z)
+        if not np.all(np.isfinite(r)):
+            i = int(np.flatnonzero(~np.isfinite(r))[0])
+            raise ValueError(f"{_core.status_message(int(Status.ZETA_FAILED))} (NaN or Inf: zeta(z)[{i}] of this "
+                             f"rank's rows = {r[i]})")
+        return r
+
+    def make(self, A):
+        if self.c is not None:
+            self.c = _vec(A, self.c)
+        return self
+
+    def __call__(self, z, out):
+        """out = ζ(z); collective: a failure on any rank raises on every rank."""
+        if self.kind == 0:
+            out.set(0.0)
+        elif self.kind == 1:
+            self.c.copy(out)
+        elif self.kind == 2:
+            self.B.multAdd(z, self.c, out)
+        else:
+            r = _collective(self.comm, self._checked, z.getArray(readonly=True))
+            out.setArray(r)
+        return out
+
+
+# ----------------------------------------------------------------------------- the pieces
+class _Problem:
+    """An LCP(b, A) level of the nested iteration: A, b, diag(A), work vectors."""
+
+    def __init__(self, A, b):
+        self.A, self.b = A, b
+        self.d = A.getDiagonal()
+        self.w = b.duplicate()
+
+    def residual(self, y):
+        """w = A y + b (kept in self.w), Res = ‖min(w, y)‖₂."""
+        self.A.multAdd(y, self.b, self.w)
+        m = self.w.duplicate()
+        m.setArray(np.minimum(self.w.getArray(readonly=True), y.getArray(readonly=True)))
+        return m.norm()
+
+
+def _hierarchy(A, comm, prefix):
+    """hypre BoomerAMG's classical prolongations, finest first, read through PCHMG."""
+    opts = PETSc.Options(prefix)
+    opts["pc_hmg_reuse_interpolation"] = True
+    opts["hmg_inner_pc_type"] = "hypre"
+    pc = PETSc.PC().create(comm)
+    pc.setOptionsPrefix(prefix)
+    pc.setOperators(A)
+    pc.setType("hmg")
+    pc.setFromOptions()
+    pc.setUp()
+    Ps = [pc.getMGInterpolation(l) for l in range(pc.getMGLevels() - 1, 0, -1)]
+    return Ps, pc
+
+
+class _Newton:
+    """The Newton member on one level's LCP (y = z − c): active-set rule y − w/diag(A) ≥ 0 inactive
+    (ties inactive), steps for the correction on the inactive set by KSP (CG on symmetric A,
+    else BiCGSTAB) with hypre BoomerAMG, the non-monotone acceptance of the serial member."""
+
+    def __init__(self, prob, comm, symmetric, stats):
+        self.p, self.comm, self.stats = prob, comm, stats
+        self.ksp_type = "cg" if symmetric else "bcgs"
+
+    def step(self, y, rtol, atol, last=None):
+        """One Newton step from y (w of y in self.p.w): the new iterate and the set's fingerprint;
+        (None, fingerprint) without solving when the set is `last` (a settled coarse level)."""
+        p = self.p
+        lo, _ = p.A.getOwnershipRange()
+        ya, wa, da = y.getArray(readonly=True), p.w.getArray(readonly=True), p.d.getArray(readonly=True)
+        inactive = ya - wa / da >= 0
+        h = _fingerprint(self.comm, lo, inactive)
+        if last is not None and h == last:
+            return None, h
+        delta = y.duplicate()
+        delta.setArray(np.where(inactive, 0.0, -ya))
+        rhs = y.duplicate()
+        p.A.mult(delta, rhs)
+        rhs.axpy(1.0, p.w)
+        rhs.scale(-1.0)
+        isI = PETSc.IS().createGeneral((np.flatnonzero(inactive) + lo).astype(PETSc.IntType), comm=self.comm)
+        if isI.getSize() > 0:
+            AII = p.A.createSubMatrix(isI, isI)
+            bI, dI = rhs.getSubVector(isI), delta.getSubVector(isI)
+            ksp = _ksp(self.comm, AII, self.ksp_type, rtol, atol)
+            ksp.setInitialGuessNonzero(False)
+            ksp.solve(bI, dI)
+            self.stats["inner_iterations"] += ksp.getIterationNumber()
+            self.stats["linear_solves"] += 1
+            rhs.restoreSubVector(isI, bI)
+            delta.restoreSubVector(isI, dI)
+            ksp.destroy()
+            AII.destroy()
+        ynew = y.copy()
+        ynew.axpy(1.0, delta)
+        return ynew, h
+
+
+def _ksp(comm, M, kind, rtol, atol):
+    """CG or BiCGSTAB with hypre BoomerAMG, stopping on the true residual (the preconditioned
+    norm of a small w_I is far smaller, and stopped the solve before it started)."""
+    ksp = PETSc.KSP().create(comm)
+    ksp.setOperators(M)
+    ksp.setType(kind)
+    ksp.getPC().setType("hypre")
+    if kind != "cg":
+        ksp.setPCSide(PETSc.PC.Side.RIGHT)
+    ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
+    ksp.setTolerances(rtol=rtol, atol=atol, max_it=1000)
+    ksp.setOptionsPrefix("nrmicp_inner_")  # -nrmicp_inner_pc_hypre_boomeramg_... tunes the reduced solves
+    ksp.setFromOptions()
+    return ksp
+
+
+def _fingerprint(comm, lo, inactive):
+    idx = np.flatnonzero(inactive) + lo
+    weights = ((idx.astype(np.int64) + 1) * 2654435761 % 2147483647) / 2147483647.0
+    v = PETSc.Vec().createMPI((1, PETSc.DECIDE), comm=comm)
+    v.setArray([float(idx.size)])
+    count = v.sum()
+    v.setArray([float(np.sum(weights))])
+    return count, round(v.sum(), 8)
+
+
+class _AOR:
+    """An AOR-type member as synchronous multisplitting: this rank's left matrix
+    T = αΩ2 + (D − βL_loc)Ω1 + αφΩ1 (L_loc: the strictly lower part of A's diagonal block, so one
+    rank is the serial member exactly, and nrmj is Jacobi on any number of ranks); the rest of A
+    enters through PETSc's product (Jacobi across ranks)."""
+
+    def __init__(self, A, alpha, beta, omega1, omega2, gamma):
+        lo, hi = A.getOwnershipRange()
+        indptr, cols, vals = A.getValuesCSR()
+        nloc = hi - lo
+        d = A.getDiagonal().getArray().copy()
+        bad = ~(d > 0)
+        if np.any(bad):
+            i = int(np.flatnonzero(bad)[0])
+            raise ValueError(f"A's diagonal must be positive for the modulus members (Omega2 = diag(A), the AOR "
+                             f"sweep divides by it); A[{lo + i}, {lo + i}] = {d[i]}")
+        self.w1 = np.ones(nloc) if omega1 is None else omega1
+        self.w2 = d if omega2 is None else omega2
+        self.alpha, self.gamma = alpha, gamma
+        rows = np.repeat(np.arange(nloc), np.diff(indptr))
+        lower = (cols >= lo) & (cols < lo + rows)  # strictly lower, inside this rank's block
+        SL = sp.csr_matrix((vals[lower] * self.w1[cols[lower] - lo], (rows[lower], cols[lower] - lo)),
+                           shape=(nloc, nloc))
+        self.K = (sp.diags(d * self.w1) + beta * SL).tocsr()
+        self.T = (sp.diags(alpha * self.w2 + d * self.w1) + beta * SL).tocsr()
+        self.diagonal = beta == 0 or SL.nnz == 0
+        self.Tdiag = alpha * self.w2 + d * self.w1
+        if not self.diagonal:
+            self._lower_solver()
+
+    def _lower_solver(self):
+        """The local forward substitution by PETSc (ILU(0) of a lower-triangular T is T itself)."""
+        T = self.T.tocsr()
+        T.sort_indices()
+        nloc = T.shape[0]
+        self._T = PETSc.Mat().createAIJ(size=(nloc, nloc), csr=(T.indptr.astype(PETSc.IntType),
+                                        T.indices.astype(PETSc.IntType), T.data), comm=PETSc.COMM_SELF)
+        self._ksp = PETSc.KSP().create(PETSc.COMM_SELF)
+        self._ksp.setOperators(self._T)
+        self._ksp.setType("preonly")
+        self._ksp.getPC().setType("ilu")
+        self._r, self._x = self._T.createVecs()
+
+    def start(self, g, w):
+        """x with g = Ω1(|x|+x)/γ, w = Ω2(|x|−x)/γ for a complementary (g, w) ≥ 0 (a start z)."""
+        return 0.5 * self.gamma * (np.maximum(g, 0) / self.w1 - np.maximum(w, 0) / self.w2)
+
+    def sweep(self, x, zt, Av_of):
+        """x_{k+1} from x_k and ζ(z_k) (zt); Av_of(v) returns A v + γ q's local rows."""
+        v = self.w1 * (x + np.abs(x)) + self.gamma * zt
+        r = self.K @ x + self.alpha * self.w2 * np.abs(x) - self.alpha * Av_of(v)
+        if self.diagonal:
+            return r / self.Tdiag
+        self._r.setArray(r)
+        self._ksp.solve(self._r, self._x)
+        return self._x.getArray().copy()
+
+    def z_of(self, x, zt):
+        return zt + self.w1 * (np.abs(x) + x) / self.gamma
+
+
+def _icp_residual(A, q, zeta, z, w, g, zt):
+    """Res(z) = ‖min(Az + q, z − ζ(z))‖ (w, g, zt = ζ(z) filled)."""
+    A.multAdd(z, q, w)
+    zeta(z, zt)
+    z.copy(g)
+    g.axpy(-1.0, zt)
+    m = w.duplicate()
+    m.setArray(np.minimum(w.getArray(readonly=True), g.getArray(readonly=True)))
+    return m.norm()
+
+
+def _stationary(A, q, zeta, member, z, tol, maxiter, stats):
+    """Sweeps of an AOR-type member on ICP(q, A, ζ) from z (modified in place: the best iterate).
+    Returns (Res, iterations, status)."""
+    w, g, zt, v = z.duplicate(), z.duplicate(), z.duplicate(), z.duplicate()
+    Av = z.duplicate()
+    res = _icp_residual(A, q, zeta, z, w, g, zt)
+    x = member.start(g.getArray(readonly=True), w.getArray(readonly=True))
+    best = (res, z.copy(), 0)
+    gq = member.gamma
+
+    def Av_of(arr):
+        v.setArray(arr)
+        A.mult(v, Av)
+        return Av.getArray(readonly=True) + gq * q.getArray(readonly=True)
+
+    status, k = Status.MAX_ITERATIONS, 0
+    while k < maxiter:
+        if res < tol:
+            status = Status.CONVERGED
+            break
+        x = member.sweep(x, zt.getArray(readonly=True), Av_of)
+        z.setArray(member.z_of(x, zt.getArray(readonly=True)))
+        k += 1
+        res = _icp_residual(A, q, zeta, z, w, g, zt)
+        if not math.isfinite(res):
+            status = Status.DIVERGED
+            break
+        if res < best[0]:
+            best = (res, z.copy(), k)
+    if res < tol:
+        status = Status.CONVERGED
+    stats["sweeps"] = stats.get("sweeps", 0) + k
+    best[1].copy(z)
+    return best[0], best[2], status, k
+
+
+def _newton_loop(residual, step, fallback, y, *, tol, maxiter, settle, sweep_budget):
+    """The serial member's globalization around plain steps: a step is accepted when its Res is
+    below the largest of the last 5 accepted (the first after a start is exempt); a rejected step
+    or a cycle of active sets hands over to fallback sweeps from the best iterate (10, 20, 40, ...),
+    after which Newton resumes. settle: stop when the active set repeats (coarse levels); the
+    finest level goes on while a repeated set still halves Res (inexact inner solves).
+    Returns (y, Res, steps, sweeps, status)."""
+    res = residual(y)
+    best = (res, y.copy())
+    recent, exempt, seen, last = [res], True, set(), None
+    steps = sweeps = 0
+    run = 10
+    while True:
+        if res < tol:
+            return best[1], best[0], steps, sweeps, Status.CONVERGED
+        if steps >= maxiter:
+            return best[1], best[0], steps, sweeps, Status.MAX_ITERATIONS
+        ynew, h = step(y, last if settle else None)
+        if ynew is None:  # the set y's own test gives is the one y solves: settled, no solve needed
+            return best[1], best[0], steps, sweeps, Status.STAGNATED
+        steps += 1
+        rnew = residual(ynew)
+        repeated = h == last
+        ok = math.isfinite(rnew) and (exempt or rnew < max(recent)) and (repeated or h not in seen)
+        if ok:
+            halved = rnew < 0.5 * res
+            y, res, exempt, last = ynew, rnew, False, h
+            recent = (recent + [rnew])[-_WINDOW:]
+            seen.add(h)
+            if rnew < best[0]:
+                best = (rnew, y.copy())
+            if repeated and (settle or not halved) and not rnew < tol:
+                return best[1], best[0], steps, sweeps, Status.STAGNATED
+            continue
+        if fallback is None or sweeps >= sweep_budget:
+            return best[1], best[0], steps, sweeps, Status.STAGNATED
+        y = best[1].copy()
+        rb, k = fallback(y, min(run, sweep_budget - sweeps))
+        sweeps += k
+        run *= 2
+        if not rb < best[0]:
+            return best[1], best[0], steps, sweeps, Status.STAGNATED
+        best, res = (rb, y.copy()), residual(y)
+        recent, exempt, last = [res], True, None
+
+
+# ----------------------------------------------------------------------------- the Newton drivers
+#: Inner (KSP) tolerance relative to the step's right-hand side (inexact Newton); the finest level
+#: also stops at tol/10 absolute, as the serial member's iterative inner solve.
+_RTOL = 1e-6
+
+
+def _nested_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats):
+    """LCP(b, A) by the nested Newton member: coarse problems PᵀAP, Pᵀb, solved coarse to fine,
+    each solution prolongated and projected (y ≥ 0) as the next start. Returns (y, Res, status)."""
+    As, bs = [A], [b]
+    for P in Ps:
+        As.append(As[-1].ptap(P))
+        bc = P.createVecRight()
+        P.multTranspose(bs[-1], bc)
+        bs.append(bc)
+    y = None
+    for level in reversed(range(len(As))):
+        t0 = time.perf_counter()
+        prob = _Problem(As[level], bs[level])
+        if y is None:
+            y = y0.copy() if (level == 0 and y0 is not None) else prob.b.duplicate()
+            if y0 is None or level > 0:
+                y.set(0.0)
+        else:
+            yf = As[level].createVecLeft()
+            Ps[level].mult(y, yf)
+            yf.setArray(np.maximum(yf.getArray(readonly=True), 0.0))
+            y = yf
+        finest = level == 0
+        nt = _Newton(prob, comm, symmetric, stats)
+        # finest: the inner solve aims at tol/10 absolute (a step short of it costs a whole extra step)
+        rtol, atol = (1e-14, 0.1 * tol) if finest else (_RTOL, 0.0)
+        fallback = _lcp_fallback(prob, comm, stats) if finest else None
+        y, res, steps, sweeps, status = _newton_loop(
+            prob.residual, lambda v, last: nt.step(v, rtol, atol, last), fallback, y, tol=tol if finest else 0.0,
+            maxiter=maxiter if finest else 50, settle=not finest, sweep_budget=maxiter)
+        stats["level_steps"].insert(0, steps)
+        stats["level_seconds"].insert(0, time.perf_counter() - t0)
+        stats["fallback_sweeps"] += sweeps
+    return y, res, status
+
+
+def _lcp_fallback(prob, comm, stats):
+    """Fallback sweeps of nrmgs (synchronous multisplitting) on the level's LCP."""
+    zeta = _Zeta(None, prob.A, comm)
+    member = []  # built on first use: most solves never fall back
+
+    def run(y, k):
+        if not member:
+            member.append(_AOR(prob.A, 1.0, 1.0, None, None, 1.0))
+        res, _, _, done = _stationary(prob.A, prob.b, zeta, member[0], y, 0.0, k, stats)
+        return res, done
+    return run
+
+
+def _affine_newton(A, q, zeta, z, tol, maxiter, comm, stats):
+    """ICP(q, A, Bz + c) by Newton on the whole problem: rows of A on the inactive set, rows of
+    I − B on the active set; BiCGSTAB with hypre BoomerAMG."""
+    lo, _ = A.getOwnershipRange()
+    d = A.getDiagonal().getArray(readonly=True)
+    w, g, zt = z.duplicate(), z.duplicate(), z.duplicate()
+    member = _AOR(A, 1.0, 1.0, None, None, 1.0)
+
+    def residual(v):
+        return _icp_residual(A, q, zeta, v, w, g, zt)
+
+    def step(v, last):
+        inactive = g.getArray(readonly=True) - w.getArray(readonly=True) / d >= 0
+        mI = _vec(A, inactive.astype(float))
+        mA = _vec(A, 1.0 - inactive)
+        J = A.copy()
+        J.diagonalScale(L=mI)
+        BB = zeta.B.copy()
+        BB.diagonalScale(L=_vec(A, inactive - 1.0))
+        J.axpy(1.0, BB, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+        J.setDiagonal(mA, addv=PETSc.InsertMode.ADD_VALUES)
+        rhs = _vec(A, -np.where(inactive, w.getArray(readonly=True), g.getArray(readonly=True)))
+        delta = z.duplicate()
+        ksp = _ksp(comm, J, "bcgs", _RTOL, 0.1 * tol)
+        ksp.solve(rhs, delta)
+        stats["inner_iterations"] += ksp.getIterationNumber()
+        stats["linear_solves"] += 1
+        ksp.destroy()
+        J.destroy()
+        out = v.copy()
+        out.axpy(1.0, delta)
+        return out, _fingerprint(comm, lo, inactive)
+
+    def fallback(v, k):
+        res, _, _, done = _stationary(A, q, zeta, member, v, 0.0, k, stats)
+        return res, done
+
+    t0 = time.perf_counter()
+    z, res, steps, sweeps, status = _newton_loop(residual, step, fallback, z, tol=tol, maxiter=maxiter,
+                                                 settle=False, sweep_budget=maxiter)
+    stats["level_steps"], stats["level_seconds"] = [steps], [time.perf_counter() - t0]
+    stats["fallback_sweeps"] += sweeps
+    return z, res, status
+
+
+def _obstacle_newton(A, q, c, z0, Ps, tol, maxiter, symmetric, comm, stats):
+    """ζ ≡ c (c None: the LCP): the LCP in y = z − c with b = q + A c; returns (z, Res, status)."""
+    b = q.copy()
+    y0 = None if z0 is None else z0.copy()
+    if c is not None:
+        A.multAdd(c, q, b)
+        if y0 is not None:
+            y0.axpy(-1.0, c)
+    y, res, status = _nested_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats)
+    if c is not None:
+        y.axpy(1.0, c)
+    return y, res, status
+
+
+def _callable_newton(A, q, zeta, z0, Ps, tol, maxiter, symmetric, comm, stats):
+    """A callable ζ: the outer fixed point c_k = ζ(z_k), each obstacle problem by the Newton member
+    (nested the first time, then warm-started), as the serial member without zeta_jacobian."""
+    z = z0.copy() if z0 is not None else A.createVecLeft()
+    if z0 is None:
+        z.set(0.0)
+    w, g, zt = z.duplicate(), z.duplicate(), z.duplicate()
+    res = _icp_residual(A, q, zeta, z, w, g, zt)
+    best, status = (res, z.copy()), Status.MAX_ITERATIONS
+    for k in range(maxiter):
+        if res < tol:
+            status = Status.CONVERGED
+            break
+        c = zt.copy()
+        sub = dict(stats, level_steps=[], level_seconds=[])
+        z, _, _ = _obstacle_newton(A, q, c, z if k else None, Ps if k == 0 else [], 0.1 * tol, maxiter,
+                                   symmetric, comm, sub)
+        for key in ("linear_solves", "inner_iterations", "fallback_sweeps"):
+            stats[key] = sub[key]
+        stats["level_steps"], stats["level_seconds"] = sub["level_steps"], sub["level_seconds"]
+        stats["outer_iterations"] += 1
+        stats["nit"] += sub["level_steps"][0]
+        res = _icp_residual(A, q, zeta, z, w, g, zt)
+        if not res < best[0] and k > 0:
+            status = Status.STAGNATED
+            break
+        best = (res, z.copy())
+    if best[0] < tol:
+        status = Status.CONVERGED
+    return best[1], best[0], status
+
+
+def _polish(A, q, zeta, z, res, comm, symmetric, stats):
+    """One Newton step from z on its active set with a tight inner solve; kept when it lowers Res."""
+    trial = z.copy()
+    w, g, zt = z.duplicate(), z.duplicate(), z.duplicate()
+    if zeta.kind == 2:
+        sub = dict(stats, level_steps=[], level_seconds=[])
+        _icp_residual(A, q, zeta, trial, w, g, zt)
+        trial, r, _ = _affine_newton(A, q, zeta, trial, 0.0, 1, comm, sub)
+    else:
+        c = A.createVecLeft()
+        zeta(z, c)
+        b = q.copy()
+        A.multAdd(c, q, b)
+        y = z.copy()
+        y.axpy(-1.0, c)
+        prob = _Problem(A, b)
+        prob.residual(y)
+        y, _ = _Newton(prob, comm, symmetric, stats).step(y, 1e-14, 0.0)
+        y.axpy(1.0, c)
+        trial = y
+    r = _icp_residual(A, q, zeta, trial, w, g, zt)
+    return (trial, r) if r < res else (None, res)
+
+
+# ----------------------------------------------------------------------------- the entry points
+def _prepare(A, q, zeta, x0, comm, method, tol, maxiter, omega1, omega2, gamma, alpha, beta, hierarchy):
+    """Every check, with every rank's failure raised on all ranks; returns the PETSc objects."""
+    A_in = _collective(comm, _check_mat, A)
+    Am = _as_mat(A_in, comm) if sp.issparse(A_in) else A_in
+    n, nloc = Am.getSize()[0], Am.getLocalSize()[0]
+
+    def local():
+        m, w1, w2 = _check_options(method, n, tol, maxiter, omega1, omega2, gamma, alpha, beta, nloc)
+        if m != "newton" and hierarchy not in (None, "amg", "auto"):
+            raise ValueError(f"hierarchy is the nested iteration of method 'newton'; got {hierarchy!r}")
+        if m == "newton" and not (hierarchy in (None, "amg", "auto") or isinstance(hierarchy, (list, tuple))):
+            raise ValueError(f"hierarchy must be 'amg', None or a list of PETSc prolongations; got {hierarchy!r}")
+        qa = _local(q, Am, "q")
+        xa = None if x0 is None else _local(x0, Am, "x0")
+        return m, w1, w2, qa, xa, _Zeta(zeta, Am, comm)
+    m, w1, w2, qa, xa, zf = _collective(comm, local)
+    d = Am.getDiagonal()
+
+    def diagonal():
+        da = d.getArray(readonly=True)
+        if np.any(~(da > 0)):
+            i = int(np.flatnonzero(~(da > 0))[0])
+            lo = Am.getOwnershipRange()[0]
+            raise ValueError(f"A's diagonal must be positive (method {m!r} divides by it); "
+                             f"A[{lo + i}, {lo + i}] = {da[i]}")
+    _collective(comm, diagonal)
+    return Am, m, w1, w2, _vec(Am, qa), None if xa is None else _vec(Am, xa), zf.make(Am)
+
+
+def solve(A, q, zeta=None, *, method: str = "newton", tol: float = 1e-8, maxiter: int = 10000,
+          omega1=None, omega2=None, gamma: float = 1.0, alpha=None, beta=None, hierarchy="amg",
+          x0=None, polish: bool = False, comm=None) -> Result:
+    """Solve ICP(q, A, ζ) on all ranks of A's communicator (call it on every rank).
+
+    A: petsc4py Mat (AIJ, square, same row and column layout) or this rank's scipy.sparse row
+    block (n_local, n). q, x0: petsc4py Vec in A's row layout or this rank's rows. zeta: None,
+    a constant (scalar, this rank's rows or a Vec), :class:`nrmicp.Affine` (B a petsc4py Mat in
+    A's layout, c) or a callable mapping this rank's rows of z to this rank's rows of ζ(z)
+    (entry-wise or row-local ζ only). method: 'newton' (nested over hypre BoomerAMG's
+    prolongations with hierarchy='amg', cold with None, or a list of PETSc prolongation Mats,
+    finest first) or 'nrmj', 'nrmgs', 'nrmsor', 'nrmaor' (synchronous multisplitting).
+    The options mean what they mean in :func:`nrmicp.solve` and are checked by the same code.
+    Returns a :class:`nrmicp.Result` on every rank, with ``z`` and ``w`` as PETSc Vecs
+    (:func:`gather` copies one to rank 0). A failure on any rank raises on every rank.
+    """
+    comm = comm or (A.getComm() if isinstance(A, PETSc.Mat) else PETSc.COMM_WORLD)
+    t_start = time.perf_counter()
+    Am, m, w1, w2, qv, z0, zf = _prepare(A, q, zeta, x0, comm, method, tol, maxiter, omega1, omega2,
+                                         gamma, alpha, beta, hierarchy)
+    polish = bool(_collective(comm, lambda: _check_polish(polish)))
+    stats = {"linear_solves": 0, "inner_iterations": 0, "fallback_sweeps": 0, "outer_iterations": 0,
+             "level_steps": [], "level_seconds": [], "nit": 0}
+    symmetric = bool(Am.isSymmetric(1e-14)) and zf.kind != 2
+    t_setup = time.perf_counter()
+    Ps = []
+    if m == "newton" and hierarchy in ("amg", "auto") and zf.kind != 2:
+        Ps, _pc = _hierarchy(Am, comm, f"nrmicp_{id(stats)}_")
+    elif m == "newton" and isinstance(hierarchy, (list, tuple)):
+        Ps = list(hierarchy)
+    t_iter = time.perf_counter()
+    if m == "newton":
+        if zf.kind == 2:
+            z = z0.copy() if z0 is not None else Am.createVecLeft()
+            if z0 is None:
+                z.set(0.0)
+            z, res, status = _affine_newton(Am, qv, zf, z, tol, maxiter, comm, stats)
+        elif zf.kind == 3:
+            z, res, status = _callable_newton(Am, qv, zf, z0, Ps, tol, maxiter, symmetric, comm, stats)
+        else:
+            z, res, status = _obstacle_newton(Am, qv, zf.c, z0, Ps, tol, maxiter, symmetric, comm, stats)
+        nit = stats["nit"] or stats["level_steps"][0]
+        iterations = sum(stats["level_steps"])
+    else:
+        a, b = _AOR_FIXED.get(m, (None, None))
+        a = a if a is not None else (1.0 if alpha is None else float(alpha))
+        b = b if b is not None else (a if beta is None else float(beta))
+        member = _AOR(Am, a, b, w1, w2, float(gamma))
+        z = z0.copy() if z0 is not None else Am.createVecLeft()
+        if z0 is None:
+            z.set(0.0)
+        res, nit, status, iterations = _stationary(Am, qv, zf, member, z, tol, maxiter, stats)
+    polished = None
+    if polish:
+        zp, res = _polish(Am, qv, zf, z, res, comm, symmetric, stats)
+        polished = zp is not None
+        if zp is not None:
+            z = zp
+            if res < tol:
+                status = Status.CONVERGED
+    w = z.duplicate()
+    Am.multAdd(z, qv, w)
+    t_end = time.perf_counter()
+    message = _core.status_message(int(status))
+    fields = dict(z=z, w=w, success=status == Status.CONVERGED, status=Status(status), message=message,
+                  nit=int(nit), iterations=int(iterations), residual=float(res), history=None,
+                  timings={"setup": t_iter - t_setup, "iterations": t_end - t_iter, "total": t_end - t_start},
+                  method=m, inner=("cg" if symmetric else "bicgstab") if m == "newton" else "none",
+                  counters={}, ranks=comm.getSize())
+    if m == "newton":
+        fields.update(linear_solves=stats["linear_solves"], inner_iterations=stats["inner_iterations"],
+                      fallback_sweeps=stats["fallback_sweeps"], outer_iterations=stats["outer_iterations"],
+                      level_steps=list(stats["level_steps"]), level_seconds=list(stats["level_seconds"]),
+                      path="newton+fallback" if stats["fallback_sweeps"] and iterations else
+                      ("fallback" if stats["fallback_sweeps"] else "newton"))
+    if polish:
+        fields["polished"] = polished
+    return Result(**fields)
+
+
+def _check_polish(polish):
+    from ._newton import check_polish
+    return check_polish(polish)
+
+
+def gather(v):
+    """A distributed Vec as one numpy array on rank 0 (None on the other ranks); collective."""
+    scatter, out = PETSc.Scatter.toZero(v)
+    scatter.scatter(v, out, PETSc.InsertMode.INSERT, PETSc.ScatterMode.FORWARD)
+    arr = out.getArray().copy() if v.getComm().getRank() == 0 else None
+    scatter.destroy()
+    out.destroy()
+    return arr

@@ -1,0 +1,245 @@
+"""The MPI side of the distributed tests: run as ``mpirun -n P python cases.py CASE``; rank 0
+prints one JSON line (every rank's outcome where the case is about agreement between ranks).
+The serial answers come from nrmicp itself on rank 0 (single process); the checks of Res use
+the plain numpy oracle of tests/reference_impl.py."""
+import json
+import os
+import sys
+
+import numpy as np
+import scipy.sparse as sp
+from petsc4py import PETSc
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests"))
+import nrmicp  # noqa: E402
+from nrmicp import distributed as dist  # noqa: E402
+from nrmicp.scenes.convection import convection_diffusion_obstacle  # noqa: E402
+from nrmicp.scenes.obstacle import obstacle_2d, obstacle_3d  # noqa: E402
+from problems import make_affine_icp, make_icp, make_lcp  # noqa: E402
+from reference_impl import residual as oracle_residual  # noqa: E402
+
+COMM = PETSc.COMM_WORLD
+RANK, SIZE = COMM.getRank(), COMM.getSize()
+
+
+def split(n, weights=None):
+    """Row ranges of the ranks: even, or proportional to weights."""
+    w = np.ones(SIZE) if weights is None else np.asarray(weights[:SIZE], dtype=float)
+    cuts = np.concatenate([[0], np.round(np.cumsum(w) / w.sum() * n)]).astype(int)
+    return int(cuts[RANK]), int(cuts[RANK + 1])
+
+
+def mat(A, lo, hi):
+    """A's rows lo:hi as this rank's block of an MPIAIJ Mat."""
+    B = sp.csr_matrix(A[lo:hi])
+    B.sort_indices()
+    M = PETSc.Mat().createAIJ(size=((hi - lo, PETSc.DECIDE), (hi - lo, PETSc.DECIDE)),
+                              csr=(B.indptr.astype(PETSc.IntType), B.indices.astype(PETSc.IntType), B.data),
+                              comm=COMM)
+    return M
+
+
+def vec(M, arr):
+    v = M.createVecLeft()
+    lo, hi = v.getOwnershipRange()
+    v.setArray(np.asarray(arr, dtype=float)[lo:hi])
+    return v
+
+
+def problems():
+    """(name, A, q, serial zeta, distributed-zeta maker)."""
+    out = []
+    for name, pb in (("obstacle_2d", obstacle_2d(31, exact=False)), ("obstacle_3d", obstacle_3d(9, exact=False)),
+                     ("convection", convection_diffusion_obstacle(31, exact=False))):
+        A = sp.csr_matrix(pb.A)
+        out.append((name, A, pb.q, pb.zeta, lambda M, lo, hi, c=pb.zeta: c[lo:hi]))
+    lcp = make_lcp(16)
+    out.append(("lcp", sp.csr_matrix(lcp.A), lcp.q, None, lambda M, lo, hi: None))
+    aff = make_affine_icp(16, symmetric=False)
+    B, c = sp.csr_matrix(aff.zeta.B), aff.zeta.c
+    out.append(("affine", sp.csr_matrix(aff.A), aff.q, nrmicp.Affine(B, c),
+                lambda M, lo, hi: nrmicp.Affine(mat(B, lo, hi), c[lo:hi])))
+    icp = make_icp(16, c=0.1)
+    s = icp.zeta(np.zeros(icp.A.shape[0]))  # zeta(z) = 0.1 sin(z) + s, entry-wise: each rank evaluates its rows
+    out.append(("icp_callable", sp.csr_matrix(icp.A), icp.q, icp.zeta,
+                lambda M, lo, hi: (lambda z, s=s[lo:hi]: 0.1 * np.sin(z) + s)))
+    return out
+
+
+SERIAL_METHOD = {"newton": "newton", "nrmj": "nrmj", "nrmgs": "nrmgs", "nrmsor": "nrmsor", "nrmaor": "nrmaor"}
+OPTIONS = {"newton": {}, "nrmj": {}, "nrmgs": {}, "nrmsor": {"alpha": 1.2}, "nrmaor": {"alpha": 1.1, "beta": 0.9}}
+
+
+def case_agreement(weights=None):
+    """Every member on every problem: max |z - z_serial|, Res by the oracle, status, steps."""
+    rows = []
+    for name, A, q, zeta, dzeta in problems():
+        n = A.shape[0]
+        lo, hi = split(n, weights)
+        M = mat(A, lo, hi)
+        serial = nrmicp.solve(A, q, zeta, method="newton", tol=1e-11, polish=True)
+        oracle_zeta = None if zeta is None else (zeta if callable(zeta) else (lambda z, c=zeta: c))
+        for method, kw in OPTIONS.items():
+            tol = 1e-9 if method == "newton" else 1e-10
+            qv, zv = vec(M, q), dzeta(M, lo, hi)
+            before = _snapshot(M, qv, zv)
+            r = dist.solve(M, qv, zv, method=method, tol=tol, maxiter=100000, **kw)
+            untouched = _snapshot(M, qv, zv) == before
+            z = dist.gather(r.z)
+            if RANK == 0:
+                rows.append({"problem": name, "method": method, "status": str(r.status), "nit": r.nit,
+                             "err": float(np.max(np.abs(z - serial.z))), "res": oracle_residual(A, q, z, oracle_zeta),
+                             "level_steps": r.get("level_steps"), "serial_res": float(serial.residual),
+                             "untouched": untouched})
+    return rows
+
+
+def case_partition():
+    """One problem, two partitions (even and 1:3:2): the answers agree."""
+    out = {}
+    for weights in (None, [1, 3, 2]):
+        pb = obstacle_2d(31, exact=False)
+        A = sp.csr_matrix(pb.A)
+        lo, hi = split(A.shape[0], weights)
+        zs = {}
+        for method in ("newton", "nrmgs"):
+            r = dist.solve(A[lo:hi], pb.q[lo:hi], pb.zeta[lo:hi], method=method, tol=1e-10 if method != "newton" else 1e-9,
+                           maxiter=100000)
+            zs[method] = dist.gather(r.z)
+        out[str(weights)] = zs
+    # a P-matrix where the active-set steps cycle: the fallback sweeps take over, as in the serial member
+    from nrmicp.scenes.p_matrix import p_matrix_cycling
+    pm = p_matrix_cycling(3)
+    A = sp.csr_matrix(pm.A)
+    lo, hi = split(A.shape[0])
+    r = dist.solve(A[lo:hi], pm.q[lo:hi], None, hierarchy=None, tol=1e-10)
+    z = dist.gather(r.z)
+    if RANK == 0:
+        serial = nrmicp.solve(A, pm.q, None, method="newton", tol=1e-10)
+        out = {m: float(np.max(np.abs(out["None"][m] - out["[1, 3, 2]"][m]))) for m in ("newton", "nrmgs")}
+        out["fallback"] = {"status": str(r.status), "path": r.path, "sweeps": r.fallback_sweeps,
+                           "err": float(np.max(np.abs(z - serial.z))), "serial_path": serial.path}
+        return out
+
+
+def _bad(kind):
+    """The inputs of one bad-input case, bad on the last rank only where that makes sense."""
+    pb = obstacle_2d(15, exact=False)
+    A = sp.csr_matrix(pb.A)
+    n = A.shape[0]
+    lo, hi = split(n)
+    last = RANK == SIZE - 1
+    M = mat(A, lo, hi)
+    q = vec(M, pb.q)
+    zeta = pb.zeta[lo:hi]
+    kw = {}
+    if kind == "layout":
+        sizes = [n // SIZE + (1 if RANK == 0 else -1 if RANK == 1 else 0)] if SIZE > 1 else [n - 1]
+        q = PETSc.Vec().createMPI((sizes[0], PETSc.DECIDE), comm=COMM)
+        q.set(0.0)
+    elif kind == "nonsquare":
+        return A[lo:hi, :n - 1] if last else A[lo:hi], pb.q[lo:hi], zeta, kw
+    elif kind == "zero_diagonal":
+        D = sp.lil_matrix(A)
+        D[n - 1, n - 1] = 0.0
+        return mat(sp.csr_matrix(D), lo, hi), q, zeta, kw
+    elif kind == "nan_q":
+        qa = pb.q[lo:hi].copy()
+        if last:
+            qa[-1] = np.nan
+        return M, qa, zeta, kw
+    elif kind == "zeta_raises":
+        def zeta(z):
+            if last:
+                raise RuntimeError("zeta failed here")
+            return np.zeros_like(z)
+    elif kind == "zeta_nan":
+        def zeta(z):
+            return np.full_like(z, np.nan if last else 0.0)
+    elif kind == "bad_option":
+        kw = {"tol": -1.0}
+    elif kind == "bad_method":
+        kw = {"method": "nrm"}
+    return M, q, zeta, kw
+
+
+def case_bad(kind, method):
+    """Every rank's exception (type, message), and whether the inputs were left as they were."""
+    A, q, zeta, kw = _bad(kind)
+    before = _snapshot(A, q, zeta)
+    try:
+        dist.solve(A, q, zeta, **{"method": method, "tol": 1e-8, "maxiter": 200, **kw})
+        outcome = ["no exception", ""]
+    except Exception as exc:  # noqa: BLE001 - the outcome is the test's subject
+        outcome = [type(exc).__name__, str(exc)]
+    same = _snapshot(A, q, zeta) == before
+    outcomes = _allgather_text(json.dumps(outcome + [same]))
+    if RANK == 0:
+        return [json.loads(t) for t in outcomes]
+
+
+def _snapshot(*objs):
+    out = []
+    for o in objs:
+        if isinstance(o, PETSc.Mat):
+            out.append([a.tolist() for a in o.getValuesCSR()])
+        elif isinstance(o, PETSc.Vec):
+            out.append(o.getArray().tolist())
+        elif sp.issparse(o):
+            out.append(o.toarray().tolist())
+        elif isinstance(o, np.ndarray):
+            out.append(np.nan_to_num(o, nan=1e300).tolist())
+        elif isinstance(o, nrmicp.Affine):
+            out.append(_snapshot(o.B, np.asarray(o.c)))
+    return out
+
+
+def _allgather_text(text, width=4096):
+    """Each rank's text on rank 0 (through a PETSc scatter: no mpi4py needed)."""
+    buf = np.zeros(width)
+    raw = text.encode()[:width]
+    buf[:len(raw)] = np.frombuffer(raw, dtype=np.uint8)
+    v = PETSc.Vec().createMPI((width, PETSc.DECIDE), comm=COMM)
+    v.setArray(buf)
+    full = dist.gather(v)
+    if RANK == 0:
+        rows = full.reshape(SIZE, width)
+        return [bytes(r[r > 0].astype(np.uint8)).decode() for r in rows]
+
+
+def case_fuzz(examples):
+    """Random small problems (np = 2): M-matrix LCPs and obstacles, P-matrix LCPs; every member
+    against serial nrmicp and the numpy oracle."""
+    rng = np.random.default_rng(int(os.environ.get("NRMICP_FUZZ_SEED", "2026")))
+    rows = []
+    for k in range(examples):
+        n = int(rng.integers(5, 60))
+        R = sp.random(n, n, density=min(1.0, 4.0 / n), random_state=int(rng.integers(1 << 30)))
+        R.data[:] = -np.abs(R.data)
+        R.setdiag(0.0)
+        if rng.random() < 0.5:
+            R = (R + R.T) / 2
+        A = sp.csr_matrix(R + sp.diags(np.abs(R).sum(axis=1).A.ravel() + rng.uniform(0.1, 2.0, n)))
+        q = rng.normal(size=n) * 10 ** rng.uniform(-1, 2)
+        zeta = None if rng.random() < 0.5 else rng.normal(size=n)
+        method = str(rng.choice(list(OPTIONS)))
+        lo, hi = split(n, rng.uniform(0.2, 1.0, SIZE).tolist())
+        polish = bool(rng.random() < 0.3)
+        r = dist.solve(A[lo:hi], q[lo:hi], None if zeta is None else zeta[lo:hi], method=method, tol=1e-9,
+                       maxiter=100000, polish=polish, **OPTIONS[method])
+        z = dist.gather(r.z)
+        if RANK == 0:
+            serial = nrmicp.solve(A, q, zeta, method="newton", tol=1e-11, polish=True)
+            rows.append({"n": n, "method": method, "status": str(r.status), "err": float(np.max(np.abs(z - serial.z))),
+                         "res": oracle_residual(A, q, z, None if zeta is None else (lambda _z, c=zeta: c)),
+                         "scale": float(np.max(np.abs(q)))})
+    return rows
+
+
+if __name__ == "__main__":
+    name, args = sys.argv[1], sys.argv[2:]
+    result = {"agreement": lambda: case_agreement(), "partition": case_partition,
+              "bad": lambda: case_bad(args[0], args[1]),
+              "fuzz": lambda: case_fuzz(int(args[0]))}[name]()
+    if RANK == 0:
+        print("RESULT " + json.dumps(result), flush=True)

@@ -1,0 +1,100 @@
+"""nrmicp.distributed under mpirun: agreement with serial nrmicp, partition independence, bad
+input on one rank (the same exception on every rank, no hang), nothing mutated."""
+import pytest
+
+from conftest import mpirun
+
+AGREE = 1e-10
+
+
+@pytest.fixture(scope="module", params=[1, 2, 3])
+def agreement(request):
+    return request.param, mpirun(request.param, "agreement")
+
+
+def test_every_member_agrees_with_serial_nrmicp(agreement):
+    np_, rows = agreement
+    assert {r["problem"] for r in rows} == {"obstacle_2d", "obstacle_3d", "convection", "lcp", "affine",
+                                             "icp_callable"}
+    assert {r["method"] for r in rows} == {"newton", "nrmj", "nrmgs", "nrmsor", "nrmaor"}
+    for r in rows:
+        where = f"np={np_} {r['problem']} {r['method']}"
+        assert r["status"] == "CONVERGED", where
+        assert r["err"] < AGREE, where
+        assert r["untouched"], where + ": an input was modified"
+        # Res by the numpy oracle: the returned z meets the tolerance it was asked for
+        assert r["res"] < (1e-9 if r["method"] == "newton" else 1e-10) * 1.0001, where
+
+
+def test_newton_nests_finest_steps_few(agreement):
+    _, rows = agreement
+    for r in rows:
+        if r["method"] == "newton" and r["problem"] in ("obstacle_2d", "obstacle_3d", "convection"):
+            assert len(r["level_steps"]) > 1, r
+            assert r["level_steps"][0] <= 5, r
+
+
+@pytest.fixture(scope="module")
+def partition_run():
+    return mpirun(3, "partition")
+
+
+def test_answer_does_not_depend_on_the_partition(partition_run):
+    diffs = partition_run
+    assert diffs["newton"] < AGREE
+    assert diffs["nrmgs"] < AGREE
+
+
+def test_cycling_active_sets_hand_over_to_the_fallback_sweeps(partition_run):
+    fb = partition_run["fallback"]
+    assert fb["status"] == "CONVERGED" and fb["sweeps"] > 0 and fb["path"] == "newton+fallback", fb
+    assert fb["err"] < AGREE, fb
+
+
+BAD = {
+    "layout": ("ValueError", "does not match A's rows"),
+    "nonsquare": ("ValueError", "must together be square"),
+    "zero_diagonal": ("ValueError", "diagonal must be positive"),
+    "nan_q": ("ValueError", "q has a non-finite entry"),
+    "zeta_raises": ("RuntimeError", "zeta failed here"),
+    "zeta_nan": ("ValueError", "NaN or Inf"),
+    "bad_option": ("ValueError", "tol"),
+    "bad_method": ("ValueError", "method must be one of"),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(BAD))
+@pytest.mark.parametrize("method", ["newton", "nrmgs"])
+def test_bad_input_raises_the_same_exception_on_every_rank(kind, method):
+    outcomes = mpirun(2, "bad", kind, method, timeout=120)
+    kind_name, text = BAD[kind]
+    assert len(outcomes) == 2
+    assert outcomes[0] == outcomes[1], outcomes  # the same type and message on both ranks
+    name, message, untouched = outcomes[0]
+    assert name == kind_name, outcomes
+    assert text in message, outcomes
+    assert message.startswith("rank "), outcomes
+    assert untouched, "an input was modified"
+
+
+def test_readme_example_runs_on_two_ranks():
+    import os
+    import subprocess
+    import shutil
+    from conftest import PYTHON, TIMEOUT
+    here = os.path.dirname(os.path.abspath(__file__))
+    cmd = [shutil.which("mpirun"), "-n", "2", "--oversubscribe"] + (["--allow-run-as-root"] if os.geteuid() == 0 else [])
+    out = subprocess.run(cmd + [PYTHON, os.path.join(here, "..", "examples", "distributed_obstacle.py")],
+                         capture_output=True, text=True, timeout=TIMEOUT)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.startswith("CONVERGED finest steps"), out.stdout
+    assert "on 2 ranks" in out.stdout
+
+
+def test_the_documented_example_is_the_one_the_tests_run():
+    import os
+    import re
+    root = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+    doc = open(os.path.join(root, "docs", "DISTRIBUTED.md"), encoding="utf-8").read()
+    block = re.findall(r"^```py\n(.*?)^```", doc, flags=re.S | re.M)[0]
+    assert block == open(os.path.join(root, "examples", "distributed_obstacle.py"), encoding="utf-8").read()

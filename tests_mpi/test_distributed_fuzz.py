@@ -1,0 +1,17 @@
+"""Random small problems through the distributed entry points (np = 2, uneven partitions):
+every member against serial nrmicp and the numpy oracle (tests/reference_impl.py)."""
+import os
+
+from conftest import mpirun
+
+EXAMPLES = int(os.environ.get("NRMICP_MPI_FUZZ_EXAMPLES", "40"))
+
+
+def test_distributed_fuzz():
+    rows = mpirun(2, "fuzz", EXAMPLES)
+    assert len(rows) == EXAMPLES
+    for r in rows:
+        assert r["status"] == "CONVERGED", r
+        assert r["res"] < 1e-9 * 1.0001, r
+        # a P-matrix ICP has one solution; z's error is bounded by ||A^-1|| Res (A is diagonally dominant)
+        assert r["err"] < 1e-8, r
