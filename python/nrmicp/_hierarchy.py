@@ -102,6 +102,8 @@ def _auxiliary_level(A, theta, sweeps, truncate):
     leaves no coarse (or no fine) point."""
     strength, rs_split, direct = _pyamg()
     B = auxiliary_m_matrix(A)
+    if not (B.diagonal() > 0).all():   # the weights divide by it (and Newton needs it > 0 anyway)
+        return None
     # norm='min': only negative couplings are strong (pyamg 5's 'abs' counts the positive P2
     # couplings: 88 finest steps on P2 at n = 32,513, and P entries down to -2.7)
     C = strength(B, theta=theta, norm="min")

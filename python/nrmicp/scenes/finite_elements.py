@@ -23,7 +23,7 @@ Load f ≡ −1 (the membrane is pressed down onto the obstacle); obstacle
 scikit-fem is a test and benchmark dependency, not one of nrmicp's: it is imported when a scene
 is built (``pip install scikit-fem``).
 
-Left out: everything _MODELS of the obstacle scenes leaves out, plus curved boundaries.
+Left out: large deflections, friction, adhesion, dynamics (as the grid obstacle scenes), and a curved boundary.
 """
 from __future__ import annotations
 
@@ -122,10 +122,9 @@ def fe_obstacle(element: str = "P2", refinements: int = 3, exact=None) -> Proble
     """Membrane over an off-centre obstacle on a disk-like polygon with P1/P2/P3 elements.
 
     ``refinements`` uniform refinements of a 256-triangle polygon; n (interior degrees of
-    freedom) = 481 · 4^r roughly for P1... precisely: P1 1,985 / 8,065 / 32,513 / 130,561 at
-    r = 2..5, P2 8,065 / 32,513 / 130,561 / 522,241 at r = 2..5. ``z_exact`` (policy iteration
-    with direct solves, which needs no M-matrix on these problems) when ``exact`` is True
-    (default: n ≤ 20,000).
+    freedom): P1 8,065 / 32,513 / 130,561 / 523,265 at r = 3..6, P2 the same at r = 2..5 (P2 at
+    r equals P1 at r + 1). ``z_exact`` (policy iteration with direct solves; it settled on
+    these problems although P2 is no M-matrix) when ``exact`` is True (default: n ≤ 20,000).
     """
     _check(element, refinements)
     skfem = _skfem()
