@@ -27,6 +27,9 @@ skipped at that size and marked so; one that failed or timed out is skipped at l
 The prototype's SuperLU (splu) is not run above n = 1.1e6 in 2D and 1.5e5 in 3D (its fill
 needs > 10 GB there).
 
+The report is one table: CPU seconds of the solving child (all threads), finest-level Newton
+steps / linear solves on all levels (or iterations), extra peak memory.
+
 Other sections (in this process): thermoforming 1D/2D (total linear solves of newton against
 iterations of nrmgs ± Anderson), the American put march (Newton steps per time step,
 warm-started) and impulse control (steps). Writes <out>.csv and <out>.md. Timings on a shared
@@ -211,8 +214,8 @@ def obstacle_section(args, log):
                     except subprocess.TimeoutExpired:
                         row["status"] = f"timeout (> {2 * args.budget + 60:.0f} s)"
                 st = row.get("status", "")
-                if st == "converged":
-                    hist.setdefault(peer, []).append((n, row["seconds"]))
+                if st == "converged":   # extrapolated in CPU seconds: wall time follows the machine's load
+                    hist.setdefault(peer, []).append((n, row.get("cpu_seconds") or row["seconds"]))
                     if "eps" in row:
                         qp_eps[peer] = row["eps"]
                 elif not st.startswith(("skipped", "not installed")) and peer not in dead:
@@ -362,27 +365,37 @@ def _cell(r):
     return s
 
 
+def _one_cell(r):
+    """CPU s, Newton steps / linear solves (or iterations), extra peak MB; or why not run."""
+    st = r.get("status", "")
+    if st != "converged":
+        return st.split(" (")[0] if st.startswith("skipped") else st
+    if r["peer"].startswith(("newton", "proto")):
+        count = f"{r['steps']} / {r['solves']}"
+    else:
+        count = f"{r['steps']} it"
+    return f"{r['cpu_seconds']:.2f} s, {count}, {r['extra_mb']:.0f} MB"
+
+
 def markdown(rows, meta):
     out = [f"# Mesh-independent solves (benchmarks/mesh_independent.py)", "",
            f"{meta}", ""]
     obst = [r for r in rows if r["section"] == "obstacle"]
-    for case in dict.fromkeys(r["case"] for r in obst):
-        rs = [r for r in obst if r["case"] == case]
-        peers = list(dict.fromkeys(r["peer"] for r in rs))
-        out += [f"## {case}: seconds to Res < {rs[0]['target']:g} (finest-level Newton steps / iterations)", "",
-                "| n | " + " | ".join(peers) + " |", "|---|" + "---|" * len(peers)]
-        for n in dict.fromkeys(r["n"] for r in rs):
-            cells = {r["peer"]: _cell(r) for r in rs if r["n"] == n}
-            out.append(f"| {n:,} | " + " | ".join(cells.get(p, "") for p in peers) + " |")
-        out += ["", "Linear solves (all levels) and extra peak memory (MB):", "",
-                "| n | " + " | ".join(p for p in peers) + " |", "|---|" + "---|" * len(peers)]
-        for n in dict.fromkeys(r["n"] for r in rs):
-            cells = {}
-            for r in rs:
-                if r["n"] == n and r.get("status") == "converged":
-                    sol = f"{r['solves']} solves, " if r.get("solves") is not None else ""
-                    cells[r["peer"]] = f"{sol}{r['extra_mb']:.0f} MB"
-            out.append(f"| {n:,} | " + " | ".join(cells.get(p, "") for p in peers) + " |")
+    if obst:
+        peers = list(dict.fromkeys(r["peer"] for r in obst))
+        tol = obst[0]["target"]
+        newtons = [p for p in peers if p.startswith("newton")] if "psor" in peers else []
+        out += [f"## Obstacle problems: CPU seconds to Res < {tol:g}, finest-level Newton steps / linear solves "
+                "(all levels) or iterations, extra peak memory; PSOR's CPU time over Newton's", "",
+                "| problem | n | " + " | ".join(peers + [f"PSOR / {p}" for p in newtons]) + " |",
+                "|---|---|" + "---|" * (len(peers) + len(newtons))]
+        for case, n in dict.fromkeys((r["case"], r["n"]) for r in obst):
+            here = {r["peer"]: r for r in obst if r["case"] == case and r["n"] == n}
+            cells = [_one_cell(here[p]) if p in here else "" for p in peers]
+            ok = {p: r for p, r in here.items() if r.get("status") == "converged"}
+            cells += [f"{ok['psor']['cpu_seconds'] / ok[p]['cpu_seconds']:.1f}×" if "psor" in ok and p in ok else ""
+                      for p in newtons]
+            out.append(f"| {case} | {n:,} | " + " | ".join(cells) + " |")
         out.append("")
     for sec, title in [("thermoforming", "Thermoforming: Newton steps / linear solves (total) and nrmgs iterations"),
                        ("american", "American put, 100 time steps: per time step (mean), Newton steps on the finest "

@@ -466,6 +466,8 @@ PYBIND11_MODULE(_core, m) {
       .def(py::init<>())
       .def_readwrite("method", &Options::method)
       .def_readwrite("tol", &Options::tol)
+      .def_readwrite("rtol", &Options::rtol)
+      .def("target", &Options::target, py::arg("res0"))
       .def_readwrite("maxiter", &Options::maxiter)
       .def_readwrite("omega1", &Options::omega1)
       .def_readwrite("omega2", &Options::omega2)

@@ -320,3 +320,59 @@ TEST_CASE("Newton: warm start from the solution, maxiter, callback stop, tol bel
   CHECK(r.status == Status::Stagnated);
   CHECK(r.residual < 1e-12);
 }
+
+TEST_CASE("Newton stops at the rounding floor of Res, in a few steps, and says what the floor was") {
+  // A degenerate LCP (z* = 0 and w* = 0 on a band of nodes) with A ~ 1e12: Res cannot get below
+  // about 1e-3, and the band's signs flip with the rounding noise, so the active set never repeats.
+  const int m = 31;
+  const RowMat A = RowMat(laplacian_2d(m) * 1e8);
+  const Eigen::Index n = A.rows();
+  Vec z_star = Vec::Zero(n), w_star = Vec::Zero(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const int band = static_cast<int>((i % m) * 3 / m);  // columns: inactive | degenerate | active
+    if (band == 0) z_star[i] = 1.0 + 0.01 * static_cast<double>(i % 7);
+    if (band == 2) w_star[i] = 1e6;
+  }
+  const Vec q = w_star - A * z_star;
+  Options o;
+  o.method = Method::Newton;
+  o.tol = 1e-300;
+  const Newton<RowMat> newton(A, o);
+  const Result r = newton.solve(q);
+  Vec t = q.cwiseAbs();
+  t += A.cwiseAbs() * r.z.cwiseAbs();
+  const double level = std::numeric_limits<double>::epsilon() * (t.norm() + r.z.cwiseAbs().norm());
+  CHECK(r.status == Status::Stagnated);
+  CHECK(r.iterations <= 5);
+  CHECK(r.residual <= 100 * level);
+  CHECK((r.z - z_star).lpNorm<Eigen::Infinity>() < 1e-8);
+  CHECK(r.message.find("rounding level") != std::string::npos);
+  CHECK(r.message.find(to_text(r.residual)) != std::string::npos);
+}
+
+TEST_CASE("rtol: the target is max(tol, rtol Res(0)), Res(0) = ||min(q, -zeta(0))||") {
+  const RowMat A = laplacian_2d(15);
+  const Vec psi = paraboloid(15);
+  const Vec q = Vec::Constant(A.rows(), 8.0);  // a downward load onto the obstacle
+  const double res0 = q.cwiseMin(-psi).norm();
+  for (const double rtol : {1e-2, 1e-6}) {
+    Options o;
+    o.method = Method::Newton;
+    o.tol = 0;
+    o.rtol = rtol;
+    CHECK(o.target(res0) == doctest::Approx(rtol * res0));
+    for (const Method method : {Method::Newton, Method::NRMGS}) {
+      o.method = method;
+      o.maxiter = 100000;
+      const Result r = method == Method::Newton ? Newton<RowMat>(A, o).solve(q, Zeta<int>::constant(psi))
+                                                : Solver<RowMat>(A, o).solve(q, Zeta<int>::constant(psi));
+      CHECK(r.status == Status::Converged);
+      CHECK(r.residual < rtol * res0);
+      if (method == Method::NRMGS) CHECK(r.residual > 1e-3 * rtol * res0);  // it stopped there, not at rounding
+    }
+  }
+  Options o;
+  o.tol = 1e-3;
+  o.rtol = 1e-12;
+  CHECK(o.target(res0) == 1e-3);  // the larger of the two
+}

@@ -23,6 +23,15 @@ TEST_CASE("invalid fields are named in the error") {
   CHECK_THROWS_WITH_AS(o.check(3), doctest::Contains("phi[1]"), std::invalid_argument);
   o = Options(); o.theta = 2.5;
   CHECK_THROWS_WITH_AS(o.check(3), doctest::Contains("theta"), std::invalid_argument);
+  o = Options(); o.rtol = 1.0;
+  CHECK_THROWS_WITH_AS(o.check(3), doctest::Contains("rtol must lie in [0, 1)"), std::invalid_argument);
+  o = Options(); o.rtol = NAN;
+  CHECK_THROWS_WITH_AS(o.check(3), doctest::Contains("rtol"), std::invalid_argument);
+  o = Options(); o.tol = 0;
+  CHECK_THROWS_WITH_AS(o.check(3), doctest::Contains("tol must be a finite number > 0 (or 0 with rtol > 0)"),
+                       std::invalid_argument);
+  o.rtol = 1e-6;
+  CHECK_NOTHROW(o.check(3));
   o = Options(); o.maxiter = -1;
   CHECK_THROWS_WITH_AS(o.check(3), doctest::Contains("maxiter"), std::invalid_argument);
 }

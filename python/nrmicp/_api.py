@@ -176,10 +176,11 @@ def _scalar(value, name, *, low=None, low_inclusive=False, high=None, allow_none
 
 
 def _iteration_options(opts, *, tol, maxiter, z_update, accelerate, anderson_m, theta, record_history,
-                       stall_iterations, verbose=0):
+                       stall_iterations, verbose=0, rtol=0.0):
     """Fill the iteration fields of a core Options, checking types here; values are checked by
     the core (Options.check), which knows the rules."""
     opts.tol = _scalar(tol, "tol")
+    opts.rtol = _scalar(rtol, "rtol")
     opts.maxiter = _scalar(maxiter, "maxiter", integer=True)
     opts.z_update = getattr(_core.ZUpdate, _choice(z_update, Z_UPDATES, "z_update"))
     opts.accelerate = getattr(_core.Accelerate, _choice(accelerate or "none", ACCELERATIONS, "accelerate"))
@@ -280,7 +281,7 @@ class Solver:
 
     ``Solver(A, method=..., **options)`` accepts the set-up options of :func:`solve`
     (method, omega1, omega2, gamma, phi, alpha, beta, inner, scale, hierarchy, polish) and defaults for the
-    iteration options (tol, maxiter, theta, z_update, accelerate, anderson_m, record_history,
+    iteration options (tol, rtol, maxiter, theta, z_update, accelerate, anderson_m, record_history,
     stall_iterations, verbose), each of which :meth:`solve` may override. A is referenced, not
     copied, when it is canonical float64 CSR and ``scale`` is off: do not modify it while the
     Solver lives.
@@ -296,7 +297,8 @@ class Solver:
     def __init__(self, A: MatrixLike, *, method: str = "nrmgs", omega1: DiagonalLike = None,
                  omega2: DiagonalLike = None, gamma: float = 1.0, phi: DiagonalLike = None,
                  alpha: Optional[float] = None, beta: Optional[float] = None, inner: str = "auto",
-                 tol: float = 1e-8, maxiter: int = 10000, theta: float = 1.0, z_update: str = "auto",
+                 tol: float = 1e-8, rtol: float = 0.0, maxiter: int = 10000, theta: float = 1.0,
+                 z_update: str = "auto",
                  accelerate: Optional[str] = "none", anderson_m: int = 5, record_history: bool = False,
                  stall_iterations: int = 100, scale: Union[bool, str] = False, verbose: int = 0,
                  hierarchy: Any = "auto", polish: bool = False) -> None:
@@ -324,7 +326,7 @@ class Solver:
         opts.alpha = math.nan if alpha is None else _scalar(alpha, "alpha")
         opts.beta = math.nan if beta is None else _scalar(beta, "beta")
         opts.inner = getattr(_core.Inner, _choice(inner, INNERS, "inner"))
-        self._defaults = dict(tol=tol, maxiter=maxiter, theta=theta, z_update=z_update, accelerate=accelerate,
+        self._defaults = dict(tol=tol, rtol=rtol, maxiter=maxiter, theta=theta, z_update=z_update, accelerate=accelerate,
                               anderson_m=anderson_m, record_history=record_history,
                               stall_iterations=stall_iterations, verbose=verbose)
         _checked(_iteration_options(opts, **self._defaults), n)
@@ -379,9 +381,9 @@ class Solver:
                             "options (method, omega1, omega2, gamma, phi, alpha, beta, inner, scale) are fixed at "
                             "set-up")
         it = dict(self._defaults, **iteration_options)
-        checked = _iteration_options(_core.Options(), **it)
-        checked.method = getattr(_core.Method, self.method)
-        _checked(checked, n)  # validates every iteration option once, against this method
+        checked_opts = _iteration_options(_core.Options(), **it)
+        checked_opts.method = getattr(_core.Method, self.method)
+        _checked(checked_opts, n)  # validates every iteration option once, against this method
         tol = float(it["tol"])
         qv = as_vector(q, n, "q")
         z0 = None if x0 is None else as_vector(x0, n, "x0")
@@ -432,6 +434,11 @@ class Solver:
                 g = z - checked(z)  # on a read-only copy: ζ never sees (or writes into) the result
             return w, _norm(np.minimum(w, g))
 
+        if checked_opts.rtol > 0:
+            # The core's rule (Options::target): max(tol, rtol · Res(0)), Res(0) in the original
+            # variables; the core then gets the absolute target.
+            tol = checked_opts.target(original_residual(np.zeros(n))[1])
+            it = dict(it, tol=tol, rtol=0.0)
         tol_k, x0k = tol, z0s
         best = None
         done_iters = 0
@@ -487,8 +494,8 @@ class Solver:
         _, z, w, res, nit, d = best
         polished = None
         if self.polish:
-            polished = _newton.polish(self, (qs, kind, cs, bp, bi, bd, fns), z, res, original_residual,
-                                      dc if scaled else None)
+            polished, polish_core = _newton.polish(self, (qs, kind, cs, bp, bi, bd, fns), z, res,
+                                                   original_residual, dc if scaled else None)
             if polished is not None:
                 z, w, res = polished
         last_status = rounds[-1][1]
@@ -520,7 +527,10 @@ class Solver:
         if self.polish:
             extra["polished"] = polished is not None
             if polished is not None and res < tol and status != Status.CONVERGED:
-                status, message = Status.CONVERGED, "converged: Res < tol after polishing (one Newton step)"
+                status, message = Status.CONVERGED, "converged: Res < tol after polishing (Newton steps)"
+            elif (res >= tol and polish_core is not None and Status(polish_core["status"]) == Status.STAGNATED
+                  and "rounding floor" in polish_core["message"]):
+                status, message = Status.STAGNATED, f"{message}; polish: {polish_core['message']}"
         if self.method == "newton":
             extra.update(_newton.result_fields(d))
         return Result(z=z, w=w, success=status == Status.CONVERGED, status=status, message=message, nit=nit,
@@ -529,7 +539,7 @@ class Solver:
 
 
 def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "nrmgs", tol: float = 1e-8,
-          maxiter: int = 10000, omega1: DiagonalLike = None, omega2: DiagonalLike = None, gamma: float = 1.0,
+          rtol: float = 0.0, maxiter: int = 10000, omega1: DiagonalLike = None, omega2: DiagonalLike = None, gamma: float = 1.0,
           phi: DiagonalLike = None, alpha: Optional[float] = None, beta: Optional[float] = None,
           theta: float = 1.0, z_update: str = "auto", inner: str = "auto", accelerate: Optional[str] = "none",
           anderson_m: int = 5, x0: Optional[ArrayLike] = None, callback: Optional[Callable[..., Any]] = None,
@@ -565,7 +575,13 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
         when a step does not reduce Res or the active set cycles). Its ``maxiter`` counts Newton
         steps (and bounds the fallback sweeps). Default by measurement: see README "Choosing a method".
     tol : float
-        Stop when Res(z) = ‖min(Az + q, z − ζ(z))‖₂ < tol (absolute, the paper's criterion).
+        Stop when Res(z) = ‖min(Az + q, z − ζ(z))‖₂ < tol (absolute, the paper's criterion;
+        scipy.sparse.linalg's ``atol``). With ``rtol``, the target is max(tol, rtol · Res(0)).
+    rtol : float in [0, 1)
+        Relative tolerance, as scipy.sparse.linalg's: stop when Res(z) < max(tol, rtol · Res(0)),
+        Res(0) = ‖min(q, −ζ(0))‖₂ the residual at z = 0 (scipy's ‖b‖; it does not depend on
+        ``x0``). Default 0: the absolute ``tol`` alone, as before. ``tol=0`` with ``rtol > 0`` is
+        a purely relative target.
     maxiter : int
     omega1, omega2 : float or array_like (n,), positive
         Ω1, Ω2. Defaults: Ω1 = I; Ω2 = I (nrm, the paper's definition), αI (nrmm),
@@ -651,8 +667,10 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
         method: for a max-type ζ, policy iteration). Without it, a callable ζ is handled by an
         outer fixed point ζ(z_k) -> obstacle problem, each solved by warm-started Newton.
     polish : bool
-        After the method stops, take one Newton step on the active set of its answer and keep it
-        if it lowers Res (``result.polished``); typically Res drops to rounding level.
+        After the method stops, take Newton steps from its answer on its active set (at most 3)
+        and keep them if they lower Res (``result.polished``); typically the first one drops Res
+        to rounding level. When Res stays above ``tol`` at its rounding floor, the status is
+        STAGNATED and the message gives the floor.
 
     Returns
     -------
@@ -668,7 +686,7 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
         shifted LCP), with the same re-solve rule as for ``scale``.
     """
     s = Solver(A, method=method, omega1=omega1, omega2=omega2, gamma=gamma, phi=phi, alpha=alpha, beta=beta,
-               inner=inner, tol=tol, maxiter=maxiter, theta=theta, z_update=z_update, accelerate=accelerate,
+               inner=inner, tol=tol, rtol=rtol, maxiter=maxiter, theta=theta, z_update=z_update, accelerate=accelerate,
                anderson_m=anderson_m, record_history=record_history, stall_iterations=stall_iterations,
                scale=scale, verbose=verbose, hierarchy=hierarchy, polish=polish)
     return s.solve(q, zeta, x0=x0, callback=callback, zeta_jacobian=zeta_jacobian)

@@ -92,14 +92,16 @@ def polisher(solver):
 
 
 def polish(solver, problem, z, res, original_residual, dc):
-    """One Newton step from z on its active set (``polish=True``). Returns (z, w, Res) when it
-    lowered Res (measured in the original variables), else None.
+    """Newton steps from z on its active set (``polish=True``) to the rounding floor of Res (at
+    most 3: Newton::polish). Returns (z, w, Res, core result) when they lowered Res (measured in
+    the original variables), else (None, core result); the core result's status is STAGNATED
+    with the floor in its message when the floor was reached.
 
     `problem` is the core's (q, kind, c, B-indptr, B-indices, B-data, fn) in the core's variables;
     dc the column scaling (None when unscaled)."""
     core = solver._core if solver.method == "newton" else polisher(solver)
     if core is None or not np.isfinite(res):
-        return None
+        return None, None
     z0 = z / dc if dc is not None else z
     qs, kind, cs, bp, bi, bd, fns = problem
     # tol = tiny: the step is taken whatever the member's tol
@@ -107,8 +109,8 @@ def polish(solver, problem, z, res, original_residual, dc):
     zp = d["z"] * dc if dc is not None else d["z"]
     wp, rp = original_residual(zp)
     if not rp < res:
-        return None
-    return zp, wp, rp
+        return None, d
+    return (zp, wp, rp), d
 
 
 def result_fields(d) -> dict:

@@ -6,8 +6,8 @@
 
 For every scene, method and z-update it sweeps ``tol`` (default 1e-2, 1e-3, …, 1e-12). The
 methods are nrmicp's members, ``newton`` (its 'iterations' are Newton steps on the finest level;
-``hierarchy='auto'``) and any member with ``+polish`` (``polish=True``: one Newton step on the
-settled active set); next to them, in the same diagrams, the peers a user would otherwise
+``hierarchy='auto'``) and any member with ``+polish`` (``polish=True``: Newton steps on the
+settled active set, to the rounding floor); next to them, in the same diagrams, the peers a user would otherwise
 reach for (nrmicp/_peers.py): red-black projected SOR in numpy with SOR's optimal ω, and a QP
 solver (PIQP, else OSQP) on min ½zᵀAz + qᵀz, z ≥ 0, its eps tightened from tol by 10× until
 Res < tol (the time of that last run). The peers run on the scenes that are LCPs (ζ constant),
@@ -84,7 +84,7 @@ EXTRA_SCENES = ("bai_sym_affine", "obstacle_1d", "thermoforming_1d", "obstacle_3
 SCENES = DEFAULT_SCENES + EXTRA_SCENES
 
 #: Default methods: nrmaor and nrmsor with their default parameters (α = β = 1) are nrmgs.
-#: 'nrmgs+polish' is nrmgs with polish=True (one Newton step on the settled active set).
+#: 'nrmgs+polish' is nrmgs with polish=True (Newton steps on the settled active set, to the rounding floor).
 DEFAULT_METHODS = ("nrm", "nrmm", "nrmgs", "nrmj", "mms", "two_sweep", "newton", "nrmgs+polish")
 QUICK_METHODS = ("nrmgs", "nrmm", "newton", "nrmgs+polish")
 QUICK_TOLS = (1e-2, 1e-4, 1e-6, 1e-8)

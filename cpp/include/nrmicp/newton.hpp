@@ -196,6 +196,7 @@ class Newton {
     if (iteration_options) {
       iteration_options->check(A_.rows());
       o.tol = iteration_options->tol;
+      o.rtol = iteration_options->rtol;
       o.maxiter = iteration_options->maxiter;
       o.record_history = iteration_options->record_history;
       o.verbose = iteration_options->verbose;
@@ -203,18 +204,23 @@ class Newton {
     return run(q, zeta, z0, callback, poll, o, !coarse_.empty(), progress);
   }
 
-  /// Polish: one Newton step from z on its active set (no nesting). Returns the better of z and
-  /// the step (smaller Res); `success()` when that Res is below `tol`.
+  /// Polish: Newton steps from z on its active set (no nesting) until Res < tol or Res reaches
+  /// its rounding floor (the rule of the Newton loop: the set repeats, or a step does not reduce
+  /// Res there; STAGNATED, the message gives the floor), at most polish_steps. Returns the best
+  /// iterate, z included.
   Result polish(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector& z, double tol) const {
     std::lock_guard<std::mutex> lock(mutex_);
     Options o = options_;
     o.tol = tol;
-    o.maxiter = 1;
+    o.maxiter = polish_steps;
     o.record_history = false;
     return run(q, zeta, &z, {}, {}, o, false);
   }
 
  private:
+  /// One step lands a member's answer on the rounding floor; a second one shows it is there.
+  static constexpr int polish_steps = 3;
+
   Result run(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0, const Callback& callback,
              const Poll& poll, const Options& o, bool nest, const Progress& progress = {}) const {
     const auto t0 = std::chrono::steady_clock::now();
@@ -222,7 +228,9 @@ class Newton {
     if (q.size() != n) throw std::invalid_argument("Newton::solve: q has length " + std::to_string(q.size()) + ", expected n = " + std::to_string(n));
     if (z0 && z0->size() != n) throw std::invalid_argument("Newton::solve: x0 has length " + std::to_string(z0->size()) + ", expected n = " + std::to_string(n));
     zeta.check(n);
-    Run run(*this, o, callback, poll, nest, progress);
+    Options resolved = o;
+    resolve_tolerance(resolved, q, zeta);
+    Run run(*this, resolved, callback, poll, nest, progress);
     Result r;
     switch (zeta.kind()) {
       case ZetaKind::None: r = run.obstacle(q, Vector::Zero(n), z0, nest); break;

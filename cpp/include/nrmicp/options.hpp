@@ -3,6 +3,7 @@
 
 #include <Eigen/Core>
 
+#include <algorithm>
 #include <cfloat>
 #include <cmath>
 #include <limits>
@@ -67,7 +68,10 @@ inline std::string to_text(double v) {
 /// default (docs/SPEC.md); a NaN alpha/beta takes the method's default too.
 struct Options {
   Method method = Method::NRMGS;
-  double tol = 1e-8;               ///< stop when Res(z) = ‖min(Az + q, z − ζ(z))‖₂ < tol
+  double tol = 1e-8;               ///< stop when Res(z) = ‖min(Az + q, z − ζ(z))‖₂ < target(Res(0)) (scipy's atol)
+  /// Relative tolerance (scipy.sparse.linalg's rtol): the target is max(tol, rtol · Res(0)),
+  /// Res(0) = ‖min(q, −ζ(0))‖₂ the residual at z = 0 (scipy's ‖b‖: independent of the start).
+  double rtol = 0.0;
   int maxiter = 10000;             ///< at most this many x-updates
   Eigen::VectorXd omega1;          ///< Ω1 (positive), length n or empty
   Eigen::VectorXd omega2;          ///< Ω2 (positive), length n or empty
@@ -94,11 +98,20 @@ struct Options {
   /// whenever k seconds have passed since the last report, and once at the end.
   int verbose = 0;
 
+  /// The absolute Res target of a solve whose Res at z = 0 is `res0`: max(tol, rtol · res0).
+  /// (A zero target, tol = 0 with Res(0) = 0, is the smallest normal number: z = 0 solves.)
+  double target(double res0) const {
+    const double t = std::max(tol, rtol * res0);
+    return t > 0 ? t : DBL_MIN;
+  }
+
   /// Throws std::invalid_argument naming the offending field, its value and what is accepted.
   void check(Eigen::Index n) const {
     auto fail = [](const std::string& msg) { throw std::invalid_argument("Options: " + msg); };
     auto num = [](double v) { return to_text(v); };
-    if (!(tol > 0) || !std::isfinite(tol)) fail("tol must be a finite number > 0, got " + num(tol));
+    if (!(rtol >= 0 && rtol < 1)) fail("rtol must lie in [0, 1), got " + num(rtol));
+    if (!(tol > 0 || (rtol > 0 && tol == 0)) || !std::isfinite(tol))
+      fail("tol must be a finite number > 0 (or 0 with rtol > 0), got " + num(tol));
     if (maxiter < 0) fail("maxiter must be >= 0, got " + std::to_string(maxiter));
     if (!(gamma > 0) || !std::isfinite(gamma)) fail("gamma must be a finite number > 0, got " + num(gamma));
     if (gamma < DBL_MIN) fail("gamma = " + num(gamma) + " is subnormal; it must be >= " + num(DBL_MIN));

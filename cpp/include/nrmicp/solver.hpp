@@ -130,7 +130,7 @@ class Solver {
     const Eigen::Index n = A_.rows();
     Options o = options_;
     if (iteration_options) {
-      o.tol = iteration_options->tol; o.maxiter = iteration_options->maxiter;
+      o.tol = iteration_options->tol; o.rtol = iteration_options->rtol; o.maxiter = iteration_options->maxiter;
       o.z_update = iteration_options->z_update; o.accelerate = iteration_options->accelerate;
       o.anderson_m = iteration_options->anderson_m; o.theta = iteration_options->theta;
       o.record_history = iteration_options->record_history;
@@ -142,6 +142,7 @@ class Solver {
     if (q.size() != n) throw std::invalid_argument("Solver::solve: q has length " + std::to_string(q.size()) + ", expected n = " + std::to_string(n));
     if (z0 && z0->size() != n) throw std::invalid_argument("Solver::solve: x0 has length " + std::to_string(z0->size()) + ", expected n = " + std::to_string(n));
     zeta.check(n);
+    resolve_tolerance(o, q, zeta);
     Result r;
     if (zeta.kind() == ZetaKind::Constant) {
       // ζ ≡ c: LCP(q + Ac, A) in y = z − c. Res and w are the same in both variables.

@@ -6,7 +6,11 @@
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
 
+#include "detail/residual.hpp"
+#include "options.hpp"
+
 #include <functional>
+#include <limits>
 #include <stdexcept>
 
 namespace nrmicp {
@@ -79,5 +83,21 @@ class Zeta {
   Functor f_;
   Jacobian j_;
 };
+
+/// Res at z = 0, ‖min(q, −ζ(0))‖₂: the reference of the relative tolerance (Options::rtol);
+/// NaN when ζ(0) failed.
+template <typename StorageIndex>
+double residual_at_zero(const Eigen::VectorXd& q, const Zeta<StorageIndex>& zeta) {
+  Eigen::VectorXd zeta0;
+  if (!zeta.eval(Eigen::VectorXd::Zero(q.size()), zeta0)) return std::numeric_limits<double>::quiet_NaN();
+  return detail::stable_norm(q.cwiseMin(-zeta0));
+}
+
+/// `o` with its relative tolerance resolved for this problem: tol = target(Res(0)), rtol = 0.
+template <typename StorageIndex>
+void resolve_tolerance(Options& o, const Eigen::VectorXd& q, const Zeta<StorageIndex>& zeta) {
+  if (o.rtol > 0) o.tol = o.target(residual_at_zero(q, zeta));
+  o.rtol = 0;
+}
 
 }  // namespace nrmicp

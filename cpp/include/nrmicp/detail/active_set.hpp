@@ -17,6 +17,7 @@
 
 #include <Eigen/SparseCore>
 
+#include <algorithm>
 #include <limits>
 #include <memory>
 #include <stdexcept>
@@ -137,7 +138,7 @@ class ActiveSetSystem {
     // CG needs a symmetric positive definite K: the LCP of a symmetric A (an indefinite K shows
     // as a failed coarsest Cholesky or CG breakdown; then the loop falls back). Any other K
     // (a nonsymmetric A, an affine ζ) takes BiCGSTAB (detail/multigrid.hpp).
-    if (use_iterative(inner, spd_candidate_, below.levels, A.rows()))
+    if (use_iterative(inner, spd_candidate_, below.levels, A.rows(), K_.nonZeros()))
       krylov_ = std::make_unique<MultigridKrylov<StorageIndex>>(below, spd_candidate_);
     else
       analyze();
@@ -153,7 +154,7 @@ class ActiveSetSystem {
       for (StorageIndex p = outer[j]; p < outer[j + 1]; ++p) {
         const bool row_inactive = inactive[row[p]];
         // LCP: z_𝒜 = 0, so the active columns of the inactive rows are dropped (symmetry).
-        v[p] = row_inactive ? ((lcp_ && !inactive[j]) ? 0.0 : inactive_values_[p]) : active_values_[p];
+        v[p] = row_inactive ? ((lcp_ && !inactive[j]) ? 0.0 : inactive_value_ptr_[p]) : active_value(p, row[p], j);
       }
     if (!krylov_) return solver_.factorize(K_);
     inactive_ = inactive;
@@ -186,26 +187,26 @@ class ActiveSetSystem {
   /// reach the direct retry.
   void set_max_iterations(int k) { if (krylov_) krylov_->set_max_iterations(k); }
 
-  /// Whether `inner` (with K's size n and `levels` prolongations below) means the multigrid-
-  /// preconditioned Krylov solve: always for cg with a hierarchy; for auto with a hierarchy and n ≥
-  /// auto_cg_min_n (an SPD candidate: CG) or n ≥ auto_krylov_min_n (else: BiCGSTAB); the
-  /// measurements are in those constants' comments.
-  static bool use_iterative(Inner inner, bool spd_candidate, std::size_t levels, Eigen::Index n) {
+  /// Whether `inner` (with K's size n, its nonzeros nnz and `levels` prolongations below) means
+  /// the multigrid-preconditioned Krylov solve: always for cg with a hierarchy; for auto with a
+  /// hierarchy and n ≥ auto_cg_min_n (an SPD candidate: CG) or n ≥ auto_krylov_min_n (else:
+  /// BiCGSTAB), or nnz ≥ auto_iterative_min_nnz; the measurements are in those constants' comments.
+  static bool use_iterative(Inner inner, bool spd_candidate, std::size_t levels, Eigen::Index n, Eigen::Index nnz) {
     if (levels == 0) return false;
-    return inner == Inner::CG || (inner == Inner::Auto && n >= (spd_candidate ? auto_cg_min_n : auto_krylov_min_n));
+    if (inner == Inner::CG) return true;
+    return inner == Inner::Auto &&
+           (n >= (spd_candidate ? auto_cg_min_n : auto_krylov_min_n) || nnz >= auto_iterative_min_nnz);
   }
-  /// Measured (obstacle scenes, hierarchy "amg", tol 1e-8, one solve, OPENBLAS_NUM_THREADS=1,
-  /// same run), Newton solve time direct (CHOLMOD) → cg, same steps and Res: 2D n = 16,129:
-  /// 0.29 → 0.12 s; 2D n = 261,121: 11.9 → 4.0 s; 3D n = 29,791: 3.0 → 0.32 s; 3D n = 103,823:
-  /// 25.2 → 2.5 s (CHOLMOD's fill grows like n^{4/3} in 3D); 3D n = 10⁶: 47 s with cg (+15 s
-  /// set-up, 3 fine steps, Res 2e-9), the direct solve was estimated at an hour. Below 10⁴ both take milliseconds
-  /// and the direct solve is the exact one.
   static constexpr Eigen::Index auto_cg_min_n = 10000;
   /// Measured (convection_diffusion_obstacle, hierarchy "amg", tol 1e-8, same run; README, "The
   /// iterative inner solve"), CPU s direct (UMFPACK) → bicgstab, same steps: 2D n = 3,969: 0.07 →
   /// 0.06; n = 10,201: 0.13 → 0.07; n = 261,121: 5.5 → 1.6; n = 10⁶: 234 → 46; 3D n = 103,823:
   /// 48 → 0.92 (2.3 GB → 0.2 GB).
   static constexpr Eigen::Index auto_krylov_min_n = 10000;
+  /// A dense coarse operator (3D Ruge–Stüben levels: 33–100 nonzeros a row) fills in a direct
+  /// factorization long before n = 10⁴. Measured (obstacle_3d m = 47, amg, one solve): the level
+  /// of 8,652 unknowns and 57 nonzeros a row took 0.31 s by CHOLMOD (of 0.74 s for the solve).
+  static constexpr Eigen::Index auto_iterative_min_nnz = 50000;
 
  private:
   /// The symbolic analysis of the direct solve (at construction, or on first need).
@@ -243,11 +244,26 @@ class ActiveSetSystem {
   void use_pattern_of(const MatrixType& A) {
     K_ = A;
     K_.makeCompressed();
+    active_values_.resize(0);  // the identity's: active_value() gives them without storage
+    // A symmetric row-major A stores K's column order: K's inactive values are A's own (held by
+    // reference, as A is), not a copy (42 MB at n = 10⁶ on a 5-point grid).
+    if constexpr (MatrixType::IsRowMajor) {
+      if (A.isCompressed() && A.nonZeros() == K_.nonZeros() &&
+          std::equal(K_.innerIndexPtr(), K_.innerIndexPtr() + K_.nonZeros(), A.innerIndexPtr()) &&
+          std::equal(K_.valuePtr(), K_.valuePtr() + K_.nonZeros(), A.valuePtr())) {
+        inactive_values_.resize(0);
+        inactive_value_ptr_ = A.valuePtr();
+        return;
+      }
+    }
     inactive_values_ = Eigen::Map<const Vector>(K_.valuePtr(), K_.nonZeros());
-    active_values_ = Vector::Zero(K_.nonZeros());
-    for (Eigen::Index j = 0; j < K_.cols(); ++j)
-      for (StorageIndex p = K_.outerIndexPtr()[j]; p < K_.outerIndexPtr()[j + 1]; ++p)
-        if (K_.innerIndexPtr()[p] == j) active_values_[p] = 1.0;
+    inactive_value_ptr_ = inactive_values_.data();
+  }
+
+  /// The active-row value at storage position p (row i, column j): the identity's on A's own
+  /// pattern (the LCP), else the stored I − B.
+  double active_value(StorageIndex p, Eigen::Index i, Eigen::Index j) const {
+    return active_values_.size() ? active_values_[p] : (i == j ? 1.0 : 0.0);
   }
 
   /// Any other case: the union of the patterns of A, I and B.
@@ -283,12 +299,14 @@ class ActiveSetSystem {
     Kb.makeCompressed();
     if (Kb.nonZeros() != K_.nonZeros()) throw std::logic_error("ActiveSetSystem: patterns differ");
     inactive_values_ = Eigen::Map<const Vector>(K_.valuePtr(), K_.nonZeros());
+    inactive_value_ptr_ = inactive_values_.data();
     active_values_ = Eigen::Map<const Vector>(Kb.valuePtr(), Kb.nonZeros());
   }
 
   bool lcp_;
   ColMatrix K_;
   Vector inactive_values_, active_values_;
+  const double* inactive_value_ptr_ = nullptr;  // the inactive-row values: inactive_values_, or A's own
   mutable Refactorizer<StorageIndex> solver_;  // mutable: analysed on first need (direct_solve)
   std::unique_ptr<MultigridKrylov<StorageIndex>> krylov_;
   std::vector<char> inactive_;  // of the last factorize (iterative)

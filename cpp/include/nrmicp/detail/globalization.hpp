@@ -95,7 +95,7 @@ class Globalized {
   }
   /// A Newton step, or the fallback, or the end.
   void move_x(Iterate&) {
-    if (still_) return settle();
+    if (still_ || at_floor_) return settle();
     if (plain_.steps() >= ctl_.maxiter) return stop(Status::MaxIterations);
     if (!plain_.linearize()) return stop(Status::ZetaFailed);
     if (!newton()) fall_back();
@@ -126,9 +126,19 @@ class Globalized {
     if (!plain_.factorize(inactive_)) return false;
     const double r = plain_.solve(inactive_, ctl_.tol, ctl_.forcing);
     if (!(std::isfinite(r) && (exempt_ || test_.acceptable(r)))) return false;
+    const double r_old = plain_.residual();
     accept(r, h);
+    if (!(r < ctl_.tol) && !(r < 0.5 * r_old) && !still_) at_floor_ = at_rounding_level(r_old);
     return true;
   }
+  // Res (before a step that did not halve it) is within kFloorFactor of the rounding level of Res.
+  bool at_rounding_level(double r) {
+    floor_ = plain_.rounding_level();
+    return r <= kFloorFactor * floor_;
+  }
+  /// How close to its rounding level Res counts as there (a step on the right piece lands within
+  /// a few times the level; one on a wrong piece leaves Res orders of magnitude above it).
+  static constexpr double kFloorFactor = 100;
   void accept(double r, std::uint64_t h) {
     still_ = Plain::set_fixes_step && plain_.trial_still() && !(r < ctl_.tol);
     plain_.accept();
@@ -157,11 +167,15 @@ class Globalized {
   void give_up() {
     stop(sweeps_ >= ctl_.sweep_budget && ctl_.sweep_budget > 0 ? Status::MaxIterations : Status::Stagnated);
   }
+  // The active set repeated, z stood still, or a step at the rounding level did not reduce Res.
   void settle() {
     settled_ = true;
+    if (!(floor_ > 0)) floor_ = plain_.rounding_level();
     end_ = StepEnd{Status::Stagnated,
-                   "stagnated: the active set has settled and Res is at its rounding floor, above tol; "
-                   "returning the best iterate"};
+                   "stagnated: Res reached its rounding floor (the active set has settled and a further Newton "
+                   "step does not reduce Res): best Res " + to_text(best_r_) + " >= tol " + to_text(ctl_.tol) +
+                       ", rounding level eps (||A||z| + |q||| + ||z| + |zeta(z)||) = " + to_text(floor_) +
+                       "; returning the best iterate"};
   }
   void stop(Status s) { end_ = StepEnd{s, std::string()}; }
 
@@ -173,7 +187,8 @@ class Globalized {
   std::vector<char> inactive_, last_inactive_;
   std::unordered_set<std::uint64_t> seen_;
   std::uint64_t last_set_ = 0;
-  bool have_last_ = false, exempt_ = true, still_ = false, settled_ = false;
+  bool have_last_ = false, exempt_ = true, still_ = false, settled_ = false, at_floor_ = false;
+  double floor_ = 0;  // the rounding level of Res (computed when a stop at it is considered)
   int sweep_run_ = 10, sweeps_ = 0;
   std::optional<StepEnd> end_;
 };

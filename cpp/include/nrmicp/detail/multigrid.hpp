@@ -104,20 +104,16 @@ class MultigridKrylov {
   /// setup. False if singular.
   ///
   /// K keeps one pattern across Newton steps (detail/active_set.hpp: only its values change),
-  /// so the products K_l P_l and P_lᵀ (K_l P_l) keep theirs: their patterns are formed on the
-  /// first setup, later setups only recompute the values (detail/sparse_product.hpp).
+  /// so the Galerkin operators P_lᵀ K_l P_l keep theirs: their patterns are formed on the first
+  /// setup, later setups only recompute the values (detail/sparse_product.hpp).
   bool setup(const ColMatrix& K) {
     fine_ = &K;
-    const bool same_pattern = fine_pattern_ == K.nonZeros() && KP_.size() == levels_;
+    const bool same_pattern = fine_pattern_ == K.nonZeros();
     if (!symmetric_) copy_rows(K, same_pattern);
-    KP_.resize(levels_);
     for (std::size_t l = 0; l < levels_; ++l) {
       auto galerkin = [&](const auto& Kl) {
-        if (same_pattern && product_values(Kl, P_[l], KP_[l], position_) &&
-            product_values(R_[l], KP_[l], coarse_ops_[l], position_))
-          return;
-        KP_[l] = product(Kl, P_[l]);
-        coarse_ops_[l] = product(R_[l], KP_[l]);
+        if (same_pattern && galerkin_values(R_[l], Kl, P_[l], coarse_ops_[l], position_)) return;
+        coarse_ops_[l] = product(R_[l], product(Kl, P_[l]));
       };
       if (l == 0) galerkin(fine());
       else galerkin(coarse_ops_[l - 1]);
@@ -274,7 +270,6 @@ class MultigridKrylov {
   const RowMatrix* R_;                    // their transposes (restrictions)
   std::size_t levels_;
   std::vector<RowMatrix> coarse_ops_;     // K_1, K_2, ...: Galerkin operators of the reduced system
-  std::vector<RowMatrix> KP_;             // K_l P_l, kept for the next setup's values-only products
   Eigen::Index fine_pattern_ = -1;        // nonzeros of the K the patterns were formed for
   std::vector<StorageIndex> position_;    // scratch of product_values
   std::vector<Vector> inv_diag_;          // 1 / diag(K_l), l < coarsest

@@ -83,6 +83,15 @@ class NewtonLevel {
     return std::isnan(r) ? inf : r;
   }
 
+  /// The rounding level of Res at z: ε (‖|A||z| + |q|‖₂ + ‖|z| + |ζ(z)|‖₂), the size of the rounding
+  /// error in w = Az + q and g = z − ζ(z) (ζ(z) = z − g), below which no step brings Res.
+  double rounding_level(const Vector& z, const Vector& q, const Vector& g) const {
+    Vector t = q.cwiseAbs();
+    t.noalias() += A_.cwiseAbs() * z.cwiseAbs();
+    constexpr double eps = std::numeric_limits<double>::epsilon();
+    return eps * (stable_norm(t) + stable_norm(z.cwiseAbs() + (z - g).cwiseAbs()));
+  }
+
   /// Ω1 (g/Ω1 − w/Ω2) = g − (Ω1/Ω2) w: the modulus vector x up to the factor γ/(2Ω1).
   void modulus(const Vector& w, const Vector& g, Vector& x) const { x = g - ratio_.cwiseProduct(w); }
 

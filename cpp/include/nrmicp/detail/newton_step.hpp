@@ -92,8 +92,9 @@ class NewtonStep {
   NewtonStep(NewtonLevel<MatrixType>& level, Linearization lin, Vector z)
       : level_(level), lin_(std::move(lin)), z_(std::move(z)) {
     const Eigen::Index n = level.size();
-    w_.resize(n); g_.resize(n); zeta_z_.resize(n); rhs_.resize(n);
-    z_new_.resize(n); w_new_.resize(n); g_new_.resize(n); zeta_new_.resize(n);
+    w_.resize(n); g_.resize(n); rhs_.resize(n);
+    z_new_.resize(n); w_new_.resize(n); g_new_.resize(n);
+    if constexpr (!set_fixes_step) { zeta_z_.resize(n); zeta_new_.resize(n); }  // a fixed ζ keeps no ζ(z)
     r_ = lin_.evaluate(z_, w_, g_, zeta_z_);
   }
 
@@ -124,6 +125,8 @@ class NewtonStep {
     ++steps_;
     return r_new_ = lin_.evaluate(z_new_, w_new_, g_new_, zeta_new_);
   }
+  /// The rounding level of Res at z (NewtonLevel::rounding_level).
+  double rounding_level() const { return level_.rounding_level(z_, lin_.q, g_); }
   /// The trial z⁺ did not move beyond rounding (only ties g ≈ w ≈ 0 changed sides).
   bool trial_still() const {
     return (z_new_ - z_).template lpNorm<Eigen::Infinity>() <= 1e-14 * z_new_.template lpNorm<Eigen::Infinity>();
