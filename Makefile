@@ -5,7 +5,7 @@ PY      ?= python3
 BUILD   ?= build
 APT_PKGS = libeigen3-dev libsuitesparse-dev libopenblas0-pthread doctest-dev
 PIP_PKGS = "numpy>=1.23" "scipy>=1.9" "pyamg>=5.0" "pybind11>=2.12" "scikit-build-core>=0.8" "matplotlib>=3.5" \
-           "pytest>=7" "hypothesis>=6" "piqp>=0.4" ninja "cmake>=3.18"
+           "pytest>=7" "hypothesis>=6" "piqp>=0.4" "scikit-fem>=8" ninja "cmake>=3.18"
 SUDO    := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # Every recipe line fails on the first failing command, including inside a pipe: a failed
 # build must fail `make demo` and `make test`, never leave an older nrmicp importable.

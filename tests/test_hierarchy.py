@@ -81,6 +81,11 @@ def test_amg_prolongations_pass_options_to_pyamg():
     assert len(amg_prolongations(A, max_levels=2)) == 1
 
 
+def test_amg_prolongations_reject_an_unknown_option_by_name():
+    with pytest.raises(TypeError, match="strenght"):
+        amg_prolongations(laplacian_2d(8), strenght=0.5)
+
+
 def test_amg_prolongations_do_not_mutate_A():
     A = laplacian_2d(16)
     before = A.copy()

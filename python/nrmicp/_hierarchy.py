@@ -5,8 +5,11 @@ l, shape (n_l, n_{l+1}), level 0 being the problem itself (n_0 = n). The coarse 
 are the Galerkin ones, A_{l+1} = P_lᵀ A_l P_l and q_{l+1} = P_lᵀ q_l; the C++ solver takes the
 list and solves coarse to fine. Building it is this module's job:
 
-- ``"amg"``: classical Ruge–Stüben prolongations from pyamg (no grid needed). For an
-  M-matrix they are nonnegative, so a prolongated feasible start stays close to feasible.
+- ``"amg"``: classical Ruge–Stüben prolongations (no grid needed), the first level built on an
+  auxiliary M-matrix (A's positive off-diagonals lumped into the diagonal) with Jacobi-improved
+  interpolation, the coarser ones by pyamg. Nonnegative, so a prolongated feasible start stays
+  feasible; on finite-element matrices (P2: no M-matrix) the coarse problems then predict the
+  fine active set (docs/finite_elements.md has the measurements).
 - a list of matrices: a geometric hierarchy (the grid scenes offer theirs as
   ``Problem.prolongations``), checked here.
 - None: no hierarchy (a cold start).
@@ -27,36 +30,122 @@ __all__ = ["amg_prolongations", "resolve_hierarchy"]
 # nested active-set Newton of benchmarks/newton_prototype.py) it gave 7 → 10 finest-level
 # steps where 'symmetric' strength gave 17 → 53 (cold start: 21 → 57); at ε = 0.1, 3 steps
 # flat (m = 63 → 255).
-_RS_DEFAULTS = {"strength": ("classical", {"theta": 0.25}), "max_coarse": 10, "max_levels": 30}
+# sweeps/truncate: 3 sweeps truncated at 0.2 took P2 (n = 130,561) to 6 finest steps, 2.4 CPU s;
+# 2 and 4 sweeps, or truncation at 0.1 / 0.05 / 0.3, took 6-9 steps and 2.0-3.8 s.
+# aux_levels = 1: the auxiliary level on the finest operator only, pyamg's own RS below; on
+# every level the grid obstacles' coarse levels took more steps (2D n = 1M: 13 against 7 on
+# level 1, 2x the CPU time) and P2 gained nothing (6 finest steps either way).
+_RS_DEFAULTS = {"theta": 0.25, "max_coarse": 10, "max_levels": 30, "sweeps": 3, "truncate": 0.2, "aux_levels": 1}
 
 
 def _pyamg():
     try:
-        import pyamg
+        import pyamg  # noqa: F401
+        from pyamg.classical import split
+        from pyamg.classical.interpolate import direct_interpolation
+        from pyamg.strength import classical_strength_of_connection
     except ImportError as exc:
         raise ImportError(
             "hierarchy='amg' needs pyamg (pip install pyamg); pass hierarchy=None for a cold "
             "start or a list of prolongation matrices for a geometric hierarchy") from exc
-    return pyamg
+    return classical_strength_of_connection, split.RS, direct_interpolation
+
+
+def auxiliary_m_matrix(A: sp.csr_matrix) -> sp.csr_matrix:
+    """A with its positive off-diagonal entries lumped into the diagonal (row sums kept): an
+    M-matrix-like stand-in for the coarsening and the interpolation weights. A itself when A
+    has no positive off-diagonal (finite differences, P1 on Delaunay meshes)."""
+    coo = A.tocoo()
+    pos = (coo.row != coo.col) & (coo.data > 0)
+    if not pos.any():
+        return A
+    lump = np.bincount(coo.row[pos], coo.data[pos], minlength=A.shape[0])
+    B = sp.csr_matrix((np.where(pos, 0.0, coo.data), (coo.row, coo.col)), shape=A.shape)
+    B = sp.csr_matrix(B + sp.diags(lump))
+    B.eliminate_zeros()
+    return B
+
+
+def _truncate(P: sp.csr_matrix, truncate: float) -> sp.csr_matrix:
+    """P without its entries below ``truncate`` × the row's largest, each row rescaled to its former sum."""
+    P = P.tocoo()
+    row_max = np.zeros(P.shape[0])
+    np.maximum.at(row_max, P.row, np.abs(P.data))
+    keep = np.abs(P.data) >= truncate * row_max[P.row]
+    before = np.bincount(P.row, P.data, minlength=P.shape[0])
+    after = np.bincount(P.row[keep], P.data[keep], minlength=P.shape[0])
+    scale = np.divide(before, after, out=np.ones_like(before), where=after != 0)
+    return sp.csr_matrix((P.data[keep] * scale[P.row[keep]], (P.row[keep], P.col[keep])), shape=P.shape)
+
+
+def _relax_interpolation(B, P, is_c, sweeps, truncate):
+    """Jacobi sweeps on the F rows of P towards B-harmonic (ideal) interpolation,
+    P_F ← −D_F⁻¹((B_FF − D_FF) P_F + B_FC), C rows kept as identity (P stays ≥ 0 for an
+    M-matrix B), each sweep truncated (the fill of a sweep grows the V-cycle's coarse operators)."""
+    f_scale = sp.diags(np.where(is_c, 0.0, 1.0 / B.diagonal()))
+    for _ in range(sweeps):
+        P = sp.csr_matrix(P - f_scale @ (B @ P))
+        if truncate > 0:
+            P = _truncate(P, truncate)
+    return P
+
+
+def _canonical(P) -> sp.csr_matrix:
+    P = sp.csr_matrix(P, dtype=np.float64)
+    P.eliminate_zeros()
+    P.sort_indices()
+    return P
+
+
+def _auxiliary_level(A, theta, sweeps, truncate):
+    """One prolongation of A built on :func:`auxiliary_m_matrix`, or None when the splitting
+    leaves no coarse (or no fine) point."""
+    strength, rs_split, direct = _pyamg()
+    B = auxiliary_m_matrix(A)
+    if not (B.diagonal() > 0).all():   # the weights divide by it (and Newton needs it > 0 anyway)
+        return None
+    # norm='min': only negative couplings are strong (pyamg 5's 'abs' counts the positive P2
+    # couplings: 88 finest steps on P2 at n = 32,513, and P entries down to -2.7)
+    C = strength(B, theta=theta, norm="min")
+    is_c = rs_split(C).astype(bool)
+    if is_c.all() or not is_c.any():
+        return None
+    P = sp.csr_matrix(direct(B, C, is_c.astype(np.int32)))
+    return _canonical(_relax_interpolation(B, P, is_c, sweeps, truncate))
 
 
 def amg_prolongations(A, **opts) -> list:
-    """Classical (Ruge–Stüben) AMG prolongations of A, finest first.
+    """Classical (Ruge–Stüben) AMG prolongations of A, finest first, built for nested iteration.
 
-    ``opts`` go to ``pyamg.ruge_stuben_solver`` (e.g. ``strength``, ``CF``,
-    ``interpolation``, ``max_coarse``, ``max_levels``); the defaults are
-    classical strength with θ = 0.25, coarsening down to at most 10 unknowns. Works for
-    nonsymmetric A (the strength measure reads A's rows). Returns a list of float64
-    canonical ``scipy.sparse.csr_matrix``, P_l of shape (n_l, n_{l+1}); ``[]`` when A is
-    already small enough to be the coarsest level.
+    The first ``aux_levels`` levels: the coarsening (RS C/F splitting of the classical strength
+    with ``theta``) and the direct-interpolation weights come from :func:`auxiliary_m_matrix` of
+    the level's operator, so P ≥ 0 also when A is no M-matrix (P2/P3 finite elements); the
+    weights are then improved by ``sweeps`` Jacobi sweeps on the F rows (exact for what the
+    auxiliary matrix annihilates: constants), each truncated at ``truncate`` × the row maximum
+    (row sums kept); the next operator is the true Galerkin product PᵀAP. Below: pyamg's
+    ``ruge_stuben_solver`` (classical strength θ, classical interpolation).
+    Options (defaults): ``theta`` (0.25), ``max_coarse`` (10), ``max_levels`` (30), ``sweeps``
+    (3), ``truncate`` (0.2), ``aux_levels`` (1). Works for nonsymmetric A (the strength reads
+    A's rows). Returns a list of float64 canonical ``scipy.sparse.csr_matrix``, P_l of shape
+    (n_l, n_{l+1}); ``[]`` when A is already small enough to be the coarsest level.
     """
-    pyamg = _pyamg()
+    _pyamg()
     A = sp.csr_matrix(A, dtype=np.float64)
     if A.shape[0] != A.shape[1]:
         raise ValueError(f"A must be square, got shape {A.shape}")
+    unknown = set(opts) - set(_RS_DEFAULTS)
+    if unknown:
+        raise TypeError(f"amg_prolongations got unknown options {sorted(unknown)}; known: {sorted(_RS_DEFAULTS)}")
     kw = {**_RS_DEFAULTS, **opts}
-    if A.shape[0] <= kw["max_coarse"]:
-        return []
+    out = []
+    while len(out) < kw["aux_levels"] and A.shape[0] > kw["max_coarse"] and len(out) < kw["max_levels"] - 1:
+        P = _auxiliary_level(A, kw["theta"], kw["sweeps"], kw["truncate"])
+        if P is None:
+            return out
+        out.append(P)
+        A_fine, A = A, sp.csr_matrix(P.T @ (A @ P))
+    if A.shape[0] <= kw["max_coarse"] or len(out) >= kw["max_levels"] - 1:
+        return out
     # A first coarse operator denser than A (7-point 3D: 546k unknowns, 18.7 nonzeros a row
     # against 6.9) costs more per V-cycle and per Newton step than the finest level: it is then
     # folded into the next (P_0 P_1, nonnegative), whose levels use direct interpolation (a
@@ -65,27 +154,17 @@ def amg_prolongations(A, **opts) -> list:
     # Folding the 2D 5-point first level (not denser) took 13 finest steps instead of 3;
     # θ = 0.5 changed nothing on the 7-point stencil (all its connections are equally strong);
     # PMIS with direct interpolation took 18-26 finest steps.
-    first = pyamg.ruge_stuben_solver(A, **{**kw, "max_levels": 2})
-    if len(first.levels) < 2:
-        return []
-    P0, A1 = first.levels[0].P, first.levels[1].A
-    out = [P0]
-    if A1.shape[0] > kw["max_coarse"] and kw["max_levels"] > 2:
-        dense = A1.nnz > A.nnz
-        kw1 = {**kw, "max_levels": kw["max_levels"] - 1}
-        rest = pyamg.ruge_stuben_solver(A1, **({**kw1, "interpolation": "direct"} if dense and "interpolation" not in opts
-                                               else kw1))
-        out += [level.P for level in rest.levels[:-1]]
-        if dense and len(out) > 1:
-            out[:2] = [out[0] @ out[1]]
-    return [_canonical(P) for P in out]
-
-
-def _canonical(P):
-    P = sp.csr_matrix(P, dtype=np.float64)
-    P.eliminate_zeros()
-    P.sort_indices()
-    return P
+    # "denser" = 1.2x A's nonzeros: 7-point 3D gives 1.26-1.33; P1 on the Delaunay disk 1.01-1.07,
+    # where folding took 7 finest steps instead of 5 at n = 8,000
+    dense = len(out) == 1 and A.nnz > 1.2 * A_fine.nnz
+    import pyamg
+    ml = pyamg.ruge_stuben_solver(A, strength=("classical", {"theta": kw["theta"]}), max_coarse=kw["max_coarse"],
+                                  max_levels=kw["max_levels"] - len(out),
+                                  interpolation="direct" if dense else "classical")
+    out += [_canonical(level.P) for level in ml.levels[:-1]]
+    if dense and len(out) > 1:
+        out[:2] = [_canonical(out[0] @ out[1])]
+    return out
 
 
 def resolve_hierarchy(hierarchy, A) -> list | None:

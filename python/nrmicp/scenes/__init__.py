@@ -30,6 +30,11 @@ Scenes (one module per family):
 :func:`impulse_control`   1D impulse-control QVI: ζ(z)_i = max_{j≥i} z_j − cost
 :func:`american_put`      one Rannacher/Crank–Nicolson step of an American put;
                           :func:`american_put_price` marches all steps with one Solver
+:func:`fe_obstacle`       membrane over an off-centre obstacle, P1/P2/P3 finite elements
+                          on nested refinements (scikit-fem, imported on use); its
+                          ``prolongations()`` are the mesh hierarchy's interpolation
+:func:`contact_disk_p1`   P1 elements on a Delaunay mesh of scattered points, no grid and
+                          no mesh hierarchy (numpy/scipy only)
 =======================  ==========================================================
 
 ``z_exact`` is the exact solution *of the discrete problem* (what an iterative solver
@@ -71,6 +76,8 @@ __all__ = [
     "american_put",
     "american_put_price",
     "binomial_american_put",
+    "fe_obstacle",
+    "contact_disk_p1",
     "solve_exact_obstacle",
     "evaluate_zeta",
     "NAMES",
@@ -173,8 +180,11 @@ class Problem:
         Linear / bilinear / trilinear interpolation on the scene's grid, finest first (P_l of
         shape (n_l, n_{l+1})), halving every axis while the node counts are odd, so a grid
         of m = 2^k − 1 nodes per axis coarsens to a single node. None when the scene has no
-        grid or its node counts are even (use ``hierarchy="amg"`` there).
+        grid or its node counts are even (use ``hierarchy="amg"`` there). A scene with a mesh
+        hierarchy of its own (finite elements) keeps a builder in ``reference["prolongations"]``.
         """
+        if callable(self.reference.get("prolongations")):
+            return self.reference["prolongations"]() or None
         if self.grid is None:
             return None
         from ._operators import grid_prolongations
@@ -196,5 +206,7 @@ from .p_matrix import p_matrix_cycling  # noqa: E402
 from .thermoforming import thermoforming_1d, thermoforming_2d  # noqa: E402
 from .impulse import impulse_control  # noqa: E402
 from .american import american_put, american_put_price, binomial_american_put  # noqa: E402
+from .finite_elements import fe_obstacle  # noqa: E402  (scikit-fem is imported when a scene is built)
+from .unstructured import contact_disk_p1  # noqa: E402
 
 from ._registry import NAMES, SIZES, build, catalog, parameter, scaled_lcp  # noqa: E402

@@ -23,16 +23,16 @@ import scipy.sparse as sp
 #: Every scene the registry builds, in the order of the family sweep's panels.
 NAMES = ("bai_sym_lcp", "bai_nonsym_lcp", "bai_sym_icp", "bai_nonsym_icp", "bai_sym_affine",
          "obstacle_1d", "obstacle_2d", "obstacle_3d", "convection_obstacle", "p_matrix_cycling",
-         "thermoforming_1d", "thermoforming_2d", "impulse_control", "american_put")
+         "thermoforming_1d", "thermoforming_2d", "impulse_control", "american_put", "contact_disk_p1")
 
 _PARAMS = ("bai", "obstacle_1d", "obstacle_2d", "obstacle_3d", "convection_obstacle", "p_matrix_cycling",
-           "thermoforming_1d", "thermoforming_2d", "impulse_control", "american_put")
+           "thermoforming_1d", "thermoforming_2d", "impulse_control", "american_put", "contact_disk_p1")
 SIZES = {
-    "tiny":      dict(zip(_PARAMS, (8, 63, 8, 6, 8, 4, 63, 8, 33, 100))),
-    "small":     dict(zip(_PARAMS, (64, 255, 32, 12, 32, 64, 255, 32, 65, 1600))),
-    "medium":    dict(zip(_PARAMS, (128, 1023, 64, 20, 64, 256, 1023, 64, 129, 3200))),
-    "large":     dict(zip(_PARAMS, (256, 4095, 128, 32, 128, 1024, 4095, 128, 255, 6400))),
-    "realistic": dict(zip(_PARAMS, (512, 65535, 511, 47, 511, 4096, 65535, 127, 1023, 3200))),
+    "tiny":      dict(zip(_PARAMS, (8, 63, 8, 6, 8, 4, 63, 8, 33, 100, 64))),
+    "small":     dict(zip(_PARAMS, (64, 255, 32, 12, 32, 64, 255, 32, 65, 1600, 1024))),
+    "medium":    dict(zip(_PARAMS, (128, 1023, 64, 20, 64, 256, 1023, 64, 129, 3200, 4096))),
+    "large":     dict(zip(_PARAMS, (256, 4095, 128, 32, 128, 1024, 4095, 128, 255, 6400, 16384))),
+    "realistic": dict(zip(_PARAMS, (512, 65535, 511, 47, 511, 4096, 65535, 127, 1023, 3200, 131072))),
 }
 
 
@@ -46,8 +46,8 @@ def parameter(name: str, size: str) -> int:
 def build(name: str, size: str = "small", *, exact=None):
     """The :class:`nrmicp.scenes.Problem` named ``name`` at ``size``. ``exact``: compute the
     exact discrete solution (None: the scene's default; False saves the reference solve)."""
-    from . import (american_put, bai, convection_diffusion_obstacle, impulse_control, obstacle_1d, obstacle_2d,
-                   obstacle_3d, p_matrix_cycling, thermoforming_1d, thermoforming_2d)
+    from . import (american_put, bai, contact_disk_p1, convection_diffusion_obstacle, impulse_control, obstacle_1d,
+                   obstacle_2d, obstacle_3d, p_matrix_cycling, thermoforming_1d, thermoforming_2d)
 
     if name not in NAMES:
         raise ValueError(f"unknown scene {name!r}; choose from {', '.join(NAMES)}")
@@ -62,7 +62,8 @@ def build(name: str, size: str = "small", *, exact=None):
         return american_put(n_space=m, **kw)
     builders = {"obstacle_1d": obstacle_1d, "obstacle_2d": obstacle_2d, "obstacle_3d": obstacle_3d,
                 "convection_obstacle": convection_diffusion_obstacle, "thermoforming_1d": thermoforming_1d,
-                "thermoforming_2d": thermoforming_2d, "impulse_control": impulse_control}
+                "thermoforming_2d": thermoforming_2d, "impulse_control": impulse_control,
+                "contact_disk_p1": contact_disk_p1}
     return builders[name](m, **kw)
 
 

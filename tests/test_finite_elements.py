@@ -1,0 +1,146 @@
+"""Finite-element matrices users bring (issue 17): the scikit-fem P1/P2 obstacle scenes, the
+numpy-only unstructured P1 scene, and the algebraic hierarchy on them. Properties, not timings:
+finest-level Newton steps flat under refinement with hierarchy="amg", agreement with the
+independent policy-iteration solution, complementarity. Small sizes (n <= 8,065)."""
+import sys
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+nrmicp = pytest.importorskip("nrmicp")
+pytest.importorskip("pyamg")
+from nrmicp._hierarchy import amg_prolongations, auxiliary_m_matrix  # noqa: E402
+from nrmicp.scenes.unstructured import contact_disk_p1  # noqa: E402
+
+TOL = 1e-9
+
+
+def fe(element, r, exact=None):
+    pytest.importorskip("skfem")
+    from nrmicp.scenes.finite_elements import fe_obstacle
+    return fe_obstacle(element, r, exact=exact)
+
+
+def assert_complementary(problem, z, tol=1e-8):
+    w, g = problem.parts(z)
+    scale = np.abs(problem.q).max() + np.abs(problem.A @ z).max()
+    assert w.min() >= -tol * scale and g.min() >= -tol
+    assert np.abs(np.minimum(w, g)).max() <= tol * scale
+
+
+# ---------------------------------------------------------------- finest steps flat (amg)
+
+@pytest.mark.parametrize("element, sizes", [("P1", (2, 3)), ("P2", (1, 2))])
+def test_amg_finest_steps_stay_flat_under_refinement_on_finite_elements(element, sizes):
+    # before the auxiliary-matrix hierarchy: P2 took 36 finest steps at r = 2 (n = 8,065)
+    steps = [fe(element, r, exact=False).solve(method="newton", hierarchy="amg", tol=TOL).level_steps[0]
+             for r in sizes]
+    assert max(steps) <= 5 and steps[1] <= steps[0] + 1, steps
+
+
+def test_amg_finest_steps_stay_flat_on_the_unstructured_disk():
+    steps = [contact_disk_p1(n, exact=False).solve(method="newton", hierarchy="amg", tol=TOL).level_steps[0]
+             for n in (2_000, 8_000)]
+    assert max(steps) <= 5 and steps[1] <= steps[0] + 1, steps
+
+
+# ---------------------------------------------------------------- agreement with the reference
+
+@pytest.mark.parametrize("element, r", [("P1", 2), ("P2", 1)])
+@pytest.mark.parametrize("hierarchy", ["amg", "fe"])
+def test_newton_agrees_with_policy_iteration_on_finite_elements(element, r, hierarchy):
+    problem = fe(element, r, exact=True)
+    h = problem.prolongations() if hierarchy == "fe" else "amg"
+    res = problem.solve(method="newton", hierarchy=h, tol=1e-11)
+    assert res.success
+    assert np.abs(res.z - problem.z_exact).max() <= 1e-10 * max(1.0, np.abs(problem.z_exact).max())
+    assert_complementary(problem, res.z)
+
+
+def test_newton_agrees_with_policy_iteration_on_the_unstructured_disk():
+    problem = contact_disk_p1(3_000)
+    res = problem.solve(method="newton", hierarchy="amg", tol=1e-11)
+    assert res.success
+    assert np.abs(res.z - problem.z_exact).max() <= 1e-10
+    assert_complementary(problem, res.z)
+
+
+def test_p2_obstacle_has_contact_and_a_free_region():
+    problem = fe("P2", 1, exact=True)
+    contact = np.isclose(problem.z_exact, problem.zeta, atol=1e-12)
+    assert 0.02 * problem.n < contact.sum() < 0.5 * problem.n
+
+
+# ---------------------------------------------------------------- the scenes' matrices
+
+def test_p2_stiffness_is_spd_but_no_m_matrix():
+    A = fe("P2", 0, exact=False).A
+    off = A - sp.diags(A.diagonal())
+    assert (off.data > 1e-12).sum() > 0                    # positive off-diagonals
+    assert abs(A - A.T).max() <= 1e-12 * abs(A).max()
+    assert np.linalg.eigvalsh(A.toarray()).min() > 0
+
+
+def test_fe_interpolation_is_the_coarse_p2_function_at_the_fine_nodes():
+    pytest.importorskip("skfem")
+    from nrmicp.scenes import finite_elements as fem
+    P = fem.fe_interpolation("P2", 1)[0]
+    fine, coarse = fem._basis("P2", 1), fem._basis("P2", 0)
+    xf = fine.doflocs[:, fem._interior(fine)]
+    f = lambda xy: 1.0 - xy[0] ** 2 - 0.5 * xy[1] ** 2 + 0.3 * xy[0] * xy[1]  # noqa: E731
+    # with the coarse boundary values, a quadratic is reproduced exactly (P2 spaces are nested) ...
+    full = coarse.probes(xf).tocsr()
+    assert np.allclose(full @ f(coarse.doflocs), f(xf), atol=1e-12)
+    # ... and the hierarchy's P is that interpolation on the interior (Dirichlet) unknowns
+    assert abs(P - full[:, fem._interior(coarse)]).max() <= 1e-12
+    assert P.data.min() < 0                                 # P2's own interpolation has −1/8 weights
+
+
+def test_unstructured_scene_is_symmetric_with_zero_row_sums_inside():
+    problem = contact_disk_p1(1_000, exact=False)
+    A = problem.A
+    assert abs(A - A.T).max() <= 1e-12 * abs(A).max()
+    assert problem.grid is None and problem.prolongations() is None
+
+
+def test_fe_scene_names_scikit_fem_when_it_is_missing(monkeypatch):
+    from nrmicp.scenes import finite_elements as fem
+    monkeypatch.setitem(sys.modules, "skfem", None)
+    with pytest.raises(ImportError, match="scikit-fem"):
+        fem.fe_obstacle("P1", 0)
+
+
+@pytest.mark.parametrize("bad", [dict(element="P4"), dict(refinements=-1), dict(refinements=2.0)])
+def test_fe_scene_rejects_bad_arguments_by_name(bad):
+    from nrmicp.scenes import finite_elements as fem
+    args = {"element": "P1", "refinements": 0, **bad}
+    with pytest.raises(ValueError, match=next(iter(bad))):
+        fem.fe_obstacle(**args)
+
+
+# ---------------------------------------------------------------- the hierarchy on P2
+
+def test_auxiliary_matrix_lumps_positive_couplings_and_keeps_row_sums():
+    A = fe("P2", 0, exact=False).A
+    B = auxiliary_m_matrix(A)
+    off = B - sp.diags(B.diagonal())
+    assert off.data.max() <= 0
+    assert np.allclose(np.asarray(B.sum(axis=1)).ravel(), np.asarray(A.sum(axis=1)).ravel())
+    assert (A != A.copy()).nnz == 0
+
+
+def test_amg_prolongations_of_p2_are_nonnegative_and_exact_for_constants_inside():
+    A = fe("P2", 1, exact=False).A
+    Ps = amg_prolongations(A)
+    assert all(P.data.min() >= 0 for P in Ps)
+    # rows more than 5 couplings away from a boundary row (nonzero row sum) interpolate constants
+    # exactly (direct interpolation: 1 coupling, 3 sweeps, 1 to spare)
+    near = (np.abs(np.asarray(A.sum(axis=1)).ravel()) > 1e-10).astype(float)
+    graph = (abs(A) > 0).astype(float)
+    for _ in range(5):
+        near = graph @ near
+    inside = near == 0
+    assert inside.sum() > 0.2 * A.shape[0]
+    sums = np.asarray(Ps[0].sum(axis=1)).ravel()
+    assert np.allclose(sums[inside], 1.0)
