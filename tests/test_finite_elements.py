@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-nrmicp = pytest.importorskip("nrmicp")
-pytest.importorskip("pyamg")
+import nrmicp
+import pyamg  # noqa: F401  (required: a missing one fails, not skips)
 from nrmicp._hierarchy import amg_prolongations, auxiliary_m_matrix  # noqa: E402
 from nrmicp.scenes.unstructured import contact_disk_p1  # noqa: E402
 
@@ -17,7 +17,7 @@ TOL = 1e-9
 
 
 def fe(element, r, exact=None):
-    pytest.importorskip("skfem")
+    import skfem  # noqa: F401  (a test dependency: make deps installs it; missing fails, not skips)
     from nrmicp.scenes.finite_elements import fe_obstacle
     return fe_obstacle(element, r, exact=exact)
 
@@ -83,7 +83,7 @@ def test_p2_stiffness_is_spd_but_no_m_matrix():
 
 
 def test_fe_interpolation_is_the_coarse_p2_function_at_the_fine_nodes():
-    pytest.importorskip("skfem")
+    import skfem  # noqa: F401  (a test dependency: make deps installs it; missing fails, not skips)
     from nrmicp.scenes import finite_elements as fem
     P = fem.fe_interpolation("P2", 1)[0]
     fine, coarse = fem._basis("P2", 1), fem._basis("P2", 0)
