@@ -538,6 +538,11 @@ class _Rounds:
             tol_k, x0k = new_tol, d["z"]
             self.refined += 1
 
+    def ran_away(self) -> bool:
+        """The scaled ζ was handed a z that overflowed in the user's variables (docs/SPEC.md)."""
+        fn = self.problem[-1]
+        return isinstance(getattr(fn, "fn", None), ScaledCallable) and fn.fn.overflowed
+
     def round(self, tol_k, x0k):
         """One solve by the core at tolerance tol_k from x0k; its outcome folded in."""
         solver = self.solver
@@ -546,6 +551,11 @@ class _Rounds:
         self.core_kw["progress"] = _progress_hook(solver.method, solver.n) if opts.verbose > 0 else None
         d = solver._core.solve(*self.problem, x0k, self.cb, opts, **self.core_kw)
         status = Status(d["status"])
+        if status == Status.ZETA_FAILED and self.ran_away():
+            d["status"], d["message"] = int(Status.DIVERGED), (
+                "diverged: the iterate overflowed in the original (unscaled) variables before zeta "
+                f"could be evaluated; {d['message'].split('; ', 1)[-1]}")
+            status = Status.DIVERGED
         if status == Status.ZETA_FAILED:
             raise ValueError(f"{d['message']} (NaN or Inf)")
         z = d["z"] * solver._dc if self.scaled else d["z"]

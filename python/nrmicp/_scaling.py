@@ -86,6 +86,11 @@ class ScaledCallable:
     def __init__(self, zeta, dc: np.ndarray):
         self.zeta = zeta
         self.dc = dc
+        self.overflowed = False  # set when D_c y overflowed: the iterate ran away, ζ did not fail
 
     def __call__(self, y):
-        return self.zeta(self.dc * y) / self.dc
+        z = self.dc * y
+        if not np.all(np.isfinite(z)):  # finite in the scaled variables, not in the user's
+            self.overflowed = True
+            return np.full_like(y, np.nan)
+        return self.zeta(z) / self.dc
