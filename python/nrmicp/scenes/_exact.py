@@ -20,6 +20,13 @@ def _policy_matrix(A: sp.csr_matrix, active: np.ndarray) -> sp.csr_matrix:
     return sp.csr_matrix(keep @ A + ident)
 
 
+def exact_if_small(A, q, psi, exact, max_n: int = 20_000):
+    """A scene's ``z_exact``: :func:`solve_exact_obstacle` when ``exact`` (None: n ≤ ``max_n``)."""
+    if exact is None:
+        exact = A.shape[0] <= max_n
+    return solve_exact_obstacle(A, q, psi) if exact else None
+
+
 def solve_exact_obstacle(A, q, psi, z0=None, maxiter: int = 500) -> np.ndarray:
     """Exact solution of min(A z + q, z − ψ) = 0 (constant obstacle ψ), A an M-matrix.
 

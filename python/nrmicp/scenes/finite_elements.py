@@ -140,13 +140,8 @@ def fe_obstacle(element: str = "P2", refinements: int = 3, exact=None) -> Proble
     x, y = basis.doflocs[:, interior]
     psi = 0.1 - (x - _CENTRE[0]) ** 2 - (y - _CENTRE[1]) ** 2
     q = -np.asarray(load[interior], dtype=np.float64)
-    n = A.shape[0]
-    if exact is None:
-        exact = n <= 20_000
-    z_exact = None
-    if exact:
-        from ._exact import solve_exact_obstacle
-        z_exact = solve_exact_obstacle(A, q, psi)
+    from ._exact import exact_if_small
+    z_exact = exact_if_small(A, q, psi, exact)
     return Problem(
         name=f"fe_obstacle({element}, r={refinements})", A=A, q=q, zeta=psi, z_exact=z_exact,
         reference={"x": x, "y": y, "element": element, "refinements": refinements,

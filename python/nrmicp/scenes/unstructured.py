@@ -72,12 +72,8 @@ def contact_disk_p1(n: int = 20_000, exact=None) -> Problem:
     x, y = points[:n_in, 0], points[:n_in, 1]
     psi = np.maximum(0.05 - (x - 0.35) ** 2 - (y - 0.1) ** 2, 0.02 - 2.0 * ((x + 0.3) ** 2 + (y + 0.25) ** 2))
     q = 2.0 * mass[:n_in]                              # q = −∫fφ, f = −2
-    if exact is None:
-        exact = n_in <= 20_000
-    z_exact = None
-    if exact:
-        from ._exact import solve_exact_obstacle
-        z_exact = solve_exact_obstacle(A, q, psi)
+    from ._exact import exact_if_small
+    z_exact = exact_if_small(A, q, psi, exact)
     return Problem(
         name=f"contact_disk_p1(n={n_in})", A=A, q=q, zeta=psi, z_exact=z_exact,
         reference={"x": x, "y": y, "triangles": tri},
