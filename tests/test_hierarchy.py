@@ -167,3 +167,39 @@ def test_amg_without_pyamg_says_what_to_do(monkeypatch):
     monkeypatch.setitem(sys.modules, "pyamg", None)   # import pyamg now raises ImportError
     with pytest.raises(ImportError, match=r"hierarchy='amg' needs pyamg.*hierarchy=None"):
         resolve_hierarchy("amg", laplacian_2d(8))
+
+
+def test_truncate_drops_small_entries_per_row_and_keeps_row_sums_against_a_dense_reference():
+    from nrmicp._hierarchy import _truncate
+    rng = np.random.default_rng(3)
+    D = rng.uniform(-0.2, 1.0, (40, 12)) * (rng.random((40, 12)) < 0.4)
+    D[5] = 0.0                                          # an empty row stays empty
+    got = _truncate(sp.csr_matrix(D), 0.3).toarray()
+    big = np.abs(D).max(axis=1, keepdims=True)
+    keep = (np.abs(D) >= 0.3 * big) & (D != 0)
+    want = np.where(keep, D, 0.0)
+    kept = want.sum(axis=1, keepdims=True)
+    want = want * np.divide(D.sum(axis=1, keepdims=True), kept, out=np.ones_like(kept), where=kept != 0)
+    np.testing.assert_allclose(got, want, rtol=1e-14, atol=1e-15)
+    assert not got[5].any()
+
+
+def test_relaxation_with_no_fine_fine_coupling_is_its_first_sweep():
+    # a 7-point 3D Laplacian's RS split leaves no F–F coupling: one sweep is the ideal interpolation
+    from nrmicp._hierarchy import _relax_interpolation
+    from pyamg.classical import split
+    from pyamg.classical.interpolate import direct_interpolation
+    from pyamg.strength import classical_strength_of_connection
+    t = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(9, 9))
+    eye = sp.identity(9)
+    B = sp.csr_matrix(sp.kron(sp.kron(eye, eye), t) + sp.kron(sp.kron(eye, t), eye) + sp.kron(sp.kron(t, eye), eye))
+    C = classical_strength_of_connection(B, theta=0.25, norm="min")
+    is_c = split.RS(C).astype(bool)
+    assert B[~is_c][:, ~is_c].count_nonzero() == (~is_c).sum()      # the premise: B_FF diagonal
+    P = sp.csr_matrix(direct_interpolation(B, C, is_c.astype(np.int32)))
+    ideal = np.zeros(P.shape)
+    ideal[is_c] = P.toarray()[is_c]
+    Bd = B.toarray()
+    ideal[~is_c] = -(Bd[~is_c][:, is_c] @ P.toarray()[is_c]) / np.diag(Bd)[~is_c, None]
+    got = _relax_interpolation(B, P, is_c, sweeps=3, truncate=0.0).toarray()
+    np.testing.assert_allclose(got, ideal, rtol=1e-14, atol=1e-15)

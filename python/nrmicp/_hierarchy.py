@@ -68,14 +68,21 @@ def auxiliary_m_matrix(A: sp.csr_matrix) -> sp.csr_matrix:
 
 def _truncate(P: sp.csr_matrix, truncate: float) -> sp.csr_matrix:
     """P without its entries below ``truncate`` × the row's largest, each row rescaled to its former sum."""
-    P = P.tocoo()
-    row_max = np.zeros(P.shape[0])
-    np.maximum.at(row_max, P.row, np.abs(P.data))
-    keep = np.abs(P.data) >= truncate * row_max[P.row]
-    before = np.bincount(P.row, P.data, minlength=P.shape[0])
-    after = np.bincount(P.row[keep], P.data[keep], minlength=P.shape[0])
+    P = sp.csr_matrix(P)
+    P.sum_duplicates()
+    n = P.shape[0]
+    counts = np.diff(P.indptr)
+    rows = np.repeat(np.arange(n), counts)
+    magnitude = np.abs(P.data)
+    row_max = np.zeros(n)
+    filled = counts > 0     # reduceat per row on CSR: np.maximum.at is 10x slower (3D set-up)
+    row_max[filled] = np.maximum.reduceat(magnitude, P.indptr[:-1][filled])
+    keep = magnitude >= truncate * row_max[rows]
+    before = np.bincount(rows, P.data, minlength=n)
+    after = np.bincount(rows[keep], P.data[keep], minlength=n)
     scale = np.divide(before, after, out=np.ones_like(before), where=after != 0)
-    return sp.csr_matrix((P.data[keep] * scale[P.row[keep]], (P.row[keep], P.col[keep])), shape=P.shape)
+    indptr = np.concatenate(([0], np.cumsum(np.bincount(rows[keep], minlength=n))))
+    return sp.csr_matrix((P.data[keep] * scale[rows[keep]], P.indices[keep], indptr), shape=P.shape)
 
 
 def _relax_interpolation(B, P, is_c, sweeps, truncate):
@@ -83,6 +90,9 @@ def _relax_interpolation(B, P, is_c, sweeps, truncate):
     P_F ← −D_F⁻¹((B_FF − D_FF) P_F + B_FC), C rows kept as identity (P stays ≥ 0 for an
     M-matrix B), each sweep truncated (the fill of a sweep grows the V-cycle's coarse operators)."""
     f_scale = sp.diags(np.where(is_c, 0.0, 1.0 / B.diagonal()))
+    B_FF = B[~is_c][:, ~is_c]
+    if B_FF.count_nonzero() == np.count_nonzero(B_FF.diagonal()):
+        sweeps = min(sweeps, 1)     # no F–F coupling (7-point 3D): a sweep ignores P_F, the rest repeat it
     for _ in range(sweeps):
         P = sp.csr_matrix(P - f_scale @ (B @ P))
         if truncate > 0:
