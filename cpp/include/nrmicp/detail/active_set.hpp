@@ -126,9 +126,9 @@ class ActiveSetSystem {
   using Vector = Eigen::VectorXd;
 
   /// B == nullptr: the (shifted) LCP. The symbolic analysis happens here, once.
-  /// `below`: the prolongations below this level, for the iterative solve (detail/multigrid.hpp).
+  /// `below`: the levels below this one, for the iterative solve (detail/multigrid.hpp).
   template <typename MatrixType>
-  ActiveSetSystem(const MatrixType& A, const RowMatrix* B, Inner inner, Prolongations<StorageIndex> below = {})
+  ActiveSetSystem(const MatrixType& A, const RowMatrix* B, Inner inner, Hierarchy<StorageIndex> below = {})
       : lcp_(B == nullptr), inner_(inner) {
     if (lcp_ && has_full_diagonal(A))
       use_pattern_of(A);
