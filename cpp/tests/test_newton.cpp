@@ -212,8 +212,9 @@ TEST_CASE("inner = cg on a nonsymmetric A: BiCGSTAB preconditioned by the V-cycl
 TEST_CASE("a Krylov solve that does not converge is redone by the direct solve: the exact step") {
   const int m = 15;
   const RowMat A = convection_2d(m, 40.0, 20.0);
-  std::vector<RowMat> P{interpolation_2d(m)}, R{RowMat(P[0].transpose())};
-  detail::ActiveSetSystem<int> iterative(A, nullptr, Inner::CG, {P.data(), R.data(), 1});
+  detail::Level<int> coarse{interpolation_2d(m), {}, {}};
+  coarse.R = coarse.P.transpose();  // the V-cycle reads P and R; A is the Newton member's
+  detail::ActiveSetSystem<int> iterative(A, nullptr, Inner::CG, {&coarse, 1});
   detail::ActiveSetSystem<int> direct(A, nullptr, Inner::Umfpack);
   CHECK(std::string(iterative.inner_name()) == "bicgstab");
   std::vector<char> inactive(m * m);

@@ -162,6 +162,69 @@ void check_umfpack(int status, const std::string& what) {
 }
 #endif
 
+/// The backends `Inner::Auto` chooses: CHOLMOD for a symmetric matrix with a positive diagonal
+/// (a Cholesky that then fails means not positive definite: LU instead), else UMFPACK; Eigen's
+/// own solvers in a build without SuiteSparse.
+inline Inner cholesky_backend() { return have_cholmod() ? Inner::Cholmod : Inner::EigenLLT; }
+inline Inner lu_backend() { return have_umfpack() ? Inner::Umfpack : Inner::EigenLU; }
+inline Inner resolve_backend(Inner kind, bool spd_candidate) {
+  if (kind != Inner::Auto) return kind;
+  return spd_candidate ? cholesky_backend() : lu_backend();
+}
+
+#if defined(NRMICP_HAVE_CHOLMOD)
+/// Eigen's CHOLMOD LLᵀ, silent (CHOLMOD prints warnings to stdout; a library must not), and able
+/// to say whether cholmod_analyze made a factor (Eigen's wrapper dereferences one it did not).
+template <typename ColMatrix>
+struct CholmodLLT : Eigen::CholmodSupernodalLLT<ColMatrix, Eigen::Lower> {
+  CholmodLLT() { this->cholmod().print = 0; }
+  bool has_factor() const { return this->m_cholmodFactor != nullptr; }
+};
+#endif
+#if defined(NRMICP_HAVE_UMFPACK)
+/// Eigen's UMFPACK LU, with UMFPACK's status.
+template <typename ColMatrix>
+struct UmfpackLU : Eigen::UmfPackLU<ColMatrix> {
+  int status() const { return static_cast<int>(this->m_fact_errorCode); }
+};
+#endif
+
+template <typename T>
+struct Backend {
+  using type = T;
+};
+
+/// f(Backend<S>{}) for the Eigen solver type S of the concrete backend `k` (not Auto: resolve it
+/// first); throws std::invalid_argument for a backend this build lacks, and for 'cg'.
+template <typename ColMatrix, typename F>
+decltype(auto) with_backend(Inner k, F&& f) {
+  using StorageIndex = typename ColMatrix::StorageIndex;
+  switch (k) {
+    case Inner::Cholmod:
+#if defined(NRMICP_HAVE_CHOLMOD)
+      return f(Backend<CholmodLLT<ColMatrix>>{});
+#else
+      throw std::invalid_argument("inner = 'cholmod' but this build has no CHOLMOD (SuiteSparse was not found)");
+#endif
+    case Inner::Umfpack:
+#if defined(NRMICP_HAVE_UMFPACK)
+      return f(Backend<UmfpackLU<ColMatrix>>{});
+#else
+      throw std::invalid_argument("inner = 'umfpack' but this build has no UMFPACK (SuiteSparse was not found)");
+#endif
+    case Inner::EigenLLT:
+      return f(Backend<Eigen::SimplicialLLT<ColMatrix, Eigen::Lower, Eigen::AMDOrdering<StorageIndex>>>{});
+    case Inner::EigenLU:
+      // COLAMD: AMD ordering took 450 s at n = 250,000 on this machine, COLAMD 2.5 s.
+      return f(Backend<Eigen::SparseLU<ColMatrix, Eigen::COLAMDOrdering<StorageIndex>>>{});
+    case Inner::CG:
+      throw std::invalid_argument("inner = 'cg' is the iterative inner solve of method 'newton' only; the "
+                                  "stationary members factorize their matrices (use 'auto' or a direct backend)");
+    case Inner::Auto: break;
+  }
+  throw std::logic_error("with_backend: inner = 'auto' must be resolved first (resolve_backend)");
+}
+
 }  // namespace detail
 
 /// Factorizes a sparse matrix once and solves with it many times. Keeps its own copy of the
@@ -183,11 +246,8 @@ class InnerSolver {
                                    " has no nonzero entry (every factorization fails on it)");
     if (kind == Inner::Auto) {
       const bool spd_candidate = detail::is_symmetric(M) && detail::has_positive_diagonal(M);
-      if (spd_candidate) {
-        // Cholesky fails cleanly on an indefinite matrix; fall back to LU then.
-        if (try_compute(M, have_cholmod() ? Inner::Cholmod : Inner::EigenLLT, what)) return;
-      }
-      if (try_compute(M, have_umfpack() ? Inner::Umfpack : Inner::EigenLU, what)) return;
+      if (spd_candidate && try_compute(M, detail::cholesky_backend(), what)) return;  // else LU
+      if (try_compute(M, detail::lu_backend(), what)) return;
       throw FactorizationError(FactorizationError::Reason::Singular,
                                "InnerSolver: factorization of " + what + " failed (the matrix is singular)");
     }
@@ -214,13 +274,7 @@ class InnerSolver {
     virtual const ColMatrix& matrix() const = 0;
   };
 #if defined(NRMICP_HAVE_CHOLMOD)
-  // Eigen's CHOLMOD wrapper dereferences a factor that cholmod_analyze failed to make: the
-  // status is checked here between the two phases.
-  struct CholmodLLT : Eigen::CholmodSupernodalLLT<ColMatrix, Eigen::Lower> {
-    bool has_factor() const { return this->m_cholmodFactor != nullptr; }
-  };
-  static bool factorize(CholmodLLT& s, const ColMatrix& M, const std::string& what) {
-    s.cholmod().print = 0;  // CHOLMOD prints warnings to stdout; a library must not
+  static bool factorize(detail::CholmodLLT<ColMatrix>& s, const ColMatrix& M, const std::string& what) {
     s.analyzePattern(M);
     detail::check_cholmod<StorageIndex>(s.cholmod().status, s.has_factor(), what);
     s.factorize(M);
@@ -229,10 +283,7 @@ class InnerSolver {
   }
 #endif
 #if defined(NRMICP_HAVE_UMFPACK)
-  struct UmfpackLU : Eigen::UmfPackLU<ColMatrix> {
-    int status() const { return static_cast<int>(this->m_fact_errorCode); }
-  };
-  static bool factorize(UmfpackLU& s, const ColMatrix& M, const std::string& what) {
+  static bool factorize(detail::UmfpackLU<ColMatrix>& s, const ColMatrix& M, const std::string& what) {
     s.analyzePattern(M);
     detail::check_umfpack<StorageIndex>(s.status(), what);
     s.factorize(M);
@@ -266,30 +317,8 @@ class InnerSolver {
   }
 
   bool try_compute(const ColMatrix& M, Inner k, const std::string& what) {
-    switch (k) {
-      case Inner::Cholmod:
-#if defined(NRMICP_HAVE_CHOLMOD)
-        return emplace<CholmodLLT>(M, k, what);
-#else
-        throw std::invalid_argument("inner = 'cholmod' but this build has no CHOLMOD (SuiteSparse was not found)");
-#endif
-      case Inner::Umfpack:
-#if defined(NRMICP_HAVE_UMFPACK)
-        return emplace<UmfpackLU>(M, k, what);
-#else
-        throw std::invalid_argument("inner = 'umfpack' but this build has no UMFPACK (SuiteSparse was not found)");
-#endif
-      case Inner::EigenLLT:
-        return emplace<Eigen::SimplicialLLT<ColMatrix, Eigen::Lower, Eigen::AMDOrdering<StorageIndex>>>(M, k, what);
-      case Inner::EigenLU:
-        // COLAMD: AMD ordering took 450 s at n = 250,000 on this machine, COLAMD 2.5 s.
-        return emplace<Eigen::SparseLU<ColMatrix, Eigen::COLAMDOrdering<StorageIndex>>>(M, k, what);
-      case Inner::CG:
-        throw std::invalid_argument("inner = 'cg' is the iterative inner solve of method 'newton' only; the "
-                                    "stationary members factorize their matrices (use 'auto' or a direct backend)");
-      case Inner::Auto: break;
-    }
-    return false;
+    return detail::with_backend<ColMatrix>(
+        k, [&](auto backend) { return emplace<typename decltype(backend)::type>(M, k, what); });
   }
 
   std::unique_ptr<Base> impl_;

@@ -123,7 +123,7 @@ class Newton {
   /// `options.method` is taken as Method::Newton (this class is the Newton member), so the
   /// options the Newton member does not have (phi, accelerate, z_update) are refused.
   Newton(const MatrixType& A, Options options, std::vector<RowMatrix> prolongations = {})
-      : A_(A), options_(as_newton(std::move(options))), P_(std::move(prolongations)) {
+      : A_(A), options_(as_newton(std::move(options))) {
     if (A.rows() != A.cols())
       throw std::invalid_argument("Newton: A must be square, got " + std::to_string(A.rows()) + "x" +
                                   std::to_string(A.cols()));
@@ -132,28 +132,28 @@ class Newton {
     params_ = resolve_parameters(A_, options_);
     finest_ = std::make_unique<detail::NewtonLevel<MatrixType>>(A_, options_);
     Eigen::Index rows = A.rows();
-    for (std::size_t l = 0; l < P_.size(); ++l) {
-      if (P_[l].rows() != rows || P_[l].cols() < 1 || P_[l].cols() > rows)
+    for (std::size_t l = 0; l < prolongations.size(); ++l) {
+      const RowMatrix& P = prolongations[l];
+      if (P.rows() != rows || P.cols() < 1 || P.cols() > rows)
         throw std::invalid_argument("Newton: prolongations[" + std::to_string(l) + "] has shape " +
-                                    std::to_string(P_[l].rows()) + "x" + std::to_string(P_[l].cols()) +
+                                    std::to_string(P.rows()) + "x" + std::to_string(P.cols()) +
                                     ", expected " + std::to_string(rows) + " rows and at most as many columns");
-      rows = P_[l].cols();
+      rows = P.cols();
     }
     // Galerkin coarse operators; a level whose operator has a non-positive diagonal ends the
     // hierarchy there (the active-set test needs Ω2 = diag > 0).
-    const RowMatrix* fine = nullptr;
-    for (std::size_t l = 0; l < P_.size(); ++l) {
-      const RowMatrix AP = fine ? detail::product(*fine, P_[l]) : detail::product(A_, P_[l]);
-      R_.emplace_back(P_[l].transpose());
-      auto Ac = std::make_unique<RowMatrix>(detail::product(R_.back(), AP));
-      if (!(diagonal(*Ac).array() > 0).all()) { P_.resize(l); R_.resize(l); break; }
-      Options co;
-      co.inner = options_.inner;
-      coarse_matrices_.push_back(std::move(Ac));
-      coarse_.push_back(std::make_unique<detail::NewtonLevel<RowMatrix>>(*coarse_matrices_.back(), co));
-      fine = coarse_matrices_.back().get();
+    for (auto& P : prolongations) {
+      const RowMatrix AP = hierarchy_.empty() ? detail::product(A_, P) : detail::product(hierarchy_.back().A, P);
+      detail::Level<StorageIndex> level{std::move(P), {}, {}};
+      level.R = level.P.transpose();
+      level.A = detail::product(level.R, AP);
+      if (!(diagonal(level.A).array() > 0).all()) break;
+      hierarchy_.push_back(std::move(level));
     }
-    detail::Prolongations<StorageIndex> below{P_.data(), R_.data(), P_.size()};
+    Options co;
+    co.inner = options_.inner;
+    for (auto& level : hierarchy_) coarse_.push_back(std::make_unique<detail::NewtonLevel<RowMatrix>>(level.A, co));
+    detail::Hierarchy<StorageIndex> below{hierarchy_.data(), hierarchy_.size()};
     finest_->use_hierarchy(below);
     for (auto& level : coarse_) level->use_hierarchy(below = below.below());
     setup_seconds_ = detail::ScopedTimer::seconds_since(t0);
@@ -295,7 +295,7 @@ class Newton {
       const std::size_t L = self.coarse_.size();
       std::vector<Vector> qs(L + 1);
       qs[0] = q_shift;
-      for (std::size_t l = 0; l < L; ++l) qs[l + 1] = self.R_[l] * qs[l];
+      for (std::size_t l = 0; l < L; ++l) qs[l + 1] = self.hierarchy_[l].R * qs[l];
       Vector y = Vector::Zero(L ? self.coarse_.back()->size() : q_shift.size());
       for (std::size_t l = L; l >= 1; --l) {
         const auto t0 = std::chrono::steady_clock::now();
@@ -306,7 +306,7 @@ class Newton {
         c.sweep_budget = 1000;
         const auto out = detail::newton_loop(lev, lev.lcp_system(), qs[l], nullptr, nullptr, y, c);
         absorb(out, static_cast<int>(l), detail::ScopedTimer::seconds_since(t0));
-        y = (self.P_[l - 1] * out.z).cwiseMax(0.0);  // prolongate, project onto y ≥ 0
+        y = (self.hierarchy_[l - 1].P * out.z).cwiseMax(0.0);  // prolongate, project onto y ≥ 0
       }
       return y;
     }
@@ -495,8 +495,7 @@ class Newton {
   const MatrixType& A_;
   Options options_;
   Parameters params_;
-  std::vector<RowMatrix> P_, R_;  // prolongations and their transposes
-  std::vector<std::unique_ptr<RowMatrix>> coarse_matrices_;
+  std::vector<detail::Level<StorageIndex>> hierarchy_;  // the levels below the finest: P, R, A
   std::unique_ptr<Level> finest_;
   std::vector<std::unique_ptr<CoarseLevel>> coarse_;
   double setup_seconds_ = 0;

@@ -35,13 +35,11 @@ class Refactorizer {
   using ColMatrix = Eigen::SparseMatrix<double, Eigen::ColMajor, StorageIndex>;
   using Vector = Eigen::VectorXd;
 
-  /// Analyzes K's pattern. Auto: CHOLMOD when `spd_candidate` (else UMFPACK); Eigen's solvers
-  /// without SuiteSparse. K must outlive this object (UMFPACK reads it again when solving).
+  /// Analyzes K's pattern with the backend `kind` means (detail::resolve_backend). K must outlive
+  /// this object (UMFPACK reads it again when solving).
   void analyze(const ColMatrix& K, Inner kind, bool spd_candidate) {
     kind_ = kind;
-    if (kind == Inner::Auto) kind = spd_candidate ? (have_cholmod() ? Inner::Cholmod : Inner::EigenLLT)
-                                                  : (have_umfpack() ? Inner::Umfpack : Inner::EigenLU);
-    impl_ = make(kind);
+    impl_ = make(resolve_backend(kind, spd_candidate));
     impl_->analyze(K);
   }
 
@@ -50,7 +48,7 @@ class Refactorizer {
   bool factorize(const ColMatrix& K) {
     if (impl_->factorize(K)) return true;
     if (kind_ != Inner::Auto || !impl_->cholesky) return false;
-    impl_ = make(have_umfpack() ? Inner::Umfpack : Inner::EigenLU);
+    impl_ = make(lu_backend());
     impl_->analyze(K);
     return impl_->factorize(K);
   }
@@ -70,48 +68,20 @@ class Refactorizer {
   template <typename EigenSolver>
   struct Impl : Base {
     EigenSolver solver;
-    void analyze(const ColMatrix& K) override {
-#if defined(NRMICP_HAVE_CHOLMOD)
-      if constexpr (std::is_base_of_v<Eigen::CholmodBase<ColMatrix, Eigen::Lower, EigenSolver>, EigenSolver>)
-        solver.cholmod().print = 0;  // a library does not write to the user's terminal
-#endif
-      solver.analyzePattern(K);
-    }
+    void analyze(const ColMatrix& K) override { solver.analyzePattern(K); }
     bool factorize(const ColMatrix& K) override {
       solver.factorize(K);
       return solver.info() == Eigen::Success;
     }
     void solve(const Vector& b, Vector& x) const override { x = solver.solve(b); }
   };
-  template <typename EigenSolver>
-  static std::unique_ptr<Base> impl(Inner k, bool cholesky) {
-    auto p = std::make_unique<Impl<EigenSolver>>();
-    p->name = InnerSolver<StorageIndex>::name_of(k);
-    p->cholesky = cholesky;
-    return p;
-  }
   static std::unique_ptr<Base> make(Inner k) {
-    switch (k) {
-      case Inner::Cholmod:
-#if defined(NRMICP_HAVE_CHOLMOD)
-        return impl<Eigen::CholmodSupernodalLLT<ColMatrix, Eigen::Lower>>(k, true);
-#else
-        throw std::invalid_argument("inner = 'cholmod' but this build has no CHOLMOD (SuiteSparse was not found)");
-#endif
-      case Inner::Umfpack:
-#if defined(NRMICP_HAVE_UMFPACK)
-        return impl<Eigen::UmfPackLU<ColMatrix>>(k, false);
-#else
-        throw std::invalid_argument("inner = 'umfpack' but this build has no UMFPACK (SuiteSparse was not found)");
-#endif
-      case Inner::EigenLLT:
-        return impl<Eigen::SimplicialLLT<ColMatrix, Eigen::Lower, Eigen::AMDOrdering<StorageIndex>>>(k, true);
-      case Inner::EigenLU:
-      case Inner::Auto:
-      case Inner::CG:  // not reached: ActiveSetSystem asks for Auto when CG does not apply
-        return impl<Eigen::SparseLU<ColMatrix, Eigen::COLAMDOrdering<StorageIndex>>>(Inner::EigenLU, false);
-    }
-    return nullptr;
+    return with_backend<ColMatrix>(k, [k](auto backend) -> std::unique_ptr<Base> {
+      auto p = std::make_unique<Impl<typename decltype(backend)::type>>();
+      p->name = to_string(k);
+      p->cholesky = k == Inner::Cholmod || k == Inner::EigenLLT;
+      return p;
+    });
   }
   Inner kind_ = Inner::Auto;
   std::unique_ptr<Base> impl_;
@@ -126,9 +96,9 @@ class ActiveSetSystem {
   using Vector = Eigen::VectorXd;
 
   /// B == nullptr: the (shifted) LCP. The symbolic analysis happens here, once.
-  /// `below`: the prolongations below this level, for the iterative solve (detail/multigrid.hpp).
+  /// `below`: the levels below this one, for the iterative solve (detail/multigrid.hpp).
   template <typename MatrixType>
-  ActiveSetSystem(const MatrixType& A, const RowMatrix* B, Inner inner, Prolongations<StorageIndex> below = {})
+  ActiveSetSystem(const MatrixType& A, const RowMatrix* B, Inner inner, Hierarchy<StorageIndex> below = {})
       : lcp_(B == nullptr), inner_(inner) {
     if (lcp_ && has_full_diagonal(A))
       use_pattern_of(A);

@@ -41,15 +41,20 @@
 
 namespace nrmicp::detail {
 
-/// The prolongations below a level and their transposes (the restrictions), owned elsewhere
-/// (by nrmicp::Newton, which forms each transpose once): P[0] maps level 1 to this level.
+/// One level of a hierarchy below a finer one, as pyamg's MultilevelSolver.Level: P maps this
+/// level to the next finer one, R = Pᵀ (formed once), A = R A_finer P its Galerkin operator.
 template <typename StorageIndex>
-struct Prolongations {
+struct Level {
   using RowMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, StorageIndex>;
-  const RowMatrix* P = nullptr;
-  const RowMatrix* R = nullptr;  ///< R[l] = P[l]ᵀ
+  RowMatrix P, R, A;
+};
+
+/// The levels below a level, owned elsewhere (by nrmicp::Newton): level[0] is the next coarser one.
+template <typename StorageIndex>
+struct Hierarchy {
+  const Level<StorageIndex>* level = nullptr;
   std::size_t levels = 0;
-  Prolongations below() const { return levels ? Prolongations{P + 1, R + 1, levels - 1} : *this; }
+  Hierarchy below() const { return levels ? Hierarchy{level + 1, levels - 1} : *this; }
 };
 
 template <typename StorageIndex>
@@ -88,13 +93,11 @@ class MultigridKrylov {
   static constexpr double rtol = 1e-12;
   static constexpr int default_max_iterations = 500;
 
-  /// The prolongations must outlive this object. `symmetric`: the systems K given to setup are
+  /// The hierarchy must outlive this object. `symmetric`: the systems K given to setup are
   /// symmetric (their column storage is their row storage; CG), else a row-major copy of each is
   /// kept (BiCGSTAB).
-  MultigridKrylov(Prolongations<StorageIndex> h, bool symmetric)
-      : P_(h.P), R_(h.R), levels_(h.levels), symmetric_(symmetric) {
-    coarse_ops_.resize(levels_);
-    work_.resize(levels_ + 1);
+  MultigridKrylov(Hierarchy<StorageIndex> h, bool symmetric) : grid_(h.level), levels_(h.levels), symmetric_(symmetric) {
+    k_.resize(levels_ + 1);
     bicgstab_.preconditioner().mg = this;
   }
   MultigridKrylov(const MultigridKrylov&) = delete;  // the preconditioner points here
@@ -112,19 +115,19 @@ class MultigridKrylov {
     if (!symmetric_) copy_rows(K, same_pattern);
     for (std::size_t l = 0; l < levels_; ++l) {
       auto galerkin = [&](const auto& Kl) {
-        if (same_pattern && galerkin_values(R_[l], Kl, P_[l], coarse_ops_[l], position_)) return;
-        coarse_ops_[l] = product(R_[l], product(Kl, P_[l]));
+        const Level<StorageIndex>& g = grid_[l];
+        if (same_pattern && galerkin_values(g.R, Kl, g.P, k_[l + 1].K, position_)) return;
+        k_[l + 1].K = product(g.R, product(Kl, g.P));
       };
       if (l == 0) galerkin(fine());
-      else galerkin(coarse_ops_[l - 1]);
+      else galerkin(k_[l].K);
     }
     fine_pattern_ = K.nonZeros();
-    inv_diag_.resize(levels_);
     for (std::size_t l = 0; l < levels_; ++l) {
-      inv_diag_[l] = (l == 0 ? Vector(K.diagonal()) : Vector(coarse_ops_[l - 1].diagonal())).cwiseInverse();
-      if (!inv_diag_[l].allFinite()) return false;
+      k_[l].inv_diag = (l == 0 ? Vector(K.diagonal()) : Vector(k_[l].K.diagonal())).cwiseInverse();
+      if (!k_[l].inv_diag.allFinite()) return false;
     }
-    const ColMatrix coarsest = levels_ == 0 ? K : ColMatrix(coarse_ops_.back());
+    const ColMatrix coarsest = levels_ == 0 ? K : ColMatrix(k_.back().K);
     try {
       coarsest_.compute(coarsest, Inner::Auto, "the coarsest multigrid level");
     } catch (const std::runtime_error&) {
@@ -244,42 +247,42 @@ class MultigridKrylov {
   /// e ≈ K_l⁻¹ r: one V-cycle on level l.
   void vcycle(std::size_t l, const Vector& r, Vector& e) const {
     if (l == levels_) { coarsest_.solve(r, e); return; }
-    Work& w = work_[l];
+    KLevel& k = k_[l];
     e.setZero(r.size());
     auto smooth_and_correct = [&](const auto& A) {
-      gauss_seidel(A, inv_diag_[l], r, e, true);
-      w.res.noalias() = A * e;
-      w.res = r - w.res;
-      w.rc.noalias() = R_[l] * w.res;
-      vcycle(l + 1, w.rc, w.ec);
-      e.noalias() += P_[l] * w.ec;
-      gauss_seidel(A, inv_diag_[l], r, e, false);
+      gauss_seidel(A, k.inv_diag, r, e, true);
+      k.res.noalias() = A * e;
+      k.res = r - k.res;
+      k.rc.noalias() = grid_[l].R * k.res;
+      vcycle(l + 1, k.rc, k.ec);
+      e.noalias() += grid_[l].P * k.ec;
+      gauss_seidel(A, k.inv_diag, r, e, false);
     };
     if (l == 0) smooth_and_correct(fine());
-    else smooth_and_correct(coarse_ops_[l - 1]);
+    else smooth_and_correct(k_[l].K);
   }
 
-  struct Work {
-    Vector res, rc, ec;
+  /// Level l of the reduced system: K_l = R K_{l−1} P (l ≥ 1; level 0 is the fine K), 1 / diag(K_l)
+  /// (l < coarsest) and the V-cycle's vectors there.
+  struct KLevel {
+    RowMatrix K;
+    Vector inv_diag, res, rc, ec;
   };
   struct CGWork {
     Vector r, s, p, Kp;
   };
   mutable CGWork cg_;
-  const RowMatrix* P_;                    // prolongations
-  const RowMatrix* R_;                    // their transposes (restrictions)
+  const Level<StorageIndex>* grid_;       // the levels below: prolongations, restrictions
   std::size_t levels_;
-  std::vector<RowMatrix> coarse_ops_;     // K_1, K_2, ...: Galerkin operators of the reduced system
+  mutable std::vector<KLevel> k_;         // K_0 (= fine_), K_1, ...: the reduced system per level
   Eigen::Index fine_pattern_ = -1;        // nonzeros of the K the patterns were formed for
   std::vector<StorageIndex> position_;    // scratch of product_values
-  std::vector<Vector> inv_diag_;          // 1 / diag(K_l), l < coarsest
   const ColMatrix* fine_ = nullptr;
   bool symmetric_;
   int max_iterations_ = default_max_iterations;
   RowMatrix rows_;                        // K in row-major storage (nonsymmetric K)
   std::vector<StorageIndex> to_row_;      // K's storage position → rows_'
   InnerSolver<StorageIndex> coarsest_;
-  mutable std::vector<Work> work_;
   mutable Eigen::BiCGSTAB<RowMatrix, VCyclePreconditioner<StorageIndex>> bicgstab_;
 };
 

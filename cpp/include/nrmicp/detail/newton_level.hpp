@@ -43,9 +43,9 @@ class NewtonLevel {
     fallback_options_.accelerate = Accelerate::Anderson;  // plain nrm diverged on zero-diagonal LCPs (SPEC)
   }
 
-  /// The prolongations below this level (P[0]: the next coarser level → this one), for the
-  /// multigrid-preconditioned CG inner solve; they must outlive this level.
-  void use_hierarchy(Prolongations<StorageIndex> below) { below_ = below; }
+  /// The levels below this one (level[0]: the next coarser one), for the multigrid-preconditioned
+  /// Krylov inner solve; they must outlive this level.
+  void use_hierarchy(Hierarchy<StorageIndex> below) { below_ = below; }
 
   const MatrixType& matrix() const { return A_; }
   Eigen::Index size() const { return A_.rows(); }
@@ -127,7 +127,7 @@ class NewtonLevel {
   Vector ratio_;  // Ω1/Ω2: x ≥ 0 ⇔ g − (Ω1/Ω2) w ≥ 0
   Options fallback_options_;
   std::unique_ptr<System> lcp_system_;
-  Prolongations<StorageIndex> below_;
+  Hierarchy<StorageIndex> below_;
   std::optional<Solver<MatrixType>> fallback_;
 };
 
