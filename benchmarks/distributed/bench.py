@@ -1,6 +1,6 @@
 """nrmicp.distributed against PETSc's SNES VI (vinewtonrsls), one invocation for both sides.
 
-    python benchmarks/distributed/bench.py [--m2 1023] [--m3 99] [--ranks 1 2] [--cold-max-n 300000]
+    python benchmarks/distributed/bench.py [--m2 1023] [--m3 99] [--dims 2 3] [--ranks 1 2] [--cold-max-n 300000]
 
 For each scene (2D obstacle m², 3D obstacle m³) and each rank count it runs, under mpirun:
   ours   nrmicp.distributed.solve(method='newton', hierarchy='amg'), tol 1e-8 (this file, --worker)
@@ -114,6 +114,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--m2", type=int, default=1023)
     ap.add_argument("--m3", type=int, default=99)
+    ap.add_argument("--dims", type=int, nargs="+", default=[2, 3], choices=[2, 3])
     ap.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--cold-max-n", type=int, default=300_000, help="run the cold peer only up to this n")
     ap.add_argument("--python", default=sys.executable)
@@ -123,7 +124,7 @@ def main():
                            check=True).stdout.split()
     subprocess.run(["mpicc", "-O2", "-o", exe, os.path.join(HERE, "vi_gridseq.c")] + flags, check=True)
     rows = []
-    for dim, m in ((2, a.m2), (3, a.m3)):
+    for dim, m in ((d, a.m2 if d == 2 else a.m3) for d in a.dims):
         n = m ** dim
         for np_ in a.ranks:
             row = {"scene": f"obstacle_{dim}d m={m}", "n": n, "np": np_, "ours": run_ours(a.python, dim, m, np_),
