@@ -236,10 +236,28 @@ def case_fuzz(examples):
     return rows
 
 
+def case_boomeramg():
+    """The reduced solves' BoomerAMG defaults: by A's nonzeros a row, the user's option kept, and
+    nothing of ours left in the options database after a solve."""
+    pb3, pb2 = obstacle_3d(7, exact=False), obstacle_2d(9, exact=False)
+    rule = {}
+    for name, pb in (("7-point", pb3), ("5-point", pb2)):
+        lo, hi = split(pb.A.shape[0])
+        rule[name] = dist._boomeramg_defaults(mat(sp.csr_matrix(pb.A), lo, hi))
+    opts = PETSc.Options("nrmicp_inner_")
+    opts["pc_hypre_boomeramg_coarsen_type"] = "Falgout"          # the user's choice
+    lo, hi = split(pb3.A.shape[0])
+    r = dist.solve(sp.csr_matrix(pb3.A)[lo:hi], pb3.q[lo:hi], pb3.zeta[lo:hi], method="newton", tol=1e-9)
+    left = sorted(k for k in PETSc.Options().getAll() if k.startswith("nrmicp_inner_"))
+    kept = opts.getString("pc_hypre_boomeramg_coarsen_type", "")
+    opts.delValue("pc_hypre_boomeramg_coarsen_type")
+    return {"rule": rule, "left": left, "kept": kept, "status": str(r.status)}
+
+
 if __name__ == "__main__":
     name, args = sys.argv[1], sys.argv[2:]
     result = {"agreement": lambda: case_agreement(), "partition": case_partition,
-              "bad": lambda: case_bad(args[0], args[1]),
+              "bad": lambda: case_bad(args[0], args[1]), "boomeramg": case_boomeramg,
               "fuzz": lambda: case_fuzz(int(args[0]))}[name]()
     if RANK == 0:
         print("RESULT " + json.dumps(result), flush=True)

@@ -34,6 +34,15 @@ def test_newton_nests_finest_steps_few(agreement):
             assert r["level_steps"][0] <= 5, r
 
 
+def test_reduced_solves_choose_boomeramg_by_the_matrix_and_keep_the_users_options():
+    out = mpirun(2, "boomeramg")
+    assert out["rule"]["5-point"] == {}
+    assert out["rule"]["7-point"]["pc_hypre_boomeramg_coarsen_type"] == "HMIS"
+    assert out["status"] == "CONVERGED"
+    assert out["kept"] == "Falgout"                      # the user's entry survives the solve
+    assert out["left"] == ["nrmicp_inner_pc_hypre_boomeramg_coarsen_type"], out["left"]
+
+
 @pytest.fixture(scope="module")
 def partition_run():
     return mpirun(3, "partition")
