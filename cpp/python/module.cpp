@@ -418,11 +418,8 @@ bool check_compressed(const py::array& indptr, const py::array& indices, py::ssi
   return canonical;
 }
 
-}  // namespace
-
-PYBIND11_MODULE(_core, m) {
-  m.doc() = "nrmicp C++ core (internal: use the nrmicp package)";
-  // A failed factorization is the same exception at set-up and in a lazy one during solve().
+// A failed factorization is the same exception at set-up and in a lazy one during solve().
+void bind_exceptions() {
   py::register_exception_translator([](std::exception_ptr p) {
     try {
       if (p) std::rethrow_exception(p);
@@ -435,7 +432,11 @@ PYBIND11_MODULE(_core, m) {
       }
     }
   });
-  // The names come from the C++ core (options.hpp, result.hpp); Python derives its lists from these.
+}
+
+// The option and status vocabulary; the names come from the C++ core (options.hpp, result.hpp)
+// and Python derives its lists from these.
+void bind_vocabulary(py::module_& m) {
   bind_enum(m, "Method", nrmicp::all_methods, [](nrmicp::Method v) { return nrmicp::to_string(v); });
   bind_enum(m, "ZUpdate", nrmicp::all_z_updates, [](nrmicp::ZUpdate v) { return nrmicp::to_string(v); });
   bind_enum(m, "Inner", nrmicp::all_inners, [](nrmicp::Inner v) { return nrmicp::to_string(v); });
@@ -454,7 +455,10 @@ PYBIND11_MODULE(_core, m) {
   }, py::arg("method"), py::arg("omega2_given"), py::arg("is_icp"),
      "The z-update 'auto' means for this method (is_icp: a zeta that is not None or constant).");
 
-  // The Newton member's statistics; `fields` lists them for the Python result (by reflection).
+}
+
+// The Newton member's statistics; `fields` lists them for the Python result (by reflection).
+void bind_newton_stats(py::module_& m) {
   py::class_<nrmicp::NewtonStats> stats(m, "NewtonStats");
   std::vector<std::string> stat_fields;
   auto stat = [&](const char* name, auto member) {
@@ -470,6 +474,9 @@ PYBIND11_MODULE(_core, m) {
   stat("path", &nrmicp::NewtonStats::path);
   stats.attr("fields") = py::tuple(py::cast(stat_fields));
 
+}
+
+void bind_options(py::module_& m) {
   py::class_<SolveOptions>(m, "SolveOptions")
       .def(py::init<>())
       .def_readwrite("tol", &SolveOptions::tol)
@@ -496,11 +503,10 @@ PYBIND11_MODULE(_core, m) {
       .def_readwrite("inner", &Options::inner)
       .def("check", &Options::check, py::arg("n"));
 
-  bind_solver<std::int32_t>(m, "SolverI32");
-  bind_solver<std::int64_t>(m, "SolverI64");
-  bind_newton<std::int32_t>(m, "NewtonI32");
-  bind_newton<std::int64_t>(m, "NewtonI64");
+}
 
+// Input checks and what this build has.
+void bind_utilities(py::module_& m) {
   m.def("check_compressed", [](const py::array& indptr, const py::array& indices, py::ssize_t n_data,
                                 py::ssize_t outer, py::ssize_t inner, const std::string& name) {
     return has_dtype<std::int64_t>(indices) ? check_compressed<std::int64_t>(indptr, indices, n_data, outer, inner, name)
@@ -514,4 +520,19 @@ PYBIND11_MODULE(_core, m) {
     d["eigen_lu"] = true;
     return d;
   });
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_core, m) {
+  m.doc() = "nrmicp C++ core (internal: use the nrmicp package)";
+  bind_exceptions();
+  bind_vocabulary(m);
+  bind_newton_stats(m);
+  bind_options(m);
+  bind_solver<std::int32_t>(m, "SolverI32");
+  bind_solver<std::int64_t>(m, "SolverI64");
+  bind_newton<std::int32_t>(m, "NewtonI32");
+  bind_newton<std::int64_t>(m, "NewtonI64");
+  bind_utilities(m);
 }

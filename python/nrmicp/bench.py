@@ -359,6 +359,28 @@ def _timed(solve, tol, repeat):
     return best, best_t
 
 
+def _record_history(case, solve, tol, repeat):
+    """One recorded run at `tol` (best wall time of `repeat`) into case.history."""
+    try:
+        out, wall = None, math.inf
+        for _ in range(max(1, repeat)):  # best of repeat, like the timed solves
+            t0 = time.perf_counter()
+            o = solve(tol, history=True)
+            dt = time.perf_counter() - t0
+            if dt < wall:
+                out, wall = o, dt
+        h = out["history"]
+        # the clock of a history starts with the iteration: shift it by everything else in
+        # the call (Python checks, set-up, factorizations, result conversion) so that the
+        # last iterate sits at the run's wall time, on the same axis as the timed solves
+        last = out["iterations"] if out.get("iterations") not in ("", None) else h["seconds"][-1]
+        offset = max(wall - max(last, h["seconds"][-1]), 0.0)
+        case.history = dict(iteration=h["iteration"], seconds=h["seconds"] + offset, residual=h["residual"])
+        case.history_status = out["status"]
+    except Exception as exc:  # already recorded in the rows
+        case.history_status = f"error: {exc}"
+
+
 def run_case(problem, scene, method, z_update, tols, *, size, maxiter, repeat, history, progress):
     """All tols of one case, then (if ``history``) one recorded run at the smallest tol."""
     peer = is_peer(method)
@@ -408,24 +430,7 @@ def run_case(problem, scene, method, z_update, tols, *, size, maxiter, repeat, h
             failed = (tol, row)
         progress.step(repeat, what)
     if history and method not in _peers_without_history():
-        try:
-            out, wall = None, math.inf
-            for _ in range(max(1, repeat)):  # best of repeat, like the timed solves
-                t0 = time.perf_counter()
-                o = solve(min(tols), history=True)
-                dt = time.perf_counter() - t0
-                if dt < wall:
-                    out, wall = o, dt
-            h = out["history"]
-            # the clock of a history starts with the iteration: shift it by everything else in
-            # the call (Python checks, set-up, factorizations, result conversion) so that the
-            # last iterate sits at the run's wall time, on the same axis as the timed solves
-            last = out["iterations"] if out.get("iterations") not in ("", None) else h["seconds"][-1]
-            offset = max(wall - max(last, h["seconds"][-1]), 0.0)
-            case.history = dict(iteration=h["iteration"], seconds=h["seconds"] + offset, residual=h["residual"])
-            case.history_status = out["status"]
-        except Exception as exc:  # already recorded in the rows
-            case.history_status = f"error: {exc}"
+        _record_history(case, solve, min(tols), repeat)
     progress.step(repeat, f"{scene} {method} {z_update} history")
     return case
 
@@ -646,6 +651,44 @@ def _case_style(c):
                 lw=2.0 if base == "newton" or kw else 1.3)
 
 
+def _plot_case(ax, c, st, y):
+    """One case in a work-precision panel: its history (faint), converged points, early stops."""
+    if y == "residual" and c.history is not None:
+        hs, hr = c.history["seconds"], c.history["residual"]
+        keep = (hs > 0) & (hr > 0) & np.isfinite(hr)
+        ax.plot(hs[keep], hr[keep], color=st["color"], linestyle=st["linestyle"], lw=0.8, alpha=0.3)
+    fresh = [r for r in c.rows if r["reused_from_tol"] == "" and r["seconds"] != ""]
+    vals = [(r["seconds"], r[y], r["converged"]) for r in fresh
+            if r[y] != "" and np.isfinite(r[y]) and r[y] > 0]
+    ok = [(s, v) for s, v, conv in vals if conv == 1]
+    bad = [(s, v) for s, v, conv in vals if conv != 1]
+    if ok:
+        xs, ys = zip(*ok)
+        ax.plot(xs, ys, color=st["color"], linestyle=st["linestyle"], marker=st["marker"], ms=5, lw=st["lw"])
+    if bad:  # the point reached when the solve stopped early: hollow marker
+        xs, ys = zip(*bad)
+        ax.plot(xs, ys, linestyle="none", marker=st["marker"], ms=9, mfc="none", mec=st["color"], mew=1.6)
+        if ok:  # connect the last converged point to where it stopped
+            ax.plot([ok[-1][0], xs[0]], [ok[-1][1], ys[0]], color=st["color"], lw=0.8, linestyle=":")
+
+
+def _legend(Line2D, seen_methods, seen_z, scene_results, y):
+    """The work-precision figure's legend entries."""
+    handles = [Line2D([], [], color=st["color"], marker=st["marker"], linestyle=st["linestyle"], label=m)
+               for m, st in seen_methods.items()]
+    handles += [Line2D([], [], color="k", linestyle=_LINESTYLES[z], label=f"z-update '{z}'")
+                for z in _LINESTYLES if z in seen_z]
+    if any(c.tool == "peer" for _, cs, _ in scene_results.values() for c in cs):
+        handles.append(Line2D([], [], color="k", linestyle=_PEER_LINESTYLE, label="peer (not nrmicp)"))
+    handles += [Line2D([], [], color="k", marker="o", linestyle="none", label="converged (Res < tol)"),
+                Line2D([], [], color="k", marker="o", mfc="none", ms=9, linestyle="none",
+                       label="stopped early: point reached")]
+    if y == "residual":
+        handles += [Line2D([], [], color="k", lw=0.8, alpha=0.4, label="history of one run (every iterate)"),
+                    Line2D([], [], color="k", lw=0.9, linestyle=":", label="rounding level eps·‖|A||z*|+|q|‖₂")]
+    return handles
+
+
 def plot_work_precision(scene_results, path, *, y="residual", tols=(), dpi=110):
     """One panel per scene: x = seconds (log), y = Res or max|z − z*| (log)."""
     plt = _pyplot()
@@ -662,24 +705,7 @@ def plot_work_precision(scene_results, path, *, y="residual", tols=(), dpi=110):
             st = _case_style(c)
             seen_methods.setdefault(c.method, dict(st, linestyle=_PEER_LINESTYLE if c.tool == "peer" else "-"))
             seen_z.add(c.z_update_used)
-            if y == "residual" and c.history is not None:
-                hs, hr = c.history["seconds"], c.history["residual"]
-                keep = (hs > 0) & (hr > 0) & np.isfinite(hr)
-                ax.plot(hs[keep], hr[keep], color=st["color"], linestyle=st["linestyle"], lw=0.8, alpha=0.3)
-            fresh = [r for r in c.rows if r["reused_from_tol"] == "" and r["seconds"] != ""]
-            vals = [(r["seconds"], r[y], r["converged"]) for r in fresh
-                    if r[y] != "" and np.isfinite(r[y]) and r[y] > 0]
-            ok = [(s, v) for s, v, conv in vals if conv == 1]
-            bad = [(s, v) for s, v, conv in vals if conv != 1]
-            if ok:
-                xs, ys = zip(*ok)
-                ax.plot(xs, ys, color=st["color"], linestyle=st["linestyle"], marker=st["marker"], ms=5, lw=st["lw"])
-            if bad:  # the point reached when the solve stopped early: hollow marker
-                xs, ys = zip(*bad)
-                ax.plot(xs, ys, linestyle="none", marker=st["marker"], ms=9, mfc="none", mec=st["color"],
-                        mew=1.6)
-                if ok:  # connect the last converged point to where it stopped
-                    ax.plot([ok[-1][0], xs[0]], [ok[-1][1], ys[0]], color=st["color"], lw=0.8, linestyle=":")
+            _plot_case(ax, c, st, y)
         if y == "residual":
             if np.isfinite(floor) and floor > 0:
                 ax.axhline(floor, color="k", lw=0.9, linestyle=":")
@@ -695,18 +721,7 @@ def plot_work_precision(scene_results, path, *, y="residual", tols=(), dpi=110):
         ax.tick_params(labelsize=7)
     for ax in list(axes.flat)[len(names):]:
         ax.set_visible(False)
-    handles = [Line2D([], [], color=st["color"], marker=st["marker"], linestyle=st["linestyle"], label=m)
-               for m, st in seen_methods.items()]
-    handles += [Line2D([], [], color="k", linestyle=_LINESTYLES[z], label=f"z-update '{z}'")
-                for z in _LINESTYLES if z in seen_z]
-    if any(c.tool == "peer" for _, cs, _ in scene_results.values() for c in cs):
-        handles.append(Line2D([], [], color="k", linestyle=_PEER_LINESTYLE, label="peer (not nrmicp)"))
-    handles += [Line2D([], [], color="k", marker="o", linestyle="none", label="converged (Res < tol)"),
-                Line2D([], [], color="k", marker="o", mfc="none", ms=9, linestyle="none",
-                       label="stopped early: point reached")]
-    if y == "residual":
-        handles += [Line2D([], [], color="k", lw=0.8, alpha=0.4, label="history of one run (every iterate)"),
-                    Line2D([], [], color="k", lw=0.9, linestyle=":", label="rounding level eps·‖|A||z*|+|q|‖₂")]
+    handles = _legend(Line2D, seen_methods, seen_z, scene_results, y)
     fig.legend(handles=handles, loc="lower center", ncol=math.ceil(len(handles) / 2), fontsize=8, frameon=False)
     tl = f"tol = {max(tols):.0e} … {min(tols):.0e}" if tols else ""
     what = "residual Res reached" if y == "residual" else "true error max|z − z_exact| reached"
@@ -820,67 +835,95 @@ def _parser(prog: str = "python -m nrmicp bench --family"):
 def main(argv: Optional[list[str]] = None, prog: str = "python -m nrmicp bench --family") -> int:
     import nrmicp
 
-    from . import scenes
-
     args = _parser(prog).parse_args(argv)
-    scenes_ = _split(args.scenes) if args.scenes else list(DEFAULT_SCENES)
-    methods = [m.lower() for m in _split(args.methods)] if args.methods else \
-        list(QUICK_METHODS if args.quick else DEFAULT_METHODS)
-    z_updates = [z.lower() for z in _split(args.z_updates)]
-    size = args.size or ("tiny" if args.quick else "small")
-    for s in scenes_:
-        if s not in SCENES:
-            print(f"unknown scene {s!r}; choose from {', '.join(SCENES)}", file=sys.stderr)
-            return 2
-    for m in methods:
-        base, _, extra = m.partition("+")
-        if base not in nrmicp.METHODS or extra not in ("", "polish"):
-            print(f"unknown method {m!r}; choose from {', '.join(nrmicp.METHODS)} (each optionally "
-                  "with '+polish')", file=sys.stderr)
-            return 2
-    peer_names = [p.lower() for p in _split(args.peers) if p.lower() != "none"]
-    for p in peer_names:
-        if p not in PEERS:
-            print(f"unknown peer {p!r}; choose from {', '.join(PEERS)} or none", file=sys.stderr)
-            return 2
-    for z in z_updates:
-        if z not in ("auto", "explicit", "solve"):
-            print(f"unknown z-update {z!r}; choose from auto, explicit, solve", file=sys.stderr)
-            return 2
-    if args.repeat < 1 or args.maxiter < 1:
-        print("--repeat and --maxiter must be >= 1", file=sys.stderr)
-        return 2
-    tols = _tols(args)
-    hist_scene = args.history_scene or ("obstacle_2d" if "obstacle_2d" in scenes_ else scenes_[0])
-    if hist_scene not in scenes_:
-        print(f"--history-scene {hist_scene!r} is not among the swept scenes", file=sys.stderr)
+    try:
+        sel = _selection(args, nrmicp.METHODS)
+    except ValueError as exc:
+        print(exc, file=sys.stderr)
         return 2
     os.makedirs(args.out, exist_ok=True)
-
     t_start = time.perf_counter()
-    print(f"nrmicp {nrmicp.__version__} bench: scenes {','.join(scenes_)}; methods {','.join(methods)}; "
-          f"peers {','.join(peer_names) or 'none'}; z-updates {','.join(z_updates)}; size {size}; {len(tols)} tols {tols[0]:.0e}..{tols[-1]:.0e}; "
-          f"repeat {args.repeat}; maxiter {args.maxiter}", flush=True)
-    problems = {}
-    for s in scenes_:  # build first: exact references are not part of any timing
-        problems[s] = scenes.build(s, size)
-    peers, notes = resolve_peers(peer_names, problems)
+    print(f"nrmicp {nrmicp.__version__} bench: scenes {','.join(sel.scenes)}; methods {','.join(sel.methods)}; "
+          f"peers {','.join(sel.peers) or 'none'}; z-updates {','.join(sel.z_updates)}; size {sel.size}; "
+          f"{len(sel.tols)} tols {sel.tols[0]:.0e}..{sel.tols[-1]:.0e}; repeat {args.repeat}; maxiter {args.maxiter}",
+          flush=True)
+    scene_results = _sweep(sel, args)
+    env = environment()
+    written = _write_tables(scene_results, sel, env, args.out)
+    # The numbers first: a missing or failing matplotlib must not cost the sweep.
+    try:
+        _pyplot()
+    except ImportError:
+        print(f"\nwrote {', '.join(written)} in {time.perf_counter() - t_start:.1f} s. No figures: matplotlib "
+              "is not installed; pip install nrmicp[plot] (or matplotlib) draws them.")
+        return 0
+    pngs = _plot_all(scene_results, sel, args.out)
+    print(f"\nwrote {', '.join(written + pngs)} in {time.perf_counter() - t_start:.1f} s")
+    return 0
+
+
+class _Selection:
+    """What one bench invocation sweeps: scenes, methods, z-updates, peers, size, tols."""
+
+
+def _selection(args, known_methods) -> _Selection:
+    """The sweep the arguments ask for; ValueError naming the first unknown choice."""
+    sel = _Selection()
+    sel.scenes = _split(args.scenes) if args.scenes else list(DEFAULT_SCENES)
+    sel.methods = [m.lower() for m in _split(args.methods)] if args.methods else \
+        list(QUICK_METHODS if args.quick else DEFAULT_METHODS)
+    sel.z_updates = [z.lower() for z in _split(args.z_updates)]
+    sel.size = args.size or ("tiny" if args.quick else "small")
+    sel.peers = [p.lower() for p in _split(args.peers) if p.lower() != "none"]
+    for s in sel.scenes:
+        if s not in SCENES:
+            raise ValueError(f"unknown scene {s!r}; choose from {', '.join(SCENES)}")
+    for m in sel.methods:
+        base, _, extra = m.partition("+")
+        if base not in known_methods or extra not in ("", "polish"):
+            raise ValueError(f"unknown method {m!r}; choose from {', '.join(known_methods)} (each optionally "
+                             "with '+polish')")
+    for p in sel.peers:
+        if p not in PEERS:
+            raise ValueError(f"unknown peer {p!r}; choose from {', '.join(PEERS)} or none")
+    for z in sel.z_updates:
+        if z not in ("auto", "explicit", "solve"):
+            raise ValueError(f"unknown z-update {z!r}; choose from auto, explicit, solve")
+    if args.repeat < 1 or args.maxiter < 1:
+        raise ValueError("--repeat and --maxiter must be >= 1")
+    sel.tols = _tols(args)
+    sel.hist_scene = args.history_scene or ("obstacle_2d" if "obstacle_2d" in sel.scenes else sel.scenes[0])
+    if sel.hist_scene not in sel.scenes:
+        raise ValueError(f"--history-scene {sel.hist_scene!r} is not among the swept scenes")
+    return sel
+
+
+def _sweep(sel, args) -> dict:
+    """Every (scene, method, z-update) and peer case: scene -> (problem, cases, rounding floor)."""
+    from . import scenes
+
+    problems = {s: scenes.build(s, sel.size) for s in sel.scenes}  # exact references are not timed
+    peers, notes = resolve_peers(sel.peers, problems)
     for note in notes:
         print(note, flush=True)
-    plan = {s: [(m, z) for m in methods for z in (z_updates if split_method(m)[0] != "newton" else z_updates[:1])]
-            + [(p, "") for p in peers[s]] for s in scenes_}
+    plan = {s: [(m, z) for m in sel.methods
+                for z in (sel.z_updates if split_method(m)[0] != "newton" else sel.z_updates[:1])]
+            + [(p, "") for p in peers[s]] for s in sel.scenes}
     n_cases = sum(len(v) for v in plan.values())
-    progress = Progress(n_cases * (len(tols) + 1) * args.repeat, enabled=not args.no_progress)
+    progress = Progress(n_cases * (len(sel.tols) + 1) * args.repeat, enabled=not args.no_progress)
     scene_results = {}
-    for s in scenes_:
+    for s in sel.scenes:
         P = problems[s]
-        cases = [run_case(P, s, m, z, tols, size=size, maxiter=args.maxiter, repeat=args.repeat, history=True,
-                          progress=progress) for m, z in plan[s]]
+        cases = [run_case(P, s, m, z, sel.tols, size=sel.size, maxiter=args.maxiter, repeat=args.repeat,
+                          history=True, progress=progress) for m, z in plan[s]]
         scene_results[s] = (P, cases, rounding_floor(P, cases))
     progress.close()
+    return scene_results
 
-    env = environment()
-    csv_path = os.path.join(args.out, "work_precision.csv")
+
+def _write_tables(scene_results, sel, env, out) -> list:
+    """work_precision.csv, history.csv (the history scene) and summary.txt; their paths."""
+    csv_path = os.path.join(out, "work_precision.csv")
     with open(csv_path, "w", newline="") as f:
         wr = csv.DictWriter(f, fieldnames=CSV_COLUMNS)
         wr.writeheader()
@@ -888,40 +931,36 @@ def main(argv: Optional[list[str]] = None, prog: str = "python -m nrmicp bench -
             for c in cases:
                 for r in c.rows:
                     wr.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in dict(r, **env).items()})
-    P, hcases, hfloor = scene_results[hist_scene]
-    hist_path = os.path.join(args.out, "history.csv")
+    _, hcases, _ = scene_results[sel.hist_scene]
+    hist_path = os.path.join(out, "history.csv")
     with open(hist_path, "w", newline="") as f:
         wr = csv.writer(f)
         wr.writerow(("scene", "method", "z_update_used", "iteration", "seconds", "residual"))
         for c in hcases:
             if c.history is not None:
                 for k, t, r in zip(c.history["iteration"], c.history["seconds"], c.history["residual"]):
-                    wr.writerow((hist_scene, c.method, c.z_update_used, int(k), f"{t:.6g}", f"{r:.6g}"))
-    # The numbers first: a missing or failing matplotlib must not cost the sweep.
-    summary_path = os.path.join(args.out, "summary.txt")
-    text = summarize(scene_results, tols, env)
+                    wr.writerow((sel.hist_scene, c.method, c.z_update_used, int(k), f"{t:.6g}", f"{r:.6g}"))
+    summary_path = os.path.join(out, "summary.txt")
+    text = summarize(scene_results, sel.tols, env)
     with open(summary_path, "w") as f:
         f.write(text + "\n")
     print(text)
-    written = [csv_path, hist_path, summary_path]
+    return [csv_path, hist_path, summary_path]
 
-    try:
-        _pyplot()
-    except ImportError:
-        print(f"\nwrote {', '.join(written)} in {time.perf_counter() - t_start:.1f} s. No figures: matplotlib "
-              "is not installed; pip install nrmicp[plot] (or matplotlib) draws them.")
-        return 0
-    pngs = [os.path.join(args.out, "work_precision.png"), os.path.join(args.out, "work_precision_error.png"),
-            os.path.join(args.out, "convergence_history.png")]
-    plot_work_precision(scene_results, pngs[0], y="residual", tols=tols)
+
+def _plot_all(scene_results, sel, out) -> list:
+    """The work-precision figures (residual; error where exact solutions exist) and the history."""
+    pngs = [os.path.join(out, "work_precision.png"), os.path.join(out, "work_precision_error.png"),
+            os.path.join(out, "convergence_history.png")]
+    plot_work_precision(scene_results, pngs[0], y="residual", tols=sel.tols)
     with_exact = {s: v for s, v in scene_results.items() if v[0].z_exact is not None}
     if with_exact:
-        plot_work_precision(with_exact, pngs[1], y="error", tols=tols)
+        plot_work_precision(with_exact, pngs[1], y="error", tols=sel.tols)
     else:
         pngs.pop(1)
-    plot_history(P, hist_scene, hcases, hfloor, pngs[-1], tol=min(tols))
-    print(f"\nwrote {', '.join(written + pngs)} in {time.perf_counter() - t_start:.1f} s")
-    return 0
+    P, hcases, hfloor = scene_results[sel.hist_scene]
+    plot_history(P, sel.hist_scene, hcases, hfloor, pngs[-1], tol=min(sel.tols))
+    return pngs
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -216,86 +216,90 @@ def _setup(A, method, omega1, omega2, gamma, phi, alpha, beta, theta, lipschitz,
     n = s.n = A.shape[0]
     s.method = method
     s.gamma = _positive_scalar(gamma, "gamma")
-    s.theta = _positive_scalar(theta, "theta")
-    if s.theta > 2:
-        raise ValueError(f"theta must lie in (0, 2], got {theta!r}")
-    if method != "two_sweep" and s.theta != 1.0:
-        raise ValueError(f"theta applies to method='two_sweep' only, got theta={theta!r} for {method!r}")
+    s.theta = _theta(theta, method)
     d = A.diagonal()
-
     # --- parameters, as docs/SPEC.md's method table
     if method in ("mms", "two_sweep"):
         for name, val, fixed in (("omega1", omega1, 1.0), ("phi", phi, 0.0)):
             if val is not None and not np.all(np.asarray(val, dtype=np.float64) == fixed):
                 raise ValueError(f"method {method!r} fixes {name} = {'I' if fixed else '0'}; got {name}={val!r}")
         omega1, phi = None, None
+    s.alpha, s.beta = _alpha_beta(method, alpha, beta)
+    s.w1 = np.ones(n) if omega1 is None else _diag_vector(omega1, n, "omega1", positive=True)
+    s.phi = np.zeros(n) if phi is None else _diag_vector(phi, n, "phi", positive=False)
+    if method == "nrmm" and omega2 is None:     # an explicit omega2 wins over alpha, as in the core
+        s.alpha = omega2 = _nrmm_alpha(alpha, d)
+    s.w2 = _diag_vector(_default_omega2(method, d) if omega2 is None else omega2, n, "omega2", positive=True)
+    s.Psi, s.psi_zero = _lipschitz_matrix(lipschitz, n)
+    s.z_update = "any (LCP: Psi = 0)" if s.psi_zero else z_update
+    _splitting(s, A, d)
+    return s
+
+
+def _theta(theta, method):
+    t = _positive_scalar(theta, "theta")
+    if t > 2:
+        raise ValueError(f"theta must lie in (0, 2], got {theta!r}")
+    if method != "two_sweep" and t != 1.0:
+        raise ValueError(f"theta applies to method='two_sweep' only, got theta={theta!r} for {method!r}")
+    return t
+
+
+def _alpha_beta(method, alpha, beta):
+    """(alpha, beta) of the method (None for nrm/nrmm, whose M = A), refusing what it fixes."""
     if method in ("nrm", "nrmm"):
         if beta is not None:
             raise ValueError(f"beta does not apply to method {method!r}")
         if method == "nrm" and alpha is not None:
             raise ValueError("alpha does not apply to method 'nrm' (use 'nrmm' for Omega2 = alpha I)")
-        s.alpha = s.beta = None
-    else:
-        a = None if alpha is None else _positive_scalar(alpha, "alpha")
-        b = None if beta is None else _positive_scalar(beta, "beta", allow_zero=True)
-        if method == "nrmgs":
-            if a not in (None, 1.0) or b not in (None, 1.0):
-                raise ValueError("method 'nrmgs' fixes alpha = beta = 1 (use 'nrmaor' for other values)")
-            a, b = 1.0, 1.0
-        elif method == "nrmj":
-            if a not in (None, 1.0) or b not in (None, 0.0):
-                raise ValueError("method 'nrmj' fixes alpha = 1, beta = 0 (use 'nrmaor' for other values)")
-            a, b = 1.0, 0.0
-        elif method == "nrmsor":
-            a = 1.0 if a is None else a
-            if b is not None and b != a:
-                raise ValueError(f"method 'nrmsor' has beta = alpha; got alpha={a}, beta={b}")
-            b = a
-        else:                                   # nrmaor, mms, two_sweep (as the core)
-            a = 1.0 if a is None else a
-            b = a if b is None else b
-        s.alpha, s.beta = a, b
+        return None, None
+    a = None if alpha is None else _positive_scalar(alpha, "alpha")
+    b = None if beta is None else _positive_scalar(beta, "beta", allow_zero=True)
+    if method == "nrmgs":
+        if a not in (None, 1.0) or b not in (None, 1.0):
+            raise ValueError("method 'nrmgs' fixes alpha = beta = 1 (use 'nrmaor' for other values)")
+        return 1.0, 1.0
+    if method == "nrmj":
+        if a not in (None, 1.0) or b not in (None, 0.0):
+            raise ValueError("method 'nrmj' fixes alpha = 1, beta = 0 (use 'nrmaor' for other values)")
+        return 1.0, 0.0
+    a = 1.0 if a is None else a
+    if method == "nrmsor":
+        if b is not None and b != a:
+            raise ValueError(f"method 'nrmsor' has beta = alpha; got alpha={a}, beta={b}")
+        return a, a
+    return a, (a if b is None else b)            # nrmaor, mms, two_sweep (as the core)
 
-    s.w1 = np.ones(n) if omega1 is None else _diag_vector(omega1, n, "omega1", positive=True)
-    s.phi = np.zeros(n) if phi is None else _diag_vector(phi, n, "phi", positive=False)
-    if method == "nrmm":
-        if omega2 is None:                      # an explicit omega2 wins over alpha, as in the core
-            if alpha is None:
-                alpha = float(np.mean(d))
-                if not alpha > 0:
-                    raise ValueError("nrmm's default alpha (mean of diag A) is not positive; pass alpha")
-            alpha = _positive_scalar(alpha, "alpha")
-            s.alpha = alpha
-            omega2 = alpha
-    if omega2 is None:
-        if method == "nrm":
-            omega2 = 1.0
-        else:
-            if not np.all(d > 0):
-                raise ValueError(f"the default omega2 = diag(A) of method {method!r} needs a positive "
-                                 "diagonal of A; pass omega2")
-            omega2 = d
-    s.w2 = _diag_vector(omega2, n, "omega2", positive=True)
 
-    s.Psi, s.psi_zero = _lipschitz_matrix(lipschitz, n)
-    if s.psi_zero:
-        s.z_update = "any (LCP: Psi = 0)"
-    else:
-        s.z_update = z_update
+def _nrmm_alpha(alpha, d):
+    """nrmm's Omega2 = alpha I: alpha given, or the mean of diag(A)."""
+    if alpha is None:
+        alpha = float(np.mean(d))
+        if not alpha > 0:
+            raise ValueError("nrmm's default alpha (mean of diag A) is not positive; pass alpha")
+    return _positive_scalar(alpha, "alpha")
 
-    # --- splitting
+
+def _default_omega2(method, d):
+    if method == "nrm":
+        return 1.0
+    if not np.all(d > 0):
+        raise ValueError(f"the default omega2 = diag(A) of method {method!r} needs a positive "
+                         "diagonal of A; pass omega2")
+    return d
+
+
+def _splitting(s, A, d):
+    """The splitting's matrices and the blocks of the error-propagation operator, into s."""
     Dm = sp.diags(d)
     Lo = -sp.tril(A, k=-1)
     Up = -sp.triu(A, k=1)
-    if method in ("nrm", "nrmm"):
-        M = A.copy()
-    else:
-        M = (Dm - s.beta * Lo) / s.alpha
+    M = A.copy() if s.method in ("nrm", "nrmm") else (Dm - s.beta * Lo) / s.alpha
     M = sp.csr_matrix(M)
     N = sp.csr_matrix(M - A)
     W1, W2, Ph = sp.diags(s.w1), sp.diags(s.w2), sp.diags(s.phi)
     s.M, s.N, s.Ph = M, N, Ph
-    s.two_sweep = method == "two_sweep"
+    s.two_sweep = s.method == "two_sweep"
     s.Lm = sp.csr_matrix(W2 + (M + Ph) @ W1)
     if s.two_sweep:
         M2 = sp.csr_matrix(Dm - Up)
@@ -308,8 +312,7 @@ def _setup(A, method, omega1, omega2, gamma, phi, alpha, beta, theta, lipschitz,
     s.explicit_f = (not s.psi_zero) and s.z_update == "explicit"
     s.needs_Ainv = (not s.psi_zero) and s.z_update == "solve"
     s.nblocks = 1 + int(s.two_sweep) + int(s.explicit_f)
-    s.lower_triangular = method in _AOR_METHODS or s.two_sweep
-    return s
+    s.lower_triangular = s.method in _AOR_METHODS or s.two_sweep
 
 
 def _block_operator(s, K, R):
@@ -535,6 +538,38 @@ def convergence_bound(A: Any, *, method: str = "nrmgs", lipschitz: Any = 0.0, om
                        theorem=theorem, conditions=cond, message=msg)
 
 
+def _h_plus(Ad, d, cond):
+    """Is A an H+-matrix? rho(D^-1 |B|) < 1 with D > 0 (into cond)."""
+    if np.all(d > 0):
+        J = np.abs(Ad - np.diag(d)) / d[:, None]
+        rj = _rho_dense(J)
+        cond["rho_jacobi_abs"] = rj
+        cond["A_is_H_plus"] = bool(rj < 1)
+    else:
+        cond["rho_jacobi_abs"] = None
+        cond["A_is_H_plus"] = False
+
+
+def _comparison_rho(s, A, Lmd, Cmp_A, rho, I, cond):
+    """The spectral radius of the comparison majorant of Theorems 4.2-4.4 (exactly, for
+    reference), None where it is not defined; cond["Lm_is_H"] on the way."""
+    Hd = _comparison(s.Lm).toarray()
+    try:
+        Hinv = np.linalg.inv(Hd)
+        H_ok = bool(np.all(Hinv >= -1e-14 * np.abs(Hinv).max()))
+    except np.linalg.LinAlgError:
+        H_ok = False
+    cond["Lm_is_H"] = H_ok
+    same = bool(np.array_equal(Hd, Lmd)) and (not s.needs_Ainv or abs(Cmp_A - A).max() == 0)
+    if H_ok and same:            # Lm (and A) are M-matrices: the majorant is T itself
+        return rho
+    if H_ok and (not s.needs_Ainv or cond["A_is_H_plus"] or _is_M(Cmp_A)):
+        Rc = np.linalg.inv(Cmp_A.toarray()) if s.needs_Ainv else None
+        Tc = _block_operator(s, lambda X: np.abs(Hinv) @ X, (lambda X: Rc @ X) if Rc is not None else None)(I)
+        return _rho_dense(Tc)
+    return None
+
+
 def _exact_path(s, A, cond, d, Cmp_A, form, aor_thm43):
     n = s.n
     note = ""
@@ -553,16 +588,7 @@ def _exact_path(s, A, cond, d, Cmp_A, form, aor_thm43):
             Rd = None
     I = np.eye(s.nblocks * n)
 
-    # A is H+ ?  rho(D^-1 |B|) < 1 with D > 0
-    if np.all(d > 0):
-        J = np.abs(Ad - np.diag(d)) / d[:, None]
-        rj = _rho_dense(J)
-        cond["rho_jacobi_abs"] = rj
-        cond["A_is_H_plus"] = bool(rj < 1)
-    else:
-        cond["rho_jacobi_abs"] = None
-        cond["A_is_H_plus"] = False
-
+    _h_plus(Ad, d, cond)
     if s.needs_Ainv and Rd is None:
         cond["rho_T"] = math.inf
         return math.inf, True, form, False, "A is singular, so Theorem 4.1 (|A^-1|) does not apply"
@@ -571,26 +597,7 @@ def _exact_path(s, A, cond, d, Cmp_A, form, aor_thm43):
     rho = _rho_dense(T)
     cond["rho_T"] = rho
 
-    # the comparison majorant of Theorems 4.2-4.4 (exactly, for reference)
-    Hd = _comparison(s.Lm).toarray()
-    try:
-        Hinv = np.linalg.inv(Hd)
-        H_ok = bool(np.all(Hinv >= -1e-14 * np.abs(Hinv).max()))
-    except np.linalg.LinAlgError:
-        H_ok = False
-    cond["Lm_is_H"] = H_ok
-    same = bool(np.array_equal(Hd, Lmd)) and (not s.needs_Ainv or abs(Cmp_A - A).max() == 0)
-    if H_ok and same:            # Lm (and A) are M-matrices: the majorant is T itself
-        cond["rho_comparison"] = rho
-    elif H_ok and (not s.needs_Ainv or cond["A_is_H_plus"] or _is_M(Cmp_A)):
-        Rc = None
-        if s.needs_Ainv:
-            Rc = np.linalg.inv(Cmp_A.toarray())
-        Tc = _block_operator(s, lambda X: np.abs(Hinv) @ X, (lambda X: Rc @ X) if Rc is not None else None)(I)
-        cond["rho_comparison"] = _rho_dense(Tc)
-    else:
-        cond["rho_comparison"] = None
-
+    cond["rho_comparison"] = _comparison_rho(s, A, Lmd, Cmp_A, rho, I, cond)
     if aor_thm43:
         _thm43(s, cond, d, (lambda X: Rd @ X) if Rd is not None else None,
                exact_rho=lambda Y: _rho_dense(Y(np.eye(n))))

@@ -730,26 +730,10 @@ def solve(A, q, zeta=None, *, method: str = "newton", tol: float = 1e-8, maxiter
         Ps = list(hierarchy)
     t_iter = time.perf_counter()
     if m == "newton":
-        if zf.kind == 2:
-            z = z0.copy() if z0 is not None else Am.createVecLeft()
-            if z0 is None:
-                z.set(0.0)
-            z, res, status = _affine_newton(Am, qv, zf, z, tol, maxiter, comm, stats)
-        elif zf.kind == 3:
-            z, res, status = _callable_newton(Am, qv, zf, z0, Ps, tol, maxiter, symmetric, comm, stats)
-        else:
-            z, res, status = _obstacle_newton(Am, qv, zf.c, z0, Ps, tol, maxiter, symmetric, comm, stats)
-        nit = stats["nit"] or stats["level_steps"][0]
-        iterations = sum(stats["level_steps"])
+        z, res, status, nit, iterations = _newton(Am, qv, zf, z0, Ps, tol, maxiter, symmetric, comm, stats)
     else:
-        a, b = _AOR_FIXED.get(m, (None, None))
-        a = a if a is not None else (1.0 if alpha is None else float(alpha))
-        b = b if b is not None else (a if beta is None else float(beta))
-        member = _AOR(Am, a, b, w1, w2, float(gamma))
-        z = z0.copy() if z0 is not None else Am.createVecLeft()
-        if z0 is None:
-            z.set(0.0)
-        res, nit, status, iterations = _stationary(Am, qv, zf, member, z, tol, maxiter, stats)
+        z, res, status, nit, iterations = _multisplitting(Am, qv, zf, z0, m, tol, maxiter, w1, w2, gamma,
+                                                          alpha, beta, stats)
     polished = None
     if polish:
         zp, res = _polish(Am, qv, zf, z, res, comm, symmetric, stats)
@@ -761,21 +745,57 @@ def solve(A, q, zeta=None, *, method: str = "newton", tol: float = 1e-8, maxiter
     w = z.duplicate()
     Am.multAdd(z, qv, w)
     t_end = time.perf_counter()
-    message = _core.status_message(int(status))
-    fields = dict(z=z, w=w, success=status == Status.CONVERGED, status=Status(status), message=message,
-                  nit=int(nit), iterations=int(iterations), residual=float(res), history=None,
+    fields = dict(z=z, w=w, success=status == Status.CONVERGED, status=Status(status),
+                  message=_core.status_message(int(status)), nit=int(nit), iterations=int(iterations),
+                  residual=float(res), history=None,
                   timings={"setup": t_iter - t_setup, "iterations": t_end - t_iter, "total": t_end - t_start},
                   method=m, inner=("cg" if symmetric else "bicgstab") if m == "newton" else "none",
                   counters={}, ranks=comm.getSize())
     if m == "newton":
-        fields.update(linear_solves=stats["linear_solves"], inner_iterations=stats["inner_iterations"],
-                      fallback_sweeps=stats["fallback_sweeps"], outer_iterations=stats["outer_iterations"],
-                      level_steps=list(stats["level_steps"]), level_seconds=list(stats["level_seconds"]),
-                      path="newton+fallback" if stats["fallback_sweeps"] and iterations else
-                      ("fallback" if stats["fallback_sweeps"] else "newton"))
+        fields.update(_newton_fields(stats, iterations))
     if polish:
         fields["polished"] = polished
     return Result(**fields)
+
+
+def _start(Am, z0):
+    """z0, or zeros in A's layout."""
+    if z0 is not None:
+        return z0.copy()
+    z = Am.createVecLeft()
+    z.set(0.0)
+    return z
+
+
+def _newton(Am, qv, zf, z0, Ps, tol, maxiter, symmetric, comm, stats):
+    """The Newton member by ζ's kind: (z, Res, status, nit, iterations)."""
+    if zf.kind == 2:
+        z, res, status = _affine_newton(Am, qv, zf, _start(Am, z0), tol, maxiter, comm, stats)
+    elif zf.kind == 3:
+        z, res, status = _callable_newton(Am, qv, zf, z0, Ps, tol, maxiter, symmetric, comm, stats)
+    else:
+        z, res, status = _obstacle_newton(Am, qv, zf.c, z0, Ps, tol, maxiter, symmetric, comm, stats)
+    return z, res, status, stats["nit"] or stats["level_steps"][0], sum(stats["level_steps"])
+
+
+def _multisplitting(Am, qv, zf, z0, m, tol, maxiter, w1, w2, gamma, alpha, beta, stats):
+    """A stationary member as the synchronous multisplitting: (z, Res, status, nit, iterations)."""
+    a, b = _AOR_FIXED.get(m, (None, None))
+    a = a if a is not None else (1.0 if alpha is None else float(alpha))
+    b = b if b is not None else (a if beta is None else float(beta))
+    member = _AOR(Am, a, b, w1, w2, float(gamma))
+    z = _start(Am, z0)
+    res, nit, status, iterations = _stationary(Am, qv, zf, member, z, tol, maxiter, stats)
+    return z, res, status, nit, iterations
+
+
+def _newton_fields(stats, iterations):
+    """The Newton statistics of the result (the serial result's NewtonStats fields)."""
+    return dict(linear_solves=stats["linear_solves"], inner_iterations=stats["inner_iterations"],
+                fallback_sweeps=stats["fallback_sweeps"], outer_iterations=stats["outer_iterations"],
+                level_steps=list(stats["level_steps"]), level_seconds=list(stats["level_seconds"]),
+                path="newton+fallback" if stats["fallback_sweeps"] and iterations else
+                ("fallback" if stats["fallback_sweeps"] else "newton"))
 
 
 def _check_polish(polish):

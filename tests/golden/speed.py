@@ -4,9 +4,10 @@ check that a refactoring did not slow anything down; not a CI test):
     OPENBLAS_NUM_THREADS=1 python tests/golden/speed.py OLD_SITE NEW_SITE [--repeats 3]
 
 OLD_SITE/NEW_SITE: directories holding an installed nrmicp package (e.g. pip install --target).
-Cases: the 2D obstacle at n = 10^6 (nrmgs + Anderson, 300 iterations: fixed work) and at
-n = 261,121 (newton with the geometric hierarchy, to tol 1e-8). Prints each case's CPU seconds
-per build (the minimum over the repeats) and the ratio new/old.
+Cases: the 2D obstacle at n = 10^6 (nrmgs + Anderson, 300 iterations: fixed work), at
+n = 261,121 (newton with the geometric hierarchy, to tol 1e-8), and newton with the default
+amg hierarchy on the 2D (n = 1,046,529) and 3D (n = 1,092,727) obstacle (--cases picks some).
+Prints each case's CPU seconds per build (the minimum over the repeats) and the ratio new/old.
 """
 import json
 import subprocess
@@ -19,9 +20,11 @@ import numpy as np
 import nrmicp
 from nrmicp import scenes
 case = sys.argv[2]
-m = int(case.split("/")[0].split("_")[-1])
-p = scenes.obstacle_2d(m, exact=False)
-if case.endswith("newton"):
+scene, m = case.split("/")[0].rsplit("_", 1)
+p = getattr(scenes, scene)(int(m), exact=False)
+if case.endswith("newton-amg"):
+    kw = dict(method="newton", hierarchy="amg", tol=1e-8)
+elif case.endswith("newton"):
     kw = dict(method="newton", hierarchy=p.prolongations(), tol=1e-8)
 else:
     kw = dict(method="nrmgs", accelerate="anderson", maxiter=300, tol=1e-300)
@@ -31,13 +34,15 @@ cpu = time.process_time() - t
 print(json.dumps({"cpu": cpu, "nit": int(r.nit), "residual": float(r.residual), "file": nrmicp.__file__}))
 '''
 
-CASES = ("obstacle_2d_1000/nrmgs+anderson", "obstacle_2d_511/newton")
+CASES = ("obstacle_2d_1000/nrmgs+anderson", "obstacle_2d_511/newton", "obstacle_2d_1023/newton-amg",
+         "obstacle_3d_103/newton-amg")
 
 
 def main():
     old, new = sys.argv[1], sys.argv[2]
     repeats = int(sys.argv[sys.argv.index("--repeats") + 1]) if "--repeats" in sys.argv else 3
-    for case in CASES:
+    cases = sys.argv[sys.argv.index("--cases") + 1].split(",") if "--cases" in sys.argv else CASES
+    for case in cases:
         runs = {"old": [], "new": []}
         for _ in range(repeats):
             for name, site in (("old", old), ("new", new)):

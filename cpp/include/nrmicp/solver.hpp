@@ -162,12 +162,7 @@ class Solver {
     a_solver_.compute(ColMatrix(A_), options_.inner, "A (for the z-update 'solve')");
   }
 
-  // What the caller hooks into a solve (any may be empty).
-  struct Hooks {
-    const Callback& callback;
-    const Poll& poll;
-    const Progress& progress;
-  };
+  using Hooks = detail::Hooks;
   // One solve of ICP(q, A, ζ) by Method 3.1. `shift` is the constant obstacle (only to report
   // z to the callback), or empty.
   Result iterate(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0, const Hooks& hooks,

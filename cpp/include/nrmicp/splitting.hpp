@@ -55,16 +55,10 @@ struct Parameters {
   double gamma = 1, alpha = 1, beta = 1;
 };
 
-/// Resolves the method defaults: Ω1 = I; Ω2 = I (NRM), αI (NRMM, α = mean diag A),
-/// D = diag(A) (AOR types, MMS, two-sweep), newton_default_omega2 (Newton); φ = 0; α, β by the
-/// method's definition.
-template <typename MatrixType>
-Parameters resolve_parameters(const MatrixType& A, const Options& o) {
-  const Eigen::Index n = A.rows();
-  Parameters p;
-  p.diagonal = diagonal(A);
-  const Eigen::VectorXd& d = p.diagonal;
-  p.gamma = o.gamma;
+namespace detail {
+
+/// α and β by the method's definition (into p), refusing those the method does not have.
+inline void resolve_alpha_beta(const Options& o, const Eigen::VectorXd& d, Parameters& p) {
   const bool has_alpha = !std::isnan(o.alpha), has_beta = !std::isnan(o.beta);
   auto reject = [&](bool given, const char* name, const char* why) {
     if (given)
@@ -80,7 +74,7 @@ Parameters resolve_parameters(const MatrixType& A, const Options& o) {
       reject(has_beta, "beta", "M = A; alpha sets Omega2 = alpha*I");
       if (has_alpha && o.omega2.size())
         throw std::invalid_argument("Options: method 'nrmm' sets omega2 = alpha*I; give alpha or omega2, not both");
-      p.alpha = has_alpha ? o.alpha : (n > 0 ? d.mean() : 1.0); p.beta = 1;
+      p.alpha = has_alpha ? o.alpha : (d.size() > 0 ? d.mean() : 1.0); p.beta = 1;
       if (!has_alpha && !o.omega2.size() && !(p.alpha >= DBL_MIN))
         throw std::invalid_argument("Options: method 'nrmm' takes alpha = mean(diag(A)) = " + to_text(p.alpha) +
                                     " by default, which must be > 0 and not subnormal; pass alpha (Omega2 = "
@@ -103,27 +97,45 @@ Parameters resolve_parameters(const MatrixType& A, const Options& o) {
       p.alpha = 1; p.beta = (o.method == Method::NRMJ) ? 0 : 1;
       break;
   }
+}
+
+/// The default Ω2 = D = diag(A) of the AOR types, MMS and two-sweep: it divides by the diagonal.
+inline const Eigen::VectorXd& diagonal_omega2(Method method, const Eigen::VectorXd& d) {
+  for (Eigen::Index i = 0; i < d.size(); ++i)
+    if (!(d[i] >= DBL_MIN))
+      throw std::invalid_argument(std::string("Options: method '") + to_string(method) +
+                                  "' takes omega2 = diag(A) by default, which needs a positive (not subnormal) "
+                                  "diagonal, but A[" + std::to_string(i) + "," + std::to_string(i) + "] = " +
+                                  to_text(d[i]) + " (it divides by the diagonal); on such a matrix use "
+                                  "method 'newton', whose default omega2 needs no diagonal, or pass omega2 "
+                                  "explicitly (e.g. the row maxima of |A|) with accelerate='anderson'");
+  return d;
+}
+
+}  // namespace detail
+
+/// Resolves the method defaults: Ω1 = I; Ω2 = I (NRM), αI (NRMM, α = mean diag A),
+/// D = diag(A) (AOR types, MMS, two-sweep), newton_default_omega2 (Newton); φ = 0; α, β by the
+/// method's definition.
+template <typename MatrixType>
+Parameters resolve_parameters(const MatrixType& A, const Options& o) {
+  const Eigen::Index n = A.rows();
+  Parameters p;
+  p.diagonal = diagonal(A);
+  p.gamma = o.gamma;
+  detail::resolve_alpha_beta(o, p.diagonal, p);
   p.omega1 = o.omega1.size() ? o.omega1 : Eigen::VectorXd::Ones(n);
   p.phi = o.phi.size() ? o.phi : Eigen::VectorXd::Zero(n);
-  if (o.omega2.size()) {
+  if (o.omega2.size())
     p.omega2 = o.omega2;
-  } else if (o.method == Method::NRM) {
+  else if (o.method == Method::NRM)
     p.omega2 = Eigen::VectorXd::Ones(n);
-  } else if (o.method == Method::NRMM) {
+  else if (o.method == Method::NRMM)
     p.omega2 = Eigen::VectorXd::Constant(n, p.alpha);
-  } else if (o.method == Method::Newton) {
-    p.omega2 = newton_default_omega2(A, d);
-  } else {
-    for (Eigen::Index i = 0; i < n; ++i)
-      if (!(d[i] >= DBL_MIN))
-        throw std::invalid_argument(std::string("Options: method '") + to_string(o.method) +
-                                    "' takes omega2 = diag(A) by default, which needs a positive (not subnormal) "
-                                    "diagonal, but A[" + std::to_string(i) + "," + std::to_string(i) + "] = " +
-                                    to_text(d[i]) + " (it divides by the diagonal); on such a matrix use "
-                                    "method 'newton', whose default omega2 needs no diagonal, or pass omega2 "
-                                    "explicitly (e.g. the row maxima of |A|) with accelerate='anderson'");
-    p.omega2 = d;
-  }
+  else if (o.method == Method::Newton)
+    p.omega2 = newton_default_omega2(A, p.diagonal);
+  else
+    p.omega2 = detail::diagonal_omega2(o.method, p.diagonal);
   if (!(p.omega2.array() >= DBL_MIN).all())
     throw std::invalid_argument("Options: omega2 must be positive and not subnormal");
   return p;

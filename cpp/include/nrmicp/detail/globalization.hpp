@@ -57,22 +57,52 @@ inline std::uint64_t hash_set(const std::vector<char>& inactive) {
   return h;
 }
 
+/// The fallback's runs of sweeps from the best iterate: 10, then 20, 40, ... sweeps, within a
+/// budget of sweeps in all (a level's loop, and the outer fixed point: newton_run.hpp).
+class SweepRuns {
+ public:
+  explicit SweepRuns(int budget) : budget_(budget) {}
+  /// The length of the next run when `spent` sweeps are spent; 0 when the budget is.
+  int next(int spent) {
+    if (spent >= budget_) return 0;
+    const int k = std::min(run_, budget_ - spent);
+    run_ = std::min(run_, std::numeric_limits<int>::max() / 2) * 2;  // no overflow to a negative run
+    return k;
+  }
+  /// Why the fallback ends the solve: MAX_ITERATIONS once the budget is spent, else (the run
+  /// brought no better iterate) STAGNATED.
+  Status give_up(int spent) const { return spent >= budget_ && budget_ > 0 ? Status::MaxIterations : Status::Stagnated; }
+
+ private:
+  int budget_, run_ = 10;
+};
+
 /// What the Newton loop on one level needs to know and may report to.
 struct NewtonControl {
-  double tol = 0;             ///< Res < tol ends the solve; 0: only a settled active set does
+  /// The Monitor's options, in the vocabulary of every solve: Res < solve.tol ends the loop (0:
+  /// only a settled active set does); solve.maxiter counts Newton steps (the step counts them:
+  /// a fallback run is a loop iteration but not a step); history, verbose, the stall and
+  /// divergence rules as for every member.
+  SolveOptions solve = coarse();
   /// Warm start by active set: when not empty, the first step uses this inactive set instead of
   /// the one of the start (after a change of the obstacle the old contact set is a far better
   /// guess than the test on the old z: measured on thermoforming_1d, 1 step instead of 6).
   std::vector<char> start_set;
-  int maxiter = 50;           ///< Newton steps
   double forcing = 0;         ///< an iterative inner solve may stop at forcing × Res (inexact Newton)
   int sweep_budget = 0;       ///< fallback sweeps allowed in all (0: no fallback)
-  bool record_history = false;
   Callback callback;  ///< finest level only; called with z = y + shift
   Poll poll;
-  Progress progress;  ///< finest level only: the verbose report (Options::verbose seconds apart)
-  int verbose = 0;
+  Progress progress;  ///< finest level only: the verbose report (solve.verbose seconds apart)
   const Eigen::VectorXd* shift = nullptr;  ///< the constant obstacle of a shifted LCP (for the callback)
+
+ private:
+  /// An inner loop's options: no tol (to a settled active set), 50 steps, silent.
+  static SolveOptions coarse() {
+    SolveOptions o;
+    o.tol = 0;
+    o.maxiter = 50;
+    return o;
+  }
 };
 
 /// A plain Newton step (NewtonStep), globalized: a step of detail::loop.
@@ -82,7 +112,8 @@ class Globalized {
   using Vector = Eigen::VectorXd;
 
   Globalized(Plain& plain, const NewtonControl& ctl, Iterate& s)
-      : plain_(plain), ctl_(ctl), test_(plain.residual()), best_z_(plain.z()), best_r_(plain.residual()) {
+      : plain_(plain), ctl_(ctl), test_(plain.residual()), best_z_(plain.z()), best_r_(plain.residual()),
+        runs_(ctl.sweep_budget) {
     s.z = plain.z();
   }
 
@@ -96,7 +127,7 @@ class Globalized {
   /// A Newton step, or the fallback, or the end.
   void move_x(Iterate&) {
     if (still_ || at_floor_) return settle();
-    if (plain_.steps() >= ctl_.maxiter) return stop(Status::MaxIterations);
+    if (plain_.steps() >= ctl_.solve.maxiter) return stop(Status::MaxIterations);
     if (!plain_.linearize()) return stop(Status::ZetaFailed);
     if (!newton()) fall_back();
   }
@@ -124,11 +155,11 @@ class Globalized {
       if (!seen_.insert(h).second) return false;  // a cycle
     }
     if (!plain_.factorize(inactive_)) return false;
-    const double r = plain_.solve(inactive_, ctl_.tol, ctl_.forcing);
+    const double r = plain_.solve(inactive_, ctl_.solve.tol, ctl_.forcing);
     if (!(std::isfinite(r) && (exempt_ || test_.acceptable(r)))) return false;
     const double r_old = plain_.residual();
     accept(r, h);
-    if (!(r < ctl_.tol) && !(r < 0.5 * r_old) && !still_) at_floor_ = at_rounding_level(r_old);
+    if (!(r < ctl_.solve.tol) && !(r < 0.5 * r_old) && !still_) at_floor_ = at_rounding_level(r_old);
     return true;
   }
   // Res (before a step that did not halve it) is within kFloorFactor of the rounding level of Res.
@@ -140,7 +171,7 @@ class Globalized {
   /// a few times the level; one on a wrong piece leaves Res orders of magnitude above it).
   static constexpr double kFloorFactor = 100;
   void accept(double r, std::uint64_t h) {
-    still_ = Plain::set_fixes_step && plain_.trial_still() && !(r < ctl_.tol);
+    still_ = Plain::set_fixes_step && plain_.trial_still() && !(r < ctl_.solve.tol);
     plain_.accept();
     if (r < best_r_ || !std::isfinite(best_r_)) { best_r_ = r; best_z_ = plain_.z(); }
     test_.push(r);
@@ -149,12 +180,11 @@ class Globalized {
     have_last_ = true;
     exempt_ = false;
   }
-  // Sweeps of the fallback member from the best iterate, each run twice as long as the last.
+  // Sweeps of the fallback member from the best iterate (SweepRuns).
   void fall_back() {
-    if (sweeps_ >= ctl_.sweep_budget) return give_up();
-    const int k = std::min(sweep_run_, ctl_.sweep_budget - sweeps_);
-    sweep_run_ = std::min(sweep_run_, std::numeric_limits<int>::max() / 2) * 2;  // no overflow to a negative run
-    const Result fr = plain_.sweep(best_z_, k, ctl_.tol);
+    const int k = runs_.next(sweeps_);
+    if (!k) return give_up();
+    const Result fr = plain_.sweep(best_z_, k, ctl_.solve.tol);
     sweeps_ += fr.iterations;
     seen_.clear();
     have_last_ = false;
@@ -164,16 +194,14 @@ class Globalized {
     test_.reset(r);
     if (r < best_r_) { best_r_ = r; best_z_ = plain_.z(); }
   }
-  void give_up() {
-    stop(sweeps_ >= ctl_.sweep_budget && ctl_.sweep_budget > 0 ? Status::MaxIterations : Status::Stagnated);
-  }
+  void give_up() { stop(runs_.give_up(sweeps_)); }
   // The active set repeated, z stood still, or a step at the rounding level did not reduce Res.
   void settle() {
     settled_ = true;
     if (!(floor_ > 0)) floor_ = plain_.rounding_level();
     end_ = StepEnd{Status::Stagnated,
                    "stagnated: Res reached its rounding floor (the active set has settled and a further Newton "
-                   "step does not reduce Res): best Res " + to_text(best_r_) + " >= tol " + to_text(ctl_.tol) +
+                   "step does not reduce Res): best Res " + to_text(best_r_) + " >= tol " + to_text(ctl_.solve.tol) +
                        ", rounding level eps (||A||z| + |q||| + ||z| + |zeta(z)||) = " + to_text(floor_) +
                        "; returning the best iterate"};
   }
@@ -189,7 +217,8 @@ class Globalized {
   std::uint64_t last_set_ = 0;
   bool have_last_ = false, exempt_ = true, still_ = false, settled_ = false, at_floor_ = false;
   double floor_ = 0;  // the rounding level of Res (computed when a stop at it is considered)
-  int sweep_run_ = 10, sweeps_ = 0;
+  SweepRuns runs_;
+  int sweeps_ = 0;
   std::optional<StepEnd> end_;
 };
 

@@ -29,6 +29,13 @@ using Poll = std::function<void()>;
 /// message is empty while iterating and the result's message at the end.
 using Progress = std::function<void(int, double, double, double, const std::string&)>;
 
+/// What the caller hooks into a solve (any may be empty).
+struct Hooks {
+  const Callback& callback;
+  const Poll& poll;
+  const Progress& progress;
+};
+
 /// A step's own end of the loop (a rule only that step kind knows: the Newton member's settled
 /// active set, or a fallback that brings nothing): the status, and a message that replaces the
 /// status's standard one when not empty.
@@ -44,7 +51,7 @@ class Monitor {
 
   /// `shift`: the constant obstacle c when the core iterates the shifted LCP in y = z − c (the
   /// callback sees z = y + c), else empty.
-  Monitor(const Options& o, const Callback& callback, const Poll& poll, const Progress& progress,
+  Monitor(const SolveOptions& o, const Callback& callback, const Poll& poll, const Progress& progress,
           const Vector& shift, Result& res, Eigen::Index n)
       : o_(o), callback_(callback), poll_(poll), progress_(o.verbose > 0 ? progress : Progress()), shift_(shift),
         res_(res), best_z_(n), t_start_(clock::now()), last_poll_(t_start_), last_report_(t_start_) {
@@ -55,6 +62,7 @@ class Monitor {
   /// res.status says why. May take s.z as the best iterate (s.z is then stale: the step's
   /// z-update rewrites it).
   bool stop(int k, double r, Iterate& s) {
+    if (count_) k = *count_;
     if (!s.finite) return finish_with(Status::Diverged, k);
     if (!s.zeta_ok) return finish_with(Status::ZetaFailed, k);
     record(k, r);
@@ -80,6 +88,11 @@ class Monitor {
   }
 
   Result& result() { return res_; }
+
+  /// Number the iterates by `*count` instead of the loop's k (history, callback, maxiter, the
+  /// best iterate's number): the outer fixed point numbers them by the Newton steps taken, as
+  /// its nit counts them.
+  void number_by(const int* count) { count_ = count; }
 
   /// The step ended the solve after its last iterate was looked at (the loop's step.end()).
   void end(const StepEnd& e) {
@@ -210,7 +223,7 @@ class Monitor {
     return shift_.size() ? callback_(k, z + shift_, r) : callback_(k, z, r);
   }
 
-  const Options& o_;
+  const SolveOptions& o_;
   const Callback& callback_;
   const Poll& poll_;
   const Progress progress_;
@@ -222,6 +235,7 @@ class Monitor {
   int best_k_ = 0, floor_count_ = 0, win_count_ = 0, bad_windows_ = 0, since_best_ = 0;
   bool out_of_reach_ = false, x_runaway_ = false;
   int x_ref_k_ = -1;
+  const int* count_ = nullptr;
   double x_scale_ = 0, x_ref_ = 0;
   double last_r_ = std::numeric_limits<double>::quiet_NaN();
   double win_min_ = std::numeric_limits<double>::infinity(), win_max_ = -win_min_, prev_win_min_ = win_min_;

@@ -1,0 +1,352 @@
+// nrmicp — one solve of the Newton member (nrmicp::Newton, newton.hpp): the Newton loop on one
+// level, the levels of nested iteration, and the four strategies by ζ with the tally of their
+// statistics across levels and outer steps.
+//   newton_loop              one level: a plain step (detail/newton_step.hpp), globalized
+//                            (detail/globalization.hpp), in the family's loop with its Monitor
+//   NewtonRun::solve_obstacle   ζ none or constant: the (shifted) LCP, nested coarse to fine
+//   NewtonRun::solve_affine     ζ = Bz + c: Newton on the full system, from the obstacle problem
+//   NewtonRun::solve_outer_fixed_point  a callable ζ: z ← S(ζ(z)) (detail/outer_fixed_point.hpp)
+//   NewtonRun::solve_semismooth a callable ζ with its Jacobian: semismooth Newton on the ICP
+#pragma once
+
+#include "../options.hpp"
+#include "../result.hpp"
+#include "../zeta.hpp"
+#include "active_set.hpp"
+#include "globalization.hpp"
+#include "multigrid.hpp"
+#include "newton_level.hpp"
+#include "newton_step.hpp"
+#include "outer_fixed_point.hpp"
+#include "stopping.hpp"
+#include "timer.hpp"
+
+#include <Eigen/SparseCore>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace nrmicp::detail {
+
+/// What the Newton loop on one level did, as a Result (z: the best iterate; its Res, status,
+/// message and history; newton.linear_solves, .inner_iterations, .fallback_sweeps), and what
+/// nested iteration and the outer fixed point take on from it.
+struct LevelOutcome : Result {
+  int steps = 0;               ///< Newton steps (the Monitor's nit is the best iterate's index)
+  bool settled = false;        ///< the active set repeated: z solves the problem to rounding
+  std::vector<char> inactive;  ///< the inactive set of z's last step (empty if no step was taken)
+};
+
+/// The Newton member on one level: the plain step `plain` (at its start), globalized, in the
+/// family's loop (detail::loop, solver.hpp) with the family's Monitor.
+template <typename Plain>
+LevelOutcome newton_loop(Plain& plain, const NewtonControl& ctl) {
+  static const Eigen::VectorXd no_shift;
+  SolveOptions mo = ctl.solve;
+  mo.maxiter = std::numeric_limits<int>::max();  // Newton steps are the step's to count (ctl.solve.maxiter)
+  LevelOutcome o;
+  Monitor monitor(mo, ctl.callback, ctl.poll, ctl.progress, ctl.shift ? *ctl.shift : no_shift, o, plain.size());
+  const Eigen::VectorXd z_start = plain.z();
+  Iterate s;
+  Globalized<Plain> step(plain, ctl, s);
+  loop(step, s, monitor);
+  monitor.finish(z_start);
+  o.steps = plain.steps();
+  o.settled = step.settled();
+  o.inactive = step.inactive();
+  o.newton.fallback_sweeps = step.sweeps();
+  o.newton.linear_solves = plain.solves();
+  o.newton.inner_iterations = plain.inner_iterations();
+  return o;
+}
+
+/// The (shifted) LCP (B null) or the affine ICP ζ(z) = Bz + c on `level`, with the reduced system
+/// `K` (analysed for this problem), from z.
+template <typename MatrixType>
+LevelOutcome newton_loop(NewtonLevel<MatrixType>& level, ActiveSetSystem<typename MatrixType::StorageIndex>& K,
+                         const Eigen::VectorXd& q, const typename NewtonLevel<MatrixType>::RowMatrix* B,
+                         const Eigen::VectorXd* c, Eigen::VectorXd z, const NewtonControl& ctl) {
+  NewtonStep<MatrixType, FixedLinearization<MatrixType>> plain(level, {level, K, q, B, c}, std::move(z));
+  return newton_loop(plain, ctl);
+}
+
+/// The levels of nested iteration (built by nrmicp::Newton): the finest on A, the coarser ones on
+/// the Galerkin operators of `hierarchy`.
+template <typename MatrixType>
+struct NewtonLevels {
+  using StorageIndex = typename MatrixType::StorageIndex;
+  using RowMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, StorageIndex>;
+  const MatrixType& A;
+  std::vector<Level<StorageIndex>> hierarchy;  ///< below the finest: P, R = Pᵀ, A = R A_finer P
+  std::unique_ptr<NewtonLevel<MatrixType>> finest;
+  std::vector<std::unique_ptr<NewtonLevel<RowMatrix>>> coarse;  ///< coarse[l] on hierarchy[l].A
+  int count() const { return 1 + static_cast<int>(coarse.size()); }
+};
+
+/// What a solve gathers over levels and outer steps (Result::newton, nit, iterations, the
+/// finest level's history), and the Result it returns.
+template <typename MatrixType>
+class NewtonTally {
+ public:
+  using Vector = Eigen::VectorXd;
+
+  NewtonTally(const MatrixType& A, int levels) : A_(A) {
+    tally_.newton.level_steps.assign(levels, 0);
+    tally_.newton.level_seconds.assign(levels, 0.0);
+  }
+
+  int nit() const { return tally_.nit; }
+  /// nit, for a Monitor that numbers its iterates by it (Monitor::number_by).
+  const int* nit_counter() const { return &tally_.nit; }
+  int fallback_sweeps() const { return tally_.newton.fallback_sweeps; }
+  void outer_step() { ++tally_.newton.outer_iterations; }
+  /// Sweeps of the fallback member outside a level's loop (the outer fixed point's).
+  void sweeps(int k) {
+    tally_.newton.fallback_sweeps += k;
+    tally_.iterations += k;
+  }
+  /// The history of the outer fixed point's Monitor (numbered by nit already).
+  void take_history(Result& from) {
+    tally_.history_iteration = std::move(from.history_iteration);
+    tally_.history_seconds = std::move(from.history_seconds);
+    tally_.history_residual = std::move(from.history_residual);
+  }
+
+  /// A level's loop into the tally (the finest level's history too, numbered on).
+  void absorb(const LevelOutcome& out, int level, double seconds) {
+    tally_.newton.level_steps[level] += out.steps;
+    tally_.newton.level_seconds[level] += seconds;
+    tally_.newton.linear_solves += out.newton.linear_solves;
+    tally_.newton.inner_iterations += out.newton.inner_iterations;
+    if (level != 0) return;
+    tally_.newton.fallback_sweeps += out.newton.fallback_sweeps;
+    for (std::size_t i = 0; i < out.history_iteration.size(); ++i) {
+      tally_.history_iteration.push_back(tally_.nit + out.history_iteration[i]);
+      tally_.history_seconds.push_back(out.history_seconds[i]);
+      tally_.history_residual.push_back(out.history_residual[i]);
+    }
+    tally_.nit += out.steps;
+    tally_.iterations += out.steps + out.newton.fallback_sweeps;
+  }
+
+  /// ζ failed at the start z: ZETA_FAILED.
+  Result zeta_failed(const Vector& z, const Vector& q) const {
+    return finish(z, std::numeric_limits<double>::quiet_NaN(), Status::ZetaFailed, to_string(Status::ZetaFailed), q);
+  }
+  /// The result of a finest-level loop: z (original variables), w, status and message.
+  Result finish(const LevelOutcome& out, const Vector& z, const Vector& q) const {
+    return finish(z, out.residual, out.status, out.message, q);
+  }
+  Result finish(const Vector& z, double residual, Status status, std::string message, const Vector& q) const {
+    Result r = tally_;
+    r.z = z;
+    r.w = A_ * z + q;
+    r.residual = residual;
+    r.status = status;
+    r.message = std::move(message);
+    r.newton.path = r.newton.fallback_sweeps ? (r.nit ? "newton+fallback" : "fallback") : "newton";
+    return r;
+  }
+
+ private:
+  const MatrixType& A_;
+  Result tally_;
+};
+
+/// One solve: the strategies by ζ, and the statistics they gather over levels and outer steps.
+template <typename MatrixType>
+class NewtonRun {
+ public:
+  using StorageIndex = typename MatrixType::StorageIndex;
+  using Vector = Eigen::VectorXd;
+  using Z = Zeta<StorageIndex>;
+
+  /// `nest`: start from the nested coarse-to-fine solution (z0 is then not used).
+  NewtonRun(const NewtonLevels<MatrixType>& levels, const Options& o, const Hooks& hooks, bool nest)
+      : levels_(levels), o_(o), hooks_(hooks), nest_(nest), tally_(levels.A, levels.count()) {}
+
+  /// The obstacle problem z ≥ ψ (ψ = 0: the LCP) as LCP(q + Aψ, A) in y = z − ψ. `nest`: start
+  /// from the nested solution. `report`: this is the problem being solved (history, callback),
+  /// not an inner one. `set` (optional): the inactive set to start from, replaced by the final one.
+  Result solve_obstacle(const Vector& q, const Vector& psi, const Vector* z0, bool nest, double tol = -1,
+                        int maxiter = -1, bool report = true, std::vector<char>* set = nullptr) {
+    Vector q_shift = q;
+    q_shift.noalias() += levels_.A * psi;
+    Vector y0 = z0 ? Vector((*z0 - psi).cwiseMax(0.0)) : Vector::Zero(q.size());
+    if (nest && !levels_.coarse.empty()) y0 = nested_start(q_shift);
+    const auto t0 = std::chrono::steady_clock::now();
+    auto control = finest_control(psi, tol >= 0 ? tol : o_.tol, maxiter >= 0 ? maxiter : o_.maxiter, report);
+    const auto out = set && !set->empty() ? from_set(q_shift, y0, *set, control) : finest_lcp(q_shift, y0, control);
+    if (set && !out.inactive.empty()) *set = out.inactive;
+    tally_.absorb(out, 0, ScopedTimer::seconds_since(t0));
+    return tally_.finish(out, out.z + psi, q);
+  }
+
+  /// ζ(z) = Bz + c: Newton on the full system, from the obstacle problem with ψ = ζ(z0) (or
+  /// from z0 itself when it is given and there is no nesting).
+  Result solve_affine(const Vector& q, const Z& zeta, const Vector* z0) {
+    const Eigen::Index n = q.size();
+    Vector psi(n);
+    zeta.eval(z0 ? *z0 : Vector::Zero(n), psi);
+    const Vector start = (z0 && !nest_) ? *z0 : solve_inner_obstacle(q, psi, z0);
+    const auto t0 = std::chrono::steady_clock::now();
+    auto K = levels_.finest->affine_system(zeta.B());
+    const Vector& c = zeta.c();
+    const auto out = newton_loop(*levels_.finest, *K, q, &zeta.B(), &c, start,
+                                 finest_control(Vector::Zero(n), o_.tol, o_.maxiter, true));
+    tally_.absorb(out, 0, ScopedTimer::seconds_since(t0));
+    return tally_.finish(out, out.z, q);
+  }
+
+  /// A callable ζ: the outer fixed point z ← S(ζ(z)) as a step of the family's loop, its
+  /// iterates numbered by the Newton steps taken (nit).
+  Result solve_outer_fixed_point(const Vector& q, const Z& zeta, const Vector* z0) {
+    const Eigen::Index n = q.size();
+    const Vector z_start = z0 ? *z0 : Vector::Zero(n);
+    Outer outer{*this, q, zeta, {}, Vector(n)};
+    Iterate s;
+    OuterFixedPoint<Outer> step(outer, z_start, z0 != nullptr, s);
+    Result out;
+    static const Vector no_shift;
+    Monitor monitor(o_, hooks_.callback, hooks_.poll, hooks_.progress, no_shift, out, n);
+    monitor.number_by(tally_.nit_counter());
+    loop(step, s, monitor);
+    monitor.finish(z_start);
+    tally_.take_history(out);
+    return tally_.finish(out.z, out.residual, out.status, std::move(out.message), q);
+  }
+
+  /// A callable ζ with its Jacobian J: semismooth Newton on the whole ICP, each step the affine
+  /// step of the linearization ζ(z) + J(v − z) (detail::JacobianLinearization); Res is the
+  /// ICP's. Start as for an affine ζ. Newton steps and fallback sweeps of the start count
+  /// against maxiter.
+  Result solve_semismooth(const Vector& q, const Z& zeta, const Vector* z0) {
+    using Step = NewtonStep<MatrixType, JacobianLinearization<MatrixType>>;
+    const Eigen::Index n = q.size();
+    Vector psi(n);
+    const Vector z_start = z0 ? *z0 : Vector::Zero(n);
+    if (!zeta.eval(z_start, psi)) return tally_.zeta_failed(z_start, q);
+    Vector start = (z0 && !nest_) ? *z0 : solve_inner_obstacle(q, psi, z0);
+    const auto t0 = std::chrono::steady_clock::now();
+    Step plain(*levels_.finest, {*levels_.finest, q, zeta, {}, {}, {}}, std::move(start));
+    if (std::isnan(plain.residual())) return tally_.zeta_failed(z_start, q);
+    static const Vector no_shift;
+    auto control = finest_control(no_shift, o_.tol, o_.maxiter - tally_.nit(), true);
+    control.sweep_budget = o_.maxiter - tally_.fallback_sweeps();
+    const auto out = newton_loop(plain, control);
+    tally_.absorb(out, 0, ScopedTimer::seconds_since(t0));
+    return tally_.finish(out, out.z, q);
+  }
+
+ private:
+  /// Newton steps per coarse level: until its active set settles (at most this many), since a
+  /// cut-short coarse solve leaves a band of wrong active set that Res does not show
+  /// (docs/MEASUREMENTS.md, coarse_maxiter).
+  static constexpr int coarse_maxiter = 100;
+  /// The inner solves on the coarse levels stop at this fraction of the iterate's Res: a start
+  /// needs no more; not on the finest level (docs/MEASUREMENTS.md, coarse_forcing).
+  static constexpr double coarse_forcing = 0.1;
+  /// The start of an affine or semismooth solve: at most this many Newton steps of the obstacle problem.
+  static constexpr int start_maxiter = 100;
+
+  /// The outer fixed point's view of this run (the interface of detail::OuterFixedPoint).
+  struct Outer {
+    NewtonRun& run;
+    const Vector& q;
+    const Z& zeta;
+    std::vector<char> set;  // the last inner solve's inactive set: the next one starts from it
+    Vector w;
+    /// The inner obstacle problem, solved to a settled active set (its own tol: 0). Without z,
+    /// it starts at y = 0 (z = ψ): measured better than from z = 0.
+    Result obstacle(const Vector& psi, const Vector* z, bool first) {
+      Result inner = run.solve_obstacle(q, psi, z, first && run.nest_, 0.0, run.o_.maxiter - run.tally_.nit(), false, &set);
+      run.tally_.outer_step();
+      return inner;
+    }
+    double icp_residual(const Vector& v, Vector& zv) { return run.levels_.finest->icp_residual(q, zeta, v, zv, w); }
+    Result sweep(const Vector& z0, int sweeps) {
+      const Result sw = run.levels_.finest->sweep(q, zeta, z0, sweeps, run.o_.tol);
+      run.tally_.sweeps(sw.iterations);
+      return sw;
+    }
+    int sweeps_spent() const { return run.tally_.fallback_sweeps(); }
+    int sweep_budget() const { return run.o_.maxiter; }
+  };
+
+  /// The obstacle problem as the start of an affine or semismooth solve (no report, to a settled set).
+  Vector solve_inner_obstacle(const Vector& q, const Vector& psi, const Vector* z0) {
+    return solve_obstacle(q, psi, z0, nest_, 0.0, std::min(start_maxiter, o_.maxiter), false).z;
+  }
+
+  LevelOutcome finest_lcp(const Vector& q_shift, const Vector& y0, const NewtonControl& control) {
+    return newton_loop(*levels_.finest, levels_.finest->lcp_system(), q_shift, nullptr, nullptr, y0, control);
+  }
+  /// From the inactive set `set` of the last inner solve: a guess, tried without fallback; when its
+  /// steps are rejected (on impulse_control(101) they were, every outer step: Res 3.2, stagnated),
+  /// the loop is rerun from y0 on y0's own active set, as without a guess.
+  LevelOutcome from_set(const Vector& q_shift, const Vector& y0, const std::vector<char>& set, NewtonControl control) {
+    auto guess = control;
+    guess.start_set = set;
+    guess.sweep_budget = 0;
+    auto tried = finest_lcp(q_shift, y0, guess);
+    if (tried.settled || tried.status != Status::Stagnated || tried.steps >= control.solve.maxiter) return tried;
+    tally_.absorb(tried, 0, 0.0);
+    control.solve.maxiter -= tried.steps;
+    return finest_lcp(q_shift, y0, control);
+  }
+
+  /// Nested start for LCP(q_shift, A) in y ≥ 0: Newton on each coarse level to a settled active
+  /// set, coarse to fine, each solution prolongated and projected onto y ≥ 0.
+  Vector nested_start(const Vector& q_shift) {
+    const std::size_t L = levels_.coarse.size();
+    std::vector<Vector> qs(L + 1);
+    qs[0] = q_shift;
+    for (std::size_t l = 0; l < L; ++l) qs[l + 1] = levels_.hierarchy[l].R * qs[l];
+    Vector y = Vector::Zero(L ? levels_.coarse.back()->size() : q_shift.size());
+    NewtonControl c;
+    c.solve.maxiter = coarse_maxiter;
+    c.forcing = coarse_forcing;
+    c.sweep_budget = 1000;
+    for (std::size_t l = L; l >= 1; --l) {
+      const auto t0 = std::chrono::steady_clock::now();
+      auto& level = *levels_.coarse[l - 1];
+      const auto out = newton_loop(level, level.lcp_system(), qs[l], nullptr, nullptr, y, c);
+      tally_.absorb(out, static_cast<int>(l), ScopedTimer::seconds_since(t0));
+      y = (levels_.hierarchy[l - 1].P * out.z).cwiseMax(0.0);
+    }
+    return y;
+  }
+
+  /// The control of a finest-level loop; `report`: this loop is the problem being solved.
+  NewtonControl finest_control(const Vector& shift, double tol, int maxiter, bool report) const {
+    NewtonControl c;
+    c.solve = o_;
+    c.solve.tol = tol;
+    c.solve.maxiter = maxiter;
+    c.solve.record_history = report && o_.record_history;
+    c.solve.verbose = report ? o_.verbose : 0;
+    c.sweep_budget = o_.maxiter;
+    if (report) {  // the callback's k counts on from the steps before this loop, as tally_.absorb()'s history does
+      if (hooks_.callback)
+        c.callback = [&cb = hooks_.callback, base = tally_.nit()](int k, const Vector& z, double r) { return cb(base + k, z, r); };
+      c.progress = hooks_.progress;
+    }
+    c.shift = &shift;
+    c.poll = hooks_.poll;
+    return c;
+  }
+
+  const NewtonLevels<MatrixType>& levels_;
+  const Options& o_;
+  const Hooks& hooks_;
+  const bool nest_;
+  NewtonTally<MatrixType> tally_;
+};
+
+}  // namespace nrmicp::detail

@@ -1,0 +1,96 @@
+// nrmicp — the Newton member on a callable ζ without a Jacobian: the outer fixed point
+//
+//   z ← S(ζ(z)),   S(ψ) = the solution of the obstacle problem z ≥ ψ (Newton, newton_run.hpp),
+//
+// as a step of the family's loop (solver.hpp), so that the one Monitor (detail/stopping.hpp)
+// decides when it stops, keeps its history and best iterate and calls the callback. Each inner
+// solve is warm-started from z and from the last inner solve's active set. An outer step whose
+// Res fails the non-monotone test hands over to runs of the fallback member on the whole ICP from
+// the best iterate (SweepRuns, as a level's loop does: detail/globalization.hpp).
+#pragma once
+
+#include "../result.hpp"
+#include "globalization.hpp"
+#include "iterate.hpp"
+#include "stopping.hpp"
+
+#include <Eigen/Core>
+
+#include <cmath>
+#include <limits>
+#include <optional>
+#include <utility>
+
+namespace nrmicp::detail {
+
+/// `Run` (detail::NewtonRun) provides, each counted in its tally:
+///   Result obstacle(const Vector& psi, const Vector* z, bool first)
+///                                                         the inner solve S(ψ) from z (null: from
+///                                                         z = ψ); the first one may start nested
+///   double icp_residual(const Vector& v, Vector& zv)      Res of the ICP at v, ζ(v) in zv (NaN: ζ failed)
+///   Result sweep(const Vector& z0, int sweeps)            a run of the fallback member
+///   int sweeps_spent() const, int sweep_budget() const
+template <typename Run>
+class OuterFixedPoint {
+ public:
+  using Vector = Eigen::VectorXd;
+
+  /// From z (`given`: z is the user's start; else the inner solve starts as the problem's own).
+  OuterFixedPoint(Run& run, Vector z, bool given, Iterate& s)
+      : run_(run), z_(std::move(z)), psi_(z_.size()), psi_new_(z_.size()), given_(given),
+        r_(run.icp_residual(z_, psi_)), test_(r_), best_z_(z_), best_r_(r_), runs_(run.sweep_budget()) {
+    s.z = z_;
+  }
+
+  /// Res of z (computed when z was made); NaN when ζ failed there.
+  double evaluate(Iterate& s) {
+    s.zeta_ok = !std::isnan(r_);
+    return r_;
+  }
+  /// One outer step, or a run of the fallback member when the step is not acceptable.
+  void move_x(Iterate&) {
+    Result inner = run_.obstacle(psi_, given_ || !first_ ? &z_ : nullptr, first_);
+    first_ = false;
+    const double r = run_.icp_residual(inner.z, psi_new_);
+    if (std::isnan(r)) {  // ζ failed: the Monitor ends the solve at this iterate
+      r_ = r;
+      return;
+    }
+    if (test_.acceptable(r)) {
+      z_.swap(inner.z);
+      psi_.swap(psi_new_);
+      r_ = r;
+      test_.push(r);
+    } else {
+      fall_back();
+    }
+    if (r_ < best_r_) { best_z_ = z_; best_r_ = r_; }
+  }
+  void update_z(Iterate& s) { s.z = z_; }
+  const StepEnd* end() const { return end_ ? &*end_ : nullptr; }
+  void report(Result&) const {}
+
+ private:
+  void fall_back() {
+    const int k = runs_.next(run_.sweeps_spent());
+    if (!k) return give_up();
+    const Result sw = run_.sweep(best_z_, k);
+    if (!(sw.residual < best_r_)) return give_up();
+    z_ = sw.z;
+    r_ = run_.icp_residual(z_, psi_);
+    test_.reset(r_);
+  }
+  void give_up() { end_ = StepEnd{runs_.give_up(run_.sweeps_spent()), {}}; }
+
+  Run& run_;
+  Vector z_, psi_, psi_new_;  // z, ζ(z), ζ of the trial
+  bool given_, first_ = true;
+  double r_;
+  NonMonotone test_;
+  Vector best_z_;
+  double best_r_;
+  SweepRuns runs_;
+  std::optional<StepEnd> end_;
+};
+
+}  // namespace nrmicp::detail
