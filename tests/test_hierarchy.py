@@ -203,3 +203,37 @@ def test_relaxation_with_no_fine_fine_coupling_is_its_first_sweep():
     ideal[~is_c] = -(Bd[~is_c][:, is_c] @ P.toarray()[is_c]) / np.diag(Bd)[~is_c, None]
     got = _relax_interpolation(B, P, is_c, sweeps=3, truncate=0.0).toarray()
     np.testing.assert_allclose(got, ideal, rtol=1e-14, atol=1e-15)
+
+
+def laplacian_3d(m):
+    t = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(m, m))
+    eye = sp.identity(m)
+    return sp.csr_matrix(sp.kron(sp.kron(eye, eye), t) + sp.kron(sp.kron(eye, t), eye) + sp.kron(sp.kron(t, eye), eye))
+
+
+@pytest.mark.parametrize("build", [lambda: laplacian_2d(40), lambda: upwind_convection_diffusion(40),
+                                   lambda: laplacian_3d(16)], ids=["laplacian_2d", "convection", "laplacian_3d"])
+def test_amg_levels_coarse_operators_are_the_galerkin_products_of_their_prolongations(build):
+    # the core takes these instead of forming P^T A P again: they must be those products (3D: the
+    # folded first level, whose operator is pyamg's second)
+    from nrmicp._hierarchy import amg_levels
+    A = build()
+    levels = amg_levels(A)
+    assert len(levels) >= 2
+    Al = A
+    for P, Ac in levels:
+        galerkin = (P.T @ Al @ P).toarray()
+        np.testing.assert_allclose(Ac.toarray(), galerkin, rtol=0, atol=1e-12 * np.abs(galerkin).max())
+        Al = Ac
+    assert [P.shape for P in amg_prolongations(A)] == [P.shape for P, _ in levels]
+
+
+def test_newton_with_pyamgs_coarse_operators_agrees_with_the_core_forming_them():
+    import nrmicp
+    from nrmicp import scenes
+    p = scenes.obstacle_2d(63, exact=False)
+    given = nrmicp.solve(p.A, p.q, p.zeta, method="newton", hierarchy="amg", tol=1e-10)
+    formed = nrmicp.solve(p.A, p.q, p.zeta, method="newton", hierarchy=amg_prolongations(p.A), tol=1e-10)
+    assert given.success and formed.success
+    assert given.level_steps == formed.level_steps
+    np.testing.assert_allclose(given.z, formed.z, rtol=0, atol=1e-10)

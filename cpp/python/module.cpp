@@ -321,22 +321,25 @@ class PyNewton : public PyCore<I, nrmicp::Newton<CsrMap<I>>> {
  public:
   using Core = nrmicp::Newton<CsrMap<I>>;
   using PyCore<I, Core>::PyCore;
-  static std::vector<typename Core::RowMatrix> prolongations(const py::list& ps) {
+  /// (indptr, indices, data, rows, cols) triples, copied; `what` names them in errors. The list is
+  /// emptied as they are copied (it is _newton.make_core's own): one copy of each level at a time.
+  static std::vector<typename Core::RowMatrix> matrices(py::list ps, const char* what) {
     std::vector<typename Core::RowMatrix> out;
     for (std::size_t l = 0; l < ps.size(); ++l) {
       const auto t = ps[l].cast<py::tuple>();
-      const std::string name = "prolongations[" + std::to_string(l) + "]";
+      const std::string name = std::string(what) + "[" + std::to_string(l) + "]";
       py::array ip = t[0].cast<py::array>(), ix = t[1].cast<py::array>(), dv = t[2].cast<py::array>();
       const auto rows = t[3].cast<Eigen::Index>(), cols = t[4].cast<Eigen::Index>();
       if (ip.shape(0) != rows + 1) throw py::value_error(name + ".indptr must have length rows + 1");
       CsrMap<I> P(rows, cols, dv.shape(0), checked_data<I>(ip, (name + ".indptr").c_str()),
                   checked_data<I>(ix, (name + ".indices").c_str()), checked_data<double>(dv, (name + ".data").c_str()));
       out.emplace_back(P);
+      ps[l] = py::none();
     }
     return out;
   }
-  void build(const Options& o, std::vector<typename Core::RowMatrix> P) {
-    this->core_.emplace(this->A_.A, o, std::move(P));
+  void build(const Options& o, std::vector<typename Core::RowMatrix> P, std::vector<typename Core::RowMatrix> coarse) {
+    this->core_.emplace(this->A_.A, o, std::move(P), std::move(coarse));
   }
 
   // One Newton step from z (polish).
@@ -362,14 +365,15 @@ template <typename I>
 void bind_newton(py::module_& m, const char* name) {
   py::class_<PyNewton<I>> cls(m, name);
   cls.def(py::init([](py::array indptr, py::array indices, py::array data, Eigen::Index n, const Options& o,
-                       const py::list& prolongations) {
+                       py::list prolongations, py::list coarse_operators) {
              auto s = std::make_unique<PyNewton<I>>(indptr, indices, data, n);
-             auto P = PyNewton<I>::prolongations(prolongations);
-             without_gil([&] { s->build(o, std::move(P)); return true; });  // coarse operators PᵀAP, factorizations
+             auto P = PyNewton<I>::matrices(prolongations, "prolongations");
+             auto C = PyNewton<I>::matrices(coarse_operators, "coarse_operators");
+             without_gil([&] { s->build(o, std::move(P), std::move(C)); return true; });  // coarse operators PᵀAP
              return s;
            }),
            py::arg("indptr"), py::arg("indices"), py::arg("data"), py::arg("n"), py::arg("options"),
-           py::arg("prolongations"))
+           py::arg("prolongations"), py::arg("coarse_operators") = py::list())
       .def("polish", &PyNewton<I>::polish, py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"),
            py::arg("b_indptr"), py::arg("b_indices"), py::arg("b_data"), py::arg("zeta_fn"), py::arg("z"), py::arg("tol"))
       .def_property_readonly("levels", &PyNewton<I>::levels)

@@ -241,6 +241,38 @@ TEST_CASE("a prolongation of the wrong shape is refused, naming it") {
   CHECK_THROWS_WITH_AS(Newton<RowMat>(A, Options(), P), doctest::Contains("prolongations[0]"), std::invalid_argument);
 }
 
+TEST_CASE("coarse operators given with the prolongations are taken as the Galerkin ones; a wrong count or shape is refused") {
+  const int m = 31;
+  const RowMat A = laplacian_2d(m);
+  const Vec psi = paraboloid(m), q = Vec::Zero(m * m);
+  const std::vector<RowMat> P = hierarchy_2d(m);
+  std::vector<RowMat> C;  // P_lᵀ A_l P_l, formed here independently of the library
+  RowMat Al = A;
+  for (const RowMat& Pl : P) {
+    RowMat next = RowMat(RowMat(Pl.transpose()) * Al) * Pl;
+    C.push_back(next);
+    Al = next;
+  }
+  Options o;
+  o.tol = 1e-9;
+  const Newton<RowMat> formed(A, o, P), given(A, o, P, C);
+  const Result rf = formed.solve(q, Zeta<int>::constant(psi)), rg = given.solve(q, Zeta<int>::constant(psi));
+  CHECK(rg.status == Status::Converged);
+  CHECK(rg.newton.level_steps == rf.newton.level_steps);
+  CHECK((rg.z - rf.z).lpNorm<Eigen::Infinity>() < 1e-12);
+  // a coarse operator that is not the Galerkin one is taken as it is: the coarse level solves it
+  std::vector<RowMat> scaled = C;
+  scaled[0] *= 2.0;
+  const Result rs = Newton<RowMat>(A, o, P, scaled).solve(q, Zeta<int>::constant(psi));
+  CHECK(rs.status == Status::Converged);
+  check_complementarity(A, q, rs.z, psi, 1e-9);
+  const std::vector<RowMat> one(C.begin(), C.begin() + 1);
+  CHECK_THROWS_WITH_AS(Newton<RowMat>(A, o, P, one), doctest::Contains("coarse_operators for"), std::invalid_argument);
+  std::vector<RowMat> wrong = C;
+  wrong[1] = C[0];
+  CHECK_THROWS_WITH_AS(Newton<RowMat>(A, o, P, wrong), doctest::Contains("coarse_operators[1]"), std::invalid_argument);
+}
+
 TEST_CASE("a P-matrix on which the active-set steps cycle: the fallback is taken and the answer is right") {
   // A P-matrix, not an M-matrix (found by search: from z = 0 the plain active-set method cycles
   // through three active sets; q_0 = 0.1 > 0 keeps the start off a tie, which counts as inactive

@@ -23,7 +23,7 @@ import scipy.sparse as sp
 
 from ._inputs import as_csr
 
-__all__ = ["amg_prolongations", "resolve_hierarchy"]
+__all__ = ["amg_prolongations", "amg_levels", "resolve_hierarchy"]
 
 # Classical strength of connection on A's rows, θ = 0.25 (pyamg's default): it needs no
 # symmetry. On the upwind convection–diffusion obstacle (scenes, ε = 0.01, m = 63 → 191,
@@ -125,7 +125,15 @@ def _auxiliary_level(A, theta, sweeps, truncate):
 
 
 def amg_prolongations(A, **opts) -> list:
-    """Classical (Ruge–Stüben) AMG prolongations of A, finest first, built for nested iteration.
+    """Classical (Ruge–Stüben) AMG prolongations of A, finest first, built for nested iteration
+    (the P of :func:`amg_levels`)."""
+    return [P for P, _ in amg_levels(A, **opts)]
+
+
+def amg_levels(A, **opts) -> list:
+    """Classical (Ruge–Stüben) AMG levels of A, finest first, built for nested iteration: pairs
+    (P_l, A_{l+1}) of a prolongation and the Galerkin operator A_{l+1} = P_lᵀ A_l P_l it makes,
+    which the set-up forms anyway (the core takes them instead of forming them again).
 
     The first ``aux_levels`` levels: the coarsening (RS C/F splitting of the classical strength
     with ``theta``) and the direct-interpolation weights come from :func:`auxiliary_m_matrix` of
@@ -136,8 +144,8 @@ def amg_prolongations(A, **opts) -> list:
     ``ruge_stuben_solver`` (classical strength θ, classical interpolation).
     Options (defaults): ``theta`` (0.25), ``max_coarse`` (10), ``max_levels`` (30), ``sweeps``
     (3), ``truncate`` (0.2), ``aux_levels`` (1). Works for nonsymmetric A (the strength reads
-    A's rows). Returns a list of float64 canonical ``scipy.sparse.csr_matrix``, P_l of shape
-    (n_l, n_{l+1}); ``[]`` when A is already small enough to be the coarsest level.
+    A's rows). Returns a list of pairs of float64 canonical ``scipy.sparse.csr_matrix``, P_l of
+    shape (n_l, n_{l+1}) and A_{l+1}; ``[]`` when A is already small enough to be the coarsest level.
     """
     _pyamg()
     A = sp.csr_matrix(A, dtype=np.float64)
@@ -152,8 +160,8 @@ def amg_prolongations(A, **opts) -> list:
         P = _auxiliary_level(A, kw["theta"], kw["sweeps"], kw["truncate"])
         if P is None:
             return out
-        out.append(P)
         A_fine, A = A, sp.csr_matrix(P.T @ (A @ P))
+        out.append((P, _canonical(A.copy())))   # pyamg takes A as it is (explicit zeros and all)
     if A.shape[0] <= kw["max_coarse"] or len(out) >= kw["max_levels"] - 1:
         return out
     # A first coarse operator denser than A (7-point 3D: 546k unknowns, 18.7 nonzeros a row
@@ -171,9 +179,9 @@ def amg_prolongations(A, **opts) -> list:
     ml = pyamg.ruge_stuben_solver(A, strength=("classical", {"theta": kw["theta"]}), max_coarse=kw["max_coarse"],
                                   max_levels=kw["max_levels"] - len(out),
                                   interpolation="direct" if dense else "classical")
-    out += [_canonical(level.P) for level in ml.levels[:-1]]
-    if dense and len(out) > 1:
-        out[:2] = [_canonical(out[0] @ out[1])]
+    out += [(_canonical(ml.levels[i].P), _canonical(ml.levels[i + 1].A)) for i in range(len(ml.levels) - 1)]
+    if dense and len(out) > 1:   # (P_0 P_1)ᵀ A (P_0 P_1) = P_1ᵀ A_1 P_1 = A_2
+        out[:2] = [(_canonical(out[0][0] @ out[1][0]), out[1][1])]
     return out
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _core
-from ._hierarchy import resolve_hierarchy
+from ._hierarchy import amg_levels, resolve_hierarchy
 
 #: hierarchy="auto" builds the AMG hierarchy (pyamg) for method "newton" from this many unknowns
 #: on, and starts cold below, where AMG's set-up outweighs the steps it saves (docs/MEASUREMENTS.md).
@@ -33,29 +33,35 @@ def check_no_hierarchy(hierarchy, method):
                          f"(got hierarchy={hierarchy!r}; use None)")
 
 
-def prolongations(hierarchy, A, A_core, dc) -> list:
-    """hierarchy= -> prolongations for the core's matrix A_core (= A, or D_r A D_c when scaled).
+def levels(hierarchy, A, A_core, dc) -> tuple:
+    """hierarchy= -> (prolongations for the core's matrix A_core (= A, or D_r A D_c when scaled),
+    their Galerkin operators or None: the amg set-up forms them, a given list leaves them to the core).
     'auto': 'amg' for n >= AUTO_AMG_MIN_N when pyamg is importable, else none (cold start)."""
     if isinstance(hierarchy, str) and hierarchy == "auto":
         hierarchy = "amg" if A.shape[0] >= AUTO_AMG_MIN_N and _has_pyamg() else None
     if isinstance(hierarchy, str) and hierarchy == "amg":
-        return resolve_hierarchy("amg", A_core) or []
+        pairs = amg_levels(A_core)
+        return [P for P, _ in pairs], [Ac for _, Ac in pairs]
     Ps = resolve_hierarchy(hierarchy, A) or []
     if Ps and dc is not None:
         # z = D_c y: a prolongation of y is D_c⁻¹ P (the coarse variables keep their scale).
         import scipy.sparse as sp
         Ps = [sp.csr_matrix(sp.diags(1.0 / dc) @ Ps[0])] + Ps[1:]
-    return Ps
+    return Ps, None
 
 
 def make_core(A_core, opts, hierarchy, A, dc):
-    """The C++ Newton object (NewtonI32/NewtonI64) with its prolongations."""
+    """The C++ Newton object (NewtonI32/NewtonI64) with its prolongations (and coarse operators)."""
     idx = A_core.indices.dtype
-    Ps = prolongations(hierarchy, A, A_core, dc)
-    triples = [(P.indptr.astype(idx), P.indices.astype(idx), np.ascontiguousarray(P.data, dtype=np.float64),
-                P.shape[0], P.shape[1]) for P in Ps]
+    Ps, coarse = levels(hierarchy, A, A_core, dc)
+
+    def triple(M):
+        return (M.indptr.astype(idx), M.indices.astype(idx), np.ascontiguousarray(M.data, dtype=np.float64),
+                M.shape[0], M.shape[1])
     cls = _core.NewtonI64 if idx == np.int64 else _core.NewtonI32
-    return cls(A_core.indptr, A_core.indices, A_core.data, A_core.shape[0], opts, triples)
+    prolongations, coarse_operators = [triple(P) for P in Ps], [triple(Ac) for Ac in coarse or []]
+    del Ps, coarse  # the core copies each level and empties these lists as it goes: one copy at a time
+    return cls(A_core.indptr, A_core.indices, A_core.data, A_core.shape[0], opts, prolongations, coarse_operators)
 
 
 def polisher(solver):

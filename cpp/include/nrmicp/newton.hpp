@@ -60,6 +60,8 @@ namespace nrmicp {
 /// `prolongations` P_0, P_1, ...: P_0 maps level 1 (n_1 unknowns) to the finest level (n), P_l
 /// level l+1 to level l. Coarse problems A_{l+1} = P_lᵀ A_l P_l, q_{l+1} = P_lᵀ q_l are solved
 /// coarse to fine, each solution prolongated, projected onto z ≥ ζ and used as the next start.
+/// `coarse_operators` (optional, one per prolongation): those A_{l+1} when the caller has formed
+/// them already (an AMG set-up does), taken as they are instead of being formed again.
 template <typename MatrixType>
 class Newton {
  public:
@@ -72,17 +74,18 @@ class Newton {
 
   /// `options.method` is taken as Method::Newton (this class is the Newton member), so the
   /// options the Newton member does not have (phi, accelerate, z_update) are refused.
-  Newton(const MatrixType& A, Options options, std::vector<RowMatrix> prolongations = {})
+  Newton(const MatrixType& A, Options options, std::vector<RowMatrix> prolongations = {},
+         std::vector<RowMatrix> coarse_operators = {})
       : options_(as_newton(std::move(options))), levels_{A, {}, {}, {}} {
     if (A.rows() != A.cols())
       throw std::invalid_argument("Newton: A must be square, got " + std::to_string(A.rows()) + "x" +
                                   std::to_string(A.cols()));
     options_.check(A.rows());
-    check_shapes(A.rows(), prolongations);
+    check_shapes(A.rows(), prolongations, coarse_operators);
     const auto t0 = std::chrono::steady_clock::now();
     params_ = resolve_parameters(A, options_);
     levels_.finest = std::make_unique<detail::NewtonLevel<MatrixType>>(A, options_);
-    build_hierarchy(std::move(prolongations));
+    build_hierarchy(std::move(prolongations), std::move(coarse_operators));
     setup_seconds_ = detail::ScopedTimer::seconds_since(t0);
   }
 
@@ -131,26 +134,36 @@ class Newton {
     return o;
   }
 
-  static void check_shapes(Eigen::Index rows, const std::vector<RowMatrix>& prolongations) {
+  static std::string shape(const RowMatrix& M) { return std::to_string(M.rows()) + "x" + std::to_string(M.cols()); }
+  static void check_shapes(Eigen::Index rows, const std::vector<RowMatrix>& prolongations,
+                           const std::vector<RowMatrix>& coarse) {
+    if (!coarse.empty() && coarse.size() != prolongations.size())
+      throw std::invalid_argument("Newton: " + std::to_string(coarse.size()) + " coarse_operators for " +
+                                  std::to_string(prolongations.size()) + " prolongations (one each, or none)");
     for (std::size_t l = 0; l < prolongations.size(); ++l) {
       const RowMatrix& P = prolongations[l];
       if (P.rows() != rows || P.cols() < 1 || P.cols() > rows)
-        throw std::invalid_argument("Newton: prolongations[" + std::to_string(l) + "] has shape " +
-                                    std::to_string(P.rows()) + "x" + std::to_string(P.cols()) +
+        throw std::invalid_argument("Newton: prolongations[" + std::to_string(l) + "] has shape " + shape(P) +
                                     ", expected " + std::to_string(rows) + " rows and at most as many columns");
       rows = P.cols();
+      if (!coarse.empty() && (coarse[l].rows() != rows || coarse[l].cols() != rows))
+        throw std::invalid_argument("Newton: coarse_operators[" + std::to_string(l) + "] has shape " +
+                                    shape(coarse[l]) + ", expected " + std::to_string(rows) + "x" + std::to_string(rows));
     }
   }
 
-  /// Galerkin coarse operators; a level whose operator has a non-positive diagonal ends the
-  /// hierarchy there (the active-set test needs Ω2 = diag > 0).
-  void build_hierarchy(std::vector<RowMatrix> prolongations) {
+  /// Galerkin coarse operators (formed here unless given); a level whose operator has a
+  /// non-positive diagonal ends the hierarchy there (the active-set test needs Ω2 = diag > 0).
+  void build_hierarchy(std::vector<RowMatrix> prolongations, std::vector<RowMatrix> coarse) {
     auto& hierarchy = levels_.hierarchy;
-    for (auto& P : prolongations) {
-      const RowMatrix AP = hierarchy.empty() ? detail::product(levels_.A, P) : detail::product(hierarchy.back().A, P);
-      detail::Level<StorageIndex> level{std::move(P), {}, {}};
+    for (std::size_t l = 0; l < prolongations.size(); ++l) {
+      detail::Level<StorageIndex> level{std::move(prolongations[l]), {}, {}};
       level.R = level.P.transpose();
-      level.A = detail::product(level.R, AP);
+      if (!coarse.empty())
+        level.A = std::move(coarse[l]);
+      else
+        level.A = detail::product(level.R, hierarchy.empty() ? detail::product(levels_.A, level.P)
+                                                             : detail::product(hierarchy.back().A, level.P));
       if (!(diagonal(level.A).array() > 0).all()) break;
       hierarchy.push_back(std::move(level));
     }
