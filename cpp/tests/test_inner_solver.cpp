@@ -55,6 +55,23 @@ TEST_CASE("a singular matrix is a clear error") {
                        std::runtime_error);
 }
 
+TEST_CASE("a symmetric matrix whose Cholesky pivot is a rounding error is singular, on every BLAS") {
+  // [[2, 2], [2, 2]]: the last pivot 2 - (2/sqrt 2)^2 is +4e-16 or negative depending on the
+  // kernel; either way the matrix is refused, by CHOLMOD (rcond) and then by the LU
+  testing::SpMat<> S(2, 2);
+  S.insert(0, 0) = 2.0; S.insert(0, 1) = 2.0; S.insert(1, 0) = 2.0; S.insert(1, 1) = 2.0;
+  S.makeCompressed();
+  InnerSolver<int> s;
+  if (have_cholmod()) {  // (Eigen's SimplicialLLT has no such check)
+    CHECK_THROWS_WITH_AS(s.compute(S, Inner::Auto, "the test matrix"), doctest::Contains("singular"),
+                         std::runtime_error);
+    CHECK_THROWS_WITH_AS(s.compute(S, Inner::Cholmod, "the test matrix"), doctest::Contains("singular"),
+                         std::runtime_error);
+  }
+  S.coeffRef(1, 1) = 3.0;  // well conditioned: accepted
+  CHECK_NOTHROW(s.compute(S, Inner::Auto, "the test matrix"));
+}
+
 TEST_CASE("a matrix with an empty row or column is rejected before any backend sees it") {
   // Eigen's SparseLU did not return on an all-zero matrix (n >= 21); CHOLMOD's analysis of it
   // left Eigen's wrapper a null factor.

@@ -179,6 +179,13 @@ template <typename ColMatrix>
 struct CholmodLLT : Eigen::CholmodSupernodalLLT<ColMatrix, Eigen::Lower> {
   CholmodLLT() { this->cholmod().print = 0; }
   bool has_factor() const { return this->m_cholmodFactor != nullptr; }
+  /// CHOLMOD's estimate of the reciprocal condition number, (min diag L / max diag L)² ≥ 1/κ.
+  double rcond() {
+    if constexpr (sizeof(typename ColMatrix::StorageIndex) == 8)
+      return cholmod_l_rcond(this->m_cholmodFactor, &this->cholmod());
+    else
+      return cholmod_rcond(this->m_cholmodFactor, &this->cholmod());
+  }
 };
 #endif
 #if defined(NRMICP_HAVE_UMFPACK)
@@ -279,8 +286,13 @@ class InnerSolver {
     detail::check_cholmod<StorageIndex>(s.cholmod().status, s.has_factor(), what);
     s.factorize(M);
     detail::check_cholmod<StorageIndex>(s.cholmod().status, true, what);
-    return s.info() == Eigen::Success;  // not positive definite: a warning status
+    // Not positive definite is a warning status; so is a pivot within rounding of zero.
+    return s.info() == Eigen::Success && s.rcond() >= singular_rcond;
   }
+  /// Pivots this close to rounding (min/max pivot of LLᵀ; κ ≳ 4.5e12) mean a singular matrix: its
+  /// solves would follow the machine's rounding. Measured: nrm's Lm = [[2, 2], [2, 2]] factored
+  /// with rcond = ε (a pivot of 4e-16) on an AMD EPYC, and was refused (negative pivot) elsewhere.
+  static constexpr double singular_rcond = 1e3 * std::numeric_limits<double>::epsilon();
 #endif
 #if defined(NRMICP_HAVE_UMFPACK)
   static bool factorize(detail::UmfpackLU<ColMatrix>& s, const ColMatrix& M, const std::string& what) {
