@@ -188,6 +188,23 @@ struct CholmodLLT : Eigen::CholmodSupernodalLLT<ColMatrix, Eigen::Lower> {
   }
 };
 #endif
+
+/// A numeric factorization that solves can use: Eigen's status (not positive definite is a
+/// warning status for a Cholesky), and for CHOLMOD no pivot within rounding of zero.
+template <typename EigenSolver>
+bool factored(EigenSolver& s) {
+  return s.info() == Eigen::Success;
+}
+#if defined(NRMICP_HAVE_CHOLMOD)
+/// Pivots this close to rounding (min/max pivot of LLᵀ; κ ≳ 4.5e12) mean a singular matrix: its
+/// solves would follow the machine's rounding. Measured: nrm's Lm = [[2, 2], [2, 2]] factored
+/// with rcond = ε (a pivot of 4e-16) on an AMD EPYC, and was refused (negative pivot) elsewhere.
+inline constexpr double singular_rcond = 1e3 * std::numeric_limits<double>::epsilon();
+template <typename ColMatrix>
+bool factored(CholmodLLT<ColMatrix>& s) {
+  return s.info() == Eigen::Success && s.rcond() >= singular_rcond;
+}
+#endif
 #if defined(NRMICP_HAVE_UMFPACK)
 /// Eigen's UMFPACK LU, with UMFPACK's status.
 template <typename ColMatrix>
@@ -286,13 +303,8 @@ class InnerSolver {
     detail::check_cholmod<StorageIndex>(s.cholmod().status, s.has_factor(), what);
     s.factorize(M);
     detail::check_cholmod<StorageIndex>(s.cholmod().status, true, what);
-    // Not positive definite is a warning status; so is a pivot within rounding of zero.
-    return s.info() == Eigen::Success && s.rcond() >= singular_rcond;
+    return detail::factored(s);
   }
-  /// Pivots this close to rounding (min/max pivot of LLᵀ; κ ≳ 4.5e12) mean a singular matrix: its
-  /// solves would follow the machine's rounding. Measured: nrm's Lm = [[2, 2], [2, 2]] factored
-  /// with rcond = ε (a pivot of 4e-16) on an AMD EPYC, and was refused (negative pivot) elsewhere.
-  static constexpr double singular_rcond = 1e3 * std::numeric_limits<double>::epsilon();
 #endif
 #if defined(NRMICP_HAVE_UMFPACK)
   static bool factorize(detail::UmfpackLU<ColMatrix>& s, const ColMatrix& M, const std::string& what) {
@@ -307,7 +319,7 @@ class InnerSolver {
   template <typename EigenSolver>
   static bool factorize(EigenSolver& s, const ColMatrix& M, const std::string&) {
     s.compute(M);
-    return s.info() == Eigen::Success;
+    return detail::factored(s);
   }
 
   template <typename EigenSolver>

@@ -71,7 +71,7 @@ class Refactorizer {
     void analyze(const ColMatrix& K) override { solver.analyzePattern(K); }
     bool factorize(const ColMatrix& K) override {
       solver.factorize(K);
-      return solver.info() == Eigen::Success;
+      return factored(solver);
     }
     void solve(const Vector& b, Vector& x) const override { x = solver.solve(b); }
   };
