@@ -862,40 +862,47 @@ def main(argv: Optional[list[str]] = None, prog: str = "python -m nrmicp bench -
     return 0
 
 
+@dataclass
 class _Selection:
-    """What one bench invocation sweeps: scenes, methods, z-updates, peers, size, tols."""
+    """What one bench invocation sweeps."""
+    scenes: list
+    methods: list
+    z_updates: list
+    peers: list
+    size: str
+    tols: list
+    hist_scene: str
 
 
 def _selection(args, known_methods) -> _Selection:
     """The sweep the arguments ask for; ValueError naming the first unknown choice."""
-    sel = _Selection()
-    sel.scenes = _split(args.scenes) if args.scenes else list(DEFAULT_SCENES)
-    sel.methods = [m.lower() for m in _split(args.methods)] if args.methods else \
+    scenes = _split(args.scenes) if args.scenes else list(DEFAULT_SCENES)
+    methods = [m.lower() for m in _split(args.methods)] if args.methods else \
         list(QUICK_METHODS if args.quick else DEFAULT_METHODS)
-    sel.z_updates = [z.lower() for z in _split(args.z_updates)]
-    sel.size = args.size or ("tiny" if args.quick else "small")
-    sel.peers = [p.lower() for p in _split(args.peers) if p.lower() != "none"]
-    for s in sel.scenes:
+    z_updates = [z.lower() for z in _split(args.z_updates)]
+    peers = [p.lower() for p in _split(args.peers) if p.lower() != "none"]
+    for s in scenes:
         if s not in SCENES:
             raise ValueError(f"unknown scene {s!r}; choose from {', '.join(SCENES)}")
-    for m in sel.methods:
+    for m in methods:
         base, _, extra = m.partition("+")
         if base not in known_methods or extra not in ("", "polish"):
             raise ValueError(f"unknown method {m!r}; choose from {', '.join(known_methods)} (each optionally "
                              "with '+polish')")
-    for p in sel.peers:
+    for p in peers:
         if p not in PEERS:
             raise ValueError(f"unknown peer {p!r}; choose from {', '.join(PEERS)} or none")
-    for z in sel.z_updates:
+    for z in z_updates:
         if z not in ("auto", "explicit", "solve"):
             raise ValueError(f"unknown z-update {z!r}; choose from auto, explicit, solve")
     if args.repeat < 1 or args.maxiter < 1:
         raise ValueError("--repeat and --maxiter must be >= 1")
-    sel.tols = _tols(args)
-    sel.hist_scene = args.history_scene or ("obstacle_2d" if "obstacle_2d" in sel.scenes else sel.scenes[0])
-    if sel.hist_scene not in sel.scenes:
-        raise ValueError(f"--history-scene {sel.hist_scene!r} is not among the swept scenes")
-    return sel
+    tols = _tols(args)
+    hist_scene = args.history_scene or ("obstacle_2d" if "obstacle_2d" in scenes else scenes[0])
+    if hist_scene not in scenes:
+        raise ValueError(f"--history-scene {hist_scene!r} is not among the swept scenes")
+    return _Selection(scenes, methods, z_updates, peers, args.size or ("tiny" if args.quick else "small"), tols,
+                      hist_scene)
 
 
 def _sweep(sel, args) -> dict:
