@@ -116,3 +116,19 @@ def test_tol_zero_needs_rtol():
     with pytest.raises(ValueError, match=r"tol must be a finite number > 0 \(or 0 with rtol > 0\)"):
         nrmicp.solve(A, q, tol=0.0)
     assert nrmicp.solve(A, q, tol=0.0, rtol=1e-6).success
+
+
+@pytest.mark.parametrize("hierarchy", ["geometric", "amg"])
+@pytest.mark.parametrize("scene, m", [("obstacle_2d", 255), ("obstacle_3d", 31)])
+def test_a_stop_at_the_rounding_floor_is_one_no_newton_step_improves_on(scene, m, hierarchy):
+    """The floor is claimed honestly: Newton restarted cold from the answer (its own active set,
+    no nesting) does not lower Res by more than rounding. (The claim once came from the Res before
+    a step alone: on obstacle_2d m = 1023 a step from 4.9e-6 that jumped to 0.68 ended the solve
+    at 4.9e-6, and one more step reached 6.4e-8; cpp/tests/test_newton.cpp scripts that case.)"""
+    p = getattr(scenes, scene)(m, exact=False)
+    hier = p.prolongations() if hierarchy == "geometric" else "amg"
+    r = nrmicp.solve(p.A, p.q, p.zeta, method="newton", hierarchy=hier, tol=1e-300)
+    assert r.status == nrmicp.Status.STAGNATED and "rounding floor" in r.message
+    again = nrmicp.solve(p.A, p.q, p.zeta, method="newton", hierarchy=None, x0=r.z, tol=1e-300)
+    assert again.residual > 0.1 * r.residual
+    assert r.residual <= 100 * rounding_level(p.A, p.q + p.A @ p.zeta, r.z - p.zeta)

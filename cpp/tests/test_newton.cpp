@@ -454,3 +454,86 @@ TEST_CASE("rtol: the target is max(tol, rtol Res(0)), Res(0) = ||min(q, -zeta(0)
   o.rtol = 1e-12;
   CHECK(o.target(res0) == 1e-3);  // the larger of the two
 }
+
+namespace {
+/// A plain Newton step with scripted trial residuals (the interface detail::Globalized drives):
+/// step k tries Res `trials[k]` on the inactive set k (a new set each step, the last one repeated;
+/// or `sets[k]`), and records the forcing each solve was given.
+struct ScriptedStep {
+  static constexpr bool set_fixes_step = true;
+  std::vector<double> trials;
+  double level;
+  double r;
+  std::vector<int> sets = {};
+  std::vector<double> forcings = {};
+  int k = 0;
+  Vec z_ = Vec::Zero(4);
+  Eigen::Index size() const { return 4; }
+  const Vec& z() const { return z_; }
+  double residual() const { return r; }
+  int steps() const { return k; }
+  int solves() const { return k; }
+  long long inner_iterations() const { return 0; }
+  void active_set(std::vector<char>& inactive) const {
+    const int last = static_cast<int>(trials.size()) - 1;
+    const int set = sets.empty() ? std::min(k, last) + 1 : sets[static_cast<std::size_t>(std::min(k, last))];
+    inactive.assign(4, 0);
+    for (int b = 0; b < 4; ++b) inactive[b] = (set >> b) & 1;
+  }
+  void modulus(Vec& x) const { x = z_; }
+  bool linearize() { return true; }
+  bool factorize(const std::vector<char>&) { return true; }
+  double solve(const std::vector<char>&, double, double forcing) {
+    forcings.push_back(forcing);
+    return trials[static_cast<std::size_t>(k++)];
+  }
+  double rounding_level() const { return level; }
+  bool trial_still() const { return false; }
+  void accept() {
+    r = trials[static_cast<std::size_t>(k - 1)];
+    z_.setConstant(static_cast<double>(k));
+  }
+  double restart(const Vec&) { return r; }
+  Result sweep(const Vec&, int, double) { return Result{}; }
+};
+}  // namespace
+
+TEST_CASE("the rounding-floor stop needs Res at the level after the step too: a step that jumps out of it goes on") {
+  // As measured on obstacle_2d m = 1023 (A = Laplacian / h², geometric hierarchy, tol 1e-8): the
+  // second step from Res 4.9e-6 (level 2.4e-7, 8 points of the active set wrong) went to 0.68 and
+  // the third reached 6.4e-8. The solve stopped after the second, returning 4.9e-6.
+  ScriptedStep plain{{4.9e-6, 0.68, 6.4e-8}, 2.4e-7, 1.6e7};
+  detail::NewtonControl ctl;
+  ctl.solve.tol = 1e-8;
+  ctl.solve.maxiter = 10;
+  const auto out = detail::newton_loop(plain, ctl);
+  CHECK(out.steps == 3);
+  CHECK(out.residual == 6.4e-8);
+  CHECK(out.status == Status::Stagnated);  // settled at the floor, above tol
+  CHECK(out.message.find("rounding floor") != std::string::npos);
+
+  ScriptedStep at_floor{{4.9e-6, 4.0e-6, 1e-9}, 2.4e-7, 1.6e7};  // stays in the band: a stop at once
+  const auto stop = detail::newton_loop(at_floor, ctl);
+  CHECK(stop.steps == 2);
+  CHECK(stop.residual == 4.0e-6);
+}
+
+TEST_CASE("a first step solved loosely (first_forcing) whose set repeats is solved again, not taken as settled") {
+  detail::NewtonControl ctl;
+  ctl.solve.tol = 1e-10;
+  ctl.solve.maxiter = 10;
+  ctl.first_forcing = 1e-4;
+  ScriptedStep plain{{1e-3, 1e-12}, 1e-14, 1e7, {5, 5}};  // the second step's set is the first's
+  const auto out = detail::newton_loop(plain, ctl);
+  CHECK(out.status == Status::Converged);
+  CHECK(out.residual == 1e-12);
+  REQUIRE(plain.forcings.size() == 2);
+  CHECK(plain.forcings[0] == 1e-4);
+  CHECK(plain.forcings[1] == 0.0);
+
+  ctl.first_forcing = 0;  // an exact first step whose set repeats: settled, no second solve
+  ScriptedStep exact{{1e-3, 1e-12}, 1e-14, 1e7, {5, 5}};
+  const auto settled = detail::newton_loop(exact, ctl);
+  CHECK(settled.status == Status::Stagnated);
+  CHECK(exact.forcings.size() == 1);
+}
