@@ -179,10 +179,11 @@ class NewtonRun {
     Vector q_shift = q;
     q_shift.noalias() += levels_.A * psi;
     Vector y0 = z0 ? Vector((*z0 - psi).cwiseMax(0.0)) : Vector::Zero(q.size());
-    if (nest && !levels_.coarse.empty()) y0 = nested_start(q_shift);
+    const bool nested = nest && !levels_.coarse.empty();
+    if (nested) y0 = nested_start(q_shift);
     const auto t0 = std::chrono::steady_clock::now();
     auto control = finest_control(psi, tol >= 0 ? tol : o_.tol, maxiter >= 0 ? maxiter : o_.maxiter, report);
-    if (nest && !levels_.coarse.empty()) control.first_forcing = nested_first_forcing;
+    if (nested) control.first_forcing = nested_first_forcing;
     const auto out = set && !set->empty() ? from_set(q_shift, y0, *set, control) : finest_lcp(q_shift, y0, control);
     if (set && !out.inactive.empty()) *set = out.inactive;
     tally_.absorb(out, 0, ScopedTimer::seconds_since(t0));
@@ -255,10 +256,7 @@ class NewtonRun {
   static constexpr double coarse_forcing = 0.1;
   /// The first finest-level step from a nested start stops its inner solve at this fraction of the
   /// start's Res: that step's active set is the prolongation's guess, wrong along the free boundary,
-  /// and a solve to tol / 10 (16 orders on A = Laplacian / h²) is spent on it. Measured, CPU s of
-  /// the solve, 0 → 1e-4, the same finest steps and Res (docs/MEASUREMENTS.md, nested_first_forcing):
-  /// obstacle_2d n = 1,046,529 geometric 3.14 → 2.64, amg 4.87 → 4.02; obstacle_3d n = 1,092,727
-  /// geometric 4.51 → 3.79, amg 7.83 → 7.08; P2 n = 130,561 1.61 → 1.46. 1e-2 and 1e-6 did as 1e-4.
+  /// and a solve to tol / 10 is spent on it (docs/MEASUREMENTS.md, nested_first_forcing).
   static constexpr double nested_first_forcing = 1e-4;
   /// The start of an affine or semismooth solve: at most this many Newton steps of the obstacle problem.
   static constexpr int start_maxiter = 100;
