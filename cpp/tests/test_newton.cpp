@@ -488,6 +488,7 @@ struct ScriptedStep {
     return trials[static_cast<std::size_t>(k++)];
   }
   double rounding_level() const { return level; }
+  bool iterative() const { return true; }
   bool trial_still() const { return false; }
   void accept() {
     r = trials[static_cast<std::size_t>(k - 1)];

@@ -153,6 +153,8 @@ class ActiveSetSystem {
     return k;
   }
   const char* inner_name() const { return krylov_ ? krylov_->name() : solver_.name(); }
+  /// Whether solve() honours its target (a Krylov solve); a direct one solves exactly whatever it is given.
+  bool iterative() const { return krylov_ != nullptr; }
   /// The iterative solve's cap (MultigridKrylov::default_max_iterations); tests lower it to
   /// reach the direct retry.
   void set_max_iterations(int k) { if (krylov_) krylov_->set_max_iterations(k); }

@@ -90,7 +90,8 @@ struct NewtonControl {
   std::vector<char> start_set;
   double forcing = 0;         ///< an iterative inner solve may stop at forcing × Res (inexact Newton)
   /// The first step's forcing, when larger (a nested start's active set is a guess); if the next
-  /// step's set repeats it, that step is solved again with `forcing` instead of ending the loop.
+  /// step's set repeats it, that step is solved again with `forcing` instead of ending the loop
+  /// (iterative inner solves only: a direct one is exact whatever the forcing).
   double first_forcing = 0;
   int sweep_budget = 0;       ///< fallback sweeps allowed in all (0: no fallback)
   Callback callback;  ///< finest level only; called with z = y + shift
@@ -161,7 +162,7 @@ class Globalized {
     }
     if (!repeat && !plain_.factorize(inactive_)) return false;  // a repeat keeps its system
     const double forcing = plain_.steps() == 0 ? std::max(ctl_.forcing, ctl_.first_forcing) : ctl_.forcing;
-    loose_ = forcing > ctl_.forcing;
+    loose_ = forcing > ctl_.forcing && plain_.iterative();  // a direct solve is exact at any forcing
     const double r = plain_.solve(inactive_, ctl_.solve.tol, forcing);
     if (!(std::isfinite(r) && (exempt_ || test_.acceptable(r)))) return false;
     const double r_old = plain_.residual();

@@ -125,6 +125,8 @@ class NewtonStep {
     ++steps_;
     return r_new_ = lin_.evaluate(z_new_, w_new_, g_new_, zeta_new_);
   }
+  /// Whether the inner solve is iterative (a forcing loosens it; a direct solve is exact).
+  bool iterative() { return lin_.system().iterative(); }
   /// The rounding level of Res at z (NewtonLevel::rounding_level).
   double rounding_level() const { return level_.rounding_level(z_, lin_.q, g_); }
   /// The trial z⁺ did not move beyond rounding (only ties g ≈ w ≈ 0 changed sides).
