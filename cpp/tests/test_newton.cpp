@@ -6,6 +6,7 @@
 #include <doctest/doctest.h>
 
 #include <cmath>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -169,6 +170,87 @@ TEST_CASE("inner = cg: multigrid-preconditioned CG on the reduced systems agrees
   s.method = Method::NRM;
   s.inner = Inner::CG;
   CHECK_THROWS_WITH_AS(Solver<RowMat>(A, s), doctest::Contains("inner = 'cg'"), std::invalid_argument);
+}
+
+namespace {
+/// K of an LCP step for the inactive set (detail/active_set.hpp): A's inactive rows with the
+/// active columns zeroed, identity rows on the active set.
+detail::MultigridKrylov<int>::ColMatrix lcp_system(const RowMat& A, const std::vector<char>& inactive) {
+  detail::MultigridKrylov<int>::ColMatrix K = A;
+  for (int j = 0; j < K.outerSize(); ++j)
+    for (detail::MultigridKrylov<int>::ColMatrix::InnerIterator it(K, j); it; ++it)
+      it.valueRef() = inactive[it.row()] ? (inactive[j] ? it.value() : 0.0) : (it.row() == j ? 1.0 : 0.0);
+  return K;
+}
+
+/// The entries of `now` that differ from `before` (same pattern), as setup's changes.
+std::vector<detail::Change<int>> changes(const detail::MultigridKrylov<int>::ColMatrix& before,
+                                         const detail::MultigridKrylov<int>::ColMatrix& now) {
+  std::vector<detail::Change<int>> out;
+  for (int j = 0; j < now.outerSize(); ++j)
+    for (int p = now.outerIndexPtr()[j]; p < now.outerIndexPtr()[j + 1]; ++p)
+      if (now.valuePtr()[p] != before.valuePtr()[p])
+        out.push_back({now.innerIndexPtr()[p], j, now.valuePtr()[p] - before.valuePtr()[p]});
+  return out;
+}
+}  // namespace
+
+TEST_CASE("the V-cycle updated by K's changed entries equals the one set up afresh; many changes take the full set-up") {
+  const int m = 31, n = m * m;
+  const RowMat A = laplacian_2d(m);
+  std::vector<detail::Level<int>> levels;
+  RowMat coarse = A;
+  for (const RowMat& P : hierarchy_2d(m)) {
+    detail::Level<int> level{P, RowMat(P.transpose()), {}};
+    level.A = detail::product(level.R, detail::product(coarse, level.P));
+    coarse = level.A;
+    levels.push_back(level);
+  }
+  const detail::Hierarchy<int> below{levels.data(), levels.size()};
+  // Active sets: a disc growing by a few points a step, then all but one point flipped (more
+  // changes than max_changes: the full set-up), then a small change again.
+  auto disc = [&](double radius) {
+    std::vector<char> inactive(n, 1);
+    for (int i = 0; i < n; ++i) {
+      const double x = i % m - m / 2.0, y = i / m - m / 2.0;
+      if (x * x + y * y < radius * radius) inactive[i] = 0;
+    }
+    return inactive;
+  };
+  std::vector<std::vector<char>> sets = {disc(5), disc(5.5), disc(6.2), disc(6.2)};
+  sets.push_back(sets.back());
+  for (int i = 1; i < n; ++i) sets.back()[i] = !sets.back()[i];
+  sets.push_back(sets.back());
+  sets.back()[n / 2 + 3] = !sets.back()[n / 2 + 3];
+  detail::MultigridKrylov<int> updated(below, true);
+  std::vector<detail::MultigridKrylov<int>::ColMatrix> K;
+  Vec r(n);
+  for (int i = 0; i < n; ++i) r[i] = std::sin(0.37 * i) + 0.5;
+  for (std::size_t k = 0; k < sets.size(); ++k) {
+    K.push_back(lcp_system(A, sets[k]));
+    const auto dK = k ? changes(K[k - 1], K[k]) : std::vector<detail::Change<int>>{};
+    CHECK((k != 4 || dK.size() > detail::MultigridKrylov<int>::max_changes(K[k].nonZeros())));
+    REQUIRE(updated.setup(K[k], k ? &dK : nullptr));
+    detail::MultigridKrylov<int> fresh(below, true);
+    REQUIRE(fresh.setup(K[k]));
+    Vec e_updated, e_fresh;
+    updated.precondition(r, e_updated);
+    fresh.precondition(r, e_fresh);
+    CAPTURE(k);
+    CHECK((e_updated - e_fresh).norm() <= 1e-12 * e_fresh.norm());
+  }
+  // A failed set-up (a NaN in K) is not updated from: the next one is a full set-up.
+  detail::MultigridKrylov<int>::ColMatrix bad = K.back();
+  bad.valuePtr()[0] = std::numeric_limits<double>::quiet_NaN();
+  CHECK_FALSE(updated.setup(bad, nullptr));
+  const auto dK = changes(bad, K[0]);
+  REQUIRE(updated.setup(K[0], &dK));
+  detail::MultigridKrylov<int> fresh(below, true);
+  REQUIRE(fresh.setup(K[0]));
+  Vec e_updated, e_fresh;
+  updated.precondition(r, e_updated);
+  fresh.precondition(r, e_fresh);
+  CHECK((e_updated - e_fresh).norm() <= 1e-12 * e_fresh.norm());
 }
 
 /// laplacian_2d(m) plus first-order upwind convection (b_x, b_y) ≥ 0: a nonsymmetric M-matrix.

@@ -6,7 +6,8 @@ check that a refactoring did not slow anything down; not a CI test):
 OLD_SITE/NEW_SITE: directories holding an installed nrmicp package (e.g. pip install --target).
 Cases: the 2D obstacle at n = 10^6 (nrmgs + Anderson, 300 iterations: fixed work), at
 n = 261,121 (newton with the geometric hierarchy, to tol 1e-8), and newton with the default
-amg hierarchy on the 2D (n = 1,046,529) and 3D (n = 1,092,727) obstacle (--cases picks some).
+amg hierarchy on the 2D (n = 1,046,529) and 3D (n = 1,092,727) obstacle (--cases picks some;
+fe_obstacle_P2_4/newton-amg names the finite-element scene, element P2, refinement 4).
 Prints each case's CPU seconds per build (the minimum over the repeats) and the ratio new/old.
 """
 import json
@@ -21,7 +22,10 @@ import nrmicp
 from nrmicp import scenes
 case = sys.argv[2]
 scene, m = case.split("/")[0].rsplit("_", 1)
-p = getattr(scenes, scene)(int(m), exact=False)
+if scene.startswith("fe_obstacle_"):   # fe_obstacle_P2_4: element P2, refinement 4
+    p = scenes.fe_obstacle(scene.rsplit("_", 1)[1], int(m), exact=False)
+else:
+    p = getattr(scenes, scene)(int(m), exact=False)
 if case.endswith("newton-amg"):
     kw = dict(method="newton", hierarchy="amg", tol=1e-8)
 elif case.endswith("newton"):

@@ -120,16 +120,26 @@ class ActiveSetSystem {
     const StorageIndex* outer = K_.outerIndexPtr();
     const StorageIndex* row = K_.innerIndexPtr();
     double* v = K_.valuePtr();
+    // The iterative solve's multigrid updates its operators by K's change when it is small.
+    bool record = krylov_ != nullptr;
+    const std::size_t most = MultigridKrylov<StorageIndex>::max_changes(K_.nonZeros());
+    changes_.clear();
     for (Eigen::Index j = 0; j < K_.cols(); ++j)
       for (StorageIndex p = outer[j]; p < outer[j + 1]; ++p) {
         const bool row_inactive = inactive[row[p]];
         // LCP: z_𝒜 = 0, so the active columns of the inactive rows are dropped (symmetry).
-        v[p] = row_inactive ? ((lcp_ && !inactive[j]) ? 0.0 : inactive_value_ptr_[p]) : active_value(p, row[p], j);
+        const double value =
+            row_inactive ? ((lcp_ && !inactive[j]) ? 0.0 : inactive_value_ptr_[p]) : active_value(p, row[p], j);
+        if (record && value != v[p]) {
+          changes_.push_back({row[p], static_cast<StorageIndex>(j), value - v[p]});
+          record = changes_.size() <= most;
+        }
+        v[p] = value;
       }
     if (!krylov_) return solver_.factorize(K_);
     inactive_ = inactive;
     factorized_ = false;
-    return krylov_->setup(K_);
+    return krylov_->setup(K_, record ? &changes_ : nullptr);
   }
 
   /// z = K⁻¹ b after factorize(). An iterative solve (inner = cg) starts from z's value and stops
@@ -282,6 +292,7 @@ class ActiveSetSystem {
   mutable Refactorizer<StorageIndex> solver_;  // mutable: analysed on first need (direct_solve)
   std::unique_ptr<MultigridKrylov<StorageIndex>> krylov_;
   std::vector<char> inactive_;  // of the last factorize (iterative)
+  std::vector<Change<StorageIndex>> changes_;  // K's changed entries in the last factorize (iterative)
   Inner inner_ = Inner::Auto;
   bool spd_candidate_ = false;
   mutable bool analyzed_ = false, factorized_ = false;

@@ -36,6 +36,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <stdexcept>
 #include <type_traits>
 #include <vector>
 
@@ -59,6 +60,13 @@ struct Hierarchy {
 
 template <typename StorageIndex>
 class MultigridKrylov;
+
+/// One changed entry of a matrix on a fixed pattern: M(row, col) += delta.
+template <typename StorageIndex>
+struct Change {
+  StorageIndex row, col;
+  double delta;
+};
 
 /// The V-cycle as a preconditioner of Eigen's iterative solvers (their preconditioner concept:
 /// the set-up is MultigridKrylov::setup's, so compute/analyzePattern/factorize do nothing).
@@ -108,34 +116,34 @@ class MultigridKrylov {
   ///
   /// K keeps one pattern across Newton steps (detail/active_set.hpp: only its values change),
   /// so the Galerkin operators P_lᵀ K_l P_l keep theirs: their patterns are formed on the first
-  /// setup, later setups only recompute the values (detail/sparse_product.hpp).
-  bool setup(const ColMatrix& K) {
+  /// setup, later setups only recompute the values (detail/sparse_product.hpp). `changes`, when
+  /// given, lists every entry of K that changed since the previous successful setup; if they are
+  /// few (max_changes) the operators are updated by P_lᵀ ΔK_l P_l level by level instead
+  /// (a Newton step changes the rows and columns of the points that changed sets: a few hundred
+  /// of 10⁵–10⁶; add_galerkin_change).
+  bool setup(const ColMatrix& K, const std::vector<Change<StorageIndex>>* changes = nullptr) {
     fine_ = &K;
     const bool same_pattern = fine_pattern_ == K.nonZeros();
     if (!symmetric_) copy_rows(K, same_pattern);
-    for (std::size_t l = 0; l < levels_; ++l) {
-      auto galerkin = [&](const auto& Kl) {
-        const Level<StorageIndex>& g = grid_[l];
-        if (same_pattern && galerkin_values(g.R, Kl, g.P, k_[l + 1].K, position_)) return;
-        k_[l + 1].K = product(g.R, product(Kl, g.P));
-      };
-      if (l == 0) galerkin(fine());
-      else galerkin(k_[l].K);
+    if (!(same_pattern && changes && valid_ && update_galerkin(*changes))) {
+      for (std::size_t l = 0; l < levels_; ++l) {
+        auto galerkin = [&](const auto& Kl) {
+          const Level<StorageIndex>& g = grid_[l];
+          if (same_pattern && galerkin_values(g.R, Kl, g.P, k_[l + 1].K, position_)) return;
+          k_[l + 1].K = product(g.R, product(Kl, g.P));
+        };
+        if (l == 0) galerkin(fine());
+        else galerkin(k_[l].K);
+      }
     }
     fine_pattern_ = K.nonZeros();
-    for (std::size_t l = 0; l < levels_; ++l) {
-      k_[l].inv_diag = (l == 0 ? Vector(K.diagonal()) : Vector(k_[l].K.diagonal())).cwiseInverse();
-      if (!k_[l].inv_diag.allFinite()) return false;
-    }
-    const ColMatrix coarsest = levels_ == 0 ? K : ColMatrix(k_.back().K);
-    try {
-      coarsest_.compute(coarsest, Inner::Auto, "the coarsest multigrid level");
-    } catch (const std::runtime_error&) {
-      return false;
-    }
-    if (!symmetric_) bicgstab_.compute(rows_);
-    return true;
+    valid_ = finish_setup(K);
+    return valid_;
   }
+
+  /// The most changed entries of K (of `nnz`) that setup applies as an update: each costs about
+  /// as much as 5 entries of the full product (a search in C's row per term).
+  static std::size_t max_changes(Eigen::Index nnz) { return static_cast<std::size_t>(nnz / 8); }
 
   /// K z = b from the start z (the current Newton iterate: close), until ‖b − Kz‖ ≤ `target`
   /// (absolute), or ≤ rtol ‖b‖ when target is 0: CG for a symmetric K, else BiCGSTAB. Returns
@@ -154,6 +162,72 @@ class MultigridKrylov {
   std::size_t levels() const { return levels_ + 1; }
 
  private:
+  /// 1 / diag of every level and the coarsest factorization, after the operators changed.
+  bool finish_setup(const ColMatrix& K) {
+    for (std::size_t l = 0; l < levels_; ++l) {
+      k_[l].inv_diag = (l == 0 ? Vector(K.diagonal()) : Vector(k_[l].K.diagonal())).cwiseInverse();
+      if (!k_[l].inv_diag.allFinite()) return false;
+    }
+    const ColMatrix coarsest = levels_ == 0 ? K : ColMatrix(k_.back().K);
+    try {
+      coarsest_.compute(coarsest, Inner::Auto, "the coarsest multigrid level");
+    } catch (const std::runtime_error&) {
+      return false;
+    }
+    if (!symmetric_) bicgstab_.compute(rows_);
+    return true;
+  }
+
+  /// The Galerkin operators updated level by level for K's changed entries. False (some levels
+  /// updated, the rest not: setup then recomputes them all) when there are too many changes or
+  /// a term falls outside a level's pattern.
+  bool update_galerkin(const std::vector<Change<StorageIndex>>& changes) {
+    if (changes.size() > max_changes(fine_pattern_)) return false;
+    const std::vector<Change<StorageIndex>>* in = &changes;
+    for (std::size_t l = 0; l < levels_; ++l) {
+      std::vector<Change<StorageIndex>>& out = level_changes_[l % 2];
+      if (!add_galerkin_change(grid_[l].P, *in, k_[l + 1].K, out)) return false;
+      in = &out;
+    }
+    return true;
+  }
+
+  /// C += Pᵀ ΔK P, ΔK given by its changed entries (`in`); `out` gets C's changed entries.
+  /// False when a term falls outside C's pattern (C then partly updated).
+  bool add_galerkin_change(const RowMatrix& P, const std::vector<Change<StorageIndex>>& in, RowMatrix& C,
+                           std::vector<Change<StorageIndex>>& out) {
+    const StorageIndex *po = P.outerIndexPtr(), *pi = P.innerIndexPtr(), *co = C.outerIndexPtr(),
+                       *ci = C.innerIndexPtr();
+    const double* pv = P.valuePtr();
+    sum_.resize(static_cast<std::size_t>(C.nonZeros()), 0.0);   // all zero between calls
+    listed_.resize(sum_.size(), 0);
+    out.clear();                                                // C's touched positions, then its changes
+    bool inside = true;
+    for (const auto& change : in) {
+      for (StorageIndex a = po[change.row]; a < po[change.row + 1] && inside; ++a)
+        for (StorageIndex b = po[change.col]; b < po[change.col + 1]; ++b) {
+          const StorageIndex* begin = ci + co[pi[a]];
+          const StorageIndex* end = ci + co[pi[a] + 1];
+          const StorageIndex* at = std::lower_bound(begin, end, pi[b]);
+          if (at == end || *at != pi[b]) { inside = false; break; }
+          const auto p = static_cast<std::size_t>(at - ci);
+          if (!listed_[p]) { listed_[p] = 1; out.push_back({pi[a], static_cast<StorageIndex>(p), 0.0}); }
+          sum_[p] += pv[a] * change.delta * pv[b];
+        }
+      if (!inside) break;
+    }
+    double* cv = C.valuePtr();
+    for (auto& change : out) {   // col holds the position until here
+      const auto p = static_cast<std::size_t>(change.col);
+      change.delta = sum_[p];
+      change.col = ci[p];
+      cv[p] += sum_[p];
+      sum_[p] = 0.0;
+      listed_[p] = 0;
+    }
+    return inside;
+  }
+
   /// Preconditioned CG; ‖b − Kz‖ ≤ stop.
   ///
   /// Measured (obstacle_2d, m = 1023, n = 1,046,529, h²-scaled, tol 1e-8, geometric hierarchy):
@@ -276,6 +350,10 @@ class MultigridKrylov {
   std::size_t levels_;
   mutable std::vector<KLevel> k_;         // K_0 (= fine_), K_1, ...: the reduced system per level
   Eigen::Index fine_pattern_ = -1;        // nonzeros of the K the patterns were formed for
+  bool valid_ = false;                    // the last setup succeeded (an update builds on it)
+  std::vector<Change<StorageIndex>> level_changes_[2];   // scratch of update_galerkin
+  std::vector<double> sum_;               // scratch of add_galerkin_change: C's change per position,
+  std::vector<char> listed_;              // and whether that position is in its list yet
   std::vector<StorageIndex> position_;    // scratch of product_values
   const ColMatrix* fine_ = nullptr;
   bool symmetric_;
