@@ -239,6 +239,19 @@ TEST_CASE("the V-cycle updated by K's changed entries equals the one set up afre
     CAPTURE(k);
     CHECK((e_updated - e_fresh).norm() <= 1e-12 * e_fresh.norm());
   }
+  // Started from the hierarchy's operators (those of K = A), the first set-up is an update too.
+  for (const auto& set : {disc(2), disc(12)}) {   // few changes from A, and more than max_changes
+    const detail::MultigridKrylov<int>::ColMatrix K_A = A, K_set = lcp_system(A, set);
+    const auto from_A = changes(K_A, K_set);
+    detail::MultigridKrylov<int> seeded(below, true), fresh(below, true);
+    seeded.start_from_hierarchy(K_A.nonZeros());
+    REQUIRE(seeded.setup(K_set, &from_A));
+    REQUIRE(fresh.setup(K_set));
+    Vec e_seeded, e_fresh;
+    seeded.precondition(r, e_seeded);
+    fresh.precondition(r, e_fresh);
+    CHECK((e_seeded - e_fresh).norm() <= 1e-12 * e_fresh.norm());
+  }
   // A failed set-up (a NaN in K) is not updated from: the next one is a full set-up.
   detail::MultigridKrylov<int>::ColMatrix bad = K.back();
   bad.valuePtr()[0] = std::numeric_limits<double>::quiet_NaN();

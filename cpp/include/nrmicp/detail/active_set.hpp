@@ -108,9 +108,10 @@ class ActiveSetSystem {
     // CG needs a symmetric positive definite K: the LCP of a symmetric A (an indefinite K shows
     // as a failed coarsest Cholesky or CG breakdown; then the loop falls back). Any other K
     // (a nonsymmetric A, an affine ζ) takes BiCGSTAB (detail/multigrid.hpp).
-    if (use_iterative(inner, spd_candidate_, below.levels, A.rows(), K_.nonZeros()))
+    if (use_iterative(inner, spd_candidate_, below.levels, A.rows(), K_.nonZeros())) {
       krylov_ = std::make_unique<MultigridKrylov<StorageIndex>>(below, spd_candidate_);
-    else
+      krylov_->start_from_hierarchy(K_.nonZeros());  // K holds A's values until the first factorize
+    } else
       analyze();
   }
 

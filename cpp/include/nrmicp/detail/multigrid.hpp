@@ -141,6 +141,15 @@ class MultigridKrylov {
     return valid_;
   }
 
+  /// Takes the hierarchy's own operators (Level::A, the Galerkin ones of the level's A) as those
+  /// of a K equal to A with `nnz` stored entries: the first setup then updates them by K − A, or
+  /// recomputes them on their patterns, instead of forming the patterns (and K P) anew.
+  void start_from_hierarchy(Eigen::Index nnz) {
+    for (std::size_t l = 0; l < levels_; ++l) k_[l + 1].K = grid_[l].A;
+    fine_pattern_ = nnz;
+    valid_ = true;
+  }
+
   /// The most changed entries of K (of `nnz`) that setup applies as an update: each costs about
   /// as much as 5 entries of the full product (a search in C's row per term).
   static std::size_t max_changes(Eigen::Index nnz) { return static_cast<std::size_t>(nnz / 8); }
