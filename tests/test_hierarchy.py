@@ -237,3 +237,28 @@ def test_newton_with_pyamgs_coarse_operators_agrees_with_the_core_forming_them()
     assert given.success and formed.success
     assert given.level_steps == formed.level_steps
     np.testing.assert_allclose(given.z, formed.z, rtol=0, atol=1e-10)
+
+
+def p2_stiffness():
+    from nrmicp.scenes.finite_elements import fe_obstacle
+    return sp.csr_matrix(fe_obstacle("P2", 2, exact=False).A)
+
+
+@pytest.mark.parametrize("interpolation", ["classical", "direct"])
+@pytest.mark.parametrize("build", [lambda: laplacian_2d(40), lambda: upwind_convection_diffusion(40),
+                                   lambda: laplacian_3d(12), p2_stiffness],
+                         ids=["laplacian_2d", "convection", "laplacian_3d", "P2"])
+def test_ruge_stuben_levels_from_pyamgs_kernels_are_pyamgs_ruge_stuben_solver(build, interpolation):
+    # _rs_levels calls pyamg's compiled kernels without its Python-level copies: the same
+    # splittings, prolongations and coarse operators as pyamg's own solver (up to rounding)
+    import pyamg
+    from nrmicp._hierarchy import _rs_levels
+    A = build()
+    ml = pyamg.ruge_stuben_solver(A, strength=("classical", {"theta": 0.25}), max_coarse=10, max_levels=30,
+                                  interpolation=interpolation)
+    ours = _rs_levels(A, 0.25, 10, 30, interpolation)
+    assert len(ours) == len(ml.levels) - 1
+    for (P, Ac), level, coarse in zip(ours, ml.levels, ml.levels[1:]):
+        assert P.shape == level.P.shape and Ac.shape == coarse.A.shape
+        np.testing.assert_allclose(P.toarray(), level.P.toarray(), rtol=0, atol=1e-13)
+        np.testing.assert_allclose(Ac.toarray(), coarse.A.toarray(), rtol=0, atol=1e-13 * abs(coarse.A).max())
