@@ -7,7 +7,7 @@ list and solves coarse to fine. Building it is this module's job:
 
 - ``"amg"``: classical Ruge–Stüben prolongations (no grid needed), the first level built on an
   auxiliary M-matrix (A's positive off-diagonals lumped into the diagonal) with Jacobi-improved
-  interpolation, the coarser ones by pyamg. Nonnegative, so a prolongated feasible start stays
+  interpolation, the coarser ones by Ruge–Stüben on pyamg's compiled kernels. Nonnegative, so a prolongated feasible start stays
   feasible; on finite-element matrices (P2: no M-matrix) the coarse problems then predict the
   fine active set (docs/finite_elements.md has the measurements).
 - a list of matrices: a geometric hierarchy (the grid scenes offer theirs as
@@ -51,9 +51,8 @@ def _pyamg():
 
 # The Ruge–Stüben level of pyamg's ruge_stuben_solver (classical strength, RS splitting, direct
 # or classical interpolation) built from its compiled kernels: the same C/F splitting and P,
-# without its Python-level copies (the strength's row scaling and a COO round trip to drop the
-# diagonal, values that neither the splitting nor the interpolation reads): 3D n = 1.09M, the
-# set-up's strength took 0.75 of 3.4 s that way.
+# without its Python-level copies of values that neither the splitting nor the interpolation
+# reads (a quarter of the 3D set-up: docs/MEASUREMENTS.md).
 
 def _strength(A: sp.csr_matrix, theta: float, norm: str) -> sp.csr_matrix:
     """The classical strength graph of A with its diagonal, holding A's values (pyamg's

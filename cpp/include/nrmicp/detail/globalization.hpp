@@ -88,11 +88,14 @@ struct NewtonControl {
   /// the one of the start (after a change of the obstacle the old contact set is a far better
   /// guess than the test on the old z: measured on thermoforming_1d, 1 step instead of 6).
   std::vector<char> start_set;
-  double forcing = 0;         ///< an iterative inner solve may stop at forcing × Res (inexact Newton)
-  /// The first step's forcing, when larger (a nested start's active set is a guess); if the next
-  /// step's set repeats it, that step is solved again with `forcing` instead of ending the loop
-  /// (iterative inner solves only: a direct one is exact whatever the forcing).
+  /// An iterative inner solve may stop at forcing × Res (inexact Newton; a direct one is exact
+  /// whatever the forcing), the first step at first_forcing × Res. With `exact_repeat`, a set so
+  /// solved that repeats is solved again to tol / 10 before the loop may settle on it (the finest
+  /// level, where Res must reach tol: the steps before are on guessed sets); without, a repeat
+  /// settles (coarse levels: a start needs no more).
+  double forcing = 0;
   double first_forcing = 0;
+  bool exact_repeat = false;
   int sweep_budget = 0;       ///< fallback sweeps allowed in all (0: no fallback)
   Callback callback;  ///< finest level only; called with z = y + shift
   Poll poll;
@@ -157,12 +160,13 @@ class Globalized {
     if constexpr (Plain::set_fixes_step) {
       h = hash_set(inactive_);
       repeat = have_last_ && h == last_set_;
-      if (repeat && !loose_) return settle(), true;
+      if (repeat && !(ctl_.exact_repeat && loose_)) return settle(), true;
       if (!repeat && !seen_.insert(h).second) return false;  // a cycle
     }
     if (!repeat && !plain_.factorize(inactive_)) return false;  // a repeat keeps its system
-    const double forcing = plain_.steps() == 0 ? std::max(ctl_.forcing, ctl_.first_forcing) : ctl_.forcing;
-    loose_ = forcing > ctl_.forcing && plain_.iterative();  // a direct solve is exact at any forcing
+    // Loose only where a repeat is recognized (a set fixes the step): the repeat is then exact.
+    const double forcing = repeat || !Plain::set_fixes_step ? 0.0 : plain_.steps() == 0 ? ctl_.first_forcing : ctl_.forcing;
+    loose_ = forcing > 0 && plain_.iterative();
     const double r = plain_.solve(inactive_, ctl_.solve.tol, forcing);
     if (!(std::isfinite(r) && (exempt_ || test_.acceptable(r)))) return false;
     const double r_old = plain_.residual();
@@ -229,7 +233,7 @@ class Globalized {
   std::unordered_set<std::uint64_t> seen_;
   std::uint64_t last_set_ = 0;
   bool have_last_ = false, exempt_ = true, still_ = false, settled_ = false, at_floor_ = false;
-  bool loose_ = false;  // the last step was solved to first_forcing: a repeat of its set is solved again
+  bool loose_ = false;  // the last step was solved to a forcing: with exact_repeat a repeat of its set is solved again
   double floor_ = 0;  // the rounding level of Res (computed when a stop at it is considered)
   SweepRuns runs_;
   int sweeps_ = 0;

@@ -151,7 +151,7 @@ class MultigridKrylov {
   }
 
   /// The most changed entries of K (of `nnz`) that setup applies as an update: each costs about
-  /// as much as 5 entries of the full product (a search in C's row per term).
+  /// as much as 5 entries of the full product (a search in C's row per term; docs/MEASUREMENTS.md).
   static std::size_t max_changes(Eigen::Index nnz) { return static_cast<std::size_t>(nnz / 8); }
 
   /// K z = b from the start z (the current Newton iterate: close), until ‖b − Kz‖ ≤ `target`

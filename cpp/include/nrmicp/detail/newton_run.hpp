@@ -183,7 +183,11 @@ class NewtonRun {
     if (nested) y0 = nested_start(q_shift);
     const auto t0 = std::chrono::steady_clock::now();
     auto control = finest_control(psi, tol >= 0 ? tol : o_.tol, maxiter >= 0 ? maxiter : o_.maxiter, report);
-    if (nested) control.first_forcing = nested_first_forcing;
+    if (nested) {  // the sets of the finest steps are guesses until one repeats
+      control.first_forcing = nested_first_forcing;
+      control.forcing = nested_forcing;
+      control.exact_repeat = true;
+    }
     const auto out = set && !set->empty() ? from_set(q_shift, y0, *set, control) : finest_lcp(q_shift, y0, control);
     if (set && !out.inactive.empty()) *set = out.inactive;
     tally_.absorb(out, 0, ScopedTimer::seconds_since(t0));
@@ -258,6 +262,10 @@ class NewtonRun {
   /// start's Res: that step's active set is the prolongation's guess, wrong along the free boundary,
   /// and a solve to tol / 10 is spent on it (docs/MEASUREMENTS.md, nested_first_forcing).
   static constexpr double nested_first_forcing = 1e-4;
+  /// The later finest-level steps from a nested start stop their inner solves at this fraction of
+  /// the iterate's Res while their active set is new; a set that repeats is solved to tol / 10
+  /// (NewtonControl::exact_repeat; docs/MEASUREMENTS.md, nested_forcing).
+  static constexpr double nested_forcing = 0.1;
   /// The start of an affine or semismooth solve: at most this many Newton steps of the obstacle problem.
   static constexpr int start_maxiter = 100;
 
@@ -317,7 +325,7 @@ class NewtonRun {
     Vector y = Vector::Zero(L ? levels_.coarse.back()->size() : q_shift.size());
     NewtonControl c;
     c.solve.maxiter = coarse_maxiter;
-    c.forcing = coarse_forcing;
+    c.forcing = c.first_forcing = coarse_forcing;
     c.sweep_budget = 1000;
     for (std::size_t l = L; l >= 1; --l) {
       const auto t0 = std::chrono::steady_clock::now();
