@@ -233,8 +233,8 @@ def amg_levels(A, **opts) -> list:
         P = _auxiliary_level(A, kw["theta"], kw["sweeps"], kw["truncate"])
         if P is None:
             return out
-        A_fine, A = A, sp.csr_matrix(P.T @ (A @ P))
-        out.append((P, _canonical(A.copy())))   # pyamg takes A as it is (explicit zeros and all)
+        A_fine, A = A, _canonical(P.T @ (A @ P))   # our own product: canonical in place, no copy
+        out.append((P, A))
     if A.shape[0] <= kw["max_coarse"] or len(out) >= kw["max_levels"] - 1:
         return out
     # A first coarse operator denser than A (7-point 3D: 546k unknowns, 18.7 nonzeros a row

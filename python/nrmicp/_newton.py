@@ -56,7 +56,8 @@ def make_core(A_core, opts, hierarchy, A, dc):
     Ps, coarse = levels(hierarchy, A, A_core, dc)
 
     def triple(M):
-        return (M.indptr.astype(idx), M.indices.astype(idx), np.ascontiguousarray(M.data, dtype=np.float64),
+        return (M.indptr.astype(idx, copy=False), M.indices.astype(idx, copy=False),   # the core copies them
+                np.ascontiguousarray(M.data, dtype=np.float64),
                 M.shape[0], M.shape[1])
     cls = _core.NewtonI64 if idx == np.int64 else _core.NewtonI32
     prolongations, coarse_operators = [triple(P) for P in Ps], [triple(Ac) for Ac in coarse or []]
