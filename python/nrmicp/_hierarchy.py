@@ -7,9 +7,9 @@ list and solves coarse to fine. Building it is this module's job:
 
 - ``"amg"``: classical Ruge–Stüben prolongations (no grid needed), the first level built on an
   auxiliary M-matrix (A's positive off-diagonals lumped into the diagonal) with Jacobi-improved
-  interpolation, the coarser ones by Ruge–Stüben on pyamg's compiled kernels. Nonnegative, so a prolongated feasible start stays
-  feasible; on finite-element matrices (P2: no M-matrix) the coarse problems then predict the
-  fine active set (docs/finite_elements.md has the measurements).
+  interpolation, the coarser ones by Ruge–Stüben on pyamg's compiled kernels. Nonnegative, so a
+  prolongated feasible start stays feasible; on finite-element matrices (P2: no M-matrix) the
+  coarse problems then predict the fine active set (docs/finite_elements.md has the measurements).
 - a list of matrices: a geometric hierarchy (the grid scenes offer theirs as
   ``Problem.prolongations``), checked here.
 - None: no hierarchy (a cold start).
@@ -84,12 +84,12 @@ def _rs_split(S: sp.csr_matrix) -> np.ndarray:
 
 def _rs_interpolation(A: sp.csr_matrix, S: sp.csr_matrix, is_c: np.ndarray, kind: str) -> sp.csr_matrix:
     """pyamg's direct or (modified) classical interpolation from A, its strength graph S (A's
-    values on it, :func:`_strength`) and the splitting."""
+    values on it, :func:`_strength`; its explicit zeros are dropped in place) and the splitting."""
     core = _pyamg()
     n = A.shape[0]
     splitting = is_c.astype(S.indptr.dtype)
-    C = S.copy()
-    C.eliminate_zeros()
+    S.eliminate_zeros()
+    C = S.copy() if kind == "classical" else S   # classical drops strong F–F connections in C
     if kind == "classical":
         core.remove_strong_FF_connections(n, C.indptr, C.indices, C.data, splitting)
         C.eliminate_zeros()
