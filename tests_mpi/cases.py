@@ -254,10 +254,55 @@ def case_boomeramg():
     return {"rule": rule, "left": left, "kept": kept, "status": str(r.status)}
 
 
+def case_floor():
+    """tol far below Res's rounding level: the Newton member stops at the floor, says so and
+    names it (the serial member's rule and message), on the obstacle and an affine ICP."""
+    out = {}
+    pb = obstacle_2d(63, exact=False)
+    aff = make_affine_icp(16, symmetric=False)
+    B, c = sp.csr_matrix(aff.zeta.B), aff.zeta.c
+    for name, A, q, zeta, dzeta in (
+            ("obstacle", sp.csr_matrix(pb.A), pb.q, pb.zeta, lambda M, lo, hi: pb.zeta[lo:hi]),
+            ("affine", sp.csr_matrix(aff.A), aff.q, nrmicp.Affine(B, c),
+             lambda M, lo, hi: nrmicp.Affine(mat(B, lo, hi), c[lo:hi]))):
+        lo, hi = split(A.shape[0])
+        M = mat(A, lo, hi)
+        r = dist.solve(M, vec(M, q), dzeta(M, lo, hi), method="newton", tol=1e-17)
+        z = dist.gather(r.z)
+        if RANK == 0:
+            serial = nrmicp.solve(A, q, zeta, method="newton", tol=1e-17)
+            out[name] = {"status": str(r.status), "message": r.message, "res": float(r.residual), "nit": r.nit,
+                         "serial_status": str(serial.status), "err": float(np.max(np.abs(z - serial.z)))}
+    return out
+
+
+def case_ssor():
+    """The coarse levels' SSOR tries, forced to fail (-nrmicp_ssor_ksp_max_it 1): BoomerAMG goes on
+    from their iterate and the answer is the same; our SSOR option leaves the database."""
+    pb = obstacle_2d(63, exact=False)
+    A = sp.csr_matrix(pb.A)
+    lo, hi = split(A.shape[0])
+    runs = {}
+    opts = PETSc.Options("nrmicp_ssor_")
+    for label in ("default", "ssor_fails"):
+        if label == "ssor_fails":
+            opts["ksp_max_it"] = 1
+        r = dist.solve(A[lo:hi], pb.q[lo:hi], pb.zeta[lo:hi], method="newton", tol=1e-9)
+        runs[label] = {"z": dist.gather(r.z), "status": str(r.status), "inner": r.inner_iterations,
+                       "levels": r.level_steps}
+    opts.delValue("ksp_max_it")
+    left = sorted(k for k in PETSc.Options().getAll() if k.startswith("nrmicp_ssor_"))
+    if RANK == 0:
+        serial = nrmicp.solve(A, pb.q, pb.zeta, method="newton", tol=1e-11, polish=True)
+        return {k: {"status": v["status"], "inner": v["inner"], "levels": v["levels"],
+                    "err": float(np.max(np.abs(v["z"] - serial.z)))} for k, v in runs.items()} | {"left": left}
+
+
 if __name__ == "__main__":
     name, args = sys.argv[1], sys.argv[2:]
     result = {"agreement": lambda: case_agreement(), "partition": case_partition,
               "bad": lambda: case_bad(args[0], args[1]), "boomeramg": case_boomeramg,
+              "floor": case_floor, "ssor": case_ssor,
               "fuzz": lambda: case_fuzz(int(args[0]))}[name]()
     if RANK == 0:
         print("RESULT " + json.dumps(result), flush=True)

@@ -43,6 +43,26 @@ def test_reduced_solves_choose_boomeramg_by_the_matrix_and_keep_the_users_option
     assert out["left"] == ["nrmicp_inner_pc_hypre_boomeramg_coarsen_type"], out["left"]
 
 
+def test_newton_stops_at_the_rounding_floor_and_names_it():
+    out = mpirun(2, "floor")
+    for name in ("obstacle", "affine"):
+        r = out[name]
+        assert r["status"] == "STAGNATED" == r["serial_status"], r
+        assert "rounding level" in r["message"] and "tol 1e-17" in r["message"], r
+        floor = float(r["message"].split("= ")[-1].split(";")[0])
+        assert 0 < floor and r["res"] <= 100 * floor, r     # stopped at the floor, not before it
+        assert r["nit"] <= 5, r                              # and without steps that cannot help
+        assert r["err"] < AGREE, r
+
+
+def test_coarse_ssor_tries_hand_over_to_boomeramg():
+    out = mpirun(2, "ssor")
+    for label in ("default", "ssor_fails"):
+        assert out[label]["status"] == "CONVERGED" and out[label]["err"] < AGREE, out
+    assert out["ssor_fails"]["inner"] != out["default"]["inner"], out  # the option reached the coarse solves
+    assert out["left"] == [], out
+
+
 @pytest.fixture(scope="module")
 def partition_run():
     return mpirun(3, "partition")

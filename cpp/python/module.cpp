@@ -452,6 +452,16 @@ void bind_vocabulary(py::module_& m) {
       if (static_cast<int>(s) == code) return std::string(nrmicp::to_string(s));
     throw py::value_error("unknown status code " + std::to_string(code));
   }, py::arg("code"), "What a status code means (the start of a result's message).");
+  m.def("floor_message", &nrmicp::detail::floor_message, py::arg("best"), py::arg("tol"), py::arg("floor"),
+        "The message of a Newton solve that settled at Res's rounding floor above tol.");
+  using Tuning = nrmicp::detail::NewtonTuning;
+  py::dict tuning;  // the Newton member's constants, for the distributed member
+  tuning["coarse_maxiter"] = Tuning::coarse_maxiter;
+  tuning["coarse_forcing"] = Tuning::coarse_forcing;
+  tuning["nested_first_forcing"] = Tuning::nested_first_forcing;
+  tuning["nested_forcing"] = Tuning::nested_forcing;
+  tuning["floor_factor"] = nrmicp::detail::kFloorFactor;
+  m.attr("newton_tuning") = tuning;
   m.def("is_aor_type", &nrmicp::is_aor_type, py::arg("method"),
         "True for the methods whose left matrix is triangular or diagonal (no factorization).");
   m.def("resolved_z_update", [](nrmicp::Method method, bool omega2_given, bool is_icp) {

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import time
+from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -45,6 +46,8 @@ _KNOWN = {e.__name__: e for e in (ValueError, TypeError, ZeroDivisionError, Floa
                                   ArithmeticError, RuntimeError, KeyError, IndexError, MemoryError)}
 #: Newton steps' acceptance window (the serial member's non-monotone rule: detail/globalization.hpp).
 _WINDOW = 5
+#: The serial member's constants (NewtonRun, Globalized), read from the core: one definition.
+_TUNING = _core.newton_tuning
 
 
 class DistributedError(RuntimeError):
@@ -241,79 +244,156 @@ class _Problem:
         m.setArray(np.minimum(self.w.getArray(readonly=True), y.getArray(readonly=True)))
         return m.norm()
 
+    def floor(self, y):
+        """The rounding level of Res at y (ζ = 0 in y): eps (‖|A||y| + |b|‖ + ‖y‖)."""
+        return _rounding_level(self.A, self.b, y, None)
+
+
+def _abs_mat(A):
+    """|A| entry-wise, in A's layout (built for a floor test: at most a few a solve)."""
+    indptr, cols, vals = A.getValuesCSR()
+    return PETSc.Mat().createAIJ(size=A.getSizes(), csr=(indptr, cols, np.abs(vals)), comm=A.getComm())
+
+
+def _rounding_level(A, q, z, zt):
+    """The serial member's rounding level of Res (detail/newton_level.hpp):
+    eps (‖|A||z| + |q|‖ + ‖|z| + |ζ(z)|‖); zt = ζ(z), None for ζ = 0."""
+    absA = _abs_mat(A)
+    za = z.copy()
+    za.abs()
+    t = z.duplicate()
+    absA.mult(za, t)
+    t.setArray(t.getArray(readonly=True) + np.abs(q.getArray(readonly=True)))
+    if zt is not None:
+        za.setArray(za.getArray(readonly=True) + np.abs(zt.getArray(readonly=True)))
+    absA.destroy()
+    return float(np.finfo(float).eps * (t.norm() + za.norm()))
+
 
 def _hierarchy(A, comm, prefix):
-    """hypre BoomerAMG's classical prolongations, finest first, read through PCHMG."""
+    """hypre BoomerAMG's classical prolongations and its Galerkin operators PᵀAP, finest first
+    (A excluded), read through PCHMG. PCMG's smoothers are never applied here: Richardson without
+    a preconditioner spares their set-up (Chebyshev's eigenvalue estimates: 0.6 of 1.8 s at
+    n = 10⁶ in 2D)."""
     opts = PETSc.Options(prefix)
-    opts["pc_hmg_reuse_interpolation"] = True
-    opts["hmg_inner_pc_type"] = "hypre"
+    ours = {"pc_hmg_reuse_interpolation": True, "hmg_inner_pc_type": "hypre",
+            "mg_levels_ksp_type": "richardson", "mg_levels_pc_type": "none"}
+    for k, v in ours.items():
+        opts[k] = v
     pc = PETSc.PC().create(comm)
     pc.setOptionsPrefix(prefix)
     pc.setOperators(A)
     pc.setType("hmg")
     pc.setFromOptions()
     pc.setUp()
-    Ps = [pc.getMGInterpolation(l) for l in range(pc.getMGLevels() - 1, 0, -1)]
-    return Ps, pc
+    for k in ours:
+        opts.delValue(k)
+    L = pc.getMGLevels()
+    Ps = [pc.getMGInterpolation(l) for l in range(L - 1, 0, -1)]
+    As = [pc.getMGSmoother(l).getOperators()[0] for l in range(L - 2, -1, -1)]
+    return Ps, As, pc
 
 
 class _Newton:
     """The Newton member on one level's LCP (y = z − c): active-set rule y − w/diag(A) ≥ 0 inactive
     (ties inactive), steps for the correction on the inactive set by KSP (CG on symmetric A,
-    else BiCGSTAB) with hypre BoomerAMG, the non-monotone acceptance of the serial member."""
+    else BiCGSTAB). With `ssor_first` (the coarse levels) a step first tries local SSOR as the
+    preconditioner, at most _SSOR_ITERATIONS iterations, and sets up BoomerAMG only when that
+    does not reach the step's tolerance, going on from SSOR's iterate: a coarse step needs only
+    0.1 × Res and BoomerAMG's set-up was most of its cost (2D n = 10⁶, np 1: 8.6 → 6.9 CPU s;
+    docs/DISTRIBUTED.md). The last set's systems are kept: a set solved again (an exact repeat of
+    a loose step) reuses its submatrix and preconditioners."""
 
-    def __init__(self, prob, comm, symmetric, stats):
+    def __init__(self, prob, comm, symmetric, stats, ssor_first=False):
         self.p, self.comm, self.stats = prob, comm, stats
         self.ksp_type = "cg" if symmetric else "bcgs"
+        self.ssor_first = ssor_first
+        self.inactive = self.h = None
+        self.kept = {}  # the last solved set: "h", "is", "A_II" and a KSP per preconditioner
 
-    def step(self, y, rtol, atol, last=None):
-        """One Newton step from y (w of y in self.p.w): the new iterate and the set's fingerprint;
-        (None, fingerprint) without solving when the set is `last` (a settled coarse level)."""
+    def plan(self, y):
+        """The inactive set of y (w of y in self.p.w), kept for solve; returns its fingerprint."""
+        ya, wa, da = y.getArray(readonly=True), self.p.w.getArray(readonly=True), self.p.d.getArray(readonly=True)
+        self.inactive = ya - wa / da >= 0
+        self.h = _fingerprint(self.comm, self.p.A.getOwnershipRange()[0], self.inactive)
+        return self.h
+
+    def solve(self, y, rtol, atol):
+        """The step on the planned set, its inner solve stopped at max(rtol ‖rhs‖, atol)."""
         p = self.p
-        lo, _ = p.A.getOwnershipRange()
-        ya, wa, da = y.getArray(readonly=True), p.w.getArray(readonly=True), p.d.getArray(readonly=True)
-        inactive = ya - wa / da >= 0
-        h = _fingerprint(self.comm, lo, inactive)
-        if last is not None and h == last:
-            return None, h
         delta = y.duplicate()
-        delta.setArray(np.where(inactive, 0.0, -ya))
+        delta.setArray(np.where(self.inactive, 0.0, -y.getArray(readonly=True)))
         rhs = y.duplicate()
         p.A.mult(delta, rhs)
         rhs.axpy(1.0, p.w)
         rhs.scale(-1.0)
-        isI = PETSc.IS().createGeneral((np.flatnonzero(inactive) + lo).astype(PETSc.IntType), comm=self.comm)
+        isI = self._system()
         if isI.getSize() > 0:
-            AII = p.A.createSubMatrix(isI, isI)
             bI, dI = rhs.getSubVector(isI), delta.getSubVector(isI)
-            ksp = _ksp(self.comm, AII, self.ksp_type, rtol, atol)
-            ksp.setInitialGuessNonzero(False)
-            ksp.solve(bI, dI)
-            self.stats["inner_iterations"] += ksp.getIterationNumber()
+            done = self.ssor_first and self._inner("ssor", bI, dI, rtol, atol, False)
+            if not done:
+                self._inner("hypre", bI, dI, rtol, atol, self.ssor_first)
             self.stats["linear_solves"] += 1
             rhs.restoreSubVector(isI, bI)
             delta.restoreSubVector(isI, dI)
-            ksp.destroy()
-            AII.destroy()
         ynew = y.copy()
         ynew.axpy(1.0, delta)
-        return ynew, h
+        return ynew
+
+    def _inner(self, pc, b, x, rtol, atol, warm):
+        """One KSP run with preconditioner pc from x (warm) or 0; True when it converged."""
+        ksp = self.kept.get(pc)
+        if ksp is None:
+            ksp = self.kept[pc] = _ksp(self.comm, self.kept["A_II"], self.ksp_type, pc)
+        ksp.setInitialGuessNonzero(warm)
+        ksp.setTolerances(rtol=rtol, atol=atol)
+        ksp.solve(b, x)
+        self.stats["inner_iterations"] += ksp.getIterationNumber()
+        return ksp.getConvergedReason() > 0
+
+    def _system(self):
+        """The planned set's index set (its A_II kept): the kept one when it is the last solved set."""
+        if self.kept.get("h") != self.h:
+            self.release()
+            lo, _ = self.p.A.getOwnershipRange()
+            isI = PETSc.IS().createGeneral((np.flatnonzero(self.inactive) + lo).astype(PETSc.IntType), comm=self.comm)
+            self.kept = {"h": self.h, "is": isI, "A_II": self.p.A.createSubMatrix(isI, isI) if isI.getSize() else None}
+        return self.kept["is"]
+
+    def release(self):
+        """Free the kept systems (the level is done)."""
+        for key, obj in self.kept.items():
+            if key != "h" and obj is not None:
+                obj.destroy()
+        self.kept = {}
 
 
-def _ksp(comm, M, kind, rtol, atol):
-    """CG or BiCGSTAB with hypre BoomerAMG, stopping on the true residual (the preconditioned
-    norm of a small w_I is far smaller, and stopped the solve before it started)."""
+#: The coarse levels' SSOR tries: at most this many Krylov iterations before BoomerAMG is set up
+#: (2D n = 10⁶: 30 and 100 gave the same steps and time; -nrmicp_ssor_ksp_max_it overrides).
+_SSOR_ITERATIONS = 30
+
+
+def _ksp(comm, M, kind, pc):
+    """CG or BiCGSTAB with hypre BoomerAMG (pc 'hypre': options prefix nrmicp_inner_) or local
+    SSOR (pc 'ssor': prefix nrmicp_ssor_), stopping on the true residual (the preconditioned norm
+    of a small w_I is far smaller, and stopped the solve before it started)."""
     ksp = PETSc.KSP().create(comm)
     ksp.setOperators(M)
     ksp.setType(kind)
-    ksp.getPC().setType("hypre")
     if kind != "cg":
         ksp.setPCSide(PETSc.PC.Side.RIGHT)
     ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
-    ksp.setTolerances(rtol=rtol, atol=atol, max_it=1000)
-    ksp.setOptionsPrefix("nrmicp_inner_")  # -nrmicp_inner_pc_hypre_boomeramg_... tunes the reduced solves
-    opts, defaults = PETSc.Options("nrmicp_inner_"), _boomeramg_defaults(M)
-    ours = [k for k in defaults if not opts.hasName(k)]      # the user's -nrmicp_inner_ options win
+    if pc == "ssor":
+        ksp.getPC().setType("sor")
+        ksp.setTolerances(max_it=_SSOR_ITERATIONS)
+        prefix, defaults = "nrmicp_ssor_", {"pc_sor_local_symmetric": None}  # on each rank's block
+    else:
+        ksp.getPC().setType("hypre")
+        ksp.setTolerances(max_it=1000)
+        prefix, defaults = "nrmicp_inner_", _boomeramg_defaults(M)  # -nrmicp_inner_pc_hypre_boomeramg_...
+    ksp.setOptionsPrefix(prefix)
+    opts = PETSc.Options(prefix)
+    ours = [k for k in defaults if not opts.hasName(k)]      # the user's options win
     for k in ours:
         opts[k] = defaults[k]
     ksp.setFromOptions()
@@ -452,55 +532,74 @@ def _stationary(A, q, zeta, member, z, tol, maxiter, stats):
     return best[0], best[2], status, k
 
 
-def _newton_loop(residual, step, fallback, y, *, tol, maxiter, settle, sweep_budget):
-    """The serial member's globalization around plain steps: a step is accepted when its Res is
-    below the largest of the last 5 accepted (the first after a start is exempt); a rejected step
-    or a cycle of active sets hands over to fallback sweeps from the best iterate (10, 20, 40, ...),
-    after which Newton resumes. settle: stop when the active set repeats (coarse levels); the
-    finest level goes on while a repeated set still halves Res (inexact inner solves).
-    Returns (y, Res, steps, sweeps, status)."""
+class _Control(NamedTuple):
+    """How the loop on one level solves (the serial member's NewtonControl): inner solves stop at
+    forcing × Res (first_forcing for the first step; 0: at `exact`), and with exact_repeat a set
+    so solved that repeats is solved again at `exact` before the loop may settle on it."""
+    first_forcing: float = 0.0
+    forcing: float = 0.0
+    exact_repeat: bool = False
+    exact: tuple = (1e-14, 0.0)  # (rtol, atol) of an exact step
+
+
+def _newton_loop(residual, stepper, fallback, y, *, tol, maxiter, control, floor, sweep_budget):
+    """The serial member's globalization (detail/globalization.hpp) around plain steps: a step is
+    accepted when its Res is below the largest of the last 5 accepted (the first after a start is
+    exempt); a rejected step or a cycle of active sets hands over to fallback sweeps from the
+    best iterate (10, 20, 40, ...), after which Newton resumes. The loop settles when the active
+    set repeats (see _Control) or a step that did not halve Res leaves it at its rounding level
+    (floor(y), within _TUNING["floor_factor"]). Returns (y, Res, steps, sweeps, status, floor or None)."""
     res = residual(y)
     best = (res, y.copy())
-    recent, exempt, seen, last = [res], True, set(), None
+    recent, exempt, seen, last, loose = [res], True, set(), None, False
     steps = sweeps = 0
     run = 10
+
+    def end(status, level=None):
+        return best[1], best[0], steps, sweeps, status, level
+
     while True:
         if res < tol:
-            return best[1], best[0], steps, sweeps, Status.CONVERGED
+            return end(Status.CONVERGED)
         if steps >= maxiter:
-            return best[1], best[0], steps, sweeps, Status.MAX_ITERATIONS
-        ynew, h = step(y, last if settle else None)
-        if ynew is None:  # the set y's own test gives is the one y solves: settled, no solve needed
-            return best[1], best[0], steps, sweeps, Status.STAGNATED
-        steps += 1
-        rnew = residual(ynew)
-        repeated = h == last
-        ok = math.isfinite(rnew) and (exempt or rnew < max(recent)) and (repeated or h not in seen)
-        if ok:
-            halved = rnew < 0.5 * res
-            y, res, exempt, last = ynew, rnew, False, h
-            recent = (recent + [rnew])[-_WINDOW:]
-            seen.add(h)
-            if rnew < best[0]:
-                best = (rnew, y.copy())
-            if repeated and (settle or not halved) and not rnew < tol:
-                return best[1], best[0], steps, sweeps, Status.STAGNATED
-            continue
+            return end(Status.MAX_ITERATIONS)
+        h = stepper.plan(y)
+        repeat = h == last
+        if repeat and not (control.exact_repeat and loose):
+            return end(Status.STAGNATED, floor(best[1]) if floor and tol > 0 else None)  # settled: no solve needed
+        if repeat or h not in seen:
+            forcing = 0.0 if repeat else control.first_forcing if steps == 0 else control.forcing
+            loose = forcing > 0
+            ynew = stepper.solve(y, *((1e-14, max(forcing * res, 0.1 * tol)) if loose else control.exact))
+            steps += 1
+            rnew = residual(ynew)
+            if math.isfinite(rnew) and (exempt or rnew < max(recent)):
+                y, res, res_old, exempt, last = ynew, rnew, res, False, h
+                recent = (recent + [rnew])[-_WINDOW:]
+                seen.add(h)
+                if rnew < best[0]:
+                    best = (rnew, y.copy())
+                if floor and not rnew < tol and not rnew < 0.5 * res_old:
+                    level = floor(y)
+                    if max(rnew, res_old) <= _TUNING["floor_factor"] * level:
+                        return end(Status.STAGNATED, level)
+                continue
         if fallback is None or sweeps >= sweep_budget:
-            return best[1], best[0], steps, sweeps, Status.STAGNATED
+            return end(Status.STAGNATED)
         y = best[1].copy()
         rb, k = fallback(y, min(run, sweep_budget - sweeps))
         sweeps += k
         run *= 2
         if not rb < best[0]:
-            return best[1], best[0], steps, sweeps, Status.STAGNATED
+            return end(Status.STAGNATED)
         best, res = (rb, y.copy()), residual(y)
-        recent, exempt, last = [res], True, None
+        recent, exempt, last, loose = [res], True, None, False
+        seen.clear()
 
 
 # ----------------------------------------------------------------------------- the Newton drivers
-#: Inner (KSP) tolerance relative to the step's right-hand side (inexact Newton); the finest level
-#: also stops at tol/10 absolute, as the serial member's iterative inner solve.
+#: Inner (KSP) tolerance of the affine member's steps relative to the step's right-hand side
+#: (inexact Newton); they also stop at tol/10 absolute, as the serial member's iterative inner solve.
 _RTOL = 1e-6
 
 
@@ -508,8 +607,8 @@ def _nested_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats):
     """LCP(b, A) by the nested Newton member: coarse problems PᵀAP, Pᵀb, solved coarse to fine,
     each solution prolongated and projected (y ≥ 0) as the next start. Returns (y, Res, status)."""
     As, bs = [A], [b]
-    for P in Ps:
-        As.append(As[-1].ptap(P))
+    for P, Ac in Ps:
+        As.append(Ac if Ac is not None else As[-1].ptap(P))
         bc = P.createVecRight()
         P.multTranspose(bs[-1], bc)
         bs.append(bc)
@@ -523,21 +622,33 @@ def _nested_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats):
                 y.set(0.0)
         else:
             yf = As[level].createVecLeft()
-            Ps[level].mult(y, yf)
+            Ps[level][0].mult(y, yf)
             yf.setArray(np.maximum(yf.getArray(readonly=True), 0.0))
             y = yf
         finest = level == 0
-        nt = _Newton(prob, comm, symmetric, stats)
-        # finest: the inner solve aims at tol/10 absolute (a step short of it costs a whole extra step)
-        rtol, atol = (1e-14, 0.1 * tol) if finest else (_RTOL, 0.0)
-        fallback = _lcp_fallback(prob, comm, stats) if finest else None
-        y, res, steps, sweeps, status = _newton_loop(
-            prob.residual, lambda v, last: nt.step(v, rtol, atol, last), fallback, y, tol=tol if finest else 0.0,
-            maxiter=maxiter if finest else 50, settle=not finest, sweep_budget=maxiter)
+        nt = _Newton(prob, comm, symmetric, stats, ssor_first=not finest)
+        y, res, steps, sweeps, status, floor = _newton_loop(
+            prob.residual, nt, _lcp_fallback(prob, comm, stats) if finest else None,
+            y, tol=tol if finest else 0.0, maxiter=maxiter if finest else _TUNING["coarse_maxiter"],
+            control=_level_control(finest, len(As) > 1, tol), floor=prob.floor, sweep_budget=maxiter)
+        nt.release()
+        if finest:
+            stats["floor"] = floor
         stats["level_steps"].insert(0, steps)
         stats["level_seconds"].insert(0, time.perf_counter() - t0)
         stats["fallback_sweeps"] += sweeps
     return y, res, status
+
+
+def _level_control(finest, nested, tol):
+    """The serial member's controls (NewtonRun): coarse levels loose to a settled set; the finest
+    level exact (inner solve to tol/10 absolute), loose while its sets are guesses when nested."""
+    exact = (1e-14, 0.1 * tol)
+    if not finest:
+        return _Control(_TUNING["coarse_forcing"], _TUNING["coarse_forcing"], False, exact)
+    if nested:
+        return _Control(_TUNING["nested_first_forcing"], _TUNING["nested_forcing"], True, exact)
+    return _Control(exact=exact)
 
 
 def _lcp_fallback(prob, comm, stats):
@@ -564,35 +675,43 @@ def _affine_newton(A, q, zeta, z, tol, maxiter, comm, stats):
     def residual(v):
         return _icp_residual(A, q, zeta, v, w, g, zt)
 
-    def step(v, last):
-        inactive = g.getArray(readonly=True) - w.getArray(readonly=True) / d >= 0
-        mI = _vec(A, inactive.astype(float))
-        mA = _vec(A, 1.0 - inactive)
-        J = A.copy()
-        J.diagonalScale(L=mI)
-        BB = zeta.B.copy()
-        BB.diagonalScale(L=_vec(A, inactive - 1.0))
-        J.axpy(1.0, BB, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-        J.setDiagonal(mA, addv=PETSc.InsertMode.ADD_VALUES)
-        rhs = _vec(A, -np.where(inactive, w.getArray(readonly=True), g.getArray(readonly=True)))
-        delta = z.duplicate()
-        ksp = _ksp(comm, J, "bcgs", _RTOL, 0.1 * tol)
-        ksp.solve(rhs, delta)
-        stats["inner_iterations"] += ksp.getIterationNumber()
-        stats["linear_solves"] += 1
-        ksp.destroy()
-        J.destroy()
-        out = v.copy()
-        out.axpy(1.0, delta)
-        return out, _fingerprint(comm, lo, inactive)
+    class Step:
+        def plan(self, v):  # g, w are v's (the loop evaluated v last)
+            self.inactive = g.getArray(readonly=True) - w.getArray(readonly=True) / d >= 0
+            return _fingerprint(comm, lo, self.inactive)
+
+        def solve(self, v, rtol, atol):
+            inactive = self.inactive
+            mI = _vec(A, inactive.astype(float))
+            mA = _vec(A, 1.0 - inactive)
+            J = A.copy()
+            J.diagonalScale(L=mI)
+            BB = zeta.B.copy()
+            BB.diagonalScale(L=_vec(A, inactive - 1.0))
+            J.axpy(1.0, BB, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+            J.setDiagonal(mA, addv=PETSc.InsertMode.ADD_VALUES)
+            rhs = _vec(A, -np.where(inactive, w.getArray(readonly=True), g.getArray(readonly=True)))
+            delta = z.duplicate()
+            ksp = _ksp(comm, J, "bcgs", "hypre")
+            ksp.setTolerances(rtol=rtol, atol=atol)
+            ksp.solve(rhs, delta)
+            stats["inner_iterations"] += ksp.getIterationNumber()
+            stats["linear_solves"] += 1
+            ksp.destroy()
+            J.destroy()
+            out = v.copy()
+            out.axpy(1.0, delta)
+            return out
 
     def fallback(v, k):
         res, _, _, done = _stationary(A, q, zeta, member, v, 0.0, k, stats)
         return res, done
 
     t0 = time.perf_counter()
-    z, res, steps, sweeps, status = _newton_loop(residual, step, fallback, z, tol=tol, maxiter=maxiter,
-                                                 settle=False, sweep_budget=maxiter)
+    z, res, steps, sweeps, status, floor = _newton_loop(
+        residual, Step(), fallback, z, tol=tol, maxiter=maxiter, control=_Control(exact=(_RTOL, 0.1 * tol)),
+        floor=lambda v: _rounding_level(A, q, v, zt), sweep_budget=maxiter)
+    stats["floor"] = floor
     stats["level_steps"], stats["level_seconds"] = [steps], [time.perf_counter() - t0]
     stats["fallback_sweeps"] += sweeps
     return z, res, status
@@ -661,7 +780,10 @@ def _polish(A, q, zeta, z, res, comm, symmetric, stats):
         y.axpy(-1.0, c)
         prob = _Problem(A, b)
         prob.residual(y)
-        y, _ = _Newton(prob, comm, symmetric, stats).step(y, 1e-14, 0.0)
+        nt = _Newton(prob, comm, symmetric, stats)
+        nt.plan(y)
+        y = nt.solve(y, 1e-14, 0.0)
+        nt.release()
         y.axpy(1.0, c)
         trial = y
     r = _icp_residual(A, q, zeta, trial, w, g, zt)
@@ -725,9 +847,10 @@ def solve(A, q, zeta=None, *, method: str = "newton", tol: float = 1e-8, maxiter
     t_setup = time.perf_counter()
     Ps = []
     if m == "newton" and hierarchy in ("amg", "auto") and zf.kind != 2:
-        Ps, _pc = _hierarchy(Am, comm, f"nrmicp_{id(stats)}_")
+        Ps, As, _pc = _hierarchy(Am, comm, f"nrmicp_{id(stats)}_")
+        Ps = list(zip(Ps, As))
     elif m == "newton" and isinstance(hierarchy, (list, tuple)):
-        Ps = list(hierarchy)
+        Ps = [(P, None) for P in hierarchy]
     t_iter = time.perf_counter()
     if m == "newton":
         z, res, status, nit, iterations = _newton(Am, qv, zf, z0, Ps, tol, maxiter, symmetric, comm, stats)
@@ -746,7 +869,7 @@ def solve(A, q, zeta=None, *, method: str = "newton", tol: float = 1e-8, maxiter
     Am.multAdd(z, qv, w)
     t_end = time.perf_counter()
     fields = dict(z=z, w=w, success=status == Status.CONVERGED, status=Status(status),
-                  message=_core.status_message(int(status)), nit=int(nit), iterations=int(iterations),
+                  message=_message(status, res, tol, stats.get("floor")), nit=int(nit), iterations=int(iterations),
                   residual=float(res), history=None,
                   timings={"setup": t_iter - t_setup, "iterations": t_end - t_iter, "total": t_end - t_start},
                   method=m, inner=("cg" if symmetric else "bicgstab") if m == "newton" else "none",
@@ -756,6 +879,13 @@ def solve(A, q, zeta=None, *, method: str = "newton", tol: float = 1e-8, maxiter
     if polish:
         fields["polished"] = polished
     return Result(**fields)
+
+
+def _message(status, res, tol, floor):
+    """The result's message: the serial member's, with the rounding level where Res settled there."""
+    if status == Status.STAGNATED and floor is not None:
+        return _core.floor_message(float(res), float(tol), float(floor))
+    return _core.status_message(int(status))
 
 
 def _start(Am, z0):

@@ -57,6 +57,17 @@ inline std::uint64_t hash_set(const std::vector<char>& inactive) {
   return h;
 }
 
+/// How close to its rounding level Res counts as there (a step on the right piece lands within
+/// a few times the level; one on a wrong piece leaves Res orders of magnitude above it).
+inline constexpr double kFloorFactor = 100;
+
+/// The message of a Newton loop that settled at Res's rounding floor above tol.
+inline std::string floor_message(double best, double tol, double floor) {
+  return "stagnated: Res reached its rounding floor (the active set has settled and a further Newton step does not "
+         "reduce Res): best Res " + to_text(best) + " >= tol " + to_text(tol) +
+         ", rounding level eps (||A||z| + |q||| + ||z| + |zeta(z)||) = " + to_text(floor) + "; returning the best iterate";
+}
+
 /// The fallback's runs of sweeps from the best iterate: 10, then 20, 40, ... sweeps, within a
 /// budget of sweeps in all (a level's loop, and the outer fixed point: newton_run.hpp).
 class SweepRuns {
@@ -184,9 +195,6 @@ class Globalized {
     floor_ = plain_.rounding_level();
     return r <= kFloorFactor * floor_;
   }
-  /// How close to its rounding level Res counts as there (a step on the right piece lands within
-  /// a few times the level; one on a wrong piece leaves Res orders of magnitude above it).
-  static constexpr double kFloorFactor = 100;
   void accept(double r, std::uint64_t h) {
     still_ = Plain::set_fixes_step && plain_.trial_still() && !(r < ctl_.solve.tol);
     plain_.accept();
@@ -216,11 +224,7 @@ class Globalized {
   void settle() {
     settled_ = true;
     if (!(floor_ > 0)) floor_ = plain_.rounding_level();
-    end_ = StepEnd{Status::Stagnated,
-                   "stagnated: Res reached its rounding floor (the active set has settled and a further Newton "
-                   "step does not reduce Res): best Res " + to_text(best_r_) + " >= tol " + to_text(ctl_.solve.tol) +
-                       ", rounding level eps (||A||z| + |q||| + ||z| + |zeta(z)||) = " + to_text(floor_) +
-                       "; returning the best iterate"};
+    end_ = StepEnd{Status::Stagnated, floor_message(best_r_, ctl_.solve.tol, floor_)};
   }
   void stop(Status s) { end_ = StepEnd{s, std::string()}; }
 

@@ -159,6 +159,26 @@ class NewtonTally {
   Result tally_;
 };
 
+/// The Newton member's measured constants, one definition: NewtonRun uses them, and the
+/// distributed member (python/nrmicp/distributed.py) reads them through the binding.
+struct NewtonTuning {
+  /// Newton steps per coarse level: until its active set settles (at most this many), since a
+  /// cut-short coarse solve leaves a band of wrong active set that Res does not show
+  /// (docs/MEASUREMENTS.md, coarse_maxiter).
+  static constexpr int coarse_maxiter = 100;
+  /// The inner solves on the coarse levels stop at this fraction of the iterate's Res: a start
+  /// needs no more; not on the finest level (docs/MEASUREMENTS.md, coarse_forcing).
+  static constexpr double coarse_forcing = 0.1;
+  /// The first finest-level step from a nested start stops its inner solve at this fraction of the
+  /// start's Res: that step's active set is the prolongation's guess, wrong along the free boundary,
+  /// and a solve to tol / 10 is spent on it (docs/MEASUREMENTS.md, nested_first_forcing).
+  static constexpr double nested_first_forcing = 1e-4;
+  /// The later finest-level steps from a nested start stop their inner solves at this fraction of
+  /// the iterate's Res while their active set is new; a set that repeats is solved to tol / 10
+  /// (NewtonControl::exact_repeat; docs/MEASUREMENTS.md, nested_forcing).
+  static constexpr double nested_forcing = 0.1;
+};
+
 /// One solve: the strategies by ζ, and the statistics they gather over levels and outer steps.
 template <typename MatrixType>
 class NewtonRun {
@@ -184,8 +204,8 @@ class NewtonRun {
     const auto t0 = std::chrono::steady_clock::now();
     auto control = finest_control(psi, tol >= 0 ? tol : o_.tol, maxiter >= 0 ? maxiter : o_.maxiter, report);
     if (nested) {  // the sets of the finest steps are guesses until one repeats
-      control.first_forcing = nested_first_forcing;
-      control.forcing = nested_forcing;
+      control.first_forcing = NewtonTuning::nested_first_forcing;
+      control.forcing = NewtonTuning::nested_forcing;
       control.exact_repeat = true;
     }
     const auto out = set && !set->empty() ? from_set(q_shift, y0, *set, control) : finest_lcp(q_shift, y0, control);
@@ -251,21 +271,6 @@ class NewtonRun {
   }
 
  private:
-  /// Newton steps per coarse level: until its active set settles (at most this many), since a
-  /// cut-short coarse solve leaves a band of wrong active set that Res does not show
-  /// (docs/MEASUREMENTS.md, coarse_maxiter).
-  static constexpr int coarse_maxiter = 100;
-  /// The inner solves on the coarse levels stop at this fraction of the iterate's Res: a start
-  /// needs no more; not on the finest level (docs/MEASUREMENTS.md, coarse_forcing).
-  static constexpr double coarse_forcing = 0.1;
-  /// The first finest-level step from a nested start stops its inner solve at this fraction of the
-  /// start's Res: that step's active set is the prolongation's guess, wrong along the free boundary,
-  /// and a solve to tol / 10 is spent on it (docs/MEASUREMENTS.md, nested_first_forcing).
-  static constexpr double nested_first_forcing = 1e-4;
-  /// The later finest-level steps from a nested start stop their inner solves at this fraction of
-  /// the iterate's Res while their active set is new; a set that repeats is solved to tol / 10
-  /// (NewtonControl::exact_repeat; docs/MEASUREMENTS.md, nested_forcing).
-  static constexpr double nested_forcing = 0.1;
   /// The start of an affine or semismooth solve: at most this many Newton steps of the obstacle problem.
   static constexpr int start_maxiter = 100;
 
@@ -324,8 +329,8 @@ class NewtonRun {
     for (std::size_t l = 0; l < L; ++l) qs[l + 1] = levels_.hierarchy[l].R * qs[l];
     Vector y = Vector::Zero(L ? levels_.coarse.back()->size() : q_shift.size());
     NewtonControl c;
-    c.solve.maxiter = coarse_maxiter;
-    c.forcing = c.first_forcing = coarse_forcing;
+    c.solve.maxiter = NewtonTuning::coarse_maxiter;
+    c.forcing = c.first_forcing = NewtonTuning::coarse_forcing;
     c.sweep_budget = 1000;
     for (std::size_t l = L; l >= 1; --l) {
       const auto t0 = std::chrono::steady_clock::now();
