@@ -251,7 +251,13 @@ def case_boomeramg():
     left = sorted(k for k in PETSc.Options().getAll() if k.startswith("nrmicp_inner_"))
     kept = opts.getString("pc_hypre_boomeramg_coarsen_type", "")
     opts.delValue("pc_hypre_boomeramg_coarsen_type")
-    return {"rule": rule, "left": left, "kept": kept, "status": str(r.status)}
+    hier = PETSc.Options("nrmicp_hierarchy_")                 # the nesting hierarchy's BoomerAMG
+    hier["pc_hypre_boomeramg_max_levels"] = 3
+    r3 = dist.solve(sp.csr_matrix(pb3.A)[lo:hi], pb3.q[lo:hi], pb3.zeta[lo:hi], method="newton", tol=1e-9)
+    hier.delValue("pc_hypre_boomeramg_max_levels")
+    return {"rule": rule, "left": left, "kept": kept, "status": str(r.status), "levels": len(r.level_steps),
+            "levels_3": len(r3.level_steps), "status_3": str(r3.status),
+            "left_all": sorted(k for k in PETSc.Options().getAll() if k.startswith("nrmicp"))}
 
 
 def case_floor():

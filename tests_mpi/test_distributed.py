@@ -34,13 +34,15 @@ def test_newton_nests_finest_steps_few(agreement):
             assert r["level_steps"][0] <= 5, r
 
 
-def test_reduced_solves_choose_boomeramg_by_the_matrix_and_keep_the_users_options():
+def test_boomeramg_options_by_the_matrix_the_users_kept_the_hierarchys_reachable():
     out = mpirun(2, "boomeramg")
     assert out["rule"]["5-point"] == {}
     assert out["rule"]["7-point"]["pc_hypre_boomeramg_coarsen_type"] == "HMIS"
     assert out["status"] == "CONVERGED"
     assert out["kept"] == "Falgout"                      # the user's entry survives the solve
     assert out["left"] == ["nrmicp_inner_pc_hypre_boomeramg_coarsen_type"], out["left"]
+    assert out["levels"] > 3 and out["levels_3"] == 3 and out["status_3"] == "CONVERGED", out  # -nrmicp_hierarchy_
+    assert out["left_all"] == [], out                    # nothing of ours or the user's stays behind
 
 
 def test_newton_stops_at_the_rounding_floor_and_names_it():

@@ -270,6 +270,10 @@ def _rounding_level(A, q, z, zt):
     return float(np.finfo(float).eps * (t.norm() + za.norm()))
 
 
+#: Options with this prefix tune the nesting hierarchy's BoomerAMG (e.g. -nrmicp_hierarchy_pc_hypre_boomeramg_P_max 4).
+_HIERARCHY_PREFIX = "nrmicp_hierarchy_"
+
+
 def _hierarchy(A, comm, prefix):
     """hypre BoomerAMG's classical prolongations and its Galerkin operators PᵀAP, finest first
     (A excluded), read through PCHMG. PCMG's smoothers are never applied here: Richardson without
@@ -278,6 +282,9 @@ def _hierarchy(A, comm, prefix):
     opts = PETSc.Options(prefix)
     ours = {"pc_hmg_reuse_interpolation": True, "hmg_inner_pc_type": "hypre",
             "mg_levels_ksp_type": "richardson", "mg_levels_pc_type": "none"}
+    # the user's -nrmicp_hierarchy_pc_hypre_boomeramg_... options reach hypre's set-up
+    ours.update({"hmg_inner_" + k[len(_HIERARCHY_PREFIX):]: v for k, v in PETSc.Options().getAll().items()
+                 if k.startswith(_HIERARCHY_PREFIX)})
     for k, v in ours.items():
         opts[k] = v
     pc = PETSc.PC().create(comm)
