@@ -127,18 +127,26 @@ def _truncate(P: sp.csr_matrix, truncate: float) -> sp.csr_matrix:
     P = sp.csr_matrix(P)
     P.sum_duplicates()
     n = P.shape[0]
-    counts = np.diff(P.indptr)
-    rows = np.repeat(np.arange(n), counts)
-    magnitude = np.abs(P.data)
-    row_max = np.zeros(n)
-    filled = counts > 0     # reduceat per row on CSR: np.maximum.at is 10x slower (3D set-up)
-    row_max[filled] = np.maximum.reduceat(magnitude, P.indptr[:-1][filled])
-    keep = magnitude >= truncate * row_max[rows]
-    before = np.bincount(rows, P.data, minlength=n)
-    after = np.bincount(rows[keep], P.data[keep], minlength=n)
+    # pyamg's strength kernel keeps |p_ij| >= truncate max_k |p_ik| over k != i: with the column
+    # indices shifted by n no entry is diagonal, so it is this row test, compiled (numpy's took
+    # 0.29 of the 4.3 s of 2D n = 10^6)
+    shifted = P.indices.astype(np.int64) + n
+    idx = np.int32 if shifted.size == 0 or shifted.max() < np.iinfo(np.int32).max else np.int64
+    Tp = np.empty(n + 1, dtype=idx)
+    Tj = np.empty(P.nnz, dtype=idx)
+    Tx = np.empty(P.nnz, dtype=np.float64)
+    _pyamg().classical_strength_of_connection_abs(n, truncate, P.indptr.astype(idx, copy=False), shifted.astype(idx),
+                                                  P.data, Tp, Tj, Tx)
+    nnz = int(Tp[-1])
+    before, after = _row_sums(P.indptr, P.data), _row_sums(Tp, Tx[:nnz])
     scale = np.divide(before, after, out=np.ones_like(before), where=after != 0)
-    indptr = np.concatenate(([0], np.cumsum(np.bincount(rows[keep], minlength=n))))
-    return sp.csr_matrix((P.data[keep] * scale[rows[keep]], P.indices[keep], indptr), shape=P.shape)
+    Tx = Tx[:nnz] * np.repeat(scale, np.diff(Tp))
+    return sp.csr_matrix((Tx, Tj[:nnz] - n, Tp), shape=P.shape)
+
+
+def _row_sums(indptr, data) -> np.ndarray:
+    """Each CSR row's sum (0 for an empty row)."""
+    return np.bincount(np.repeat(np.arange(indptr.size - 1), np.diff(indptr)), data, minlength=indptr.size - 1)
 
 
 def _relax_interpolation(B, P, is_c, sweeps, truncate):
