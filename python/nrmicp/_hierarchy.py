@@ -250,7 +250,7 @@ def amg_levels(A, **opts) -> list:
     # folded into the next (P_0 P_1, nonnegative), whose levels use direct interpolation (a
     # third of classical's set-up there). Measured (obstacle_3d, tol 1e-8, one solve, CPU s):
     # m = 103, 12.0 -> 8.5 s, 2.3 -> 1.46 GB peak, 3 -> 4 finest steps; m = 47, 1.08 -> 0.53 s.
-    # Folding the 2D 5-point first level (not denser) took 5 finest steps instead of 3 (n = 10⁶);
+    # Folding the 2D 5-point first level (not denser) took 14 finest steps instead of 4 (n = 10⁶);
     # θ = 0.5 changed nothing on the 7-point stencil (all its connections are equally strong);
     # PMIS with direct interpolation took 18-26 finest steps.
     # "denser" = 1.2x A's nonzeros: 7-point 3D gives 1.26-1.33; P1 on the Delaunay disk 1.01-1.07,
