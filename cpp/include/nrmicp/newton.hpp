@@ -83,15 +83,15 @@ class Newton {
     options_.check(A.rows());
     check_shapes(A.rows(), prolongations, coarse_operators);
     const auto t0 = std::chrono::steady_clock::now();
-    params_ = resolve_parameters(A, options_);
-    levels_.finest = std::make_unique<detail::NewtonLevel<MatrixType>>(A, options_);
+    levels_.finest = std::make_unique<detail::NewtonLevel<MatrixType>>(A, options_);  // checks Ω1, Ω2
     build_hierarchy(std::move(prolongations), std::move(coarse_operators));
     setup_seconds_ = detail::ScopedTimer::seconds_since(t0);
   }
 
   const Options& options() const { return options_; }
-  /// Ω1, Ω2 (of the active-set test x > 0 ⇔ (z − ζ)/Ω1 > w/Ω2) and γ with defaults resolved.
-  const Parameters& parameters() const { return params_; }
+  /// Ω1, Ω2 (of the active-set test x > 0 ⇔ (z − ζ)/Ω1 > w/Ω2) and γ with defaults resolved;
+  /// computed when asked (a solve needs only Ω1/Ω2: four n-vectors not held, 34 MB at n = 10⁶).
+  Parameters parameters() const { return resolve_parameters(levels_.A, options_); }
   /// The inner solver of the reduced systems ("none" before the first solve).
   const char* inner_name() const { return levels_.finest->inner_name(); }
   /// Number of levels (1 without prolongations).
@@ -204,7 +204,6 @@ class Newton {
   }
 
   Options options_;
-  Parameters params_;
   detail::NewtonLevels<MatrixType> levels_;
   double setup_seconds_ = 0;
   mutable std::mutex mutex_;

@@ -31,16 +31,10 @@ class NewtonLevel {
   using System = ActiveSetSystem<StorageIndex>;
 
   /// `options` gives Ω1, Ω2 (empty: I and diag(A)) and the inner solver.
-  NewtonLevel(const MatrixType& A, const Options& options) : A_(A), inner_(options.inner) {
-    Options o = options;
-    o.method = Method::Newton;
-    const Parameters p = resolve_parameters(A, o);  // Ω2: diag(A), or the row maximum where a_ii ≤ 0
+  NewtonLevel(const MatrixType& A, const Options& options) : A_(A), inner_(options.inner), options_(options) {
+    options_.method = Method::Newton;
+    const Parameters p = resolve_parameters(A, options_);  // Ω2: diag(A), or the row maximum where a_ii ≤ 0
     ratio_ = p.omega1.cwiseQuotient(p.omega2);
-    fallback_options_.method = Method::NRM;
-    fallback_options_.omega1 = p.omega1;
-    fallback_options_.omega2 = p.omega2;
-    fallback_options_.inner = direct_inner(options.inner);  // nrm factorizes
-    fallback_options_.accelerate = Accelerate::Anderson;  // plain nrm diverged on zero-diagonal LCPs (SPEC)
   }
 
   /// The levels below this one (level[0]: the next coarser one), for the multigrid-preconditioned
@@ -109,8 +103,8 @@ class NewtonLevel {
 
   /// Up to `sweeps` sweeps of the fallback member (nrm) from z0 for ICP(q, A, ζ); the best iterate.
   Result sweep(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector& z0, int sweeps, double tol) {
-    if (!fallback_) fallback_.emplace(A_, fallback_options_);  // factorizes Ω2 + AΩ1 once
-    Options it = fallback_options_;
+    if (!fallback_) fallback_.emplace(A_, fallback_options());  // factorizes Ω2 + AΩ1 once
+    SolveOptions it = fallback_->options();
     it.tol = tol > 0 ? tol : std::numeric_limits<double>::min();
     it.maxiter = sweeps;
     it.stall_iterations = std::max(1, sweeps);
@@ -125,7 +119,20 @@ class NewtonLevel {
   const MatrixType& A_;
   Inner inner_;
   Vector ratio_;  // Ω1/Ω2: x ≥ 0 ⇔ g − (Ω1/Ω2) w ≥ 0
-  Options fallback_options_;
+  Options options_;  // the level's (Ω1, Ω2 as given: resolved when needed, not held as n-vectors)
+
+  /// The fallback member nrm with this level's Ω1, Ω2 (built on a level's first fallback: most
+  /// solves never fall back).
+  Options fallback_options() const {
+    const Parameters p = resolve_parameters(A_, options_);
+    Options f;
+    f.method = Method::NRM;
+    f.omega1 = p.omega1;
+    f.omega2 = p.omega2;
+    f.inner = direct_inner(options_.inner);  // nrm factorizes
+    f.accelerate = Accelerate::Anderson;  // plain nrm diverged on zero-diagonal LCPs (SPEC)
+    return f;
+  }
   std::unique_ptr<System> lcp_system_;
   Hierarchy<StorageIndex> below_;
   std::optional<Solver<MatrixType>> fallback_;
