@@ -15,6 +15,7 @@ rank 0 (small problems only).
 """
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 from typing import NamedTuple
@@ -279,22 +280,18 @@ def _hierarchy(A, comm, prefix):
     (A excluded), read through PCHMG. PCMG's smoothers are never applied here: Richardson without
     a preconditioner spares their set-up (Chebyshev's eigenvalue estimates: 0.6 of 1.8 s at
     n = 10⁶ in 2D)."""
-    opts = PETSc.Options(prefix)
     ours = {"pc_hmg_reuse_interpolation": True, "hmg_inner_pc_type": "hypre",
             "mg_levels_ksp_type": "richardson", "mg_levels_pc_type": "none"}
     # the user's -nrmicp_hierarchy_pc_hypre_boomeramg_... options reach hypre's set-up
     ours.update({"hmg_inner_" + k[len(_HIERARCHY_PREFIX):]: v for k, v in PETSc.Options().getAll().items()
                  if k.startswith(_HIERARCHY_PREFIX)})
-    for k, v in ours.items():
-        opts[k] = v
     pc = PETSc.PC().create(comm)
     pc.setOptionsPrefix(prefix)
     pc.setOperators(A)
     pc.setType("hmg")
-    pc.setFromOptions()
-    pc.setUp()
-    for k in ours:
-        opts.delValue(k)
+    with _scoped_options(prefix, ours):
+        pc.setFromOptions()
+        pc.setUp()
     L = pc.getMGLevels()
     Ps = [pc.getMGInterpolation(l) for l in range(L - 1, 0, -1)]
     As = [pc.getMGSmoother(l).getOperators()[0] for l in range(L - 2, -1, -1)]
@@ -399,14 +396,24 @@ def _ksp(comm, M, kind, pc):
         ksp.setTolerances(max_it=1000)
         prefix, defaults = "nrmicp_inner_", _boomeramg_defaults(M)  # -nrmicp_inner_pc_hypre_boomeramg_...
     ksp.setOptionsPrefix(prefix)
-    opts = PETSc.Options(prefix)
-    ours = [k for k in defaults if not opts.hasName(k)]      # the user's options win
-    for k in ours:
-        opts[k] = defaults[k]
-    ksp.setFromOptions()
-    for k in ours:          # defaults for this matrix only: the options database outlives the solve
-        opts.delValue(k)
+    with _scoped_options(prefix, defaults):   # defaults for this matrix only
+        ksp.setFromOptions()
     return ksp
+
+
+@contextlib.contextmanager
+def _scoped_options(prefix, values):
+    """PETSc options `values` under `prefix` while the block runs, then removed (the options
+    database outlives the solve); an entry the user set already wins and stays."""
+    opts = PETSc.Options(prefix)
+    ours = [k for k in values if not opts.hasName(k)]
+    for k in ours:
+        opts[k] = values[k]
+    try:
+        yield
+    finally:
+        for k in ours:
+            opts.delValue(k)
 
 
 def _boomeramg_defaults(M) -> dict:

@@ -31,7 +31,7 @@ class NewtonLevel {
   using System = ActiveSetSystem<StorageIndex>;
 
   /// `options` gives Ω1, Ω2 (empty: I and diag(A)) and the inner solver.
-  NewtonLevel(const MatrixType& A, const Options& options) : A_(A), inner_(options.inner), options_(options) {
+  NewtonLevel(const MatrixType& A, const Options& options) : A_(A), options_(options) {
     options_.method = Method::Newton;
     const Parameters p = resolve_parameters(A, options_);  // Ω2: diag(A), or the row maximum where a_ii ≤ 0
     ratio_ = p.omega1.cwiseQuotient(p.omega2);
@@ -46,10 +46,10 @@ class NewtonLevel {
 
   /// The reduced system of the (shifted) LCP, analysed once.
   System& lcp_system() {
-    if (!lcp_system_) lcp_system_ = std::make_unique<System>(A_, nullptr, inner_, below_);
+    if (!lcp_system_) lcp_system_ = std::make_unique<System>(A_, nullptr, options_.inner, below_);
     return *lcp_system_;
   }
-  std::unique_ptr<System> affine_system(const RowMatrix& B) const { return std::make_unique<System>(A_, &B, inner_, below_); }
+  std::unique_ptr<System> affine_system(const RowMatrix& B) const { return std::make_unique<System>(A_, &B, options_.inner, below_); }
   const char* inner_name() const { return lcp_system_ ? lcp_system_->inner_name() : "none"; }
 
   /// Res of z; w = Az + q and g = z − ζ(z) (ζ = Bz + c, or 0 when B is null).
@@ -117,9 +117,8 @@ class NewtonLevel {
 
  private:
   const MatrixType& A_;
-  Inner inner_;
   Vector ratio_;  // Ω1/Ω2: x ≥ 0 ⇔ g − (Ω1/Ω2) w ≥ 0
-  Options options_;  // the level's (Ω1, Ω2 as given: resolved when needed, not held as n-vectors)
+  Options options_;  // the level's inner solver, Ω1, Ω2 as given (resolved when needed, not held as n-vectors)
 
   /// The fallback member nrm with this level's Ω1, Ω2 (built on a level's first fallback: most
   /// solves never fall back).
