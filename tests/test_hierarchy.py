@@ -93,6 +93,36 @@ def test_amg_prolongations_do_not_mutate_A():
     assert (A != before).nnz == 0
 
 
+@pytest.mark.parametrize("before", [True, False])
+def test_amg_set_up_leaves_numpys_hugepage_setting_as_it_found_it(before, monkeypatch):
+    # the set-up switches numpy's madvise(MADV_HUGEPAGE) off for its temporaries: a process-wide
+    # setting of the user's, which must come back also when the set-up raises
+    try:
+        from numpy._core.multiarray import _set_madvise_hugepage
+    except ImportError:
+        from numpy.core.multiarray import _set_madvise_hugepage
+    from nrmicp import _hierarchy
+
+    def flag():
+        current = _set_madvise_hugepage(False)
+        _set_madvise_hugepage(current)
+        return current
+
+    original = _set_madvise_hugepage(before)
+    try:
+        seen = []
+        real = _hierarchy._auxiliary_level
+        monkeypatch.setattr(_hierarchy, "_auxiliary_level", lambda *a: seen.append(flag()) or real(*a))
+        assert amg_prolongations(laplacian_2d(16))
+        assert seen == [False] and flag() is before
+        monkeypatch.setattr(_hierarchy, "_auxiliary_level", lambda *a: 1 / 0)
+        with pytest.raises(ZeroDivisionError):
+            amg_prolongations(laplacian_2d(16))
+        assert flag() is before
+    finally:
+        _set_madvise_hugepage(original)
+
+
 def test_resolve_none_is_none_and_amg_builds_the_chain():
     A = laplacian_2d(16)
     assert resolve_hierarchy(None, A) is None
