@@ -325,6 +325,7 @@ class PyNewton : public PyCore<I, nrmicp::Newton<CsrMap<I>>> {
   /// emptied as they are copied (it is _newton.make_core's own): one copy of each level at a time.
   static std::vector<typename Core::RowMatrix> matrices(py::list ps, const char* what) {
     std::vector<typename Core::RowMatrix> out;
+    out.reserve(ps.size());   // growth would copy every matrix so far (Eigen 3.4's SparseMatrix cannot move)
     for (std::size_t l = 0; l < ps.size(); ++l) {
       const auto t = ps[l].cast<py::tuple>();
       const std::string name = std::string(what) + "[" + std::to_string(l) + "]";

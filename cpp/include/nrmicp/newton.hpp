@@ -155,17 +155,26 @@ class Newton {
   /// Galerkin coarse operators (formed here unless given); a level whose operator has a
   /// non-positive diagonal ends the hierarchy there (the active-set test needs Ω2 = diag > 0).
   void build_hierarchy(std::vector<RowMatrix> prolongations, std::vector<RowMatrix> coarse) {
+    // Eigen 3.4's SparseMatrix has no move constructor: std::move copies it. The matrices are
+    // swapped into place and the vector reserved (its growth would copy every level so far).
     auto& hierarchy = levels_.hierarchy;
+    hierarchy.reserve(prolongations.size());
     for (std::size_t l = 0; l < prolongations.size(); ++l) {
-      detail::Level<StorageIndex> level{std::move(prolongations[l]), {}, {}};
+      const RowMatrix* finer_A = hierarchy.empty() ? nullptr : &hierarchy.back().A;
+      detail::Level<StorageIndex>& level = hierarchy.emplace_back();
+      level.P.swap(prolongations[l]);
       level.R = level.P.transpose();
-      if (!coarse.empty())
-        level.A = std::move(coarse[l]);
-      else
-        level.A = detail::product(level.R, hierarchy.empty() ? detail::product(levels_.A, level.P)
-                                                             : detail::product(hierarchy.back().A, level.P));
-      if (!(diagonal(level.A).array() > 0).all()) break;
-      hierarchy.push_back(std::move(level));
+      if (!coarse.empty()) {
+        level.A.swap(coarse[l]);
+      } else {
+        RowMatrix A = detail::product(level.R, finer_A ? detail::product(*finer_A, level.P)
+                                                       : detail::product(levels_.A, level.P));
+        level.A.swap(A);
+      }
+      if (!(diagonal(level.A).array() > 0).all()) {
+        hierarchy.pop_back();
+        break;
+      }
     }
     Options co;
     co.inner = options_.inner;

@@ -130,7 +130,8 @@ class MultigridKrylov {
         auto galerkin = [&](const auto& Kl) {
           const Level<StorageIndex>& g = grid_[l];
           if (same_pattern && galerkin_values(g.R, Kl, g.P, k_[l + 1].K, position_)) return;
-          k_[l + 1].K = product(g.R, product(Kl, g.P));
+          RowMatrix C = product(g.R, product(Kl, g.P));
+          k_[l + 1].K.swap(C);   // Eigen 3.4's SparseMatrix has no move assignment: = would copy
         };
         if (l == 0) galerkin(fine());
         else galerkin(k_[l].K);
