@@ -42,10 +42,10 @@ class Zeta {
   /// ζ ≡ c: solved as LCP(q + Ac, A) in y = z − c.
   static Zeta constant(Vector c) { Zeta t(ZetaKind::Constant); t.c_ = std::move(c); return t; }
   /// ζ(z) = Bz + c.
-  static Zeta affine(RowMatrix B, Vector c) {
+  static Zeta affine(const RowMatrix& B, Vector c) {
     if (B.rows() != B.cols() || B.rows() != c.size())
       throw std::invalid_argument("Zeta::affine: B must be n-by-n and c of length n");
-    Zeta t(ZetaKind::Affine); t.B_ = std::move(B); t.c_ = std::move(c); return t;
+    Zeta t(ZetaKind::Affine); t.B_ = B; t.c_ = std::move(c); return t;   // one copy (SparseMatrix cannot move)
   }
   /// ζ given by a functor (e.g. a Python callable), optionally with its Jacobian (used by the
   /// Newton member for a semismooth Newton method on the whole ICP).
