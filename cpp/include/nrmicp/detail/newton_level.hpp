@@ -49,19 +49,23 @@ class NewtonLevel {
     if (!lcp_system_) lcp_system_ = std::make_unique<System>(A_, nullptr, options_.inner, below_);
     return *lcp_system_;
   }
+  /// Frees what a solve on this level built (the reduced system, the fallback's factorization).
+  /// Nested iteration releases each coarse level once its solution is prolongated: the finer
+  /// levels' solves then run without them in memory, and the next solve rebuilds them (docs/MEASUREMENTS.md).
+  void release() {
+    lcp_system_.reset();
+    fallback_.reset();
+  }
   std::unique_ptr<System> affine_system(const RowMatrix& B) const { return std::make_unique<System>(A_, &B, options_.inner, below_); }
   const char* inner_name() const { return lcp_system_ ? lcp_system_->inner_name() : "none"; }
 
-  /// Res of z; w = Az + q and g = z − ζ(z) (ζ = Bz + c, or 0 when B is null).
+  /// Res of z; w = Az + q and g = z − ζ(z) (ζ = Bz + c; when B is null ζ = 0, g = z is not written).
   double evaluate(const Vector& z, const Vector& q, const RowMatrix* B, const Vector* c, Vector& w, Vector& g) const {
     w.noalias() = A_ * z;
     w += q;
-    if (B) {
-      g.noalias() = -(*B * z);
-      g += z - *c;
-    } else {
-      g = z;
-    }
+    if (!B) return residual_of(w, z);
+    g.noalias() = -(*B * z);
+    g += z - *c;
     return residual_of(w, g);
   }
 

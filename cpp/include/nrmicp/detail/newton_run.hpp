@@ -45,14 +45,14 @@ struct LevelOutcome : Result {
 
 /// The Newton member on one level: the plain step `plain` (at its start), globalized, in the
 /// family's loop (detail::loop, solver.hpp) with the family's Monitor.
+/// `z_start`: the iterate plain started from (returned if no iterate has a finite Res).
 template <typename Plain>
-LevelOutcome newton_loop(Plain& plain, const NewtonControl& ctl) {
+LevelOutcome newton_loop(Plain& plain, const NewtonControl& ctl, const Eigen::VectorXd& z_start) {
   static const Eigen::VectorXd no_shift;
   SolveOptions mo = ctl.solve;
   mo.maxiter = std::numeric_limits<int>::max();  // Newton steps are the step's to count (ctl.solve.maxiter)
   LevelOutcome o;
   Monitor monitor(mo, ctl.callback, ctl.poll, ctl.progress, ctl.shift ? *ctl.shift : no_shift, o, plain.size());
-  const Eigen::VectorXd z_start = plain.z();
   Iterate s;
   Globalized<Plain> step(plain, ctl, s);
   loop(step, s, monitor);
@@ -71,9 +71,9 @@ LevelOutcome newton_loop(Plain& plain, const NewtonControl& ctl) {
 template <typename MatrixType>
 LevelOutcome newton_loop(NewtonLevel<MatrixType>& level, ActiveSetSystem<typename MatrixType::StorageIndex>& K,
                          const Eigen::VectorXd& q, const typename NewtonLevel<MatrixType>::RowMatrix* B,
-                         const Eigen::VectorXd* c, Eigen::VectorXd z, const NewtonControl& ctl) {
-  NewtonStep<MatrixType, FixedLinearization<MatrixType>> plain(level, {level, K, q, B, c}, std::move(z));
-  return newton_loop(plain, ctl);
+                         const Eigen::VectorXd* c, const Eigen::VectorXd& z, const NewtonControl& ctl) {
+  NewtonStep<MatrixType, FixedLinearization<MatrixType>> plain(level, {level, K, q, B, c}, z);
+  return newton_loop(plain, ctl, z);
 }
 
 /// The levels of nested iteration (built by nrmicp::Newton): the finest on A, the coarser ones on
@@ -260,12 +260,12 @@ class NewtonRun {
     if (!zeta.eval(z_start, psi)) return tally_.zeta_failed(z_start, q);
     Vector start = (z0 && !nest_) ? *z0 : solve_inner_obstacle(q, psi, z0);
     const auto t0 = std::chrono::steady_clock::now();
-    Step plain(*levels_.finest, {*levels_.finest, q, zeta, {}, {}, {}}, std::move(start));
+    Step plain(*levels_.finest, {*levels_.finest, q, zeta, {}, {}, {}}, start);
     if (std::isnan(plain.residual())) return tally_.zeta_failed(z_start, q);
     static const Vector no_shift;
     auto control = finest_control(no_shift, o_.tol, o_.maxiter - tally_.nit(), true);
     control.sweep_budget = o_.maxiter - tally_.fallback_sweeps();
-    const auto out = newton_loop(plain, control);
+    const auto out = newton_loop(plain, control, start);
     tally_.absorb(out, 0, ScopedTimer::seconds_since(t0));
     return tally_.finish(out, out.z, q);
   }
@@ -338,6 +338,7 @@ class NewtonRun {
       const auto out = newton_loop(level, level.lcp_system(), qs[l], nullptr, nullptr, y, c);
       tally_.absorb(out, static_cast<int>(l), ScopedTimer::seconds_since(t0));
       y = (levels_.hierarchy[l - 1].P * out.z).cwiseMax(0.0);
+      level.release();
     }
     return y;
   }

@@ -41,8 +41,10 @@ struct FixedLinearization {
   const typename Level::RowMatrix* B;
   const Vector* c;
 
-  /// Res of v; Av + q in w, v − ζ(v) in g (ζ(v) itself is not kept).
+  /// Res of v; Av + q in w, v − ζ(v) in g unless g_is_z (ζ(v) itself is not kept).
   double evaluate(const Vector& v, Vector& w, Vector& g, Vector&) const { return level.evaluate(v, q, B, c, w, g); }
+  /// The LCP: g = z − ζ(z) is z itself, not stored (two n-vectors a level).
+  bool g_is_z() const { return B == nullptr; }
   bool linearize(const Vector&, const Vector&) { return true; }  // nothing changes
   System& system() { return K; }
   double c_at(Eigen::Index i) const { return c ? (*c)[i] : 0.0; }
@@ -64,6 +66,7 @@ struct JacobianLinearization {
   Vector c;
   std::unique_ptr<System> K;
 
+  bool g_is_z() const { return false; }
   /// Res of the ICP at v; Av + q in w, v − ζ(v) in g, ζ(v) in zv. NaN when ζ failed.
   double evaluate(const Vector& v, Vector& w, Vector& g, Vector& zv) const {
     const double r = level.icp_residual(q, zeta, v, zv, w);
@@ -92,8 +95,9 @@ class NewtonStep {
   NewtonStep(NewtonLevel<MatrixType>& level, Linearization lin, Vector z)
       : level_(level), lin_(std::move(lin)), z_(std::move(z)) {
     const Eigen::Index n = level.size();
-    w_.resize(n); g_.resize(n); rhs_.resize(n);
-    z_new_.resize(n); w_new_.resize(n); g_new_.resize(n);
+    w_.resize(n); rhs_.resize(n);
+    z_new_.resize(n); w_new_.resize(n);
+    if (!lin_.g_is_z()) { g_.resize(n); g_new_.resize(n); }
     if constexpr (!set_fixes_step) { zeta_z_.resize(n); zeta_new_.resize(n); }  // a fixed ζ keeps no ζ(z)
     r_ = lin_.evaluate(z_, w_, g_, zeta_z_);
   }
@@ -106,9 +110,9 @@ class NewtonStep {
   long long inner_iterations() const { return inner_iterations_; }
 
   /// The inactive set ℐ = {x ≥ 0} of z.
-  void active_set(std::vector<char>& inactive) const { level_.active_set(w_, g_, inactive); }
+  void active_set(std::vector<char>& inactive) const { level_.active_set(w_, g(), inactive); }
   /// x of z up to the factor γ/(2Ω1) (what the Monitor reads).
-  void modulus(Vector& x) const { level_.modulus(w_, g_, x); }
+  void modulus(Vector& x) const { level_.modulus(w_, g(), x); }
   /// ζ's linearization at z; false when ζ's Jacobian failed.
   bool linearize() { return lin_.linearize(z_, zeta_z_); }
   /// The reduced system of the piece `inactive`; false when it is singular.
@@ -128,7 +132,7 @@ class NewtonStep {
   /// Whether the inner solve is iterative (a forcing loosens it; a direct solve is exact).
   bool iterative() { return lin_.system().iterative(); }
   /// The rounding level of Res at z (NewtonLevel::rounding_level).
-  double rounding_level() const { return level_.rounding_level(z_, lin_.q, g_); }
+  double rounding_level() const { return level_.rounding_level(z_, lin_.q, g()); }
   /// The trial z⁺ did not move beyond rounding (only ties g ≈ w ≈ 0 changed sides).
   bool trial_still() const {
     return (z_new_ - z_).template lpNorm<Eigen::Infinity>() <= 1e-14 * z_new_.template lpNorm<Eigen::Infinity>();
@@ -149,6 +153,9 @@ class NewtonStep {
   Result sweep(const Vector& z0, int sweeps, double tol) { return lin_.sweep(z0, sweeps, tol); }
 
  private:
+  /// g = z − ζ(z) of z.
+  const Vector& g() const { return lin_.g_is_z() ? z_ : g_; }
+
   NewtonLevel<MatrixType>& level_;
   Linearization lin_;
   Vector z_, w_, g_, zeta_z_, rhs_, z_new_, w_new_, g_new_, zeta_new_;
