@@ -43,3 +43,21 @@ def test_cg_is_refused_for_a_stationary_member_naming_the_option():
     pb = scenes.obstacle_2d(7)
     with pytest.raises(ValueError, match="inner = 'cg'"):
         nrmicp.solve(pb.A, pb.q, zeta=pb.zeta, method="nrm", inner="cg")
+
+
+@pytest.mark.parametrize("hierarchy", ["geometric", "amg"])
+def test_a_solver_solves_again_as_a_fresh_one_after_its_coarse_levels_released_their_systems(hierarchy):
+    # each coarse level frees its reduced system once prolongated; the next solve of the same
+    # Solver rebuilds it and must give what a fresh Solver gives: the same steps, z to rounding
+    # (the finest level's multigrid operators are updated from the previous solve's, not anew)
+    pb = scenes.obstacle_2d(63, exact=True)
+    Ps = pb.prolongations() if hierarchy == "geometric" else "amg"
+    solver = nrmicp.Solver(pb.A, method="newton", hierarchy=Ps, inner="cg")
+    for scale in (1.0, 1.5, 1.0):
+        q = pb.q * scale
+        again = solver.solve(q, pb.zeta, tol=1e-10)
+        fresh = nrmicp.Solver(pb.A, method="newton", hierarchy=Ps, inner="cg").solve(q, pb.zeta, tol=1e-10)
+        assert again.success and again.level_steps == fresh.level_steps
+        assert again.linear_solves == fresh.linear_solves
+        np.testing.assert_allclose(again.z, fresh.z, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(again.z, pb.z_exact, rtol=0, atol=1e-10)
