@@ -602,14 +602,14 @@ TEST_CASE("the rounding-floor stop needs Res at the level after the step too: a 
   detail::NewtonControl ctl;
   ctl.solve.tol = 1e-8;
   ctl.solve.maxiter = 10;
-  const auto out = detail::newton_loop(plain, ctl);
+  const auto out = detail::newton_loop(plain, ctl, Vec(plain.z()));
   CHECK(out.steps == 3);
   CHECK(out.residual == 6.4e-8);
   CHECK(out.status == Status::Stagnated);  // settled at the floor, above tol
   CHECK(out.message.find("rounding floor") != std::string::npos);
 
   ScriptedStep at_floor{{4.9e-6, 4.0e-6, 1e-9}, 2.4e-7, 1.6e7};  // stays in the band: a stop at once
-  const auto stop = detail::newton_loop(at_floor, ctl);
+  const auto stop = detail::newton_loop(at_floor, ctl, Vec(at_floor.z()));
   CHECK(stop.steps == 2);
   CHECK(stop.residual == 4.0e-6);
 }
@@ -623,7 +623,7 @@ TEST_CASE("steps on new sets are solved loosely; with exact_repeat a repeated se
   ctl.exact_repeat = true;
   // sets 5, 6, 6: the first step at first_forcing, the second (a new set) at forcing, its repeat exact
   ScriptedStep plain{{1e-3, 1e-4, 1e-12}, 1e-14, 1e7, {5, 6, 6}};
-  const auto out = detail::newton_loop(plain, ctl);
+  const auto out = detail::newton_loop(plain, ctl, Vec(plain.z()));
   CHECK(out.status == Status::Converged);
   CHECK(out.residual == 1e-12);
   REQUIRE(plain.forcings.size() == 3);
@@ -633,7 +633,7 @@ TEST_CASE("steps on new sets are solved loosely; with exact_repeat a repeated se
 
   ctl.exact_repeat = false;  // a coarse level: the repeat of a loosely solved set settles
   ScriptedStep coarse{{1e-3, 1e-4, 1e-12}, 1e-14, 1e7, {5, 6, 6}};
-  const auto start = detail::newton_loop(coarse, ctl);
+  const auto start = detail::newton_loop(coarse, ctl, Vec(coarse.z()));
   CHECK(start.status == Status::Stagnated);
   CHECK(start.residual == 1e-4);
   CHECK(coarse.forcings.size() == 2);
@@ -641,7 +641,7 @@ TEST_CASE("steps on new sets are solved loosely; with exact_repeat a repeated se
   ctl.exact_repeat = true;  // exact steps (forcing 0) whose set repeats: settled, no second solve
   ctl.first_forcing = ctl.forcing = 0;
   ScriptedStep exact{{1e-3, 1e-12}, 1e-14, 1e7, {5, 5}};
-  const auto settled = detail::newton_loop(exact, ctl);
+  const auto settled = detail::newton_loop(exact, ctl, Vec(exact.z()));
   CHECK(settled.status == Status::Stagnated);
   CHECK(exact.forcings.size() == 1);
 }
