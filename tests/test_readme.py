@@ -38,7 +38,7 @@ def test_readme_answers_which_method_and_how_fast_early_and_stays_short():
     heading = {line: i for i, line in enumerate(lines) if line.startswith("## ")}
     assert heading["## Which method for which problem"] < 150
     assert heading["## How fast: what each digit costs"] < 150
-    assert len(lines) <= 480
+    assert len(lines) <= 470  # the before-stop check warns beyond 470
 
 
 def test_every_command_the_readme_names_exists():
