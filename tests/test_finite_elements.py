@@ -1,4 +1,4 @@
-"""Finite-element matrices users bring (issue 17): the scikit-fem P1/P2 obstacle scenes, the
+"""Finite-element matrices users bring (issue 17): the scikit-fem P1/P2/P3 obstacle scenes, the
 numpy-only unstructured P1 scene, and the algebraic hierarchy on them. Properties, not timings:
 finest-level Newton steps flat under refinement with hierarchy="amg", agreement with the
 independent policy-iteration solution, complementarity. Small sizes (n <= 8,065)."""
@@ -43,6 +43,14 @@ def test_amg_finest_steps_stay_flat_under_refinement_on_finite_elements(element,
     assert max(steps) <= 5 and steps[1] <= steps[0] + 1, steps
 
 
+def test_p3_steps_are_not_spent_peeling_an_overshoot():
+    # P3 (no M-matrix): from the nested start's too small contact set the full step sank below the
+    # obstacle far beyond the true contact set, and the next steps peeled the excess: 13 and 22
+    # finest steps at r = 1, 2 (41 at r = 3) before such a step was damped (Globalized::overshoots)
+    steps = [fe("P3", r, exact=False).solve(**EXACT).level_steps[0] for r in (1, 2)]
+    assert max(steps) <= 8, steps
+
+
 def test_amg_finest_steps_stay_flat_on_the_unstructured_disk():
     steps = [contact_disk_p1(n, exact=False).solve(**EXACT).level_steps[0] for n in (2_000, 8_000)]
     assert max(steps) <= 5 and steps[1] <= steps[0] + 1, steps
@@ -62,7 +70,7 @@ def test_loose_steps_with_cg_reach_tol_and_the_exact_answer(build):
 
 # ---------------------------------------------------------------- agreement with the reference
 
-@pytest.mark.parametrize("element, r", [("P1", 2), ("P2", 1)])
+@pytest.mark.parametrize("element, r", [("P1", 2), ("P2", 1), ("P3", 1)])
 @pytest.mark.parametrize("hierarchy", ["amg", "fe"])
 def test_newton_agrees_with_policy_iteration_on_finite_elements(element, r, hierarchy):
     problem = fe(element, r, exact=True)

@@ -553,14 +553,17 @@ TEST_CASE("rtol: the target is max(tol, rtol Res(0)), Res(0) = ||min(q, -zeta(0)
 namespace {
 /// A plain Newton step with scripted trial residuals (the interface detail::Globalized drives):
 /// step k tries Res `trials[k]` on the inactive set k (a new set each step, the last one repeated;
-/// or `sets[k]`), and records the forcing each solve was given.
+/// or `sets[k]`), and records the forcing each solve was given; its trial k has `trial_active[k]`
+/// active points (0 if not scripted), and it records the damping factors it was given.
 struct ScriptedStep {
   static constexpr bool set_fixes_step = true;
   std::vector<double> trials;
   double level;
   double r;
   std::vector<int> sets = {};
+  std::vector<std::size_t> trial_active = {};
   std::vector<double> forcings = {};
+  std::vector<double> dampings = {};
   int k = 0;
   Vec z_ = Vec::Zero(4);
   Eigen::Index size() const { return 4; }
@@ -583,6 +586,13 @@ struct ScriptedStep {
     return trials[static_cast<std::size_t>(k++)];
   }
   double rounding_level() const { return level; }
+  std::size_t trial_active_count() const {
+    return static_cast<std::size_t>(k - 1) < trial_active.size() ? trial_active[static_cast<std::size_t>(k - 1)] : 0;
+  }
+  double damp(double alpha) {
+    dampings.push_back(alpha);
+    return trials[static_cast<std::size_t>(k - 1)];
+  }
   bool iterative() const { return true; }
   bool trial_still() const { return false; }
   void accept() {
@@ -644,4 +654,20 @@ TEST_CASE("steps on new sets are solved loosely; with exact_repeat a repeated se
   const auto settled = detail::newton_loop(exact, ctl, Vec(exact.z()));
   CHECK(settled.status == Status::Stagnated);
   CHECK(exact.forcings.size() == 1);
+}
+
+TEST_CASE("a step whose active set more than triples the one it was solved on is damped once by half") {
+  detail::NewtonControl ctl;
+  ctl.solve.tol = 1e-10;
+  ctl.solve.maxiter = 10;
+  // sets 14, 12, 8: 1, 2, 3 active points (bits = inactive); the trials have 4, 6, 3 active points
+  ScriptedStep plain{{1e-3, 1e-6, 1e-12}, 1e-14, 1e7, {14, 12, 8}, {4, 6, 3}};
+  const auto out = detail::newton_loop(plain, ctl, Vec(plain.z()));
+  CHECK(out.status == Status::Converged);
+  REQUIRE(plain.dampings.size() == 1);  // 4 > 3 x 1: damped; 6 = 3 x 2 and 3 < 3 x 3: not
+  CHECK(plain.dampings[0] == 0.5);
+
+  ScriptedStep from_empty{{1e-3, 1e-12}, 1e-14, 1e7, {15, 14}, {4, 1}};  // no active point: no ratio
+  detail::newton_loop(from_empty, ctl, Vec(from_empty.z()));
+  CHECK(from_empty.dampings.empty());
 }

@@ -129,6 +129,17 @@ class NewtonStep {
     ++steps_;
     return r_new_ = lin_.evaluate(z_new_, w_new_, g_new_, zeta_new_);
   }
+  /// The number of active points of the trial iterate z⁺ (after solve).
+  std::size_t trial_active_count() const {
+    std::vector<char> inactive;
+    level_.active_set(w_new_, lin_.g_is_z() ? z_new_ : g_new_, inactive);
+    return static_cast<std::size_t>(std::count(inactive.begin(), inactive.end(), 0));
+  }
+  /// The trial iterate z⁺ moved back to z + alpha (z⁺ − z); its Res.
+  double damp(double alpha) {
+    z_new_ = z_ + alpha * (z_new_ - z_);
+    return r_new_ = lin_.evaluate(z_new_, w_new_, g_new_, zeta_new_);
+  }
   /// Whether the inner solve is iterative (a forcing loosens it; a direct solve is exact).
   bool iterative() { return lin_.system().iterative(); }
   /// The rounding level of Res at z (NewtonLevel::rounding_level).
