@@ -1,11 +1,11 @@
 #!/usr/bin/env python
 """Finite-element matrices users bring (issue 17): one command, one table.
 
-    OPENBLAS_NUM_THREADS=1 python benchmarks/finite_elements.py            # P1/P2 n = 8k … 522k, disk scene
+    OPENBLAS_NUM_THREADS=1 python benchmarks/finite_elements.py            # P1/P2/P3 n = 8k … 523k, disk scene
     OPENBLAS_NUM_THREADS=1 python benchmarks/finite_elements.py --quick    # n <= 33k
 
 Cases: the scikit-fem membrane over an off-centre obstacle (nrmicp.scenes.finite_elements,
-P1 and P2 on nested refinements of a disk-like polygon) and the numpy/scipy-only P1 contact
+P1, P2 and P3 on nested refinements of a disk-like polygon) and the numpy/scipy-only P1 contact
 problem on a Delaunay mesh of scattered points (nrmicp.scenes.unstructured, no mesh hierarchy).
 Target Res = ‖min(Az + q, z − ψ)‖₂ < 1e-9 (A = the stiffness matrix as assembled).
 
@@ -33,8 +33,8 @@ import time
 import numpy as np
 
 TOL = 1e-9
-CASES = {"P1": [3, 4, 5, 6], "P2": [2, 3, 4, 5], "disk": [32_000, 130_000, 520_000]}
-QUICK = {"P1": [3, 4], "P2": [2, 3], "disk": [32_000]}
+CASES = {"P1": [3, 4, 5, 6], "P2": [2, 3, 4, 5], "P3": [2, 3, 4], "disk": [32_000, 130_000, 520_000]}
+QUICK = {"P1": [3, 4], "P2": [2, 3], "P3": [1, 2], "disk": [32_000]}
 PEERS = ["newton-amg", "newton-fe", "nrmgs+aa", "psor"]
 
 

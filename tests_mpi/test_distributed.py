@@ -57,6 +57,13 @@ def test_newton_stops_at_the_rounding_floor_and_names_it():
         assert r["err"] < AGREE, r
 
 
+def test_an_overshooting_step_is_damped_as_in_the_serial_member():
+    # P3, n = 18,241, np 2: 15 finest steps before the damping (Globalized::overshoots), 8 with it
+    out = mpirun(2, "overshoot")
+    assert out["status"] == "CONVERGED" and out["err"] < 1e-8, out
+    assert out["levels"][0] <= 10, out
+
+
 def test_coarse_ssor_tries_hand_over_to_boomeramg():
     out = mpirun(2, "ssor")
     for label in ("default", "ssor_fails"):

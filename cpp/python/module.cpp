@@ -477,6 +477,8 @@ void bind_vocabulary(py::module_& m) {
   tuning["nested_first_forcing"] = Tuning::nested_first_forcing;
   tuning["nested_forcing"] = Tuning::nested_forcing;
   tuning["floor_factor"] = nrmicp::detail::kFloorFactor;
+  tuning["overshoot_growth"] = nrmicp::detail::kOvershootGrowth;
+  tuning["overshoot_damping"] = nrmicp::detail::kOvershootDamping;
   m.attr("newton_tuning") = tuning;
   m.def("is_aor_type", &nrmicp::is_aor_type, py::arg("method"),
         "True for the methods whose left matrix is triangular or diagonal (no factorization).");

@@ -322,6 +322,11 @@ class _Newton:
         self.h = _fingerprint(self.comm, self.p.A.getOwnershipRange()[0], self.inactive)
         return self.h
 
+    def overshoots(self, y):
+        """_overshoots of the step to y (w of y in self.p.w) from the planned set."""
+        return _overshoots(self.comm, self.p.A.getSize()[0] - self.h[0], y.getArray(readonly=True),
+                           self.p.w.getArray(readonly=True), self.p.d.getArray(readonly=True))
+
     def solve(self, y, rtol, atol):
         """The step on the planned set, its inner solve stopped at max(rtol ‖rhs‖, atol)."""
         p = self.p
@@ -426,6 +431,18 @@ def _boomeramg_defaults(M) -> dict:
         return {}
     return {"pc_hypre_boomeramg_coarsen_type": "HMIS", "pc_hypre_boomeramg_interp_type": "ext+i",
             "pc_hypre_boomeramg_P_max": "4", "pc_hypre_boomeramg_agg_nl": "1"}
+
+
+def _overshoots(comm, planned, g, w, d):
+    """Globalized::overshoots: the trial (this rank's g = z − ζ(z), w and diag(A)) has more than
+    _TUNING["overshoot_growth"] times the `planned` active points (over all ranks; 0: never)."""
+    if planned <= 0:
+        return False
+    count = PETSc.Vec().createMPI((1, PETSc.DECIDE), comm=comm)
+    count.setArray([float(np.count_nonzero(g - w / d < 0))])
+    active = count.sum()
+    count.destroy()
+    return active > _TUNING["overshoot_growth"] * planned
 
 
 def _fingerprint(comm, lo, inactive):
@@ -562,7 +579,8 @@ def _newton_loop(residual, stepper, fallback, y, *, tol, maxiter, control, floor
     exempt); a rejected step or a cycle of active sets hands over to fallback sweeps from the
     best iterate (10, 20, 40, ...), after which Newton resumes. The loop settles when the active
     set repeats (see _Control) or a step that did not halve Res leaves it at its rounding level
-    (floor(y), within _TUNING["floor_factor"]). Returns (y, Res, steps, sweeps, status, floor or None)."""
+    (floor(y), within _TUNING["floor_factor"]); a step that overshoots (stepper.overshoots) is
+    damped first. Returns (y, Res, steps, sweeps, status, floor or None)."""
     res = residual(y)
     best = (res, y.copy())
     recent, exempt, seen, last, loose = [res], True, set(), None, False
@@ -587,6 +605,10 @@ def _newton_loop(residual, stepper, fallback, y, *, tol, maxiter, control, floor
             ynew = stepper.solve(y, *((1e-14, max(forcing * res, 0.1 * tol)) if loose else control.exact))
             steps += 1
             rnew = residual(ynew)
+            if stepper.overshoots(ynew):
+                damping = _TUNING["overshoot_damping"]   # ynew <- y + damping (ynew - y)
+                ynew.axpby(1.0 - damping, damping, y)
+                rnew = residual(ynew)
             if math.isfinite(rnew) and (exempt or rnew < max(recent)):
                 y, res, res_old, exempt, last = ynew, rnew, res, False, h
                 recent = (recent + [rnew])[-_WINDOW:]
@@ -692,7 +714,11 @@ def _affine_newton(A, q, zeta, z, tol, maxiter, comm, stats):
     class Step:
         def plan(self, v):  # g, w are v's (the loop evaluated v last)
             self.inactive = g.getArray(readonly=True) - w.getArray(readonly=True) / d >= 0
-            return _fingerprint(comm, lo, self.inactive)
+            self.h = _fingerprint(comm, lo, self.inactive)
+            return self.h
+
+        def overshoots(self, v):  # g, w are v's
+            return _overshoots(comm, A.getSize()[0] - self.h[0], g.getArray(readonly=True), w.getArray(readonly=True), d)
 
         def solve(self, v, rtol, atol):
             inactive = self.inactive

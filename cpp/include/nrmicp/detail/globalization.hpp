@@ -62,6 +62,12 @@ inline std::uint64_t hash_set(const std::vector<char>& inactive) {
 /// a few times the level; one on a wrong piece leaves Res orders of magnitude above it).
 inline constexpr double kFloorFactor = 100;
 
+/// A Newton step whose trial has more than kOvershootGrowth times the active points of the
+/// (nonempty) set it was solved on has overshot, and is damped to z + kOvershootDamping (z⁺ − z)
+/// (Globalized::overshoots; docs/MEASUREMENTS.md, kOvershootGrowth).
+inline constexpr double kOvershootGrowth = 3.0;
+inline constexpr double kOvershootDamping = 0.5;
+
 /// The message of a Newton loop that settled at Res's rounding floor above tol.
 inline std::string floor_message(double best, double tol, double floor) {
   return "stagnated: Res reached its rounding floor (the active set has settled and a further Newton step does not "
@@ -197,8 +203,6 @@ class Globalized {
     const auto active = static_cast<std::size_t>(std::count(inactive_.begin(), inactive_.end(), 0));
     return active > 0 && static_cast<double>(plain_.trial_active_count()) > kOvershootGrowth * static_cast<double>(active);
   }
-  static constexpr double kOvershootGrowth = 3.0;
-  static constexpr double kOvershootDamping = 0.5;
   // Res before a step that did not halve it, and after it, are within kFloorFactor of the rounding
   // level of Res. Both: a step that leaves the floor band has moved the active set (a non-monotone
   // step, accepted) and Newton goes on. Measured (obstacle_2d m = 1023, A = Laplacian / h², geometric
