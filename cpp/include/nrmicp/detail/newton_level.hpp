@@ -102,7 +102,13 @@ class NewtonLevel {
   /// with ties inactive (the same as a plain scipy active-set loop with this rule).
   void active_set(const Vector& w, const Vector& g, std::vector<char>& inactive) const {
     inactive.resize(static_cast<std::size_t>(w.size()));
-    for (Eigen::Index i = 0; i < w.size(); ++i) inactive[i] = (g[i] - ratio_[i] * w[i]) >= 0;
+    for (Eigen::Index i = 0; i < w.size(); ++i) inactive[i] = is_inactive(w, g, i);
+  }
+  /// The number of active points of (w, g) (the complement of active_set's), without storing the set.
+  std::size_t active_count(const Vector& w, const Vector& g) const {
+    std::size_t k = 0;
+    for (Eigen::Index i = 0; i < w.size(); ++i) k += !is_inactive(w, g, i);
+    return k;
   }
 
   /// Up to `sweeps` sweeps of the fallback member (nrm) from z0 for ICP(q, A, ζ); the best iterate.
@@ -120,6 +126,8 @@ class NewtonLevel {
   }
 
  private:
+  bool is_inactive(const Vector& w, const Vector& g, Eigen::Index i) const { return (g[i] - ratio_[i] * w[i]) >= 0; }
+
   const MatrixType& A_;
   Vector ratio_;  // Ω1/Ω2: x ≥ 0 ⇔ g − (Ω1/Ω2) w ≥ 0
   Options options_;  // the level's inner solver, Ω1, Ω2 as given (resolved when needed, not held as n-vectors)

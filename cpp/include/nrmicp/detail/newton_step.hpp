@@ -130,11 +130,7 @@ class NewtonStep {
     return r_new_ = lin_.evaluate(z_new_, w_new_, g_new_, zeta_new_);
   }
   /// The number of active points of the trial iterate z⁺ (after solve).
-  std::size_t trial_active_count() const {
-    std::vector<char> inactive;
-    level_.active_set(w_new_, lin_.g_is_z() ? z_new_ : g_new_, inactive);
-    return static_cast<std::size_t>(std::count(inactive.begin(), inactive.end(), 0));
-  }
+  std::size_t trial_active_count() const { return level_.active_count(w_new_, lin_.g_is_z() ? z_new_ : g_new_); }
   /// The trial iterate z⁺ moved back to z + alpha (z⁺ − z); its Res.
   double damp(double alpha) {
     z_new_ = z_ + alpha * (z_new_ - z_);
