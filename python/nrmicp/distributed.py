@@ -67,6 +67,15 @@ def _flag_max(comm, value: float) -> float:
     return out
 
 
+def _sum(comm, value: float) -> float:
+    """sum over ranks of one float (a one-entry-per-rank Vec)."""
+    v = PETSc.Vec().createMPI((1, PETSc.DECIDE), comm=comm)
+    v.setArray([value])
+    out = v.sum()
+    v.destroy()
+    return out
+
+
 def _agree(comm, exc: BaseException | None) -> None:
     """Every rank calls this after a step that may fail on some ranks only. When any rank
     failed, every rank raises the same exception (type and message of the lowest failing rank,
@@ -438,21 +447,13 @@ def _overshoots(comm, planned, g, w, d):
     _TUNING["overshoot_growth"] times the `planned` active points (over all ranks; 0: never)."""
     if planned <= 0:
         return False
-    count = PETSc.Vec().createMPI((1, PETSc.DECIDE), comm=comm)
-    count.setArray([float(np.count_nonzero(g - w / d < 0))])
-    active = count.sum()
-    count.destroy()
-    return active > _TUNING["overshoot_growth"] * planned
+    return _sum(comm, float(np.count_nonzero(g - w / d < 0))) > _TUNING["overshoot_growth"] * planned
 
 
 def _fingerprint(comm, lo, inactive):
     idx = np.flatnonzero(inactive) + lo
     weights = ((idx.astype(np.int64) + 1) * 2654435761 % 2147483647) / 2147483647.0
-    v = PETSc.Vec().createMPI((1, PETSc.DECIDE), comm=comm)
-    v.setArray([float(idx.size)])
-    count = v.sum()
-    v.setArray([float(np.sum(weights))])
-    return count, round(v.sum(), 8)
+    return _sum(comm, float(idx.size)), round(_sum(comm, float(np.sum(weights))), 8)
 
 
 class _AOR:
