@@ -3,6 +3,7 @@ nesting, the fallback, flat step counts under refinement, honesty on the hard ca
 and its options. Small sizes: seconds in all."""
 from __future__ import annotations
 
+import itertools
 import warnings
 
 import numpy as np
@@ -69,6 +70,14 @@ def test_nesting_needs_fewer_finest_steps_than_a_cold_start():
     assert len(nested.level_steps) > 2 and nested.linear_solves > nested.nit
 
 
+def test_the_projected_sweeps_after_each_step_cut_a_cold_starts_peeling():
+    # a cold start moves the contact set's boundary about one grid layer per plain Newton step:
+    # 12 -> 24 -> 49 steps at m = 31, 63, 127; with kSmoothingSweeps projected Gauss-Seidel sweeps
+    # after each step (several layers each) 6 -> 9 -> 15
+    steps = [scenes.obstacle_2d(m, exact=False).solve(method="newton", hierarchy=None).nit for m in (31, 63)]
+    assert steps[1] <= 12 and steps[1] < 2 * steps[0], steps
+
+
 @pytest.mark.parametrize("hierarchy", ["amg", "grid"])
 def test_finest_step_count_is_flat_under_refinement(hierarchy):
     steps = []
@@ -79,7 +88,7 @@ def test_finest_step_count_is_flat_under_refinement(hierarchy):
         assert res.success, res.message
         steps.append(res.nit)
     # flat: no size takes more than 1 step beyond the fewest of the smaller sizes (a cold start
-    # peels, 12 -> 24 -> 49 here); fewer steps on a finer grid are no growth
+    # grows, 3 -> 6 -> 9 here); fewer steps on a finer grid are no growth
     assert all(steps[i] <= min(steps[:i]) + 1 for i in range(1, len(steps))), steps
     assert max(steps) <= 3, steps
 
@@ -124,11 +133,36 @@ def test_nonsymmetric_m_matrix_upwind_convection_diffusion():
         assert res.inner == "umfpack"  # nonsymmetric: LU
 
 
-def test_p_matrix_where_the_active_set_steps_cycle_takes_the_fallback():
+# A P-matrix (not M, not H+) on which Newton's steps, each followed by its projected Gauss-Seidel
+# sweeps, return to an active set seen before (found by search); its solution by enumeration.
+CYCLING_3 = np.array([[1.0, -1.5, -2.5], [0.0, 1.5, -0.5], [3.0, -0.5, 1.5]])
+CYCLING_3_Q = np.array([1.3, -0.1, -0.9])
+
+
+def _lcp_by_enumeration(M, q):
+    n = len(q)
+    for pattern in itertools.product([False, True], repeat=n):
+        free = np.array(pattern)
+        z = np.zeros(n)
+        z[free] = np.linalg.solve(M[np.ix_(free, free)], -q[free])
+        if z.min() >= -1e-12 and (M @ z + q).min() >= -1e-12:
+            return z
+    raise AssertionError("no complementary point")
+
+
+def test_p_matrix_where_the_newton_steps_cycle_takes_the_fallback():
+    res = nrmicp.solve(sp.csr_matrix(CYCLING_3), CYCLING_3_Q, method="newton", hierarchy=None, tol=1e-12)
+    assert res.success, res.message
+    assert res.fallback_sweeps > 0 and res.path in ("newton+fallback", "fallback")
+    assert np.abs(res.z - _lcp_by_enumeration(CYCLING_3, CYCLING_3_Q)).max() < 1e-10
+
+
+def test_the_sweeps_after_each_step_break_the_plain_iterations_cycle():
+    # the plain active-set iteration cycles on this scene (tests/test_scenes_newton.py); the
+    # projected sweeps after the first step land on the solution's active set
     problem = scenes.p_matrix_cycling(4)
     res = problem.solve(method="newton", hierarchy=None, tol=1e-12)
     assert res.success, res.message
-    assert res.fallback_sweeps > 0 and res.path in ("newton+fallback", "fallback")
     assert err(res, problem) < 1e-10
 
 

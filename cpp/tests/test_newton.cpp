@@ -369,13 +369,14 @@ TEST_CASE("coarse operators given with the prolongations are taken as the Galerk
 }
 
 TEST_CASE("a P-matrix on which the active-set steps cycle: the fallback is taken and the answer is right") {
-  // A P-matrix, not an M-matrix (found by search: from z = 0 the plain active-set method cycles
-  // through three active sets; q_0 = 0.1 > 0 keeps the start off a tie, which counts as inactive
-  // and would solve it in one step). Its unique solution, by enumeration of the 8 active sets:
-  std::vector<Eigen::Triplet<double>> t{{0, 0, 1}, {0, 1, -3}, {0, 2, 2}, {1, 0, 2}, {1, 1, 1}, {1, 2, 1}, {2, 1, -1}, {2, 2, 1}};
+  // A P-matrix, not an M-matrix (found by search: from z = 0 the Newton steps, each followed by its
+  // projected Gauss-Seidel sweeps, return to an active set seen before). Its unique solution, by
+  // enumeration of the 8 active sets:
+  std::vector<Eigen::Triplet<double>> t{{0, 0, 1}, {0, 1, -1.5}, {0, 2, -2.5}, {1, 1, 1.5}, {1, 2, -0.5},
+                                        {2, 0, 3}, {2, 1, -0.5}, {2, 2, 1.5}};
   RowMat A(3, 3);
   A.setFromTriplets(t.begin(), t.end());
-  const Vec q = (Vec(3) << 0.1, -2.0, 1.0).finished();
+  const Vec q = (Vec(3) << 1.3, -0.1, -0.9).finished();
   Vec z_star;
   for (int mask = 0; mask < 8; ++mask) {
     Eigen::MatrixXd K = Eigen::MatrixXd::Identity(3, 3);
@@ -564,6 +565,7 @@ struct ScriptedStep {
   std::vector<std::size_t> trial_active = {};
   std::vector<double> forcings = {};
   std::vector<double> dampings = {};
+  std::vector<int> smoothings = {};
   int k = 0;
   Vec z_ = Vec::Zero(4);
   Eigen::Index size() const { return 4; }
@@ -593,6 +595,11 @@ struct ScriptedStep {
     dampings.push_back(alpha);
     return trials[static_cast<std::size_t>(k - 1)];
   }
+  bool smooth(int sweeps) {
+    smoothings.push_back(sweeps);
+    return false;
+  }
+  double trial_residual() const { return trials[static_cast<std::size_t>(k - 1)]; }
   bool iterative() const { return true; }
   bool trial_still() const { return false; }
   void accept() {
@@ -640,6 +647,8 @@ TEST_CASE("steps on new sets are solved loosely; with exact_repeat a repeated se
   CHECK(plain.forcings[0] == 1e-4);
   CHECK(plain.forcings[1] == 0.1);
   CHECK(plain.forcings[2] == 0.0);
+  // the two steps on new sets are smoothed, the exact solve of the repeated set is kept as solved
+  CHECK(plain.smoothings == std::vector<int>{detail::kSmoothingSweeps, detail::kSmoothingSweeps});
 
   ctl.exact_repeat = false;  // a coarse level: the repeat of a loosely solved set settles
   ScriptedStep coarse{{1e-3, 1e-4, 1e-12}, 1e-14, 1e7, {5, 6, 6}};
@@ -670,4 +679,35 @@ TEST_CASE("a step whose active set more than triples the one it was solved on is
   ScriptedStep from_empty{{1e-3, 1e-12}, 1e-14, 1e7, {15, 14}, {4, 1}};  // no active point: no ratio
   detail::newton_loop(from_empty, ctl, Vec(from_empty.z()));
   CHECK(from_empty.dampings.empty());
+}
+
+TEST_CASE("projected Gauss-Seidel sweeps keep y >= 0, leave the LCP's solution in place and converge to it") {
+  const RowMat A = testing::bai<int, Eigen::RowMajor>(6, 0.0, true);  // the 5-point Laplacian: an M-matrix
+  const auto n = A.rows();
+  const auto k = testing::known_solution(n);
+  const Vec q = k.w - A * k.g;  // LCP(q, A) has the solution z = g (w = Az + q, z ⊥ w)
+  const detail::NewtonLevel<RowMat> level(A, Options());
+  Vec y = k.g;
+  level.projected_gauss_seidel(q, y, 3);
+  CHECK((y - k.g).lpNorm<Eigen::Infinity>() < 1e-13);  // a fixed point
+  y = Vec::Constant(n, 5.0);
+  level.projected_gauss_seidel(q, y, 1);
+  CHECK(y.minCoeff() >= 0.0);
+  level.projected_gauss_seidel(q, y, 400);
+  CHECK((y - k.g).lpNorm<Eigen::Infinity>() < 1e-8);
+}
+
+TEST_CASE("a row with a non-positive diagonal is left by the projected sweep") {
+  Eigen::MatrixXd D(2, 2);
+  D << 0.0, 1.0, -1.0, 2.0;
+  const RowMat A = D.sparseView();
+  Options o;
+  o.omega2 = Vec::Ones(2);  // Newton's own Ω2 needs no positive diagonal
+  const detail::NewtonLevel<RowMat> level(A, o);
+  Vec y(2);
+  y << 0.7, 0.3;
+  const Vec q = Vec::Constant(2, -1.0);
+  level.projected_gauss_seidel(q, y, 1);
+  CHECK(y[0] == 0.7);                                        // a_00 = 0: left
+  CHECK(y[1] == doctest::Approx((1.0 + 0.7) / 2.0));  // max(0, -(q_1 + a_10 y_0) / a_11), both sweeps
 }

@@ -67,6 +67,12 @@ inline constexpr double kFloorFactor = 100;
 /// (Globalized::overshoots; docs/MEASUREMENTS.md, kOvershootGrowth).
 inline constexpr double kOvershootGrowth = 3.0;
 inline constexpr double kOvershootDamping = 0.5;
+/// Each new step of an LCP (ζ none or constant) is followed by this many symmetric projected
+/// Gauss–Seidel sweeps before its active set is read: the step leaves a wrong contact band at the
+/// free boundary that the next steps would peel one layer each; a sweep frees or activates
+/// several layers at the cost of two passes over A (NewtonLevel::projected_gauss_seidel;
+/// docs/MEASUREMENTS.md, kSmoothingSweeps).
+inline constexpr int kSmoothingSweeps = 2;
 
 /// The message of a Newton loop that settled at Res's rounding floor above tol.
 inline std::string floor_message(double best, double tol, double floor) {
@@ -178,7 +184,9 @@ class Globalized {
     if constexpr (Plain::set_fixes_step) {
       h = hash_set(inactive_);
       repeat = have_last_ && h == last_set_;
-      if (repeat && !(ctl_.exact_repeat && loose_)) return settle(), true;
+      // a repeat settles, unless its z was solved loosely (exact_repeat) or is not the solve of any
+      // set (sweeps changed its active set): then the set is solved again, exactly
+      if (repeat && !(ctl_.exact_repeat && loose_) && !moved_set_) return settle(), true;
       if (!repeat && !seen_.insert(h).second) return false;  // a cycle
     }
     if (!repeat && !plain_.factorize(inactive_)) return false;  // a repeat keeps its system
@@ -188,9 +196,14 @@ class Globalized {
     double r = plain_.solve(inactive_, ctl_.solve.tol, forcing);
     if constexpr (Plain::set_fixes_step)
       if (overshoots()) r = plain_.damp(kOvershootDamping);
+    const bool still = Plain::set_fixes_step && plain_.trial_still();  // the solve's own z⁺, before the sweeps
+    if (!repeat) {  // a repeat is the exact solve of its set: kept as solved
+      moved_set_ = plain_.smooth(kSmoothingSweeps);
+      r = plain_.trial_residual();
+    }
     if (!(std::isfinite(r) && (exempt_ || test_.acceptable(r)))) return false;
     const double r_old = plain_.residual();
-    accept(r, h);
+    accept(r, h, still);
     if (!(r < ctl_.solve.tol) && !(r < 0.5 * r_old) && !still_) at_floor_ = at_rounding_level(std::max(r, r_old));
     return true;
   }
@@ -213,8 +226,8 @@ class Globalized {
     floor_ = plain_.rounding_level();
     return r <= kFloorFactor * floor_;
   }
-  void accept(double r, std::uint64_t h) {
-    still_ = Plain::set_fixes_step && plain_.trial_still() && !(r < ctl_.solve.tol);
+  void accept(double r, std::uint64_t h, bool still) {
+    still_ = still && !(r < ctl_.solve.tol);
     plain_.accept();
     if (r < best_r_ || !std::isfinite(best_r_)) { best_r_ = r; best_z_ = plain_.z(); }
     test_.push(r);
@@ -256,6 +269,7 @@ class Globalized {
   std::uint64_t last_set_ = 0;
   bool have_last_ = false, exempt_ = true, still_ = false, settled_ = false, at_floor_ = false;
   bool loose_ = false;  // the last step was solved to a forcing: with exact_repeat a repeat of its set is solved again
+  bool moved_set_ = false;  // the sweeps after the last step changed its active set: a repeat of it is solved again
   double floor_ = 0;  // the rounding level of Res (computed when a stop at it is considered)
   SweepRuns runs_;
   int sweeps_ = 0;

@@ -111,6 +111,23 @@ class NewtonLevel {
     return k;
   }
 
+  /// `sweeps` symmetric projected Gauss–Seidel sweeps on LCP(q, A) from y (kept ≥ 0): y_i ←
+  /// max(0, y_i − (Ay + q)_i / a_ii), the rows in order, then in reverse; rows with a_ii ≤ 0 are left.
+  void projected_gauss_seidel(const Vector& q, Vector& y, int sweeps) const {
+    if constexpr (MatrixType::IsRowMajor) {
+      auto relax = [&](Eigen::Index i) {
+        double s = q[i], d = 0;
+        for (typename MatrixType::InnerIterator it(A_, i); it; ++it)
+          if (it.index() == i) d = it.value(); else s += it.value() * y[it.index()];
+        if (d > 0) y[i] = std::max(0.0, -s / d);
+      };
+      for (int k = 0; k < sweeps; ++k) {
+        for (Eigen::Index i = 0; i < A_.rows(); ++i) relax(i);
+        for (Eigen::Index i = A_.rows(); i-- > 0;) relax(i);
+      }
+    }
+  }
+
   /// Up to `sweeps` sweeps of the fallback member (nrm) from z0 for ICP(q, A, ζ); the best iterate.
   Result sweep(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector& z0, int sweeps, double tol) {
     if (!fallback_) fallback_.emplace(A_, fallback_options());  // factorizes Ω2 + AΩ1 once

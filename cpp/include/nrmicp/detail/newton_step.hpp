@@ -49,6 +49,9 @@ struct FixedLinearization {
   System& system() { return K; }
   double c_at(Eigen::Index i) const { return c ? (*c)[i] : 0.0; }
   Result sweep(const Vector& z0, int sweeps, double tol) { return level.sweep(q, B, c, z0, sweeps, tol); }
+  /// The LCP (B null): g = z, and projected sweeps keep z ≥ 0.
+  bool smoothable() const { return B == nullptr; }
+  void smooth(Vector& z, int sweeps) const { level.projected_gauss_seidel(q, z, sweeps); }
 };
 
 /// A callable ζ with its Jacobian: linearized at each step's z.
@@ -83,6 +86,8 @@ struct JacobianLinearization {
   System& system() { return *K; }
   double c_at(Eigen::Index i) const { return c[i]; }
   Result sweep(const Vector& z0, int sweeps, double tol) { return level.sweep(q, zeta, z0, sweeps, tol); }
+  bool smoothable() const { return false; }
+  void smooth(Vector&, int) const {}
 };
 
 /// The current iterate z (with w = Az + q, g = z − ζ(z), ζ(z), Res) and a trial step from it.
@@ -129,6 +134,18 @@ class NewtonStep {
     ++steps_;
     return r_new_ = lin_.evaluate(z_new_, w_new_, g_new_, zeta_new_);
   }
+  /// `sweeps` projected Gauss–Seidel sweeps on the trial z⁺ (the LCP only: FixedLinearization
+  /// without B); true when they changed its active set.
+  bool smooth(int sweeps) {
+    if (sweeps <= 0 || !lin_.smoothable()) return false;
+    level_.active_set(w_new_, z_new_, before_);
+    lin_.smooth(z_new_, sweeps);
+    r_new_ = lin_.evaluate(z_new_, w_new_, g_new_, zeta_new_);
+    level_.active_set(w_new_, z_new_, after_);
+    return before_ != after_;
+  }
+  /// Res of the trial z⁺.
+  double trial_residual() const { return r_new_; }
   /// The number of active points of the trial iterate z⁺ (after solve).
   std::size_t trial_active_count() const { return level_.active_count(w_new_, lin_.g_is_z() ? z_new_ : g_new_); }
   /// The trial iterate z⁺ moved back to z + alpha (z⁺ − z); its Res.
@@ -166,6 +183,7 @@ class NewtonStep {
   NewtonLevel<MatrixType>& level_;
   Linearization lin_;
   Vector z_, w_, g_, zeta_z_, rhs_, z_new_, w_new_, g_new_, zeta_new_;
+  std::vector<char> before_, after_;  // the trial's active set before and after smooth()
   double r_ = 0, r_new_ = 0;
   int steps_ = 0, solves_ = 0;
   long long inner_iterations_ = 0;
