@@ -112,7 +112,8 @@ class NewtonLevel {
   }
 
   /// `sweeps` symmetric projected Gauss–Seidel sweeps on LCP(q, A) from y (kept ≥ 0): y_i ←
-  /// max(0, y_i − (Ay + q)_i / a_ii), the rows in order, then in reverse; rows with a_ii ≤ 0 are left.
+  /// max(0, y_i − (Ay + q)_i / a_ii), the rows in order, then in reverse; rows with a_ii ≤ 0 are left,
+  /// and a column-major A (no row access) is not swept at all.
   void projected_gauss_seidel(const Vector& q, Vector& y, int sweeps) const {
     if constexpr (MatrixType::IsRowMajor) {
       auto relax = [&](Eigen::Index i) {
