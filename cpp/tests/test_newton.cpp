@@ -580,7 +580,11 @@ struct ScriptedStep {
     inactive.assign(4, 0);
     for (int b = 0; b < 4; ++b) inactive[b] = (set >> b) & 1;
   }
-  void modulus(Vec& x) const { x = z_; }
+  double modulus(Vec& x) const {  // x ← z; ‖Δx‖∞ (∞ from an empty x), as NewtonStep::modulus
+    const double step = x.size() == z_.size() ? (z_ - x).lpNorm<Eigen::Infinity>() : std::numeric_limits<double>::infinity();
+    x = z_;
+    return step;
+  }
   bool linearize() { return true; }
   bool factorize(const std::vector<char>&) { return true; }
   double solve(const std::vector<char>&, double, double forcing) {

@@ -198,7 +198,7 @@ class Newton {
     const auto t_iterations = std::chrono::steady_clock::now();
     Result r = [&] {
       switch (zeta.kind()) {
-        case ZetaKind::None: return run.solve_obstacle(q, Vector::Zero(n), z0, nest);
+        case ZetaKind::None: return run.solve_obstacle(q, Vector(), z0, nest);  // ψ = 0
         case ZetaKind::Constant: return run.solve_obstacle(q, zeta.c(), z0, nest);
         case ZetaKind::Affine: return run.solve_affine(q, zeta, z0);
         case ZetaKind::Functor: break;

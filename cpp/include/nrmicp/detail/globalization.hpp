@@ -148,11 +148,9 @@ class Globalized {
     s.z = plain.z();
   }
 
-  /// Res of z (computed when z was made); s.x from z's w and g.
+  /// Res of z (computed when z was made); s.x from z's w and g, in place (s.step: how far it moved).
   double evaluate(Iterate& s) {
-    plain_.modulus(x_);
-    s.step = s.x.size() ? (x_ - s.x).template lpNorm<Eigen::Infinity>() : std::numeric_limits<double>::infinity();
-    s.x.swap(x_);
+    s.step = plain_.modulus(s.x);
     return plain_.residual();
   }
   /// A Newton step, or the fallback, or the end.
@@ -262,7 +260,7 @@ class Globalized {
   Plain& plain_;
   const NewtonControl& ctl_;
   NonMonotone test_;
-  Vector best_z_, x_;
+  Vector best_z_;
   double best_r_;
   std::vector<char> inactive_, last_inactive_;
   std::unordered_set<std::uint64_t> seen_;

@@ -202,16 +202,19 @@ class MultigridKrylov {
     return true;
   }
 
-  /// C += Pᵀ ΔK P, ΔK given by its changed entries (`in`); `out` gets C's changed entries.
-  /// False when a term falls outside C's pattern (C then partly updated).
+  /// C += Pᵀ ΔK P, ΔK given by its changed entries (`in`); `out` gets C's changed entries. The
+  /// terms are added to C's values in place; a touched position's value before the update is kept
+  /// in `out` and its change is the difference (a dense sum per position of C cost 8 bytes per
+  /// nonzero of K_1, as much as K_1's values). False when a term falls outside C's pattern (C then
+  /// partly updated).
   bool add_galerkin_change(const RowMatrix& P, const std::vector<Change<StorageIndex>>& in, RowMatrix& C,
                            std::vector<Change<StorageIndex>>& out) {
     const StorageIndex *po = P.outerIndexPtr(), *pi = P.innerIndexPtr(), *co = C.outerIndexPtr(),
                        *ci = C.innerIndexPtr();
     const double* pv = P.valuePtr();
-    sum_.resize(static_cast<std::size_t>(C.nonZeros()), 0.0);   // all zero between calls
-    listed_.resize(sum_.size(), 0);
-    out.clear();                                                // C's touched positions, then its changes
+    double* cv = C.valuePtr();
+    listed_.resize(static_cast<std::size_t>(C.nonZeros()), false);  // all false between calls
+    out.clear();                                                      // (row, position, value before)
     bool inside = true;
     for (const auto& change : in) {
       for (StorageIndex a = po[change.row]; a < po[change.row + 1] && inside; ++a)
@@ -221,19 +224,16 @@ class MultigridKrylov {
           const StorageIndex* at = std::lower_bound(begin, end, pi[b]);
           if (at == end || *at != pi[b]) { inside = false; break; }
           const auto p = static_cast<std::size_t>(at - ci);
-          if (!listed_[p]) { listed_[p] = 1; out.push_back({pi[a], static_cast<StorageIndex>(p), 0.0}); }
-          sum_[p] += pv[a] * change.delta * pv[b];
+          if (!listed_[p]) { listed_[p] = true; out.push_back({pi[a], static_cast<StorageIndex>(p), cv[p]}); }
+          cv[p] += pv[a] * change.delta * pv[b];
         }
       if (!inside) break;
     }
-    double* cv = C.valuePtr();
-    for (auto& change : out) {   // col holds the position until here
+    for (auto& change : out) {   // col holds the position, delta the value before, until here
       const auto p = static_cast<std::size_t>(change.col);
-      change.delta = sum_[p];
+      change.delta = cv[p] - change.delta;
       change.col = ci[p];
-      cv[p] += sum_[p];
-      sum_[p] = 0.0;
-      listed_[p] = 0;
+      listed_[p] = false;
     }
     return inside;
   }
@@ -362,8 +362,7 @@ class MultigridKrylov {
   Eigen::Index fine_pattern_ = -1;        // nonzeros of the K the patterns were formed for
   bool valid_ = false;                    // the last setup succeeded (an update builds on it)
   std::vector<Change<StorageIndex>> level_changes_[2];   // scratch of update_galerkin
-  std::vector<double> sum_;               // scratch of add_galerkin_change: C's change per position,
-  std::vector<char> listed_;              // and whether that position is in its list yet
+  std::vector<bool> listed_;              // scratch of add_galerkin_change: a position of C is in its list
   std::vector<StorageIndex> position_;    // scratch of product_values
   const ColMatrix* fine_ = nullptr;
   bool symmetric_;

@@ -91,8 +91,22 @@ class NewtonLevel {
     return eps * (stable_norm(t) + stable_norm(z.cwiseAbs() + (z - g).cwiseAbs()));
   }
 
-  /// Ω1 (g/Ω1 − w/Ω2) = g − (Ω1/Ω2) w: the modulus vector x up to the factor γ/(2Ω1).
-  void modulus(const Vector& w, const Vector& g, Vector& x) const { x = g - ratio_.cwiseProduct(w); }
+  /// x ← Ω1 (g/Ω1 − w/Ω2) = g − (Ω1/Ω2) w, the modulus vector up to the factor γ/(2Ω1), in place
+  /// (a second n-vector for the old x cost 8 MB a million unknowns); returns ‖Δx‖∞, ∞ when x was empty.
+  double modulus(const Vector& w, const Vector& g, Vector& x) const {
+    if (x.size() != w.size()) {
+      x = g - ratio_.cwiseProduct(w);
+      return std::numeric_limits<double>::infinity();
+    }
+    double step = 0;
+    for (Eigen::Index i = 0; i < x.size(); ++i) {
+      const double xi = g[i] - ratio_[i] * w[i];
+      const double d = std::abs(xi - x[i]);
+      if (d > step || std::isnan(d)) step = d;  // a NaN stays (as in lpNorm)
+      x[i] = xi;
+    }
+    return step;
+  }
 
   /// The inactive set ℐ = {x ≥ 0} = {g/Ω1 − w/Ω2 ≥ 0}. A tie x = 0 (z = ζ and w = 0) counts as
   /// inactive: if it is in fact active the solve puts it back at no cost, while holding every

@@ -191,14 +191,20 @@ class NewtonRun {
   NewtonRun(const NewtonLevels<MatrixType>& levels, const Options& o, const Hooks& hooks, bool nest)
       : levels_(levels), o_(o), hooks_(hooks), nest_(nest), tally_(levels.A, levels.count()) {}
 
-  /// The obstacle problem z ≥ ψ (ψ = 0: the LCP) as LCP(q + Aψ, A) in y = z − ψ. `nest`: start
-  /// from the nested solution. `report`: this is the problem being solved (history, callback),
-  /// not an inner one. `set` (optional): the inactive set to start from, replaced by the final one.
+  /// The obstacle problem z ≥ ψ as LCP(q + Aψ, A) in y = z − ψ; an empty ψ is ψ = 0, the LCP itself
+  /// (no shifted copy of q, no vector of zeros: two n-vectors of the finest level's peak memory).
+  /// `nest`: start from the nested solution. `report`: this is the problem being solved (history,
+  /// callback), not an inner one. `set` (optional): the inactive set to start from, replaced by the final one.
   Result solve_obstacle(const Vector& q, const Vector& psi, const Vector* z0, bool nest, double tol = -1,
                         int maxiter = -1, bool report = true, std::vector<char>* set = nullptr) {
-    Vector q_shift = q;
-    q_shift.noalias() += levels_.A * psi;
-    Vector y0 = z0 ? Vector((*z0 - psi).cwiseMax(0.0)) : Vector::Zero(q.size());
+    const bool shifted = psi.size() > 0;
+    Vector shifted_q;
+    if (shifted) {
+      shifted_q = q;
+      shifted_q.noalias() += levels_.A * psi;
+    }
+    const Vector& q_shift = shifted ? shifted_q : q;
+    Vector y0 = !z0 ? Vector::Zero(q.size()) : shifted ? Vector((*z0 - psi).cwiseMax(0.0)) : Vector(z0->cwiseMax(0.0));
     const bool nested = nest && !levels_.coarse.empty();
     if (nested) y0 = nested_start(q_shift);
     const auto t0 = std::chrono::steady_clock::now();
@@ -211,7 +217,7 @@ class NewtonRun {
     const auto out = set && !set->empty() ? from_set(q_shift, y0, *set, control) : finest_lcp(q_shift, y0, control);
     if (set && !out.inactive.empty()) *set = out.inactive;
     tally_.absorb(out, 0, ScopedTimer::seconds_since(t0));
-    return tally_.finish(out, out.z + psi, q);
+    return shifted ? tally_.finish(out, out.z + psi, q) : tally_.finish(out, out.z, q);
   }
 
   /// ζ(z) = Bz + c: Newton on the full system, from the obstacle problem with ψ = ζ(z0) (or

@@ -100,7 +100,7 @@ class NewtonStep {
   NewtonStep(NewtonLevel<MatrixType>& level, Linearization lin, Vector z)
       : level_(level), lin_(std::move(lin)), z_(std::move(z)) {
     const Eigen::Index n = level.size();
-    w_.resize(n); rhs_.resize(n);
+    w_.resize(n);
     z_new_.resize(n); w_new_.resize(n);
     if (!lin_.g_is_z()) { g_.resize(n); g_new_.resize(n); }
     if constexpr (!set_fixes_step) { zeta_z_.resize(n); zeta_new_.resize(n); }  // a fixed ζ keeps no ζ(z)
@@ -116,8 +116,8 @@ class NewtonStep {
 
   /// The inactive set ℐ = {x ≥ 0} of z.
   void active_set(std::vector<char>& inactive) const { level_.active_set(w_, g(), inactive); }
-  /// x of z up to the factor γ/(2Ω1) (what the Monitor reads).
-  void modulus(Vector& x) const { level_.modulus(w_, g(), x); }
+  /// x ← x of z up to the factor γ/(2Ω1) (what the Monitor reads); ‖Δx‖∞ (∞ when x was empty).
+  double modulus(Vector& x) const { return level_.modulus(w_, g(), x); }
   /// ζ's linearization at z; false when ζ's Jacobian failed.
   bool linearize() { return lin_.linearize(z_, zeta_z_); }
   /// The reduced system of the piece `inactive`; false when it is singular.
@@ -127,9 +127,10 @@ class NewtonStep {
   /// of the Newton member: an iterative one (inner = cg) starts from z and stops at tol / 10, or
   /// at `forcing` × Res(z) if that is larger (inexact Newton; NewtonControl::forcing).
   double solve(const std::vector<char>& inactive, double tol, double forcing = 0) {
-    for (Eigen::Index i = 0; i < size(); ++i) rhs_[i] = inactive[i] ? -lin_.q[i] : lin_.c_at(i);
+    Vector& rhs = w_new_;  // w⁺ is written after the solve: its storage holds the right-hand side
+    for (Eigen::Index i = 0; i < size(); ++i) rhs[i] = inactive[i] ? -lin_.q[i] : lin_.c_at(i);
     z_new_ = z_;
-    inner_iterations_ += lin_.system().solve(rhs_, z_new_, std::max(0.1 * tol, forcing * r_));
+    inner_iterations_ += lin_.system().solve(rhs, z_new_, std::max(0.1 * tol, forcing * r_));
     ++solves_;
     ++steps_;
     return r_new_ = lin_.evaluate(z_new_, w_new_, g_new_, zeta_new_);
@@ -182,7 +183,7 @@ class NewtonStep {
 
   NewtonLevel<MatrixType>& level_;
   Linearization lin_;
-  Vector z_, w_, g_, zeta_z_, rhs_, z_new_, w_new_, g_new_, zeta_new_;
+  Vector z_, w_, g_, zeta_z_, z_new_, w_new_, g_new_, zeta_new_;
   std::vector<char> before_, after_;  // the trial's active set before and after smooth()
   double r_ = 0, r_new_ = 0;
   int steps_ = 0, solves_ = 0;
