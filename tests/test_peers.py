@@ -90,3 +90,21 @@ def test_psor_time_limit_and_max_iterations(fake_clock):
     assert o["status"] == "time_limit" and not o["success"] and 0 < o["nit"] < 20
     o = _peers.psor(A, q, np.zeros(n), 1e-14, omega=1.0, colour=colour, maxiter=5)
     assert o["status"] == "max_iterations" and o["nit"] == 5
+
+
+@pytest.mark.parametrize("m", [15, 40])
+def test_sor_omega_is_the_closed_form_optimum_on_the_5_point_grid(m):
+    # Jacobi on the 5-point Laplacian (consistently ordered): ρ_J = cos(π h), h = 1/(m + 1), so
+    # ω_opt = 2 / (1 + sin(π h)) (Young). m = 40: n = 1,600, the LOBPCG + AMG path.
+    from nrmicp.scenes._operators import neg_laplacian_2d
+    A = neg_laplacian_2d(m)
+    assert _peers.sor_omega(A) == pytest.approx(2.0 / (1.0 + np.sin(np.pi / (m + 1))), rel=1e-7)
+    assert _peers.sor_omega(4.0 * A) == pytest.approx(_peers.sor_omega(A), rel=1e-7)  # scale-free
+
+
+def test_sor_omega_nonsymmetric_and_degenerate():
+    n = 60  # an upwind tridiagonal: ARPACK's path; Jacobi's ρ = 2 √(ab) / d cos(π / (n + 1))
+    A = sp.diags([np.full(n - 1, -1.5), np.full(n, 4.0), np.full(n - 1, -0.5)], [-1, 0, 1], format="csr")
+    rho = 2 * np.sqrt(1.5 * 0.5) / 4.0 * np.cos(np.pi / (n + 1))
+    assert _peers.sor_omega(A) == pytest.approx(2.0 / (1.0 + np.sqrt(1.0 - rho ** 2)), rel=1e-4)  # ARPACK tol 1e-6
+    assert _peers.sor_omega(sp.diags(np.r_[np.ones(n - 1), 0.0], format="csr")) == 1.0  # a zero diagonal
