@@ -125,8 +125,8 @@ def main():
     sizes = QUICK if a.quick else CASES
     print(f"# finite elements, tol {TOL}, load {os.getloadavg()[0]:.1f}, OPENBLAS_NUM_THREADS="
           f"{os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}", flush=True)
-    print("| case | n | " + " | ".join(a.peers) + " | amg / nrmgs+aa |")
-    print("|---" * (len(a.peers) + 3) + "|", flush=True)
+    print("| case | n | " + " | ".join(a.peers) + " | nrmgs+aa / amg | psor / amg |")
+    print("|---" * (len(a.peers) + 4) + "|", flush=True)
     stopped = set()
     for case in a.cases:
         for size in sizes[case]:
@@ -140,11 +140,16 @@ def main():
                 if r.get("cpu", 0) > a.budget or r.get("status") in ("timeout", "failed", "time_limit"):
                     stopped.add((case, peer))
                 print(f"#   {case} {size} {peer}: {json.dumps(r)}", file=sys.stderr, flush=True)
-            amg, aa = rows.get("newton-amg", {}), rows.get("nrmgs+aa", {})
-            ratio = f"{aa['cpu'] / amg['cpu']:.1f}x" if "cpu" in amg and "cpu" in aa else ""
             label = case if case == "disk" else f"{case}, r={size}"
-            print(f"| {label} | {n or ''} | " + " | ".join(cell(rows[p]) for p in a.peers) + f" | {ratio} |",
+            ratios = " | ".join(ratio(rows.get(peer, {}), rows.get("newton-amg", {})) for peer in ("nrmgs+aa", "psor"))
+            print(f"| {label} | {n or ''} | " + " | ".join(cell(rows[p]) for p in a.peers) + f" | {ratios} |",
                   flush=True)
+
+
+def ratio(peer, amg) -> str:
+    """The peer's CPU time over newton-amg's, when both converged."""
+    ok = all("cpu" in r and r.get("status") == "converged" for r in (peer, amg))
+    return f"{peer['cpu'] / amg['cpu']:.1f}x" if ok else ""
 
 
 if __name__ == "__main__":
