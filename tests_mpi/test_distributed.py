@@ -64,6 +64,15 @@ def test_an_overshooting_step_is_damped_as_in_the_serial_member():
     assert out["levels"][0] <= 10, out
 
 
+@pytest.mark.parametrize("np_", [1, 2])
+def test_projected_sweeps_after_each_step_cut_a_cold_starts_peeling(np_):
+    # the serial member's kSmoothingSweeps, on each rank's rows: 24 steps without them (the serial
+    # member's count before the sweeps; the distributed member took as many)
+    out = mpirun(np_, "sweeps")
+    assert out["status"] == "CONVERGED" and out["err"] < 1e-8 and out["res"] < 1e-9, out
+    assert out["levels"] == [out["levels"][0]] and out["levels"][0] <= 12, out
+
+
 def test_coarse_ssor_tries_hand_over_to_boomeramg():
     out = mpirun(2, "ssor")
     for label in ("default", "ssor_fails"):

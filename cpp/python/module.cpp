@@ -479,6 +479,7 @@ void bind_vocabulary(py::module_& m) {
   tuning["floor_factor"] = nrmicp::detail::kFloorFactor;
   tuning["overshoot_growth"] = nrmicp::detail::kOvershootGrowth;
   tuning["overshoot_damping"] = nrmicp::detail::kOvershootDamping;
+  tuning["smoothing_sweeps"] = nrmicp::detail::kSmoothingSweeps;
   m.attr("newton_tuning") = tuning;
   m.def("is_aor_type", &nrmicp::is_aor_type, py::arg("method"),
         "True for the methods whose left matrix is triangular or diagonal (no factorization).");
@@ -544,6 +545,29 @@ void bind_utilities(py::module_& m) {
     return has_dtype<std::int64_t>(indices) ? check_compressed<std::int64_t>(indptr, indices, n_data, outer, inner, name)
                                             : check_compressed<std::int32_t>(indptr, indices, n_data, outer, inner, name);
   }, py::arg("indptr"), py::arg("indices"), py::arg("n_data"), py::arg("outer"), py::arg("inner"), py::arg("name"));
+  // In place on y: the distributed member sweeps each rank's block of A (PETSc's SOR has no projection).
+  m.def("projected_gauss_seidel", [](const py::array& indptr, const py::array& indices, const py::array& data,
+                                     const py::array& q, py::array y, int sweeps) {
+    const py::ssize_t n = q.shape(0);
+    if (y.ndim() != 1 || y.shape(0) != n || indptr.ndim() != 1 || indptr.shape(0) != n + 1)
+      throw py::value_error("projected_gauss_seidel: q, y and the rows of A (len(indptr) - 1) must have the same length");
+    if (!y.writeable()) throw py::value_error("projected_gauss_seidel: y must be writable (it is updated in place)");
+    if (sweeps < 0) throw py::value_error("projected_gauss_seidel: sweeps must be >= 0");
+    double* yp = const_cast<double*>(checked_data<double>(y, "y"));
+    const Eigen::Map<const Eigen::VectorXd> qm(checked_data<double>(q, "q"), n);
+    Eigen::Map<Eigen::VectorXd> ym(yp, n);
+    auto run = [&](auto index) {
+      using I = decltype(index);
+      const I* ip = checked_data<I>(indptr, "indptr");
+      const I* ix = checked_data<I>(indices, "indices");
+      const double* v = checked_data<double>(data, "data");
+      check_compressed<I>(indptr, indices, data.shape(0), n, n, "A");
+      const CsrMap<I> A(n, n, ip[n], ip, ix, v);
+      nrmicp::detail::projected_gauss_seidel(A, qm, ym, sweeps);
+    };
+    if (has_dtype<std::int64_t>(indices)) run(std::int64_t{}); else run(std::int32_t{});
+  }, py::arg("indptr"), py::arg("indices"), py::arg("data"), py::arg("q"), py::arg("y"), py::arg("sweeps"),
+     "Symmetric projected Gauss-Seidel sweeps on LCP(q, A), A square CSR, y updated in place.");
   m.def("backends", [] {
     py::dict d;
     d["cholmod"] = nrmicp::have_cholmod();

@@ -320,8 +320,14 @@ class _Newton:
     def __init__(self, prob, comm, symmetric, stats, ssor_first=False):
         self.p, self.comm, self.stats = prob, comm, stats
         self.ksp_type = "cg" if symmetric else "bcgs"
+        # The projected sweeps after each step, on a symmetric A only: there a sweep is coordinate
+        # descent on the LCP's quadratic energy and cannot start a cycle; on a nonsymmetric P-matrix
+        # (3 x 3, np 2) the swept steps cycled and this member's fallback (nrmgs, weaker than the
+        # serial member's nrm) stagnated where the plain steps converged.
+        self.smoothing = _TUNING["smoothing_sweeps"] if symmetric else 0
         self.ssor_first = ssor_first
         self.inactive = self.h = None
+        self.kept_block = {}  # smooth's copy of the rank's diagonal block of A
         self.kept = {}  # the last solved set: "h", "is", "A_II" and a KSP per preconditioner
 
     def plan(self, y):
@@ -335,6 +341,26 @@ class _Newton:
         """_overshoots of the step to y (w of y in self.p.w) from the planned set."""
         return _overshoots(self.comm, self.p.A.getSize()[0] - self.h[0], y.getArray(readonly=True),
                            self.p.w.getArray(readonly=True), self.p.d.getArray(readonly=True))
+
+    def smooth(self, y):
+        """The serial member's projected Gauss–Seidel sweeps after a step (self.smoothing of them,
+        symmetric), on each rank's own rows with the couplings to other ranks' unknowns held at y
+        (block Jacobi between ranks, Gauss–Seidel within: PETSc's SOR has no projection). w of y
+        in self.p.w on entry. Returns (whether the active set changed on some rank, Res of y);
+        self.p.w is then y's."""
+        p = self.p
+        ya, wa, da = y.getArray(readonly=True), p.w.getArray(readonly=True), p.d.getArray(readonly=True)
+        before = ya - wa / da >= 0
+        if "own" not in self.kept_block:  # the rank's diagonal block, read once a level (the loop's steps share it)
+            indptr, indices, data = p.A.getDiagonalBlock().getValuesCSR()
+            self.kept_block["own"] = sp.csr_matrix((data, indices, indptr), shape=(ya.size, ya.size))
+        own = self.kept_block["own"]
+        ys = ya.copy()
+        _core.projected_gauss_seidel(own.indptr, own.indices, own.data, wa - own @ ya, ys, self.smoothing)
+        y.setArray(ys)
+        res = p.residual(y)
+        after = y.getArray(readonly=True) - p.w.getArray(readonly=True) / da >= 0
+        return _flag_max(self.comm, float(np.any(before != after))) > 0, res
 
     def solve(self, y, rtol, atol):
         """The step on the planned set, its inner solve stopped at max(rtol ‖rhs‖, atol)."""
@@ -372,14 +398,18 @@ class _Newton:
     def _system(self):
         """The planned set's index set (its A_II kept): the kept one when it is the last solved set."""
         if self.kept.get("h") != self.h:
-            self.release()
+            self._drop_systems()
             lo, _ = self.p.A.getOwnershipRange()
             isI = PETSc.IS().createGeneral((np.flatnonzero(self.inactive) + lo).astype(PETSc.IntType), comm=self.comm)
             self.kept = {"h": self.h, "is": isI, "A_II": self.p.A.createSubMatrix(isI, isI) if isI.getSize() else None}
         return self.kept["is"]
 
     def release(self):
-        """Free the kept systems (the level is done)."""
+        """Free the kept systems and block (the level is done)."""
+        self._drop_systems()
+        self.kept_block = {}
+
+    def _drop_systems(self):
         for key, obj in self.kept.items():
             if key != "h" and obj is not None:
                 obj.destroy()
@@ -581,10 +611,13 @@ def _newton_loop(residual, stepper, fallback, y, *, tol, maxiter, control, floor
     best iterate (10, 20, 40, ...), after which Newton resumes. The loop settles when the active
     set repeats (see _Control) or a step that did not halve Res leaves it at its rounding level
     (floor(y), within _TUNING["floor_factor"]); a step that overshoots (stepper.overshoots) is
-    damped first. Returns (y, Res, steps, sweeps, status, floor or None)."""
+    damped first, then swept (stepper.smooth, when stepper.smoothing > 0: a repeat of a set the sweeps
+    changed is solved again). Returns (y, Res, steps, sweeps, status, floor or None)."""
     res = residual(y)
     best = (res, y.copy())
     recent, exempt, seen, last, loose = [res], True, set(), None, False
+    moved = False  # the sweeps after the last accepted step changed its active set
+    smooth = stepper.smooth if getattr(stepper, "smoothing", 0) > 0 else None
     steps = sweeps = 0
     run = 10
 
@@ -598,7 +631,7 @@ def _newton_loop(residual, stepper, fallback, y, *, tol, maxiter, control, floor
             return end(Status.MAX_ITERATIONS)
         h = stepper.plan(y)
         repeat = h == last
-        if repeat and not (control.exact_repeat and loose):
+        if repeat and not (control.exact_repeat and loose) and not moved:
             return end(Status.STAGNATED, floor(best[1]) if floor and tol > 0 else None)  # settled: no solve needed
         if repeat or h not in seen:
             forcing = 0.0 if repeat else control.first_forcing if steps == 0 else control.forcing
@@ -610,8 +643,11 @@ def _newton_loop(residual, stepper, fallback, y, *, tol, maxiter, control, floor
                 damping = _TUNING["overshoot_damping"]   # ynew <- y + damping (ynew - y)
                 ynew.axpby(1.0 - damping, damping, y)
                 rnew = residual(ynew)
+            moved_now = False
+            if smooth is not None and not repeat:  # a repeat is the exact solve of its set: kept as solved
+                moved_now, rnew = smooth(ynew)
             if math.isfinite(rnew) and (exempt or rnew < max(recent)):
-                y, res, res_old, exempt, last = ynew, rnew, res, False, h
+                y, res, res_old, exempt, last, moved = ynew, rnew, res, False, h, moved_now
                 recent = (recent + [rnew])[-_WINDOW:]
                 seen.add(h)
                 if rnew < best[0]:
@@ -630,7 +666,7 @@ def _newton_loop(residual, stepper, fallback, y, *, tol, maxiter, control, floor
         if not rb < best[0]:
             return end(Status.STAGNATED)
         best, res = (rb, y.copy()), residual(y)
-        recent, exempt, last, loose = [res], True, None, False
+        recent, exempt, last, loose, moved = [res], True, None, False, False
         seen.clear()
 
 

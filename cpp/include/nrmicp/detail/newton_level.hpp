@@ -20,6 +20,24 @@
 
 namespace nrmicp::detail {
 
+/// `sweeps` symmetric projected Gauss–Seidel sweeps on LCP(q, A) from y (kept ≥ 0): y_i ←
+/// max(0, −(q_i + Σ_{j≠i} a_ij y_j) / a_ii), the rows in order, then in reverse; rows with
+/// a_ii ≤ 0 are left. A: row-major (a matrix or a Map); y: a vector or a Map (updated in place).
+template <typename RowMajorMatrix, typename Q, typename Y>
+void projected_gauss_seidel(const RowMajorMatrix& A, const Q& q, Y& y, int sweeps) {
+  static_assert(RowMajorMatrix::IsRowMajor, "projected_gauss_seidel reads rows");
+  auto relax = [&](Eigen::Index i) {
+    double s = q[i], d = 0;
+    for (typename RowMajorMatrix::InnerIterator it(A, i); it; ++it)
+      if (it.index() == i) d = it.value(); else s += it.value() * y[it.index()];
+    if (d > 0) y[i] = std::max(0.0, -s / d);
+  };
+  for (int k = 0; k < sweeps; ++k) {
+    for (Eigen::Index i = 0; i < A.rows(); ++i) relax(i);
+    for (Eigen::Index i = A.rows(); i-- > 0;) relax(i);
+  }
+}
+
 /// One level: its matrix, the weights Ω1/Ω2 of the active-set test, the reduced LCP system
 /// (analysed on first use, then only refactorized) and the fallback member (nrm, Ω2 as Newton's).
 template <typename MatrixType>
@@ -125,22 +143,10 @@ class NewtonLevel {
     return k;
   }
 
-  /// `sweeps` symmetric projected Gauss–Seidel sweeps on LCP(q, A) from y (kept ≥ 0): y_i ←
-  /// max(0, y_i − (Ay + q)_i / a_ii), the rows in order, then in reverse; rows with a_ii ≤ 0 are left,
-  /// and a column-major A (no row access) is not swept at all.
+  /// `sweeps` symmetric projected Gauss–Seidel sweeps on LCP(q, A) from y (the free function of
+  /// that name); a column-major A (no row access) is not swept at all.
   void projected_gauss_seidel(const Vector& q, Vector& y, int sweeps) const {
-    if constexpr (MatrixType::IsRowMajor) {
-      auto relax = [&](Eigen::Index i) {
-        double s = q[i], d = 0;
-        for (typename MatrixType::InnerIterator it(A_, i); it; ++it)
-          if (it.index() == i) d = it.value(); else s += it.value() * y[it.index()];
-        if (d > 0) y[i] = std::max(0.0, -s / d);
-      };
-      for (int k = 0; k < sweeps; ++k) {
-        for (Eigen::Index i = 0; i < A_.rows(); ++i) relax(i);
-        for (Eigen::Index i = A_.rows(); i-- > 0;) relax(i);
-      }
-    }
+    if constexpr (MatrixType::IsRowMajor) detail::projected_gauss_seidel(A_, q, y, sweeps);
   }
 
   /// Up to `sweeps` sweeps of the fallback member (nrm) from z0 for ICP(q, A, ζ); the best iterate.
