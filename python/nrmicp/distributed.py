@@ -317,14 +317,16 @@ class _Newton:
     docs/DISTRIBUTED.md). The last set's systems are kept: a set solved again (an exact repeat of
     a loose step) reuses its submatrix and preconditioners."""
 
-    def __init__(self, prob, comm, symmetric, stats, ssor_first=False):
+    def __init__(self, prob, comm, symmetric, stats, ssor_first=False, sweeps=False):
         self.p, self.comm, self.stats = prob, comm, stats
         self.ksp_type = "cg" if symmetric else "bcgs"
-        # The projected sweeps after each step, on a symmetric A only: there a sweep is coordinate
-        # descent on the LCP's quadratic energy and cannot start a cycle; on a nonsymmetric P-matrix
-        # (3 x 3, np 2) the swept steps cycled and this member's fallback (nrmgs, weaker than the
-        # serial member's nrm) stagnated where the plain steps converged.
-        self.smoothing = _TUNING["smoothing_sweeps"] if symmetric else 0
+        # The projected sweeps after each step (`sweeps`: the finest level; on the coarse levels, whose
+        # steps are cheap SSOR-first solves, they cost more than the steps they saved: 2D n = 10⁶,
+        # np 1, 5.64 against 5.11 CPU s), on a symmetric A only: there a sweep is coordinate descent on
+        # the LCP's quadratic energy and cannot start a cycle; on a nonsymmetric 3 x 3 P-matrix (np 2)
+        # the swept steps cycled and this member's fallback (nrmgs, weaker than the serial nrm)
+        # stagnated where the plain steps converged.
+        self.smoothing = _TUNING["smoothing_sweeps"] if sweeps and symmetric else 0
         self.ssor_first = ssor_first
         self.inactive = self.h = None
         self.kept_block = {}  # smooth's copy of the rank's diagonal block of A
@@ -699,7 +701,7 @@ def _nested_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats):
             yf.setArray(np.maximum(yf.getArray(readonly=True), 0.0))
             y = yf
         finest = level == 0
-        nt = _Newton(prob, comm, symmetric, stats, ssor_first=not finest)
+        nt = _Newton(prob, comm, symmetric, stats, ssor_first=not finest, sweeps=finest)
         y, res, steps, sweeps, status, floor = _newton_loop(
             prob.residual, nt, _lcp_fallback(prob, comm, stats) if finest else None,
             y, tol=tol if finest else 0.0, maxiter=maxiter if finest else _TUNING["coarse_maxiter"],
