@@ -134,8 +134,8 @@ def main():
             print(json.dumps(row), flush=True)
     print("\nfinest steps, CPU s (slowest rank), wall s")
     print("\n| scene | n | np | serial nrmicp newton | ours (nrmicp.distributed) | vinewtonrsls cold | vinewtonrsls + grid sequencing |"
-          " msgs/rank/step | bytes/rank/step |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          " msgs/rank/step | bytes/rank/step | reductions/step |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         o, c, g = r["ours"], r["cold"], r["gs"]
         steps = sum(o["level_steps"])
@@ -144,7 +144,7 @@ def main():
         serial = f"{se['finest']}, {se['cpu']:.2f}, {se['seconds']:.2f}" if se else "–"
         print(f"| {r['scene']} | {r['n']:,} | {r['np']} | {serial} | {o['finest']}, {o['cpu']:.2f}, {o['seconds']:.2f} | {cold} | "
               f"{g['finest']}, {g['cpu']:.2f}, {g['seconds']:.2f} | {o['messages'] / r['np'] / steps:.0f} | "
-              f"{o['bytes'] / r['np'] / steps:.3g} |")
+              f"{o['bytes'] / r['np'] / steps:.3g} | {o['reductions'] / steps:.0f} |")
 
 
 if __name__ == "__main__":
