@@ -329,13 +329,12 @@ class _Newton:
         self.smoothing = _TUNING["smoothing_sweeps"] if sweeps and symmetric else 0
         self.ssor_first = ssor_first
         self.inactive = self.h = None
-        self.kept_block = {}  # smooth's copy of the rank's diagonal block of A
+        self.own = None  # smooth's copy of the rank's diagonal block of A (read once a level)
         self.kept = {}  # the last solved set: "h", "is", "A_II" and a KSP per preconditioner
 
     def plan(self, y):
         """The inactive set of y (w of y in self.p.w), kept for solve; returns its fingerprint."""
-        ya, wa, da = y.getArray(readonly=True), self.p.w.getArray(readonly=True), self.p.d.getArray(readonly=True)
-        self.inactive = ya - wa / da >= 0
+        self.inactive = self._inactive_of(y)
         self.h = _fingerprint(self.comm, self.p.A.getOwnershipRange()[0], self.inactive)
         return self.h
 
@@ -351,18 +350,21 @@ class _Newton:
         in self.p.w on entry. Returns (whether the active set changed on some rank, Res of y);
         self.p.w is then y's."""
         p = self.p
-        ya, wa, da = y.getArray(readonly=True), p.w.getArray(readonly=True), p.d.getArray(readonly=True)
-        before = ya - wa / da >= 0
-        if "own" not in self.kept_block:  # the rank's diagonal block, read once a level (the loop's steps share it)
+        ya, wa = y.getArray(readonly=True), p.w.getArray(readonly=True)
+        before = self._inactive_of(y)
+        if self.own is None:
             indptr, indices, data = p.A.getDiagonalBlock().getValuesCSR()
-            self.kept_block["own"] = sp.csr_matrix((data, indices, indptr), shape=(ya.size, ya.size))
-        own = self.kept_block["own"]
+            self.own = sp.csr_matrix((data, indices, indptr), shape=(ya.size, ya.size))
         ys = ya.copy()
-        _core.projected_gauss_seidel(own.indptr, own.indices, own.data, wa - own @ ya, ys, self.smoothing)
+        _core.projected_gauss_seidel(self.own.indptr, self.own.indices, self.own.data, wa - self.own @ ya, ys,
+                                     self.smoothing)
         y.setArray(ys)
         res = p.residual(y)
-        after = y.getArray(readonly=True) - p.w.getArray(readonly=True) / da >= 0
-        return _flag_max(self.comm, float(np.any(before != after))) > 0, res
+        return _flag_max(self.comm, float(np.any(before != self._inactive_of(y)))) > 0, res
+
+    def _inactive_of(self, y):
+        """_inactive of y (w of y in self.p.w): this rank's rows."""
+        return _inactive(y.getArray(readonly=True), self.p.w.getArray(readonly=True), self.p.d.getArray(readonly=True))
 
     def solve(self, y, rtol, atol):
         """The step on the planned set, its inner solve stopped at max(rtol ‖rhs‖, atol)."""
@@ -407,9 +409,9 @@ class _Newton:
         return self.kept["is"]
 
     def release(self):
-        """Free the kept systems and block (the level is done)."""
+        """Free the kept systems and the block copy (the level is done)."""
         self._drop_systems()
-        self.kept_block = {}
+        self.own = None
 
     def _drop_systems(self):
         for key, obj in self.kept.items():
@@ -474,12 +476,18 @@ def _boomeramg_defaults(M) -> dict:
             "pc_hypre_boomeramg_P_max": "4", "pc_hypre_boomeramg_agg_nl": "1"}
 
 
+def _inactive(g, w, d):
+    """The inactive set {g − w/diag(A) ≥ 0} of this rank's rows (g = z − ζ(z); ties inactive: the serial
+    NewtonLevel::active_set)."""
+    return g - w / d >= 0
+
+
 def _overshoots(comm, planned, g, w, d):
     """Globalized::overshoots: the trial (this rank's g = z − ζ(z), w and diag(A)) has more than
     _TUNING["overshoot_growth"] times the `planned` active points (over all ranks; 0: never)."""
     if planned <= 0:
         return False
-    return _sum(comm, float(np.count_nonzero(g - w / d < 0))) > _TUNING["overshoot_growth"] * planned
+    return _sum(comm, float(np.count_nonzero(~_inactive(g, w, d)))) > _TUNING["overshoot_growth"] * planned
 
 
 def _fingerprint(comm, lo, inactive):
@@ -752,7 +760,7 @@ def _affine_newton(A, q, zeta, z, tol, maxiter, comm, stats):
 
     class Step:
         def plan(self, v):  # g, w are v's (the loop evaluated v last)
-            self.inactive = g.getArray(readonly=True) - w.getArray(readonly=True) / d >= 0
+            self.inactive = _inactive(g.getArray(readonly=True), w.getArray(readonly=True), d)
             self.h = _fingerprint(comm, lo, self.inactive)
             return self.h
 
