@@ -195,6 +195,36 @@ std::vector<detail::Change<int>> changes(const detail::MultigridKrylov<int>::Col
 }
 }  // namespace
 
+TEST_CASE("one Newton with inner = cg solves again and again (its V-cycle borrows the coarse operators between the nestings)") {
+  const int m = 31;
+  const RowMat A = laplacian_2d(m);
+  const Vec psi = paraboloid(m), q = Vec::Zero(m * m);
+  Options o;
+  o.tol = 1e-10;
+  o.inner = Inner::CG;
+  const Newton<RowMat> cg(A, o, hierarchy_2d(m));
+  o.inner = Inner::Auto;
+  const Newton<RowMat> direct(A, o, hierarchy_2d(m));
+  RowMat B(m * m, m * m);
+  B.setIdentity();
+  B *= 0.3;
+  const Vec c = 0.7 * psi;
+  // nested, polish (finest level only, the operators kept lent), affine ζ (a copy of them), nested again
+  for (int k = 0; k < 2; ++k) {
+    const Vec psi_k = (1.0 + 0.5 * k) * psi;
+    const Result rc = cg.solve(q, Zeta<int>::constant(psi_k)), rd = direct.solve(q, Zeta<int>::constant(psi_k));
+    CHECK(std::string(rc.inner) == "cg");
+    CHECK(rc.status == Status::Converged);
+    CHECK(rc.nit <= 4);
+    CHECK((rc.z - rd.z).lpNorm<Eigen::Infinity>() < 1e-10);
+    const Result pc = cg.polish(q, Zeta<int>::constant(psi_k), rc.z, 1e-12);
+    CHECK(pc.residual <= rc.residual);
+    const Result ac = cg.solve(q, Zeta<int>::affine(B, c)), ad = direct.solve(q, Zeta<int>::affine(B, c));
+    CHECK(ac.status == Status::Converged);
+    CHECK((ac.z - ad.z).lpNorm<Eigen::Infinity>() < 1e-10);
+  }
+}
+
 TEST_CASE("the V-cycle updated by K's changed entries equals the one set up afresh; many changes take the full set-up") {
   const int m = 31, n = m * m;
   const RowMat A = laplacian_2d(m);
@@ -251,6 +281,36 @@ TEST_CASE("the V-cycle updated by K's changed entries equals the one set up afre
     seeded.precondition(r, e_seeded);
     fresh.precondition(r, e_fresh);
     CHECK((e_seeded - e_fresh).norm() <= 1e-12 * e_fresh.norm());
+  }
+  // Borrowed (`borrow`): the hierarchy holds no operators while the V-cycle works; restored,
+  // they are the Galerkin operators of A again, and the V-cycle goes on from its own.
+  {
+    std::vector<RowMat> before;
+    for (const auto& level : levels) before.push_back(level.A);
+    const detail::MultigridKrylov<int>::ColMatrix K_A = A;
+    detail::MultigridKrylov<int> borrowing(below, true, true);
+    borrowing.start_from_hierarchy(K_A.nonZeros());
+    detail::MultigridKrylov<int>::ColMatrix previous = K_A;
+    for (const auto& set : {disc(2), disc(12), disc(3)}) {
+      const detail::MultigridKrylov<int>::ColMatrix K_set = lcp_system(A, set);
+      const auto dK = changes(previous, K_set);
+      REQUIRE(borrowing.setup(K_set, &dK));
+      CHECK(borrowing.lent());
+      for (const auto& level : levels) CHECK(level.A.nonZeros() == 0);
+      detail::MultigridKrylov<int> fresh(below, true);
+      REQUIRE(fresh.setup(K_set));
+      Vec e_borrowing, e_fresh;
+      borrowing.precondition(r, e_borrowing);
+      fresh.precondition(r, e_fresh);
+      CHECK((e_borrowing - e_fresh).norm() <= 1e-12 * e_fresh.norm());
+      borrowing.restore_hierarchy(K_A);
+      CHECK_FALSE(borrowing.lent());
+      for (std::size_t l = 0; l < levels.size(); ++l) {
+        REQUIRE(levels[l].A.nonZeros() == before[l].nonZeros());
+        CHECK((RowMat(levels[l].A - before[l])).norm() <= 1e-13 * before[l].norm());
+      }
+      previous = K_set;
+    }
   }
   // A failed set-up (a NaN in K) is not updated from: the next one is a full set-up.
   detail::MultigridKrylov<int>::ColMatrix bad = K.back();

@@ -181,7 +181,7 @@ class Newton {
     for (auto& level : hierarchy)
       levels_.coarse.push_back(std::make_unique<detail::NewtonLevel<RowMatrix>>(level.A, co));
     detail::Hierarchy<StorageIndex> below{hierarchy.data(), hierarchy.size()};
-    levels_.finest->use_hierarchy(below);
+    levels_.finest->use_hierarchy(below, true);  // the finest level frees the A_l while it solves
     for (auto& level : levels_.coarse) level->use_hierarchy(below = below.below());
   }
 

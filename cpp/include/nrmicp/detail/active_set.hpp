@@ -96,9 +96,11 @@ class ActiveSetSystem {
   using Vector = Eigen::VectorXd;
 
   /// B == nullptr: the (shifted) LCP. The symbolic analysis happens here, once.
-  /// `below`: the levels below this one, for the iterative solve (detail/multigrid.hpp).
+  /// `below`: the levels below this one, for the iterative solve (detail/multigrid.hpp);
+  /// `borrow`: its V-cycle frees their operators while it works (MultigridKrylov; restore_hierarchy).
   template <typename MatrixType>
-  ActiveSetSystem(const MatrixType& A, const RowMatrix* B, Inner inner, Hierarchy<StorageIndex> below = {})
+  ActiveSetSystem(const MatrixType& A, const RowMatrix* B, Inner inner, Hierarchy<StorageIndex> below = {},
+                  bool borrow = false)
       : lcp_(B == nullptr), inner_(inner) {
     if (lcp_ && has_full_diagonal(A))
       use_pattern_of(A);
@@ -109,7 +111,7 @@ class ActiveSetSystem {
     // as a failed coarsest Cholesky or CG breakdown; then the loop falls back). Any other K
     // (a nonsymmetric A, an affine ζ) takes BiCGSTAB (detail/multigrid.hpp).
     if (use_iterative(inner, spd_candidate_, below.levels, A.rows(), K_.nonZeros())) {
-      krylov_ = std::make_unique<MultigridKrylov<StorageIndex>>(below, spd_candidate_);
+      krylov_ = std::make_unique<MultigridKrylov<StorageIndex>>(below, spd_candidate_, borrow);
       krylov_->start_from_hierarchy(K_.nonZeros());  // K holds A's values until the first factorize
     } else
       analyze();
@@ -162,6 +164,13 @@ class ActiveSetSystem {
     if (k <= krylov_->max_iterations()) return k;
     direct_solve(b, z);
     return k;
+  }
+  /// The hierarchy's operators, freed by the V-cycle while it works, formed again (a no-op when
+  /// none are freed): from A's values on K's pattern.
+  void restore_hierarchy() {
+    if (!krylov_ || !krylov_->lent()) return;
+    krylov_->restore_hierarchy(Eigen::Map<const ColMatrix>(K_.rows(), K_.cols(), K_.nonZeros(), K_.outerIndexPtr(),
+                                                           K_.innerIndexPtr(), inactive_value_ptr_));
   }
   const char* inner_name() const { return krylov_ ? krylov_->name() : solver_.name(); }
   /// Whether solve() honours its target (a Krylov solve); a direct one solves exactly whatever it is given.

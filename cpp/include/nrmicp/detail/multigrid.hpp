@@ -51,9 +51,10 @@ struct Level {
 };
 
 /// The levels below a level, owned elsewhere (by nrmicp::Newton): level[0] is the next coarser one.
+/// Not const: the finest level's V-cycle frees and restores the operators A (MultigridKrylov, `borrow`).
 template <typename StorageIndex>
 struct Hierarchy {
-  const Level<StorageIndex>* level = nullptr;
+  Level<StorageIndex>* level = nullptr;
   std::size_t levels = 0;
   Hierarchy below() const { return levels ? Hierarchy{level + 1, levels - 1} : *this; }
 };
@@ -103,8 +104,10 @@ class MultigridKrylov {
 
   /// The hierarchy must outlive this object. `symmetric`: the systems K given to setup are
   /// symmetric (their column storage is their row storage; CG), else a row-major copy of each is
-  /// kept (BiCGSTAB).
-  MultigridKrylov(Hierarchy<StorageIndex> h, bool symmetric) : grid_(h.level), levels_(h.levels), symmetric_(symmetric) {
+  /// kept (BiCGSTAB). `borrow`: the hierarchy's operators A_l become this V-cycle's K_l instead of
+  /// being copied (start_from_hierarchy), and are freed while it works (restore_hierarchy).
+  MultigridKrylov(Hierarchy<StorageIndex> h, bool symmetric, bool borrow = false)
+      : grid_(h.level), levels_(h.levels), symmetric_(symmetric), borrow_(borrow) {
     k_.resize(levels_ + 1);
     bicgstab_.preconditioner().mg = this;
   }
@@ -122,6 +125,7 @@ class MultigridKrylov {
   /// (a Newton step changes the rows and columns of the points that changed sets: a few hundred
   /// of 10⁵–10⁶; add_galerkin_change).
   bool setup(const ColMatrix& K, const std::vector<Change<StorageIndex>>* changes = nullptr) {
+    if (borrow_ && !lent_) free_hierarchy();
     fine_ = &K;
     const bool same_pattern = fine_pattern_ == K.nonZeros();
     if (!symmetric_) copy_rows(K, same_pattern);
@@ -144,13 +148,44 @@ class MultigridKrylov {
 
   /// Takes the hierarchy's own operators (Level::A, the Galerkin ones of the level's A) as those
   /// of a K equal to A with `nnz` stored entries: the first setup then updates them by K − A, or
-  /// recomputes them on their patterns, instead of forming the patterns (and K P) anew.
+  /// recomputes them on their patterns, instead of forming the patterns (and K P) anew. Copied,
+  /// or taken (`borrow`: the hierarchy then holds none until restore_hierarchy).
   void start_from_hierarchy(Eigen::Index nnz) {
-    for (std::size_t l = 0; l < levels_; ++l) k_[l + 1].K = grid_[l].A;
+    for (std::size_t l = 0; l < levels_; ++l) {
+      if (borrow_) k_[l + 1].K.swap(grid_[l].A);
+      else k_[l + 1].K = grid_[l].A;
+    }
+    lent_ = borrow_;
     fine_pattern_ = nnz;
     valid_ = true;
   }
 
+  /// Whether the hierarchy's operators are freed while this V-cycle works (`borrow`).
+  bool lent() const { return lent_; }
+
+  /// The hierarchy's operators formed again, as the Galerkin ones of `A_values` (a column-major
+  /// matrix on K's pattern holding A's values), on the patterns of this V-cycle's K_l, which stay
+  /// as they are (the next setup updates them from the last K). The next setup frees them again.
+  /// A_l and K_l have one pattern and the coarse levels need A_l only for nested iteration, before
+  /// the finest level's solve: not held during it, 74 MB less at 2D amg n = 10⁶, for one pass of
+  /// the Galerkin products a solve (docs/MEASUREMENTS.md).
+  template <typename M>
+  void restore_hierarchy(const M& A_values) {
+    if (!lent_) return;
+    if (!symmetric_) copy_rows(A_values, fine_pattern_ == A_values.nonZeros());  // rows_: K's again at setup
+    for (std::size_t l = 0; l < levels_; ++l) {
+      Level<StorageIndex>& g = grid_[l];
+      auto galerkin = [&](const auto& Al) {
+        g.A = k_[l + 1].K;
+        if (galerkin_values(g.R, Al, g.P, g.A, position_)) return;
+        RowMatrix C = product(g.R, product(Al, g.P));
+        g.A.swap(C);
+      };
+      if (l == 0) galerkin(symmetric_ ? rows(A_values) : rows(rows_));
+      else galerkin(grid_[l - 1].A);
+    }
+    lent_ = false;
+  }
   /// The most changed entries of K (of `nnz`) that setup applies as an update: each costs about
   /// as much as 5 entries of the full product (a search in C's row per term; docs/MEASUREMENTS.md).
   static std::size_t max_changes(Eigen::Index nnz) { return static_cast<std::size_t>(nnz / 8); }
@@ -172,6 +207,15 @@ class MultigridKrylov {
   std::size_t levels() const { return levels_ + 1; }
 
  private:
+  /// The hierarchy's operators freed (restored by restore_hierarchy; `borrow`).
+  void free_hierarchy() {
+    for (std::size_t l = 0; l < levels_; ++l) {
+      RowMatrix none;
+      grid_[l].A.swap(none);
+    }
+    lent_ = true;
+  }
+
   /// 1 / diag of every level and the coarsest factorization, after the operators changed.
   bool finish_setup(const ColMatrix& K) {
     for (std::size_t l = 0; l < levels_; ++l) {
@@ -297,7 +341,8 @@ class MultigridKrylov {
 
   /// rows_ = K in row-major storage; on K's previous pattern only the values are copied
   /// (through to_row_: K's storage position → rows_' storage position).
-  void copy_rows(const ColMatrix& K, bool same_pattern) {
+  template <typename M>
+  void copy_rows(const M& K, bool same_pattern) {
     const StorageIndex* outer = K.outerIndexPtr();
     const StorageIndex* row = K.innerIndexPtr();
     if (!same_pattern || rows_.nonZeros() != K.nonZeros()) {
@@ -356,7 +401,7 @@ class MultigridKrylov {
     Vector r, s, p, Kp;
   };
   mutable CGWork cg_;
-  const Level<StorageIndex>* grid_;       // the levels below: prolongations, restrictions
+  Level<StorageIndex>* grid_;             // the levels below: prolongations, restrictions, A_l
   std::size_t levels_;
   mutable std::vector<KLevel> k_;         // K_0 (= fine_), K_1, ...: the reduced system per level
   Eigen::Index fine_pattern_ = -1;        // nonzeros of the K the patterns were formed for
@@ -366,6 +411,8 @@ class MultigridKrylov {
   std::vector<StorageIndex> position_;    // scratch of product_values
   const ColMatrix* fine_ = nullptr;
   bool symmetric_;
+  bool borrow_;                           // the hierarchy's A_l are freed while this V-cycle works
+  bool lent_ = false;                     // ... and are now (restore_hierarchy forms them again)
   int max_iterations_ = default_max_iterations;
   RowMatrix rows_;                        // K in row-major storage (nonsymmetric K)
   std::vector<StorageIndex> to_row_;      // K's storage position → rows_'

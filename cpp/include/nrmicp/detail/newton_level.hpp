@@ -57,24 +57,38 @@ class NewtonLevel {
 
   /// The levels below this one (level[0]: the next coarser one), for the multigrid-preconditioned
   /// Krylov inner solve; they must outlive this level.
-  void use_hierarchy(Hierarchy<StorageIndex> below) { below_ = below; }
+  /// `borrow`: this level's LCP system frees their operators A_l while it solves (the finest
+  /// level's; restore_hierarchy forms them again before the coarse levels or another system need them).
+  void use_hierarchy(Hierarchy<StorageIndex> below, bool borrow = false) {
+    below_ = below;
+    borrow_ = borrow;
+  }
 
   const MatrixType& matrix() const { return A_; }
   Eigen::Index size() const { return A_.rows(); }
 
   /// The reduced system of the (shifted) LCP, analysed once.
   System& lcp_system() {
-    if (!lcp_system_) lcp_system_ = std::make_unique<System>(A_, nullptr, options_.inner, below_);
+    if (!lcp_system_) lcp_system_ = std::make_unique<System>(A_, nullptr, options_.inner, below_, borrow_);
     return *lcp_system_;
+  }
+  /// The hierarchy's operators, freed by the LCP system's V-cycle, formed again.
+  void restore_hierarchy() {
+    if (lcp_system_) lcp_system_->restore_hierarchy();
   }
   /// Frees what a solve on this level built (the reduced system, the fallback's factorization).
   /// Nested iteration releases each coarse level once its solution is prolongated: the finer
   /// levels' solves then run without them in memory, and the next solve rebuilds them (docs/MEASUREMENTS.md).
   void release() {
+    restore_hierarchy();
     lcp_system_.reset();
     fallback_.reset();
   }
-  std::unique_ptr<System> affine_system(const RowMatrix& B) const { return std::make_unique<System>(A_, &B, options_.inner, below_); }
+  /// A system of the affine ICP (ζ = Bz + c), its V-cycle on copies of the hierarchy's operators.
+  std::unique_ptr<System> affine_system(const RowMatrix& B) {
+    restore_hierarchy();
+    return std::make_unique<System>(A_, &B, options_.inner, below_);
+  }
   const char* inner_name() const { return lcp_system_ ? lcp_system_->inner_name() : "none"; }
 
   /// Res of z; w = Az + q and g = z − ζ(z) (ζ = Bz + c; when B is null ζ = 0, g = z is not written).
@@ -184,6 +198,7 @@ class NewtonLevel {
   }
   std::unique_ptr<System> lcp_system_;
   Hierarchy<StorageIndex> below_;
+  bool borrow_ = false;
   std::optional<Solver<MatrixType>> fallback_;
 };
 

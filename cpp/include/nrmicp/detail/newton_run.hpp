@@ -329,6 +329,7 @@ class NewtonRun {
   /// Nested start for LCP(q_shift, A) in y ≥ 0: Newton on each coarse level to a settled active
   /// set, coarse to fine, each solution prolongated and projected onto y ≥ 0.
   Vector nested_start(const Vector& q_shift) {
+    levels_.finest->restore_hierarchy();  // the coarse levels solve on the A_l its V-cycle freed
     const std::size_t L = levels_.coarse.size();
     std::vector<Vector> qs(L + 1);
     qs[0] = q_shift;

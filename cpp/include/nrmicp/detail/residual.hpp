@@ -28,11 +28,13 @@ struct ResidualSum {
 };
 
 /// ‖m‖₂ without overflow or underflow: scaled by the largest |mᵢ| (two passes; for the rare
-/// cases ResidualSum cannot take, |mᵢ| beyond about 1e154 or all below about 1e-120).
-inline double stable_norm(const Eigen::VectorXd& m) {
+/// cases ResidualSum cannot take, |mᵢ| beyond about 1e154 or all below about 1e-120). m may be an
+/// expression (min(w, g), |z| + |ζ(z)|): it is read twice, never formed as an n-vector.
+template <typename Derived>
+double stable_norm(const Eigen::MatrixBase<Derived>& m) {
   const double scale = m.cwiseAbs().maxCoeff();
   if (!(scale > 0) || !std::isfinite(scale)) return m.size() ? std::sqrt(m.squaredNorm()) : 0.0;
-  return scale * (m / scale).norm();
+  return scale * std::sqrt((m / scale).squaredNorm());
 }
 
 /// Res = ‖min(w, g)‖₂ of whole vectors w = Az + q, g = z − ζ(z), without overflow or underflow.
