@@ -364,6 +364,50 @@ TEST_CASE("inner = cg on a nonsymmetric A: BiCGSTAB preconditioned by the V-cycl
   CHECK((rk.z - ref).lpNorm<Eigen::Infinity>() < 1e-8);
 }
 
+TEST_CASE("inner = cg on a nonsymmetric A: one Newton solves again (the coarse operators formed again from A's rows)") {
+  const int m = 31;
+  const RowMat A = convection_2d(m, 40.0, 20.0);
+  const Vec psi = paraboloid(m), q = Vec::Zero(m * m);
+  Options o;
+  o.tol = 1e-10;
+  o.inner = Inner::CG;
+  const Newton<RowMat> krylov(A, o, hierarchy_2d(m));
+  o.inner = Inner::Umfpack;
+  const Newton<RowMat> direct(A, o, hierarchy_2d(m));
+  const Result first = krylov.solve(q, Zeta<int>::constant(psi));
+  for (double scale : {1.5, 1.0}) {
+    const Result rk = krylov.solve(q, Zeta<int>::constant(scale * psi));
+    const Result rd = direct.solve(q, Zeta<int>::constant(scale * psi));
+    CHECK(std::string(rk.inner) == "bicgstab");
+    CHECK(rk.status == Status::Converged);
+    CHECK((rk.z - rd.z).lpNorm<Eigen::Infinity>() < 1e-10);
+  }
+  // The operators formed again are A's Galerkin ones (read through the row copy of a nonsymmetric K).
+  std::vector<detail::Level<int>> levels;
+  RowMat coarse = A;
+  for (const RowMat& P : hierarchy_2d(m)) {
+    detail::Level<int> level{P, RowMat(P.transpose()), {}};
+    level.A = detail::product(level.R, detail::product(coarse, level.P));
+    coarse = level.A;
+    levels.push_back(level);
+  }
+  const std::vector<detail::Level<int>> before = levels;
+  const detail::MultigridKrylov<int>::ColMatrix K_A = A;
+  std::vector<char> inactive(m * m, 1);
+  for (int i = 0; i < m * m; i += 3) inactive[i] = 0;
+  const detail::MultigridKrylov<int>::ColMatrix K_set = lcp_system(A, inactive);
+  detail::MultigridKrylov<int> borrowing({levels.data(), levels.size()}, false, true);
+  borrowing.start_from_hierarchy(K_A.nonZeros());
+  REQUIRE(borrowing.setup(K_set));
+  borrowing.restore_hierarchy(K_A);
+  for (std::size_t l = 0; l < levels.size(); ++l)
+    CHECK((RowMat(levels[l].A - before[l].A)).norm() <= 1e-13 * before[l].A.norm());
+  const Result again = krylov.solve(q, Zeta<int>::constant(psi));   // the same coarse problems as the first
+  CHECK(again.newton.level_steps == first.newton.level_steps);
+  CHECK(again.newton.linear_solves == first.newton.linear_solves);
+  CHECK((again.z - first.z).lpNorm<Eigen::Infinity>() < 1e-12);
+}
+
 TEST_CASE("a Krylov solve that does not converge is redone by the direct solve: the exact step") {
   const int m = 15;
   const RowMat A = convection_2d(m, 40.0, 20.0);

@@ -150,6 +150,12 @@ class NewtonLevel {
     inactive.resize(static_cast<std::size_t>(w.size()));
     for (Eigen::Index i = 0; i < w.size(); ++i) inactive[i] = is_inactive(w, g, i);
   }
+  /// Whether (w, g)'s inactive set is `inactive`, without storing it.
+  bool has_active_set(const Vector& w, const Vector& g, const std::vector<char>& inactive) const {
+    for (Eigen::Index i = 0; i < w.size(); ++i)
+      if (static_cast<bool>(inactive[i]) != is_inactive(w, g, i)) return false;
+    return true;
+  }
   /// The number of active points of (w, g) (the complement of active_set's), without storing the set.
   std::size_t active_count(const Vector& w, const Vector& g) const {
     std::size_t k = 0;

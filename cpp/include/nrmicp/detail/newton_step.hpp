@@ -142,8 +142,7 @@ class NewtonStep {
     level_.active_set(w_new_, z_new_, before_);
     lin_.smooth(z_new_, sweeps);
     r_new_ = lin_.evaluate(z_new_, w_new_, g_new_, zeta_new_);
-    level_.active_set(w_new_, z_new_, after_);
-    return before_ != after_;
+    return !level_.has_active_set(w_new_, z_new_, before_);
   }
   /// Res of the trial z⁺.
   double trial_residual() const { return r_new_; }
@@ -184,7 +183,7 @@ class NewtonStep {
   NewtonLevel<MatrixType>& level_;
   Linearization lin_;
   Vector z_, w_, g_, zeta_z_, z_new_, w_new_, g_new_, zeta_new_;
-  std::vector<char> before_, after_;  // the trial's active set before and after smooth()
+  std::vector<char> before_;  // the trial's active set before smooth()
   double r_ = 0, r_new_ = 0;
   int steps_ = 0, solves_ = 0;
   long long inner_iterations_ = 0;
