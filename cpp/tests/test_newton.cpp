@@ -193,9 +193,22 @@ std::vector<detail::Change<int>> changes(const detail::MultigridKrylov<int>::Col
         out.push_back({now.innerIndexPtr()[p], j, now.valuePtr()[p] - before.valuePtr()[p]});
   return out;
 }
+
+/// The levels of hierarchy_2d(m) below A, each with its Galerkin operator.
+std::vector<detail::Level<int>> galerkin_levels(const RowMat& A, int m) {
+  std::vector<detail::Level<int>> levels;
+  RowMat coarse = A;
+  for (const RowMat& P : hierarchy_2d(m)) {
+    detail::Level<int> level{P, RowMat(P.transpose()), {}};
+    level.A = detail::product(level.R, detail::product(coarse, level.P));
+    coarse = level.A;
+    levels.push_back(level);
+  }
+  return levels;
+}
 }  // namespace
 
-TEST_CASE("one Newton with inner = cg solves again and again (its V-cycle borrows the coarse operators between the nestings)") {
+TEST_CASE("one Newton with inner = cg solves again and again (its V-cycle frees the coarse operators while the finest level solves)") {
   const int m = 31;
   const RowMat A = laplacian_2d(m);
   const Vec psi = paraboloid(m), q = Vec::Zero(m * m);
@@ -228,14 +241,7 @@ TEST_CASE("one Newton with inner = cg solves again and again (its V-cycle borrow
 TEST_CASE("the V-cycle updated by K's changed entries equals the one set up afresh; many changes take the full set-up") {
   const int m = 31, n = m * m;
   const RowMat A = laplacian_2d(m);
-  std::vector<detail::Level<int>> levels;
-  RowMat coarse = A;
-  for (const RowMat& P : hierarchy_2d(m)) {
-    detail::Level<int> level{P, RowMat(P.transpose()), {}};
-    level.A = detail::product(level.R, detail::product(coarse, level.P));
-    coarse = level.A;
-    levels.push_back(level);
-  }
+  std::vector<detail::Level<int>> levels = galerkin_levels(A, m);
   const detail::Hierarchy<int> below{levels.data(), levels.size()};
   // Active sets: a disc growing by a few points a step, then all but one point flipped (more
   // changes than max_changes: the full set-up), then a small change again.
@@ -383,14 +389,7 @@ TEST_CASE("inner = cg on a nonsymmetric A: one Newton solves again (the coarse o
     CHECK((rk.z - rd.z).lpNorm<Eigen::Infinity>() < 1e-10);
   }
   // The operators formed again are A's Galerkin ones (read through the row copy of a nonsymmetric K).
-  std::vector<detail::Level<int>> levels;
-  RowMat coarse = A;
-  for (const RowMat& P : hierarchy_2d(m)) {
-    detail::Level<int> level{P, RowMat(P.transpose()), {}};
-    level.A = detail::product(level.R, detail::product(coarse, level.P));
-    coarse = level.A;
-    levels.push_back(level);
-  }
+  std::vector<detail::Level<int>> levels = galerkin_levels(A, m);
   const std::vector<detail::Level<int>> before = levels;
   const detail::MultigridKrylov<int>::ColMatrix K_A = A;
   std::vector<char> inactive(m * m, 1);
