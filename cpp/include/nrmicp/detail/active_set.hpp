@@ -168,9 +168,9 @@ class ActiveSetSystem {
   /// The hierarchy's operators, freed by the V-cycle while it works, formed again (a no-op when
   /// none are freed): from A's values on K's pattern.
   void restore_hierarchy() {
-    if (!krylov_ || !krylov_->lent()) return;
-    krylov_->restore_hierarchy(Eigen::Map<const ColMatrix>(K_.rows(), K_.cols(), K_.nonZeros(), K_.outerIndexPtr(),
-                                                           K_.innerIndexPtr(), inactive_value_ptr_));
+    if (krylov_)
+      krylov_->restore_hierarchy(Eigen::Map<const ColMatrix>(K_.rows(), K_.cols(), K_.nonZeros(), K_.outerIndexPtr(),
+                                                             K_.innerIndexPtr(), inactive_value_ptr_));
   }
   const char* inner_name() const { return krylov_ ? krylov_->name() : solver_.name(); }
   /// Whether solve() honours its target (a Krylov solve); a direct one solves exactly whatever it is given.

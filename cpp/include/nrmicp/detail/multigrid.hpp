@@ -131,14 +131,8 @@ class MultigridKrylov {
     if (!symmetric_) copy_rows(K, same_pattern);
     if (!(same_pattern && changes && valid_ && update_galerkin(*changes))) {
       for (std::size_t l = 0; l < levels_; ++l) {
-        auto galerkin = [&](const auto& Kl) {
-          const Level<StorageIndex>& g = grid_[l];
-          if (same_pattern && galerkin_values(g.R, Kl, g.P, k_[l + 1].K, position_)) return;
-          RowMatrix C = product(g.R, product(Kl, g.P));
-          k_[l + 1].K.swap(C);   // Eigen 3.4's SparseMatrix has no move assignment: = would copy
-        };
-        if (l == 0) galerkin(fine());
-        else galerkin(k_[l].K);
+        if (l == 0) galerkin(0, fine(), k_[1].K, same_pattern);
+        else galerkin(l, k_[l].K, k_[l + 1].K, same_pattern);
       }
     }
     fine_pattern_ = K.nonZeros();
@@ -174,15 +168,9 @@ class MultigridKrylov {
     if (!lent_) return;
     if (!symmetric_) copy_rows(A_values, fine_pattern_ == A_values.nonZeros());  // rows_: K's again at setup
     for (std::size_t l = 0; l < levels_; ++l) {
-      Level<StorageIndex>& g = grid_[l];
-      auto galerkin = [&](const auto& Al) {
-        g.A = k_[l + 1].K;
-        if (galerkin_values(g.R, Al, g.P, g.A, position_)) return;
-        RowMatrix C = product(g.R, product(Al, g.P));
-        g.A.swap(C);
-      };
-      if (l == 0) galerkin(symmetric_ ? rows(A_values) : rows(rows_));
-      else galerkin(grid_[l - 1].A);
+      grid_[l].A = k_[l + 1].K;   // its pattern
+      if (l == 0) galerkin(0, symmetric_ ? rows(A_values) : rows(rows_), grid_[0].A, true);
+      else galerkin(l, grid_[l - 1].A, grid_[l].A, true);
     }
     lent_ = false;
   }
@@ -207,6 +195,16 @@ class MultigridKrylov {
   std::size_t levels() const { return levels_ + 1; }
 
  private:
+  /// C = P_lᵀ `finer` P_l, the Galerkin operator of level l's finer one: only its values when
+  /// `keep_pattern` and every term falls inside C's pattern, else C formed anew.
+  template <typename M>
+  void galerkin(std::size_t l, const M& finer, RowMatrix& C, bool keep_pattern) {
+    const Level<StorageIndex>& g = grid_[l];
+    if (keep_pattern && galerkin_values(g.R, finer, g.P, C, position_)) return;
+    RowMatrix formed = product(g.R, product(finer, g.P));
+    C.swap(formed);   // Eigen 3.4's SparseMatrix has no move assignment: = would copy
+  }
+
   /// The hierarchy's operators freed (restored by restore_hierarchy; `borrow`).
   void free_hierarchy() {
     for (std::size_t l = 0; l < levels_; ++l) {
