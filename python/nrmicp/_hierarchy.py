@@ -281,6 +281,8 @@ def _levels(A, kw) -> list:
     # Folding the 2D 5-point first level (not denser) took 14 finest steps instead of 4 (n = 10⁶);
     # θ = 0.5 changed nothing on the 7-point stencil (all its connections are equally strong);
     # PMIS with direct interpolation took 18-26 finest steps.
+    # Aggressive coarsening of the auxiliary level (n/4 on the 5-point grid, bilinear P) took 8
+    # finest steps on P1/P2 instead of 5 (docs/MEASUREMENTS.md, "The algebraic hierarchy on grids").
     # "denser" = 1.2x A's nonzeros: 7-point 3D gives 1.26-1.33; P1 on the Delaunay disk 1.01-1.07,
     # where folding took 7 finest steps instead of 5 at n = 8,000
     dense = len(out) == 1 and A.nnz > 1.2 * A_fine.nnz
