@@ -167,3 +167,21 @@ def test_amg_prolongations_of_p2_are_nonnegative_and_exact_for_constants_inside(
     assert inside.sum() > 0.2 * A.shape[0]
     sums = np.asarray(Ps[0].sum(axis=1)).ravel()
     assert np.allclose(sums[inside], 1.0)
+
+
+def test_scikit_fem_example_runs_and_both_hierarchies_agree():
+    # the README points scikit-fem users to this example: it must run as shipped
+    import os
+    import re
+    import subprocess
+    path = os.path.join(os.path.dirname(__file__), "..", "examples", "scikit_fem_hierarchy.py")
+    out = subprocess.run([sys.executable, path], capture_output=True, text=True, timeout=600,
+                         env=dict(os.environ, OPENBLAS_NUM_THREADS="1"))
+    assert out.returncode == 0, out.stderr
+    solves = re.findall(r"(mesh hierarchy|algebraic \(amg\)) +n = (\d+): (.*?); finest-level steps (\d+),.* Res (\S+)", out.stdout)
+    contacts = [int(c) for c in re.findall(r"contact at (\d+) nodes", out.stdout)]
+    assert [s[0] for s in solves] == ["mesh hierarchy", "algebraic (amg)"], out.stdout
+    for name, n, message, steps, res in solves:
+        assert message.startswith("converged") and float(res) < 1e-9, (name, message, res)
+        assert int(steps) <= 6, (name, steps)
+    assert len(contacts) == 2 and contacts[0] == contacts[1] > 0, out.stdout
