@@ -1,0 +1,57 @@
+"""The README's tables each name the one command that reproduces them: those scripts must run as
+shipped. Each runs here on its smallest case (seconds; the tables' sizes belong in benchmarks) and
+its output is checked for converged rows, not for timings."""
+import json
+import os
+import re
+import subprocess
+import sys
+
+import pytest
+
+ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+
+
+def run(script, *args):
+    out = subprocess.run([sys.executable, os.path.join(ROOT, "benchmarks", script), *args], capture_output=True,
+                         text=True, timeout=900, env=dict(os.environ, OPENBLAS_NUM_THREADS="1"))
+    assert out.returncode == 0, out.stderr[-3000:]
+    return out.stdout
+
+
+def table_rows(text):
+    """The markdown table's body rows, as lists of cells."""
+    rows = [ln for ln in text.splitlines() if ln.startswith("|") and not ln.startswith("|---")]
+    return [[c.strip() for c in ln.strip("|").split("|")] for ln in rows[1:]]
+
+
+def test_mesh_independent_obstacle_table(tmp_path):
+    # README "Mesh-independent solves": the obstacle table's command, on n = 961 (2D) and 29,791 (3D)
+    out = tmp_path / "mi"
+    run("mesh_independent.py", "--sections", "obstacle", "--dims", "2d", "3d", "--m", "31",
+        "--peers", "newton-geo", "newton-amg", "psor", "nrmgs+aa", "--budget", "30", "--out", str(out))
+    rows = table_rows(open(f"{out}.md", encoding="utf-8").read())
+    assert [r[0] for r in rows] == ["obstacle_2d", "obstacle_3d"]
+    for r in rows:
+        # newton cells: "s, steps / solves, MB"; the others "s, iterations it, MB"
+        assert all(re.match(r"[\d.]+ s, \d+ / \d+, \d+ MB$", c) for c in r[2:4]), r
+        assert all(re.match(r"[\d.]+ s, \d+ it, \d+ MB$", c) for c in r[4:6]), r
+
+
+def test_finite_elements_table():
+    # README "Finite-element matrices": the command, on its quick P1 sizes (n = 8,065 and 32,513)
+    text = run("finite_elements.py", "--quick", "--cases", "P1", "--budget", "30")
+    rows = table_rows(text)
+    assert [r[1] for r in rows] == ["8065", "32513"]
+    for r in rows:
+        assert all("st /" in c and "(" not in c for c in r[2:4]), r     # converged: no status in brackets
+        assert all(re.match(r"[\d.]+ s, \d+ it, \d+ MB$", c) for c in r[4:6]), r
+
+
+@pytest.mark.parametrize("scene", ["convection_2d", "convection_3d"])
+def test_newton_inner_table(scene):
+    # README "Newton's inner solve": direct and Krylov inner solves reach the same Res target
+    lines = [json.loads(ln) for ln in run("newton_inner.py", "--scene", scene, "--m", "15", "--inner",
+                                          "umfpack", "cg").splitlines() if ln.startswith("{")]
+    assert [ln["inner"] for ln in lines] == ["umfpack", "bicgstab"]
+    assert all(ln["status"] == "CONVERGED" and ln["residual"] < 1e-8 for ln in lines), lines
