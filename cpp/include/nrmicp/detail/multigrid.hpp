@@ -219,6 +219,7 @@ class MultigridKrylov {
     for (std::size_t l = 0; l < levels_; ++l) {
       k_[l].inv_diag = (l == 0 ? Vector(K.diagonal()) : Vector(k_[l].K.diagonal())).cwiseInverse();
       if (!k_[l].inv_diag.allFinite()) return false;
+      if (!symmetric_) k_[l].reach = l == 0 ? reach_of(rows_) : reach_of(k_[l].K);
     }
     const ColMatrix coarsest = levels_ == 0 ? K : ColMatrix(k_.back().K);
     try {
@@ -396,19 +397,53 @@ class MultigridKrylov {
     }
   }
 
+  /// The same for any M (row-major, read by rows): row i's residual −Σ_{k>i} m_ik e_k is final once
+  /// e is known up to i + `reach` (M's largest column − row), so it is formed `reach` rows behind
+  /// the sweep, while row i is still in cache (a grid's reach is a line or a plane of unknowns).
+  template <typename M>
+  static void sweep_from_zero_with_lagged_residual(const M& A, const Vector& inv_diag, const Vector& r, Vector& e,
+                                                   Vector& res, Eigen::Index reach) {
+    const Eigen::Index n = A.rows();
+    const StorageIndex* outer = A.outerIndexPtr();
+    const StorageIndex* col = A.innerIndexPtr();
+    const double* v = A.valuePtr();
+    e.setZero(n);
+    res.resize(n);
+    auto residual_row = [&](Eigen::Index i) {
+      double s = 0.0;
+      for (StorageIndex p = outer[i]; p < outer[i + 1]; ++p)
+        if (col[p] > i) s -= v[p] * e[col[p]];
+      res[i] = s;
+    };
+    for (Eigen::Index j = 0; j < n; ++j) {
+      double sum = r[j];
+      for (StorageIndex p = outer[j]; p < outer[j + 1]; ++p) sum -= v[p] * e[col[p]];   // e is 0 right of j
+      e[j] = sum * inv_diag[j];
+      if (j >= reach) residual_row(j - reach);
+    }
+    for (Eigen::Index i = std::max<Eigen::Index>(n - reach, 0); i < n; ++i) residual_row(i);
+  }
+
+  /// The largest column − row of M's entries (0 for a lower-triangular M).
+  template <typename M>
+  static Eigen::Index reach_of(const M& A) {
+    const StorageIndex* outer = A.outerIndexPtr();
+    const StorageIndex* col = A.innerIndexPtr();
+    Eigen::Index reach = 0;
+    for (Eigen::Index i = 0; i < A.rows(); ++i)
+      for (StorageIndex p = outer[i]; p < outer[i + 1]; ++p) reach = std::max<Eigen::Index>(reach, col[p] - i);
+    return reach;
+  }
+
   /// e ≈ K_l⁻¹ r: one V-cycle on level l.
   void vcycle(std::size_t l, const Vector& r, Vector& e) const {
     if (l == levels_) { coarsest_.solve(r, e); return; }
     KLevel& k = k_[l];
     auto smooth_and_correct = [&](const auto& A) {
-      if (symmetric_) {
+      if (symmetric_)
         sweep_from_zero_with_residual(A, k.inv_diag, r, e, k.res);
-      } else {
-        e.setZero(r.size());
-        gauss_seidel(A, k.inv_diag, r, e, true);
-        k.res.noalias() = A * e;
-        k.res = r - k.res;
-      }
+      else
+        sweep_from_zero_with_lagged_residual(A, k.inv_diag, r, e, k.res, k.reach);
       k.rc.noalias() = grid_[l].R * k.res;
       vcycle(l + 1, k.rc, k.ec);
       e.noalias() += grid_[l].P * k.ec;
@@ -423,6 +458,7 @@ class MultigridKrylov {
   struct KLevel {
     RowMatrix K;
     Vector inv_diag, res, rc, ec;
+    Eigen::Index reach = 0;   // nonsymmetric K_l: its largest column − row (the lagged residual's)
   };
   struct CGWork {
     Vector r, s, p, Kp;
