@@ -426,30 +426,62 @@ static Vec textbook_vcycle(const std::vector<Eigen::MatrixXd>& K, const std::vec
   return e;
 }
 
-TEST_CASE("one V-cycle is the textbook one (the symmetric forward sweep leaves its residual in the same pass)") {
+/// convection_2d(m) with couplings three lines ahead, k_{i,i+3m} = −w (diagonal raised by w):
+/// its rows reach 3m right of the diagonal and m left, unlike its columns.
+RowMat lopsided_2d(int m, double w) {
+  RowMat C(m * m, m * m);
+  std::vector<Eigen::Triplet<double>> t;
+  for (int i = 0; i < m * m; ++i)
+    if (i + 3 * m < m * m) {
+      t.emplace_back(i, i + 3 * m, -w);
+      t.emplace_back(i, i, w);
+    }
+  C.setFromTriplets(t.begin(), t.end());
+  return RowMat(convection_2d(m, 40.0, 20.0) + C);
+}
+
+TEST_CASE("one V-cycle is the textbook one: the forward sweep leaves its residual in the same pass (symmetric) or rows behind it (nonsymmetric), after set-up, update, borrow and restore") {
   const int m = 15, n = m * m;
   Vec r(n);
   for (int i = 0; i < n; ++i) r[i] = std::cos(0.41 * i) - 0.2;
-  std::vector<char> inactive(n, 1);
-  for (int i = 0; i < n; i += 5) inactive[i] = 0;
-  for (const bool symmetric : {true, false}) {
-    CAPTURE(symmetric);
-    const RowMat A = symmetric ? laplacian_2d(m) : convection_2d(m, 40.0, 20.0);
+  std::vector<char> first(n, 1), second(n, 1);
+  for (int i = 0; i < n; i += 5) first[i] = 0;
+  for (int i = 0; i < n; i += 7) second[i] = 0;
+  for (const int kind : {0, 1, 2}) {   // symmetric, nonsymmetric, nonsymmetric with rows reaching 3m
+    CAPTURE(kind);
+    const bool symmetric = kind == 0;
+    const RowMat A = kind == 0 ? laplacian_2d(m) : kind == 1 ? convection_2d(m, 40.0, 20.0) : lopsided_2d(m, 30.0);
     std::vector<detail::Level<int>> levels = galerkin_levels(A, m);
-    const detail::MultigridKrylov<int>::ColMatrix K = lcp_system(A, inactive);
-    detail::MultigridKrylov<int> cycle({levels.data(), levels.size()}, symmetric);
-    REQUIRE(cycle.setup(K));
-    std::vector<Eigen::MatrixXd> Kd{Eigen::MatrixXd(K)}, Pd;
-    for (const auto& level : levels) {
-      Pd.emplace_back(level.P);
-      Kd.push_back(Pd.back().transpose() * Kd.back() * Pd.back());
-    }
-    Vec e;
-    cycle.precondition(r, e);
-    const Vec ref = textbook_vcycle(Kd, Pd, 0, r);
-    CHECK((e - ref).norm() <= 1e-11 * ref.norm());
-    cycle.precondition(r, e);   // again: no state left from the first application
-    CHECK((e - ref).norm() <= 1e-11 * ref.norm());
+    const detail::Hierarchy<int> below{levels.data(), levels.size()};
+    auto check = [&](const detail::MultigridKrylov<int>& cycle, const detail::MultigridKrylov<int>::ColMatrix& K) {
+      std::vector<Eigen::MatrixXd> Kd{Eigen::MatrixXd(K)}, Pd;
+      for (const auto& level : levels) {
+        Pd.emplace_back(level.P);
+        Kd.push_back(Pd.back().transpose() * Kd.back() * Pd.back());
+      }
+      const Vec ref = textbook_vcycle(Kd, Pd, 0, r);
+      Vec e;
+      cycle.precondition(r, e);
+      CHECK((e - ref).norm() <= 1e-11 * ref.norm());
+      cycle.precondition(r, e);   // again: no state left from the first application
+      CHECK((e - ref).norm() <= 1e-11 * ref.norm());
+    };
+    const detail::MultigridKrylov<int>::ColMatrix K_A = A, K1 = lcp_system(A, first), K2 = lcp_system(A, second);
+    const auto to_second = changes(K1, K2);
+    detail::MultigridKrylov<int> fresh(below, symmetric);
+    REQUIRE(fresh.setup(K1));
+    check(fresh, K1);
+    REQUIRE(fresh.setup(K2, &to_second));   // updated by K's changes
+    check(fresh, K2);
+    // borrowing the hierarchy's operators, then forming them again from A and updating once more
+    detail::MultigridKrylov<int> borrowing(below, symmetric, true);
+    borrowing.start_from_hierarchy(K_A.nonZeros());
+    const auto from_A = changes(K_A, K1);
+    REQUIRE(borrowing.setup(K1, &from_A));
+    check(borrowing, K1);
+    borrowing.restore_hierarchy(K_A);
+    REQUIRE(borrowing.setup(K2, &to_second));
+    check(borrowing, K2);
   }
 }
 

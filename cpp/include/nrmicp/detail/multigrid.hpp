@@ -376,7 +376,8 @@ class MultigridKrylov {
   /// res = r − M e = −(strict upper part of M) e, in one pass over a symmetric M: row j's entries
   /// left of the diagonal are column j's above it, so once e_j is known they scatter −m_ij e_j
   /// into res_i (i < j). One read of M less per level and V-cycle than a sweep and a product
-  /// (docs/MEASUREMENTS.md, "fused sweep").
+  /// (docs/MEASUREMENTS.md, "fused sweep"). Exact only for a plain sweep (inv_diag = 1 / diag(M):
+  /// the lower part's residual it drops is zero then); a damped one needs the product again.
   template <typename M>
   static void sweep_from_zero_with_residual(const M& A, const Vector& inv_diag, const Vector& r, Vector& e,
                                             Vector& res) {
