@@ -357,9 +357,13 @@ class MultigridKrylov {
     for (Eigen::Index p = 0; p < K.nonZeros(); ++p) w[to_row_[p]] = v[p];
   }
 
-  /// One Gauss–Seidel sweep on M e = r, forward or backward.
-  template <typename M>
-  static void gauss_seidel(const M& A, const Vector& inv_diag, const Vector& r, Vector& e, bool forward) {
+  /// One Gauss–Seidel sweep on M e = r, forward or backward; `after_row(i)` runs once e_i is new.
+  struct NoHook {
+    void operator()(Eigen::Index) const {}
+  };
+  template <typename M, typename AfterRow = NoHook>
+  static void gauss_seidel(const M& A, const Vector& inv_diag, const Vector& r, Vector& e, bool forward,
+                           AfterRow after_row = {}) {
     const Eigen::Index n = A.rows();
     const StorageIndex* outer = A.outerIndexPtr();
     const StorageIndex* col = A.innerIndexPtr();
@@ -369,60 +373,44 @@ class MultigridKrylov {
       double sum = r[i];
       for (StorageIndex p = outer[i]; p < outer[i + 1]; ++p) sum -= v[p] * e[col[p]];
       e[i] += sum * inv_diag[i];
+      after_row(i);
     }
   }
 
-  /// The forward Gauss–Seidel sweep on M e = r from e = 0 and the residual it leaves,
-  /// res = r − M e = −(strict upper part of M) e, in one pass over a symmetric M: row j's entries
-  /// left of the diagonal are column j's above it, so once e_j is known they scatter −m_ij e_j
-  /// into res_i (i < j). One read of M less per level and V-cycle than a sweep and a product
-  /// (docs/MEASUREMENTS.md, "fused sweep"). Exact only for a plain sweep (inv_diag = 1 / diag(M):
-  /// the lower part's residual it drops is zero then); a damped one needs the product again.
+  /// The pre-smoothing of level l: the forward sweep on M e = r from e = 0 and the residual it
+  /// leaves, res = r − M e = −(strict upper part of M) e, without a second read of M (docs/
+  /// MEASUREMENTS.md, "fused sweep"). A symmetric M: row j's entries left of the diagonal are column
+  /// j's above it, so once e_j is known they scatter −m_ij e_j into res_i (i < j). Any M: row i's
+  /// residual is final once e is known up to i + reach (M's largest column − row), so it is formed
+  /// that many rows behind the sweep, while row i is still in cache (a grid's reach is a line or a
+  /// plane of unknowns). Exact only for a plain sweep (inv_diag = 1 / diag(M): the lower part's
+  /// residual it drops is zero then); a damped one needs the product again.
   template <typename M>
-  static void sweep_from_zero_with_residual(const M& A, const Vector& inv_diag, const Vector& r, Vector& e,
-                                            Vector& res) {
+  void presmooth(const M& A, const Vector& inv_diag, Eigen::Index reach, const Vector& r, Vector& e, Vector& res) const {
     const Eigen::Index n = A.rows();
     const StorageIndex* outer = A.outerIndexPtr();
     const StorageIndex* col = A.innerIndexPtr();
     const double* v = A.valuePtr();
     e.setZero(n);
     res.resize(n);
-    for (Eigen::Index j = 0; j < n; ++j) {
-      res[j] = 0.0;
-      double sum = r[j];
-      for (StorageIndex p = outer[j]; p < outer[j + 1]; ++p) sum -= v[p] * e[col[p]];   // e is 0 right of j
-      const double ej = sum * inv_diag[j];
-      e[j] = ej;
-      for (StorageIndex p = outer[j]; p < outer[j + 1]; ++p)
-        if (col[p] < j) res[col[p]] -= v[p] * ej;
+    if (symmetric_) {
+      gauss_seidel(A, inv_diag, r, e, true, [&](Eigen::Index j) {
+        res[j] = 0.0;   // rows after j add to it
+        for (StorageIndex p = outer[j]; p < outer[j + 1]; ++p)
+          if (col[p] < j) res[col[p]] -= v[p] * e[j];
+      });
+      return;
     }
-  }
-
-  /// The same for any M (row-major, read by rows): row i's residual −Σ_{k>i} m_ik e_k is final once
-  /// e is known up to i + `reach` (M's largest column − row), so it is formed `reach` rows behind
-  /// the sweep, while row i is still in cache (a grid's reach is a line or a plane of unknowns).
-  template <typename M>
-  static void sweep_from_zero_with_lagged_residual(const M& A, const Vector& inv_diag, const Vector& r, Vector& e,
-                                                   Vector& res, Eigen::Index reach) {
-    const Eigen::Index n = A.rows();
-    const StorageIndex* outer = A.outerIndexPtr();
-    const StorageIndex* col = A.innerIndexPtr();
-    const double* v = A.valuePtr();
-    e.setZero(n);
-    res.resize(n);
-    auto residual_row = [&](Eigen::Index i) {
+    auto upper_residual = [&](Eigen::Index i) {
       double s = 0.0;
       for (StorageIndex p = outer[i]; p < outer[i + 1]; ++p)
         if (col[p] > i) s -= v[p] * e[col[p]];
       res[i] = s;
     };
-    for (Eigen::Index j = 0; j < n; ++j) {
-      double sum = r[j];
-      for (StorageIndex p = outer[j]; p < outer[j + 1]; ++p) sum -= v[p] * e[col[p]];   // e is 0 right of j
-      e[j] = sum * inv_diag[j];
-      if (j >= reach) residual_row(j - reach);
-    }
-    for (Eigen::Index i = std::max<Eigen::Index>(n - reach, 0); i < n; ++i) residual_row(i);
+    gauss_seidel(A, inv_diag, r, e, true, [&](Eigen::Index j) {
+      if (j >= reach) upper_residual(j - reach);
+    });
+    for (Eigen::Index i = std::max<Eigen::Index>(n - reach, 0); i < n; ++i) upper_residual(i);
   }
 
   /// The largest column − row of M's entries (0 for a lower-triangular M).
@@ -441,10 +429,7 @@ class MultigridKrylov {
     if (l == levels_) { coarsest_.solve(r, e); return; }
     KLevel& k = k_[l];
     auto smooth_and_correct = [&](const auto& A) {
-      if (symmetric_)
-        sweep_from_zero_with_residual(A, k.inv_diag, r, e, k.res);
-      else
-        sweep_from_zero_with_lagged_residual(A, k.inv_diag, r, e, k.res, k.reach);
+      presmooth(A, k.inv_diag, k.reach, r, e, k.res);
       k.rc.noalias() = grid_[l].R * k.res;
       vcycle(l + 1, k.rc, k.ec);
       e.noalias() += grid_[l].P * k.ec;
