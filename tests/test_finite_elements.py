@@ -68,6 +68,40 @@ def test_loose_steps_with_cg_reach_tol_and_the_exact_answer(build):
     assert np.abs(loose.z - exact.z).max() <= 1e-8 * max(1.0, np.abs(exact.z).max())
 
 
+def two_materials(r):
+    """P1 membrane on the disk-like polygon, stiffness 1000x larger for x > 0.1, pressed onto a small
+    cap ψ = 0.02 − |x − (0.3, 0.2)|² (contact on about 0.3% of the nodes): (A, q, ψ)."""
+    import skfem
+    from skfem.helpers import dot, grad
+
+    basis = skfem.Basis(skfem.MeshTri.init_circle(3).refined(r), skfem.ElementTriP1())
+
+    @skfem.BilinearForm
+    def stiffness(u, v, w):
+        return (1.0 + 999.0 * (w.x[0] > 0.1)) * dot(grad(u), grad(v))
+
+    inner = basis.complement_dofs(basis.get_dofs())
+    A = sp.csr_matrix(skfem.asm(stiffness, basis)[inner][:, inner])
+    q = np.asarray(skfem.asm(skfem.LinearForm(lambda v, w: 1.0 * v), basis))[inner]
+    x, y = basis.doflocs[:, inner]
+    return A, q, 0.02 - (x - 0.3) ** 2 - (y - 0.2) ** 2
+
+
+def test_a_coarse_level_does_not_settle_on_a_set_its_loose_step_could_not_show():
+    # The start's Res is the coefficient jump's, not the contact's: a coarse step solved to 0.1 Res
+    # left z above the obstacle, its empty contact set "repeated", every coarse level settled with no
+    # contact, and the finest level found the contact alone: 9 finest steps at n = 32,513 (13 at
+    # 130,561, 20 at 523,265) with the default inner CG (NewtonTuning::coarse_repeat_trust).
+    A, q, psi = two_materials(4)
+    res = nrmicp.solve(A, q, zeta=psi, method="newton", hierarchy="amg", tol=TOL)
+    assert res.success and res.residual < TOL
+    assert res.inner == "cg" and res.level_steps[0] <= 5, res.level_steps
+    assert max(res.level_steps[1:3]) >= 2, res.level_steps   # the contact is found on the coarse levels
+    w = A @ res.z + q
+    assert (res.z - psi).min() >= 0 and w.min() >= -1e-9 and np.abs(np.minimum(w, res.z - psi)).max() <= 1e-9
+    assert 0 < np.count_nonzero(res.z - psi <= 1e-12) < 0.01 * A.shape[0]
+
+
 # ---------------------------------------------------------------- agreement with the reference
 
 @pytest.mark.parametrize("element, r", [("P1", 2), ("P2", 1), ("P3", 1)])

@@ -474,6 +474,7 @@ void bind_vocabulary(py::module_& m) {
   py::dict tuning;  // the Newton member's constants, for the distributed member
   tuning["coarse_maxiter"] = Tuning::coarse_maxiter;
   tuning["coarse_forcing"] = Tuning::coarse_forcing;
+  tuning["coarse_repeat_trust"] = Tuning::coarse_repeat_trust;
   tuning["nested_first_forcing"] = Tuning::nested_first_forcing;
   tuning["nested_forcing"] = Tuning::nested_forcing;
   tuning["floor_factor"] = nrmicp::detail::kFloorFactor;

@@ -158,7 +158,7 @@ TEST_CASE("inner = cg: multigrid-preconditioned CG on the reduced systems agrees
   CHECK(std::string(rd.inner) != "cg");
   CHECK(rc.status == Status::Converged);
   CHECK(rc.residual < 1e-10);
-  CHECK(rc.nit <= 4);  // the last set solved loosely, then again exactly (NewtonControl::exact_repeat)
+  CHECK(rc.nit <= 4);  // the last set solved loosely, then again exactly (NewtonControl::repeat_trust = 0)
   check_complementarity(A, q, rc.z, psi, 1e-10);
   CHECK((rc.z - rd.z).lpNorm<Eigen::Infinity>() < 1e-10);
   const Vec ref = projected_gauss_seidel(A, q, psi, 4000);
@@ -745,6 +745,7 @@ struct ScriptedStep {
   std::vector<int> sets = {};
   std::vector<std::size_t> trial_active = {};
   std::vector<double> forcings = {};
+  std::vector<double> tols = {};  // the tol each solve was given
   std::vector<double> dampings = {};
   std::vector<int> smoothings = {};
   int k = 0;
@@ -768,8 +769,9 @@ struct ScriptedStep {
   }
   bool linearize() { return true; }
   bool factorize(const std::vector<char>&) { return true; }
-  double solve(const std::vector<char>&, double, double forcing) {
+  double solve(const std::vector<char>&, double tol, double forcing) {
     forcings.push_back(forcing);
+    tols.push_back(tol);
     return trials[static_cast<std::size_t>(k++)];
   }
   double rounding_level() const { return level; }
@@ -816,13 +818,13 @@ TEST_CASE("the rounding-floor stop needs Res at the level after the step too: a 
   CHECK(stop.residual == 4.0e-6);
 }
 
-TEST_CASE("steps on new sets are solved loosely; with exact_repeat a repeated set is solved again, not taken as settled") {
+TEST_CASE("steps on new sets are solved loosely; a repeated set is solved again unless Res is below repeat_trust x its start") {
   detail::NewtonControl ctl;
   ctl.solve.tol = 1e-10;
   ctl.solve.maxiter = 10;
   ctl.first_forcing = 1e-4;
   ctl.forcing = 0.1;
-  ctl.exact_repeat = true;
+  ctl.repeat_trust = 0;  // the finest level
   // sets 5, 6, 6: the first step at first_forcing, the second (a new set) at forcing, its repeat exact
   ScriptedStep plain{{1e-3, 1e-4, 1e-12}, 1e-14, 1e7, {5, 6, 6}};
   const auto out = detail::newton_loop(plain, ctl, Vec(plain.z()));
@@ -835,14 +837,30 @@ TEST_CASE("steps on new sets are solved loosely; with exact_repeat a repeated se
   // the two steps on new sets are smoothed, the exact solve of the repeated set is kept as solved
   CHECK(plain.smoothings == std::vector<int>{detail::kSmoothingSweeps, detail::kSmoothingSweeps});
 
-  ctl.exact_repeat = false;  // a coarse level: the repeat of a loosely solved set settles
+  CHECK(plain.tols[2] == 1e-10);  // to tol / 10 (NewtonStep::solve)
+
+  ctl.solve.tol = 0;  // a coarse level: the repeat of a loosely solved set settles once Res < repeat_trust Res(start)
+  ctl.repeat_trust = 1e-4;
   ScriptedStep coarse{{1e-3, 1e-4, 1e-12}, 1e-14, 1e7, {5, 6, 6}};
   const auto start = detail::newton_loop(coarse, ctl, Vec(coarse.z()));
   CHECK(start.status == Status::Stagnated);
-  CHECK(start.residual == 1e-4);
+  CHECK(start.residual == 1e-4);  // 1e-4 < 1e-4 x 1e7
   CHECK(coarse.forcings.size() == 2);
+  // Res barely below the start's (a loose solve that did not move z enough to show the set): the
+  // repeat is solved again, to max(tol, repeat_trust Res(start)), and its new set goes on
+  ScriptedStep slow{{1e6, 1e5, 1e2, 1.0}, 1e-14, 1e7, {5, 5, 6, 6}};
+  const auto went_on = detail::newton_loop(slow, ctl, Vec(slow.z()));
+  CHECK(went_on.status == Status::Stagnated);
+  CHECK(went_on.residual == 1e2);
+  CHECK(slow.forcings == std::vector<double>{1e-4, 0.0, 0.1});
+  CHECK(slow.tols[1] == 1e3);
+  ctl.repeat_trust = std::numeric_limits<double>::infinity();  // every repeat settles
+  ScriptedStep trusting{{1e6, 1e5}, 1e-14, 1e7, {5, 5}};
+  CHECK(detail::newton_loop(trusting, ctl, Vec(trusting.z())).residual == 1e6);
+  CHECK(trusting.forcings.size() == 1);
+  ctl.solve.tol = 1e-10;
 
-  ctl.exact_repeat = true;  // exact steps (forcing 0) whose set repeats: settled, no second solve
+  ctl.repeat_trust = 0;  // exact steps (forcing 0) whose set repeats: settled, no second solve
   ctl.first_forcing = ctl.forcing = 0;
   ScriptedStep exact{{1e-3, 1e-12}, 1e-14, 1e7, {5, 5}};
   const auto settled = detail::newton_loop(exact, ctl, Vec(exact.z()));

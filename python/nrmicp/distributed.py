@@ -606,11 +606,12 @@ def _stationary(A, q, zeta, member, z, tol, maxiter, stats):
 
 class _Control(NamedTuple):
     """How the loop on one level solves (the serial member's NewtonControl): inner solves stop at
-    forcing × Res (first_forcing for the first step; 0: at `exact`), and with exact_repeat a set
-    so solved that repeats is solved again at `exact` before the loop may settle on it."""
+    forcing × Res (first_forcing for the first step; 0: at `exact`), and a set so solved that
+    repeats settles only once Res < repeat_trust × Res(start); before, it is solved again (at
+    `exact`, its atol raised to a tenth of repeat_trust × Res(start) where that is finite)."""
     first_forcing: float = 0.0
     forcing: float = 0.0
-    exact_repeat: bool = False
+    repeat_trust: float = math.inf
     exact: tuple = (1e-14, 0.0)  # (rtol, atol) of an exact step
 
 
@@ -623,9 +624,11 @@ def _newton_loop(residual, stepper, fallback, y, *, tol, maxiter, control, floor
     (floor(y), within _TUNING["floor_factor"]); a step that overshoots (stepper.overshoots) is
     damped first, then swept (stepper.smooth, when stepper.smoothing > 0: a repeat of a set the sweeps
     changed is solved again). Returns (y, Res, steps, sweeps, status, floor or None)."""
-    res = residual(y)
+    res = start = residual(y)
     best = (res, y.copy())
     recent, exempt, seen, last, loose = [res], True, set(), None, False
+    trust = control.repeat_trust * start   # a loose repeat settles below it
+    again = (control.exact[0], max(control.exact[1], 0.1 * trust)) if math.isfinite(trust) else control.exact
     moved = False  # the sweeps after the last accepted step changed its active set
     smooth = stepper.smooth if getattr(stepper, "smoothing", 0) > 0 else None
     steps = sweeps = 0
@@ -641,12 +644,12 @@ def _newton_loop(residual, stepper, fallback, y, *, tol, maxiter, control, floor
             return end(Status.MAX_ITERATIONS)
         h = stepper.plan(y)
         repeat = h == last
-        if repeat and not (control.exact_repeat and loose) and not moved:
+        if repeat and not (loose and not res < trust) and not moved:
             return end(Status.STAGNATED, floor(best[1]) if floor and tol > 0 else None)  # settled: no solve needed
         if repeat or h not in seen:
             forcing = 0.0 if repeat else control.first_forcing if steps == 0 else control.forcing
             loose = forcing > 0
-            ynew = stepper.solve(y, *((1e-14, max(forcing * res, 0.1 * tol)) if loose else control.exact))
+            ynew = stepper.solve(y, *((1e-14, max(forcing * res, 0.1 * tol)) if loose else again if repeat else control.exact))
             steps += 1
             rnew = residual(ynew)
             if stepper.overshoots(ynew):
@@ -728,9 +731,9 @@ def _level_control(finest, nested, tol):
     level exact (inner solve to tol/10 absolute), loose while its sets are guesses when nested."""
     exact = (1e-14, 0.1 * tol)
     if not finest:
-        return _Control(_TUNING["coarse_forcing"], _TUNING["coarse_forcing"], False, exact)
+        return _Control(_TUNING["coarse_forcing"], _TUNING["coarse_forcing"], _TUNING["coarse_repeat_trust"], exact)
     if nested:
-        return _Control(_TUNING["nested_first_forcing"], _TUNING["nested_forcing"], True, exact)
+        return _Control(_TUNING["nested_first_forcing"], _TUNING["nested_forcing"], 0.0, exact)
     return _Control(exact=exact)
 
 

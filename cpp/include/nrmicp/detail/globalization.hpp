@@ -113,13 +113,16 @@ struct NewtonControl {
   /// guess than the test on the old z: measured on thermoforming_1d, 1 step instead of 6).
   std::vector<char> start_set;
   /// An iterative inner solve may stop at forcing × Res (inexact Newton; a direct one is exact
-  /// whatever the forcing), the first step at first_forcing × Res. With `exact_repeat`, a set so
-  /// solved that repeats is solved again to tol / 10 before the loop may settle on it (the finest
-  /// level, where Res must reach tol: the steps before are on guessed sets); without, a repeat
-  /// settles (coarse levels: a start needs no more).
+  /// whatever the forcing), the first step at first_forcing × Res. A set so solved that repeats
+  /// settles only once Res < repeat_trust × Res(start); before, it is solved again, to a tenth of
+  /// max(tol, repeat_trust × Res(start)), and the loop goes on. 0, the finest level (Res must reach
+  /// tol; the steps before are on guessed sets): every loosely solved repeat is solved to tol / 10.
+  /// Coarse levels (NewtonTuning::coarse_repeat_trust): a start needs no more than the repeat,
+  /// unless Res is still near the start's, where a loose solve may not have moved z far enough to
+  /// show the set. ∞: a repeat settles.
   double forcing = 0;
   double first_forcing = 0;
-  bool exact_repeat = false;
+  double repeat_trust = std::numeric_limits<double>::infinity();
   int sweep_budget = 0;       ///< fallback sweeps allowed in all (0: no fallback)
   Callback callback;  ///< finest level only; called with z = y + shift
   Poll poll;
@@ -144,7 +147,7 @@ class Globalized {
 
   Globalized(Plain& plain, const NewtonControl& ctl, Iterate& s)
       : plain_(plain), ctl_(ctl), test_(plain.residual()), best_z_(plain.z()), best_r_(plain.residual()),
-        runs_(ctl.sweep_budget) {
+        start_r_(plain.residual()), runs_(ctl.sweep_budget) {
     s.z = plain.z();
   }
 
@@ -182,16 +185,18 @@ class Globalized {
     if constexpr (Plain::set_fixes_step) {
       h = hash_set(inactive_);
       repeat = have_last_ && h == last_set_;
-      // a repeat settles, unless its z was solved loosely (exact_repeat) or is not the solve of any
-      // set (sweeps changed its active set): then the set is solved again, exactly
-      if (repeat && !(ctl_.exact_repeat && loose_) && !moved_set_) return settle(), true;
+      // a repeat settles, unless its z was solved loosely and Res is not below repeat_trust × its
+      // start's, or z is not the solve of any set (sweeps changed its active set): then the set
+      // is solved again, to repeat_tol()
+      const bool trusted = !loose_ || plain_.residual() < ctl_.repeat_trust * start_r_;
+      if (repeat && trusted && !moved_set_) return settle(), true;
       if (!repeat && !seen_.insert(h).second) return false;  // a cycle
     }
     if (!repeat && !plain_.factorize(inactive_)) return false;  // a repeat keeps its system
-    // Loose only where a repeat is recognized (a set fixes the step): the repeat is then exact.
+    // Loose only where a repeat is recognized (a set fixes the step): the repeat is then solved to repeat_tol().
     const double forcing = repeat || !Plain::set_fixes_step ? 0.0 : plain_.steps() == 0 ? ctl_.first_forcing : ctl_.forcing;
     loose_ = forcing > 0 && plain_.iterative();
-    double r = plain_.solve(inactive_, ctl_.solve.tol, forcing);
+    double r = plain_.solve(inactive_, repeat ? repeat_tol() : ctl_.solve.tol, forcing);
     if constexpr (Plain::set_fixes_step)
       if (overshoots()) r = plain_.damp(kOvershootDamping);
     const bool still = Plain::set_fixes_step && plain_.trial_still();  // the solve's own z⁺, before the sweeps
@@ -204,6 +209,11 @@ class Globalized {
     accept(r, h, still);
     if (!(r < ctl_.solve.tol) && !(r < 0.5 * r_old) && !still_) at_floor_ = at_rounding_level(std::max(r, r_old));
     return true;
+  }
+  // What a repeated set is solved to (a tenth of it: NewtonStep::solve): tol, or where a repeat is
+  // trusted below repeat_trust × Res(start), that.
+  double repeat_tol() const {
+    return std::isfinite(ctl_.repeat_trust) ? std::max(ctl_.solve.tol, ctl_.repeat_trust * start_r_) : ctl_.solve.tol;
   }
   // The trial's active set is more than kOvershootGrowth times the (nonempty) one it was solved on.
   // From a set whose contact is far too small (nested starts on P3 and 3D P2 elements, where A
@@ -262,11 +272,12 @@ class Globalized {
   NonMonotone test_;
   Vector best_z_;
   double best_r_;
+  double start_r_;  // Res of the start (NewtonControl::repeat_trust)
   std::vector<char> inactive_, last_inactive_;
   std::unordered_set<std::uint64_t> seen_;
   std::uint64_t last_set_ = 0;
   bool have_last_ = false, exempt_ = true, still_ = false, settled_ = false, at_floor_ = false;
-  bool loose_ = false;  // the last step was solved to a forcing: with exact_repeat a repeat of its set is solved again
+  bool loose_ = false;  // the last step was solved to a forcing: a repeat of its set may be solved again (repeat_trust)
   bool moved_set_ = false;  // the sweeps after the last step changed its active set: a repeat of it is solved again
   double floor_ = 0;  // the rounding level of Res (computed when a stop at it is considered)
   SweepRuns runs_;
