@@ -175,16 +175,24 @@ def _row_sums(indptr, data) -> np.ndarray:
 def _relax_interpolation(B, P, is_c, sweeps, truncate):
     """Jacobi sweeps on the F rows of P towards B-harmonic (ideal) interpolation,
     P_F ← −D_F⁻¹((B_FF − D_FF) P_F + B_FC), C rows kept as identity (P stays ≥ 0 for an
-    M-matrix B), each sweep truncated (the fill of a sweep grows the V-cycle's coarse operators)."""
-    f_scale = sp.diags(np.where(is_c, 0.0, 1.0 / B.diagonal()))
-    B_FF = B[~is_c][:, ~is_c]
+    M-matrix B), each sweep truncated (the fill of a sweep grows the V-cycle's coarse operators).
+    Only the F rows are multiplied: P_C is the identity in the coarse numbering (C points in
+    order), so B_FC P_C is B_FC itself (whole set-up, P2 n = 523,265: 2.04 → 1.79 CPU s; 2D
+    obstacle n = 10⁶: 0.89 → 0.80 s; the same P to 2e-14)."""
+    f = ~is_c
+    B_F = B[f]
+    B_FF, B_FC = B_F[:, f], B_F[:, is_c]
     if B_FF.count_nonzero() == np.count_nonzero(B_FF.diagonal()):
         sweeps = min(sweeps, 1)     # no F–F coupling (7-point 3D): a sweep ignores P_F, the rest repeat it
+    inv_d = sp.diags_array(1.0 / B.diagonal()[f])
+    P_F = sp.csr_matrix(P[f])
     for _ in range(sweeps):
-        P = sp.csr_matrix(P - f_scale @ (B @ P))
+        P_F = sp.csr_matrix(P_F - inv_d @ (B_FF @ P_F + B_FC))
         if truncate > 0:
-            P = _truncate(P, truncate)
-    return P
+            P_F = _truncate(P_F, truncate)
+    n_c = int(is_c.sum())
+    stacked = sp.vstack([P_F, sp.identity(n_c, format="csr")], format="csr")
+    return stacked[np.argsort(np.concatenate([np.flatnonzero(f), np.flatnonzero(is_c)]), kind="stable")]
 
 
 def _canonical(P) -> sp.csr_matrix:
