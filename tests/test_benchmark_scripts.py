@@ -48,6 +48,17 @@ def test_finite_elements_table():
         assert all(re.match(r"[\d.]+ s, \d+ it, \d+ MB$", c) for c in r[4:6]), r
 
 
+def test_other_matrices_table():
+    # docs/finite_elements.md "Matrices no scene was tuned on": the command, on its quick sizes
+    cases = ["Q1", "Q2", "tetP1", "tetP2", "materials", "aniso", "rotated", "graph", "plate"]
+    text = run("finite_elements.py", "--quick", "--cases", *cases, "--peers", "newton-amg", "nrmgs+aa", "--budget", "30")
+    rows = table_rows(text)
+    assert [r[0].split()[0] for r in rows] == cases
+    for r in rows:
+        assert re.match(r"[\d.]+ s, \d+ st / \d+ sol, -?\d+ MB$", r[2]), r     # newton converged
+        assert re.match(r"[\d.]+ s, \d+ it, -?\d+ MB$", r[3]), r
+
+
 @pytest.mark.parametrize("scene", ["convection_2d", "convection_3d"])
 def test_newton_inner_table(scene):
     # README "Newton's inner solve": direct and Krylov inner solves reach the same Res target

@@ -130,7 +130,7 @@ def test_nonsymmetric_m_matrix_upwind_convection_diffusion():
     for hierarchy in (None, "amg"):
         res = problem.solve(method="newton", hierarchy=hierarchy, tol=1e-10)
         assert res.success and err(res, problem) < 1e-10
-        assert res.inner == "umfpack"  # nonsymmetric: LU
+        assert res.inner == "umfpack"  # nonsymmetric, n = 961: LU
 
 
 # A P-matrix (not M, not H+) on which Newton's steps, each followed by its projected Gauss-Seidel

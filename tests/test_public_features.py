@@ -1,6 +1,6 @@
 """Public features no other test exercises: Result.timings and history["seconds"], the Solver's
 parameters/levels/scaling, `nrmicp demo`, and the documented switch points of the 'auto'
-choices (hierarchy='auto' from n = 4096, inner='auto' picking CG/BiCGSTAB from n = 10,000).
+choices (hierarchy='auto' from n = 4096, inner='auto' picking CG/BiCGSTAB with a hierarchy from n = 1,000).
 Timings are checked for their structure (keys, signs, order), never for their values."""
 from __future__ import annotations
 
@@ -74,13 +74,14 @@ def test_hierarchy_auto_switches_at_4096():
 
 
 @pytest.mark.parametrize("symmetric, krylov", [(True, "cg"), (False, "bicgstab")])
-def test_inner_auto_picks_a_krylov_solve_from_10000(symmetric, krylov):
-    """inner='auto' with a hierarchy: the direct solve below n = 10,000, from there on CG for a
-    symmetric A (an LCP), BiCGSTAB for a nonsymmetric one."""
-    for n, expected in ((9999, None), (10_000, krylov)):
+def test_inner_auto_picks_a_krylov_solve_with_a_hierarchy_from_1000(symmetric, krylov):
+    """inner='auto' with a hierarchy: the direct solve below n = 1,000, from there on CG for a
+    symmetric A (an LCP), BiCGSTAB for a nonsymmetric one; without a hierarchy the direct solve."""
+    for n, hierarchy, expected in ((998, True, None), (1000, True, krylov), (1000, False, None)):
         A = tridiag(n, sub=-1.0, sup=-1.0 if symmetric else -0.5)
         q = np.sin(np.arange(n))
-        res = nrmicp.solve(A, q, method="newton", tol=1e-10)
+        P = sp.csr_matrix(np.kron(np.eye(n // 2), [[0.5], [1.0]]))   # n/2 coarse points
+        res = nrmicp.solve(A, q, method="newton", hierarchy=[P] if hierarchy else None, tol=1e-10)
         assert res.success and reference_residual(A, q, res.z) < 1e-10
         if expected is None:
             assert res.inner not in ("cg", "bicgstab"), res.inner

@@ -110,7 +110,7 @@ class ActiveSetSystem {
     // CG needs a symmetric positive definite K: the LCP of a symmetric A (an indefinite K shows
     // as a failed coarsest Cholesky or CG breakdown; then the loop falls back). Any other K
     // (a nonsymmetric A, an affine ζ) takes BiCGSTAB (detail/multigrid.hpp).
-    if (use_iterative(inner, spd_candidate_, below.levels, A.rows(), K_.nonZeros())) {
+    if (use_iterative(inner, below.levels, A.rows())) {
       krylov_ = std::make_unique<MultigridKrylov<StorageIndex>>(below, spd_candidate_, borrow);
       krylov_->start_from_hierarchy(K_.nonZeros());  // K holds A's values until the first factorize
     } else
@@ -179,26 +179,19 @@ class ActiveSetSystem {
   /// reach the direct retry.
   void set_max_iterations(int k) { if (krylov_) krylov_->set_max_iterations(k); }
 
-  /// Whether `inner` (with K's size n, its nonzeros nnz and `levels` prolongations below) means
-  /// the multigrid-preconditioned Krylov solve: always for cg with a hierarchy; for auto with a
-  /// hierarchy and n ≥ auto_cg_min_n (an SPD candidate: CG) or n ≥ auto_krylov_min_n (else:
-  /// BiCGSTAB), or nnz ≥ auto_iterative_min_nnz; the measurements are in those constants' comments.
-  static bool use_iterative(Inner inner, bool spd_candidate, std::size_t levels, Eigen::Index n, Eigen::Index nnz) {
-    if (levels == 0) return false;
-    if (inner == Inner::CG) return true;
-    return inner == Inner::Auto &&
-           (n >= (spd_candidate ? auto_cg_min_n : auto_krylov_min_n) || nnz >= auto_iterative_min_nnz);
+  /// Whether `inner` (with `levels` prolongations below, K of size n) means the multigrid-
+  /// preconditioned Krylov solve: cg with a hierarchy; auto with one from n = auto_krylov_min_n on.
+  static bool use_iterative(Inner inner, std::size_t levels, Eigen::Index n) {
+    return levels > 0 && (inner == Inner::CG || (inner == Inner::Auto && n >= auto_krylov_min_n));
   }
-  static constexpr Eigen::Index auto_cg_min_n = 10000;
-  /// Measured (convection_diffusion_obstacle, hierarchy "amg", tol 1e-8, same run; README, "The
-  /// iterative inner solve"), CPU s direct (UMFPACK) → bicgstab, same steps: 2D n = 3,969: 0.07 →
-  /// 0.06; n = 10,201: 0.13 → 0.07; n = 261,121: 5.5 → 1.6; n = 10⁶: 234 → 46; 3D n = 103,823:
-  /// 48 → 0.92 (2.3 GB → 0.2 GB).
-  static constexpr Eigen::Index auto_krylov_min_n = 10000;
-  /// A dense coarse operator (3D Ruge–Stüben levels: 33–100 nonzeros a row) fills in a direct
-  /// factorization long before n = 10⁴. Measured (obstacle_3d m = 47, amg, one solve): the level
-  /// of 8,652 unknowns and 57 nonzeros a row took 0.31 s by CHOLMOD (of 0.74 s for the solve).
-  static constexpr Eigen::Index auto_iterative_min_nnz = 50000;
+  /// Measured (hierarchy given, CPU ms of the whole solve, min of 5, direct → Krylov; one step
+  /// more, from the loose solves): obstacle_2d geometric n = 3,969: 14.3 → 4.0; obstacle_3d
+  /// n = 3,375: 30.5 → 3.9; convection–diffusion (BiCGSTAB) n = 3,969 / 9,025: 30.2 → 12.3,
+  /// 73.2 → 22.6; amg on P1 / P3 / tetrahedral P1 elements n = 8,065 / 4,513 / 3,375: 72 → 37,
+  /// 86 → 43, 85 → 29; from n = 10⁴ 2.4-10× (CG), 2.6-3.7× (BiCGSTAB). Below 10³ both take a
+  /// few ms (n = 961: 3.8 → 1.1) and the exact solve is the steadier one at a rounding floor
+  /// (tests/test_tolerance.py's degenerate LCP, n = 961: 2 finest steps against 5 and fallback sweeps).
+  static constexpr Eigen::Index auto_krylov_min_n = 1000;
 
  private:
   /// The symbolic analysis of the direct solve (at construction, or on first need).
