@@ -4,6 +4,9 @@
     OPENBLAS_NUM_THREADS=1 python benchmarks/finite_elements.py            # P1/P2/P3 n = 8k … 523k, disk scene
     OPENBLAS_NUM_THREADS=1 python benchmarks/finite_elements.py --quick    # n <= 33k
 
+    OPENBLAS_NUM_THREADS=1 python benchmarks/finite_elements.py --cases Q1 Q2 tetP1 tetP2 materials \\
+        aniso rotated graph plate --peers newton-amg nrmgs+aa --budget 30   # other matrices
+
 Cases: the scikit-fem membrane over an off-centre obstacle (nrmicp.scenes.finite_elements,
 P1, P2 and P3 on nested refinements of a disk-like polygon) and the numpy/scipy-only P1 contact
 problem on a Delaunay mesh of scattered points (nrmicp.scenes.unstructured, no mesh hierarchy).
@@ -32,13 +35,19 @@ import time
 
 import numpy as np
 
+import other_matrices  # noqa: E402  (this directory is on sys.path when a script here runs)
+
 TOL = 1e-9
-CASES = {"P1": [3, 4, 5, 6], "P2": [2, 3, 4, 5], "P3": [2, 3, 4], "disk": [32_000, 130_000, 520_000]}
-QUICK = {"P1": [3, 4], "P2": [2, 3], "P3": [1, 2], "disk": [32_000]}
+SCENES = ["P1", "P2", "P3", "disk"]   # the default run; the other_matrices cases by --cases
+CASES = {"P1": [3, 4, 5, 6], "P2": [2, 3, 4, 5], "P3": [2, 3, 4], "disk": [32_000, 130_000, 520_000],
+         **other_matrices.SIZES}
+QUICK = {"P1": [3, 4], "P2": [2, 3], "P3": [1, 2], "disk": [32_000], **other_matrices.QUICK}
 PEERS = ["newton-amg", "newton-fe", "nrmgs+aa", "psor"]
 
 
 def build(case, size):
+    if case in other_matrices.SIZES:
+        return other_matrices.build(case, size)
     if case == "disk":
         from nrmicp.scenes.unstructured import contact_disk_p1
         return contact_disk_p1(size, exact=False)
@@ -115,7 +124,8 @@ def main():
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--budget", type=float, default=120.0, help="CPU seconds after which a peer stops growing")
     ap.add_argument("--peers", nargs="+", default=PEERS, choices=PEERS)
-    ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
+    ap.add_argument("--cases", nargs="+", default=SCENES, choices=list(CASES),
+                    help="default: the scenes; the rest are benchmarks/other_matrices.py's")
     ap.add_argument("--child", nargs=4, help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a.child:
@@ -140,7 +150,7 @@ def main():
                 if r.get("cpu", 0) > a.budget or r.get("status") in ("timeout", "failed", "time_limit"):
                     stopped.add((case, peer))
                 print(f"#   {case} {size} {peer}: {json.dumps(r)}", file=sys.stderr, flush=True)
-            label = case if case == "disk" else f"{case}, r={size}"
+            label = f"{case}, r={size}" if case in ("P1", "P2", "P3") else f"{case} ({size:,})"
             ratios = " | ".join(ratio(rows.get(peer, {}), rows.get("newton-amg", {})) for peer in ("nrmgs+aa", "psor"))
             print(f"| {label} | {n or ''} | " + " | ".join(cell(rows[p]) for p in a.peers) + f" | {ratios} |",
                   flush=True)
