@@ -11,7 +11,7 @@ Each builder returns an nrmicp.scenes.Problem (A, q, the obstacle ψ as ζ); n g
     tetP1/P2    scikit-fem tetrahedra on a tensor mesh of [-1, 1]³ (no M-matrices), f = −1,
                 ψ = −0.1 − |x − (0.3, 0.2, 0)|²: contact on a small ball
     materials   P1 on the disk-like polygon, stiffness 1000× larger for x > 0.1, ψ = 0.02 − |x − c|²
-                (tests/test_finite_elements.py two_materials)
+                (also tests/test_finite_elements.py's coarse-settle test)
     aniso       5-point ε ∂xx + ∂yy, ε = 10⁻³ (strong couplings along y only)
     rotated     9-point rotated anisotropy (pyamg's diffusion_stencil_2d, ε = 0.01, θ = 30°, FE)
     graph       Laplacian of a random geometric graph on the unit square (+10⁻³ I): no mesh at all
@@ -25,6 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from nrmicp.scenes import Problem
+from nrmicp.scenes._operators import as_csr, grid_2d, tridiag
 
 SIZES = {"Q1": [4, 5, 6], "Q2": [3, 4, 5], "tetP1": [2, 3, 4], "tetP2": [1, 2, 3], "materials": [4, 5, 6],
          "aniso": [127, 255, 511], "rotated": [127, 255, 511], "graph": [10_000, 40_000, 160_000],
@@ -53,24 +54,12 @@ def _fe(case, r):
         return (1.0 + contrast * (w.x[0] > 0.1)) * dot(grad(u), grad(v))
 
     inner = basis.complement_dofs(basis.get_dofs())
-    A = sp.csr_matrix(skfem.asm(stiffness, basis)[inner][:, inner])
-    A.eliminate_zeros()
-    A.sort_indices()
+    A = as_csr(skfem.asm(stiffness, basis)[inner][:, inner])
     q = np.asarray(skfem.asm(skfem.LinearForm(lambda v, w: 1.0 * v), basis))[inner]
     x = basis.doflocs[:, inner]
     d2 = (x[0] - 0.3) ** 2 + (x[1] - 0.2) ** 2 + (x[2] ** 2 if x.shape[0] == 3 else 0.0)
     psi = {"materials": 0.02, "tetP1": -0.1, "tetP2": -0.1}.get(case, 0.1) - d2
     return A, q, psi
-
-
-def _grid(m):
-    x = np.arange(1, m + 1) / (m + 1)
-    X, Y = np.meshgrid(x, x, indexing="xy")
-    return X.ravel(), Y.ravel(), 1.0 / (m + 1)
-
-
-def _lap1d(m):
-    return sp.diags_array([-np.ones(m - 1), 2 * np.ones(m), -np.ones(m - 1)], offsets=[-1, 0, 1])
 
 
 def _algebraic(case, size):
@@ -86,10 +75,10 @@ def _algebraic(case, size):
         q = np.full(size, 80.0 / size)
     else:
         m = size
-        X, Y, h = _grid(m)
-        eye = sp.identity(m)
+        (X, Y), h = grid_2d(m), 1.0 / (m + 1)
+        eye, t = sp.identity(m), tridiag(m, -1.0, 2.0, -1.0)   # t: h² × the 1D −Δ_h
         if case == "aniso":
-            A = sp.csr_matrix(1e-3 * sp.kron(eye, _lap1d(m)) + sp.kron(_lap1d(m), eye))
+            A = sp.csr_matrix(1e-3 * sp.kron(eye, t) + sp.kron(t, eye))
             q = np.full(m * m, 8.0 * h * h)
         elif case == "rotated":
             import pyamg
@@ -97,11 +86,10 @@ def _algebraic(case, size):
             A = sp.csr_matrix(pyamg.gallery.stencil_grid(stencil, (m, m)))
             q = np.full(m * m, 8.0 * h * h)
         else:   # plate
-            L = sp.kron(eye, _lap1d(m)) + sp.kron(_lap1d(m), eye)
+            L = sp.kron(eye, t) + sp.kron(t, eye)
             A = sp.csr_matrix(L @ L)
             q = np.full(m * m, 200.0 * h ** 4)
-    A.sort_indices()
-    return A, q, 0.1 - (X - 0.55) ** 2 - (Y - 0.45) ** 2
+    return as_csr(A), q, 0.1 - (X - 0.55) ** 2 - (Y - 0.45) ** 2
 
 
 def build(case: str, size: int) -> Problem:

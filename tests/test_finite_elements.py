@@ -1,7 +1,8 @@
 """Finite-element matrices users bring (issue 17): the scikit-fem P1/P2/P3 obstacle scenes, the
 numpy-only unstructured P1 scene, and the algebraic hierarchy on them. Properties, not timings:
 finest-level Newton steps flat under refinement with hierarchy="amg", agreement with the
-independent policy-iteration solution, complementarity. Small sizes (n <= 8,065)."""
+independent policy-iteration solution, complementarity. Small sizes (n <= 32,513)."""
+import os
 import sys
 
 import numpy as np
@@ -12,6 +13,9 @@ import nrmicp
 import pyamg  # noqa: F401  (required: a missing one fails, not skips)
 from nrmicp._hierarchy import amg_prolongations, auxiliary_m_matrix  # noqa: E402
 from nrmicp.scenes.unstructured import contact_disk_p1  # noqa: E402
+
+sys.path.append(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "benchmarks"))
+import other_matrices  # noqa: E402  (the matrices no scene was tuned on; scikit-fem is a test dependency)
 
 TOL = 1e-9
 
@@ -68,31 +72,13 @@ def test_loose_steps_with_cg_reach_tol_and_the_exact_answer(build):
     assert np.abs(loose.z - exact.z).max() <= 1e-8 * max(1.0, np.abs(exact.z).max())
 
 
-def two_materials(r):
-    """P1 membrane on the disk-like polygon, stiffness 1000x larger for x > 0.1, pressed onto a small
-    cap ψ = 0.02 − |x − (0.3, 0.2)|² (contact on about 0.3% of the nodes): (A, q, ψ)."""
-    import skfem
-    from skfem.helpers import dot, grad
-
-    basis = skfem.Basis(skfem.MeshTri.init_circle(3).refined(r), skfem.ElementTriP1())
-
-    @skfem.BilinearForm
-    def stiffness(u, v, w):
-        return (1.0 + 999.0 * (w.x[0] > 0.1)) * dot(grad(u), grad(v))
-
-    inner = basis.complement_dofs(basis.get_dofs())
-    A = sp.csr_matrix(skfem.asm(stiffness, basis)[inner][:, inner])
-    q = np.asarray(skfem.asm(skfem.LinearForm(lambda v, w: 1.0 * v), basis))[inner]
-    x, y = basis.doflocs[:, inner]
-    return A, q, 0.02 - (x - 0.3) ** 2 - (y - 0.2) ** 2
-
-
 def test_a_coarse_level_does_not_settle_on_a_set_its_loose_step_could_not_show():
     # The start's Res is the coefficient jump's, not the contact's: a coarse step solved to 0.1 Res
     # left z above the obstacle, its empty contact set "repeated", every coarse level settled with no
     # contact, and the finest level found the contact alone: 9 finest steps at n = 32,513 (13 at
     # 130,561, 20 at 523,265) with the default inner CG (NewtonTuning::coarse_repeat_trust).
-    A, q, psi = two_materials(4)
+    p = other_matrices.build("materials", 4)   # benchmarks/other_matrices.py's two materials, n = 32,513
+    A, q, psi = p.A, p.q, p.zeta
     res = nrmicp.solve(A, q, zeta=psi, method="newton", hierarchy="amg", tol=TOL)
     assert res.success and res.residual < TOL
     assert res.inner == "cg" and res.level_steps[0] <= 5, res.level_steps
