@@ -644,7 +644,8 @@ def _newton_loop(residual, stepper, fallback, y, *, tol, maxiter, control, floor
             return end(Status.MAX_ITERATIONS)
         h = stepper.plan(y)
         repeat = h == last
-        if repeat and not (loose and not res < trust) and not moved:
+        trusted = not loose or res < trust   # the serial member's Globalized::newton
+        if repeat and trusted and not moved:
             return end(Status.STAGNATED, floor(best[1]) if floor and tol > 0 else None)  # settled: no solve needed
         if repeat or h not in seen:
             forcing = 0.0 if repeat else control.first_forcing if steps == 0 else control.forcing
