@@ -199,19 +199,41 @@ def test_amg_without_pyamg_says_what_to_do(monkeypatch):
         resolve_hierarchy("amg", laplacian_2d(8))
 
 
-def test_truncate_drops_small_entries_per_row_and_keeps_row_sums_against_a_dense_reference():
-    from nrmicp._hierarchy import _truncate
-    rng = np.random.default_rng(3)
-    D = rng.uniform(-0.2, 1.0, (40, 12)) * (rng.random((40, 12)) < 0.4)
-    D[5] = 0.0                                          # an empty row stays empty
-    got = _truncate(sp.csr_matrix(D), 0.3).toarray()
-    big = np.abs(D).max(axis=1, keepdims=True)
-    keep = (np.abs(D) >= 0.3 * big) & (D != 0)
-    want = np.where(keep, D, 0.0)
-    kept = want.sum(axis=1, keepdims=True)
-    want = want * np.divide(D.sum(axis=1, keepdims=True), kept, out=np.ones_like(kept), where=kept != 0)
-    np.testing.assert_allclose(got, want, rtol=1e-14, atol=1e-15)
-    assert not got[5].any()
+def dense_relaxation(B, P, is_c, sweeps, truncate):
+    """The Jacobi sweeps of _relax_interpolation on dense arrays: P_F <- -D_F^-1((B_FF - D_FF) P_F + B_FC),
+    each row's entries below truncate x its largest dropped and the rest scaled to the row's sum."""
+    Bd, P = B.toarray(), P.toarray()
+    d = np.diag(Bd)
+    off = Bd - np.diag(d)
+    f = ~is_c
+    for _ in range(sweeps):
+        new = -(off[f] @ P) / d[f, None]
+        keep = np.abs(new) >= truncate * np.abs(new).max(axis=1, keepdims=True)
+        kept = np.where(keep, new, 0.0)
+        s = kept.sum(axis=1, keepdims=True)
+        P[f] = kept * np.divide(new.sum(axis=1, keepdims=True), s, out=np.ones_like(s), where=s != 0)
+    return P
+
+
+@pytest.mark.parametrize("truncate", [0.0, 0.2, 0.5])
+def test_relaxation_matches_a_dense_reference_with_fine_fine_couplings(truncate):
+    # an irregular M-matrix (random graph Laplacian plus a diagonal shift): its RS split leaves F-F couplings
+    from nrmicp._hierarchy import _relax_interpolation, _rs_interpolation, _rs_split, _strength
+    rng = np.random.default_rng(5)
+    n = 60
+    W = sp.random(n, n, density=0.08, random_state=rng, data_rvs=lambda k: rng.uniform(0.1, 1.0, k))
+    W = sp.triu(W + W.T, 1)
+    W = W + W.T
+    B = sp.csr_matrix(sp.diags(np.asarray(W.sum(axis=1)).ravel() + 0.1) - W)
+    B.sort_indices()
+    S = _strength(B, 0.25, "min")
+    is_c = _rs_split(S)
+    assert B[~is_c][:, ~is_c].count_nonzero() > (~is_c).sum()    # the premise: F-F couplings
+    P = _rs_interpolation(B, S, is_c, "direct")
+    got = _relax_interpolation(B, P, is_c, sweeps=3, truncate=truncate)
+    np.testing.assert_allclose(got.toarray(), dense_relaxation(B, P, is_c, 3, truncate), rtol=1e-13, atol=1e-15)
+    assert got.has_canonical_format and (got.data != 0).all()
+    np.testing.assert_array_equal(got[is_c].toarray(), P[is_c].toarray())   # C rows: the identity, kept
 
 
 def test_relaxation_with_no_fine_fine_coupling_is_its_first_sweep():

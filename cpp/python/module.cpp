@@ -7,6 +7,7 @@
 #include <pybind11/stl.h>
 
 #include <nrmicp/nrmicp.hpp>
+#include <nrmicp/detail/interpolation.hpp>
 
 #include <algorithm>
 #include <cstdint>
@@ -569,6 +570,42 @@ void bind_utilities(py::module_& m) {
     if (has_dtype<std::int64_t>(indices)) run(std::int64_t{}); else run(std::int32_t{});
   }, py::arg("indptr"), py::arg("indices"), py::arg("data"), py::arg("q"), py::arg("y"), py::arg("sweeps"),
      "Symmetric projected Gauss-Seidel sweeps on LCP(q, A), A square CSR, y updated in place.");
+  // The amg set-up's interpolation sweeps (python/nrmicp/_hierarchy.py, _relax_interpolation).
+  m.def("relax_interpolation", [](const py::array& b_indptr, const py::array& b_indices, const py::array& b_data,
+                                  const py::array& is_c, const py::array& p_indptr, const py::array& p_indices,
+                                  const py::array& p_data, py::ssize_t n_coarse, int sweeps, double truncate) {
+    const py::ssize_t n = is_c.ndim() == 1 ? is_c.shape(0) : -1;
+    if (n < 0 || b_indptr.ndim() != 1 || b_indptr.shape(0) != n + 1 || p_indptr.ndim() != 1 || p_indptr.shape(0) != n + 1)
+      throw py::value_error("relax_interpolation: B (n x n), P (n rows) and is_c (n flags) must agree in n");
+    if (sweeps < 0 || !(truncate >= 0 && truncate <= 1)) throw py::value_error("relax_interpolation: sweeps >= 0, 0 <= truncate <= 1");
+    if (has_dtype<std::int64_t>(b_indices) != has_dtype<std::int64_t>(p_indices))
+      throw py::value_error("relax_interpolation: B's and P's indices must have the same dtype");
+    const bool* flags = checked_data<bool>(is_c, "is_c");
+    std::vector<char> c(flags, flags + n);
+    auto run = [&](auto index) -> py::tuple {
+      using I = decltype(index);
+      check_compressed<I>(b_indptr, b_indices, b_data.shape(0), n, n, "B");
+      check_compressed<I>(p_indptr, p_indices, p_data.shape(0), n, n_coarse, "P");
+      const I* bp = checked_data<I>(b_indptr, "b_indptr");
+      const CsrMap<I> B(n, n, bp[n], bp, checked_data<I>(b_indices, "b_indices"), checked_data<double>(b_data, "b_data"));
+      nrmicp::detail::CsrArrays<I> P;
+      const I* pp = checked_data<I>(p_indptr, "p_indptr");
+      P.indptr.assign(pp, pp + n + 1);
+      P.indices.assign(checked_data<I>(p_indices, "p_indices"), checked_data<I>(p_indices, "p_indices") + pp[n]);
+      P.data.assign(checked_data<double>(p_data, "p_data"), checked_data<double>(p_data, "p_data") + pp[n]);
+      nrmicp::detail::CsrArrays<I> out;
+      {
+        py::gil_scoped_release release;
+        out = nrmicp::detail::relax_interpolation<I>(B, c, std::move(P), static_cast<I>(n_coarse), sweeps, truncate);
+      }
+      return py::make_tuple(py::array_t<I>(out.indptr.size(), out.indptr.data()),
+                            py::array_t<I>(out.indices.size(), out.indices.data()),
+                            py::array_t<double>(out.data.size(), out.data.data()));
+    };
+    return has_dtype<std::int64_t>(b_indices) ? run(std::int64_t{}) : run(std::int32_t{});
+  }, py::arg("b_indptr"), py::arg("b_indices"), py::arg("b_data"), py::arg("is_c"), py::arg("p_indptr"),
+     py::arg("p_indices"), py::arg("p_data"), py::arg("n_coarse"), py::arg("sweeps"), py::arg("truncate"),
+     "Jacobi sweeps on the F rows of P towards B-harmonic interpolation, each row truncated; (indptr, indices, data).");
   m.def("backends", [] {
     py::dict d;
     d["cholmod"] = nrmicp::have_cholmod();
