@@ -588,11 +588,13 @@ void bind_utilities(py::module_& m) {
       check_compressed<I>(p_indptr, p_indices, p_data.shape(0), n, n_coarse, "P");
       const I* bp = checked_data<I>(b_indptr, "b_indptr");
       const CsrMap<I> B(n, n, bp[n], bp, checked_data<I>(b_indices, "b_indices"), checked_data<double>(b_data, "b_data"));
-      nrmicp::detail::CsrArrays<I> P;
       const I* pp = checked_data<I>(p_indptr, "p_indptr");
+      const I* pi = checked_data<I>(p_indices, "p_indices");
+      const double* pv = checked_data<double>(p_data, "p_data");
+      nrmicp::detail::CsrArrays<I> P;
       P.indptr.assign(pp, pp + n + 1);
-      P.indices.assign(checked_data<I>(p_indices, "p_indices"), checked_data<I>(p_indices, "p_indices") + pp[n]);
-      P.data.assign(checked_data<double>(p_data, "p_data"), checked_data<double>(p_data, "p_data") + pp[n]);
+      P.indices.assign(pi, pi + pp[n]);
+      P.data.assign(pv, pv + pp[n]);
       nrmicp::detail::CsrArrays<I> out;
       {
         py::gil_scoped_release release;

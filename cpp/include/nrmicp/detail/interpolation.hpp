@@ -21,6 +21,29 @@ struct CsrArrays {
   std::vector<double> data;
 };
 
+/// Appends the row (column, value) to `out`: entries below `truncate` × its largest magnitude
+/// dropped, the rest scaled to the row's former sum, sorted by column; no zeros (a row summing
+/// to 0 scales to zeros, and a canonical P has none).
+template <typename I>
+void append_truncated(std::vector<std::pair<I, double>>& row, double truncate, CsrArrays<I>& out) {
+  double largest = 0, sum = 0, kept = 0;
+  for (const auto& e : row) {
+    largest = std::max(largest, std::abs(e.second));
+    sum += e.second;
+  }
+  row.erase(std::remove_if(row.begin(), row.end(), [&](const auto& e) { return std::abs(e.second) < truncate * largest; }),
+            row.end());
+  for (const auto& e : row) kept += e.second;
+  const double scale = kept != 0 ? sum / kept : 1.0;
+  std::sort(row.begin(), row.end());
+  for (const auto& [k, v] : row)
+    if (v * scale != 0) {
+      out.indices.push_back(k);
+      out.data.push_back(v * scale);
+    }
+  out.indptr.push_back(static_cast<I>(out.indices.size()));
+}
+
 /// `sweeps` Jacobi sweeps P_F ← −D_F⁻¹((B_FF − D_FF) P_F + B_FC) on the F rows of P (n × n_c, CSR),
 /// its C rows kept (the identity in the coarse numbering, C points in order); each new row's
 /// entries below `truncate` × its largest magnitude dropped and the rest scaled to the row's sum.
@@ -71,30 +94,13 @@ CsrArrays<I> relax_interpolation(const RowMatrix& B, const std::vector<char>& is
           for (I e = P.indptr[j]; e < P.indptr[j + 1]; ++e) add(P.indices[e], it.value() * P.data[e]);
       }
       row.clear();
-      double largest = 0, sum = 0;
       for (const I k : cols) {
-        const double v = -acc[k] / d;
+        if (acc[k] != 0) row.emplace_back(k, -acc[k] / d);
         acc[k] = 0;
         seen[k] = 0;
-        if (v == 0) continue;
-        row.emplace_back(k, v);
-        largest = std::max(largest, std::abs(v));
-        sum += v;
       }
       cols.clear();
-      double kept = 0;
-      const auto dropped = std::remove_if(row.begin(), row.end(),
-                                          [&](const auto& e) { return std::abs(e.second) < truncate * largest; });
-      row.erase(dropped, row.end());
-      for (const auto& e : row) kept += e.second;
-      const double scale = kept != 0 ? sum / kept : 1.0;
-      std::sort(row.begin(), row.end());
-      for (const auto& [k, v] : row)
-        if (v * scale != 0) {  // a row summing to 0 scales to zeros: dropped, as a canonical P has none
-          next.indices.push_back(k);
-          next.data.push_back(v * scale);
-        }
-      next.indptr.push_back(static_cast<I>(next.indices.size()));
+      append_truncated(row, truncate, next);
     }
     P = std::move(next);
   }
