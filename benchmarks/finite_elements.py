@@ -18,6 +18,8 @@ VmHWM during the solve, reset after building the problem, minus its resident siz
     newton-amg   nrmicp method="newton", hierarchy="amg" (what a user without a mesh hierarchy gets)
     newton-fe    the same with the finite-element hierarchy's own nested interpolation
                  (Problem.prolongations(); its construction is not timed, see the note)
+    newton-whole newton-amg on the whole A, rows with a lone diagonal not solved apart (the private
+                 Solver(..., _decouple=False); the "dirrows" case's comparison, docs/finite_elements.md)
     nrmgs+aa     nrmicp nrmgs, accelerate="anderson"
     psor         multicolour projected SOR (nrmicp._peers.psor, greedy colouring, ω from the
                  Jacobi spectral radius)
@@ -43,6 +45,7 @@ CASES = {"P1": [3, 4, 5, 6], "P2": [2, 3, 4, 5], "P3": [2, 3, 4], "disk": [32_00
          **other_matrices.SIZES}
 QUICK = {"P1": [3, 4], "P2": [2, 3], "P3": [1, 2], "disk": [32_000], **other_matrices.QUICK}
 PEERS = ["newton-amg", "newton-fe", "nrmgs+aa", "psor"]
+EXTRA_PEERS = ["newton-whole"]
 
 
 def build(case, size):
@@ -81,7 +84,11 @@ def child(peer, case, size, budget):
     c0 = time.process_time()
     out = dict(pre)
     if peer.startswith("newton"):
-        r = p.solve(method="newton", hierarchy="amg" if peer == "newton-amg" else Ps, tol=TOL, maxiter=1000)
+        if peer == "newton-whole":   # the private flag: rows with a lone diagonal not solved apart
+            solver = nrmicp.Solver(p.A, method="newton", hierarchy="amg", tol=TOL, maxiter=1000, _decouple=False)
+            r = solver.solve(p.q, p.zeta)
+        else:
+            r = p.solve(method="newton", hierarchy="amg" if peer == "newton-amg" else Ps, tol=TOL, maxiter=1000)
         z = r.z
         out.update(status=r.status.name.lower(), steps=int(r.level_steps[0]), solves=int(r.linear_solves),
                    levels=len(r.level_steps), level_steps=list(r.level_steps),
@@ -123,7 +130,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--budget", type=float, default=120.0, help="CPU seconds after which a peer stops growing")
-    ap.add_argument("--peers", nargs="+", default=PEERS, choices=PEERS)
+    ap.add_argument("--peers", nargs="+", default=PEERS, choices=PEERS + EXTRA_PEERS)
     ap.add_argument("--cases", nargs="+", default=SCENES, choices=list(CASES),
                     help="default: the scenes; the rest are benchmarks/other_matrices.py's")
     ap.add_argument("--child", nargs=4, help=argparse.SUPPRESS)

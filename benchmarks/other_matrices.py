@@ -17,6 +17,9 @@ Each builder returns an nrmicp.scenes.Problem (A, q, the obstacle ψ as ζ); n g
     graph       Laplacian of a random geometric graph on the unit square (+10⁻³ I): no mesh at all
     plate       Kirchhoff plate (the 5-point Laplacian squared, h⁴-scaled; fourth order, no
                 M-matrix), q = 200 h⁴ (a uniform load pressing it onto the obstacle)
+    dirrows     P1 on the disk-like polygon with every degree of freedom kept and the boundary
+                rows replaced by identity rows, their columns kept (as FEniCS' DirichletBC.apply
+                and PETSc's MatZeroRows leave them: A nonsymmetric), q = 0 and ψ ≤ 0 there
 The grid and graph cases take ψ = 0.1 − |x − (0.55, 0.45)|².
 """
 from __future__ import annotations
@@ -29,8 +32,8 @@ from nrmicp.scenes._operators import as_csr, grid_2d, tridiag
 
 SIZES = {"Q1": [4, 5, 6], "Q2": [3, 4, 5], "tetP1": [2, 3, 4], "tetP2": [1, 2, 3], "materials": [4, 5, 6],
          "aniso": [127, 255, 511], "rotated": [127, 255, 511], "graph": [10_000, 40_000, 160_000],
-         "plate": [63, 127, 255]}
-QUICK = {"Q1": [4], "Q2": [3], "tetP1": [2], "tetP2": [1], "materials": [4], "aniso": [127], "rotated": [127],
+         "plate": [63, 127, 255], "dirrows": [4, 5, 6]}
+QUICK = {"dirrows": [4], "Q1": [4], "Q2": [3], "tetP1": [2], "tetP2": [1], "materials": [4], "aniso": [127], "rotated": [127],
          "graph": [10_000], "plate": [63]}
 
 
@@ -53,13 +56,24 @@ def _fe(case, r):
     def stiffness(u, v, w):
         return (1.0 + contrast * (w.x[0] > 0.1)) * dot(grad(u), grad(v))
 
-    inner = basis.complement_dofs(basis.get_dofs())
-    A = as_csr(skfem.asm(stiffness, basis)[inner][:, inner])
-    q = np.asarray(skfem.asm(skfem.LinearForm(lambda v, w: 1.0 * v), basis))[inner]
+    K = as_csr(skfem.asm(stiffness, basis))
+    q = np.asarray(skfem.asm(skfem.LinearForm(lambda v, w: 1.0 * v), basis))
+    boundary = basis.get_dofs().all()
+    kept = np.ones(K.shape[0], dtype=bool)
+    kept[boundary] = False
+    if case == "dirrows":   # identity rows on the boundary, columns kept
+        A = as_csr(sp.diags_array(kept.astype(float)) @ K + sp.diags_array((~kept).astype(float)))
+        q[boundary] = 0.0
+        inner = np.arange(K.shape[0])
+    else:
+        inner = np.flatnonzero(kept)
+        A = as_csr(K[inner][:, inner])
     x = basis.doflocs[:, inner]
     d2 = (x[0] - 0.3) ** 2 + (x[1] - 0.2) ** 2 + (x[2] ** 2 if x.shape[0] == 3 else 0.0)
     psi = {"materials": 0.02, "tetP1": -0.1, "tetP2": -0.1}.get(case, 0.1) - d2
-    return A, q, psi
+    if case == "dirrows":
+        psi[boundary] = np.minimum(psi[boundary], 0.0)
+    return A, q[inner], psi
 
 
 def _algebraic(case, size):
@@ -94,6 +108,6 @@ def _algebraic(case, size):
 
 def build(case: str, size: int) -> Problem:
     """The obstacle problem `case` at `size` (SIZES)."""
-    A, q, psi = (_fe if case in ("Q1", "Q2", "tetP1", "tetP2", "materials") else _algebraic)(case, size)
+    A, q, psi = (_fe if case in ("Q1", "Q2", "tetP1", "tetP2", "materials", "dirrows") else _algebraic)(case, size)
     return Problem(name=f"{case}({size})", A=A, q=q, zeta=psi, z_exact=None,
                    description=f"obstacle problem on the {case} matrix (benchmarks/other_matrices.py)")

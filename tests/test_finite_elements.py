@@ -205,3 +205,57 @@ def test_scikit_fem_example_runs_and_both_hierarchies_agree():
         assert message.startswith("converged") and float(res) < 1e-9, (name, message, res)
         assert int(steps) <= 6, (name, steps)
     assert len(contacts) == 2 and contacts[0] == contacts[1] > 0, out.stdout
+
+
+# ---------------------------------------------------------------- Dirichlet rows kept as identity rows
+
+def p1_with_identity_rows(r, diagonal=1.0):
+    """benchmarks/other_matrices.py's "dirrows": the P1 membrane with every degree of freedom kept
+    and the boundary rows replaced by `diagonal` e_i, their columns kept (A nonsymmetric), as
+    FEniCS' DirichletBC.apply / PETSc's MatZeroRows leave them; q = 0 there."""
+    p = other_matrices.build("dirrows", r)
+    lone = np.diff(p.A.indptr) == 1
+    scale = np.where(lone, diagonal, 1.0)
+    A = p.A.copy()
+    A.data *= np.repeat(scale, np.diff(A.indptr))   # rows scaled in place: A stays canonical
+    return A, scale * p.q, p.zeta
+
+
+def test_identity_dirichlet_rows_keep_the_finest_steps_flat_and_cg():
+    # On the whole nonsymmetric A the algebraic hierarchy mixed the fixed unknowns into the coarse
+    # problems: 8 and 12 finest steps at n = 8,321 / 33,025 (17 at 131,585), BiCGSTAB; the rows
+    # are now solved in closed form and Newton runs on the symmetric A_FF (nrmicp/_decoupled.py).
+    runs = [nrmicp.solve(*p1_with_identity_rows(r), method="newton", tol=TOL) for r in (3, 4)]
+    steps = [res.level_steps[0] for res in runs]
+    assert all(res.success and res.inner == "cg" for res in runs)
+    assert max(steps) <= 5 and steps[1] <= steps[0] + 1, steps
+
+
+@pytest.mark.parametrize("diagonal", [1.0, 37.5])
+def test_identity_dirichlet_rows_agree_with_policy_iteration_on_the_whole_matrix(diagonal):
+    from nrmicp.scenes._exact import solve_exact_obstacle
+    A, q, psi = p1_with_identity_rows(3, diagonal)
+    q = q.copy()
+    q[np.flatnonzero(np.diff(A.indptr) == 1)[::2]] = -0.05 * diagonal  # z_i = 0.05 there: a Dirichlet value
+    seen = []
+    res = nrmicp.solve(A, q, zeta=psi, method="newton", tol=1e-11, x0=np.zeros(A.shape[0]),
+                       callback=lambda zk: seen.append(zk.size))
+    z_exact = solve_exact_obstacle(A, q, psi)
+    assert res.success and res.residual < 1e-11
+    assert np.abs(res.z - z_exact).max() <= 1e-10 * max(1.0, np.abs(z_exact).max())
+    w = A @ res.z + q
+    assert np.allclose(res.w, w, atol=1e-12) and (res.z - psi).min() >= 0 and w.min() >= -1e-11
+    assert seen and set(seen) == {A.shape[0]}   # the callback sees the whole iterate
+
+
+def test_decoupled_rows_with_a_coupling_zeta_solve_the_whole_problem():
+    # an affine ζ couples a lone-diagonal row to the others: no closed form, the whole A is solved
+    A, q, psi = p1_with_identity_rows(2)
+    B = sp.csr_matrix(0.1 * sp.eye(A.shape[0], k=1))
+    zeta = nrmicp.Affine(B, psi)
+    res = nrmicp.solve(A, q, zeta=zeta, method="newton", tol=1e-10)
+    ref = nrmicp.solve(A, q, zeta=zeta, method="nrmgs", accelerate="anderson", tol=1e-12, maxiter=100_000)
+    assert res.success and ref.success
+    assert np.abs(res.z - ref.z).max() <= 1e-8 * max(1.0, np.abs(ref.z).max())
+    w, g = A @ res.z + q, res.z - zeta(res.z)
+    assert np.linalg.norm(np.minimum(w, g)) < 1e-10

@@ -70,6 +70,14 @@ def random_matrix(rng, n, kind, scale):
         R.setdiag(rng.uniform(0.1, 3.0, n))
     elif kind == "singular":
         R = sp.csr_matrix(R.toarray() * (rng.uniform(size=(1, n)) > 0.3))  # some empty columns
+    if kind != "singular" and rng.integers(3) == 0:
+        # some rows a lone diagonal, columns kept (Dirichlet rows as FE codes leave them; the
+        # Newton member solves them in closed form: python/nrmicp/_decoupled.py)
+        lone = rng.uniform(size=n) < rng.uniform(0.1, 0.9)
+        R = sp.lil_matrix(R)
+        for i in np.flatnonzero(lone):
+            R.rows[i], R.data[i] = [i], [float(rng.uniform(0.5, 2.0))]
+        R = sp.csr_matrix(R)
     R = sp.csr_matrix(R * scale)
     R.sort_indices()
     return R

@@ -19,6 +19,7 @@ from ._inputs import as_constant, as_csr, as_diagonal, as_vector
 from ._scaling import SCALINGS, ScaledCallable, equilibrate, scale_matrix
 from . import _newton
 from ._zeta import CheckedZeta
+from ._decoupled import Reduced, decoupled_rows
 
 __all__ = ["solve", "Solver", "Affine", "Result", "Status", "METHODS", "residual", "backends"]
 
@@ -250,6 +251,16 @@ def _scale_choice(scale):
     raise ValueError(f"scale must be False, True, 'rows' or 'both'; got {scale!r}")
 
 
+def _wants_result(callback: Callable[..., Any]) -> bool:
+    """scipy's rule: a callback whose only parameter is named ``intermediate_result`` receives a
+    :class:`Result`; any other the iterate alone."""
+    try:
+        params = set(inspect.signature(callback).parameters)
+    except (TypeError, ValueError):  # a builtin without a signature: the plain form
+        params = set()
+    return params == {"intermediate_result"}
+
+
 def _core_callback(callback: Callable[..., Any], dc: Optional[np.ndarray],
                    offset: Optional[list] = None) -> Callable[[int, np.ndarray, float], bool]:
     """The core's per-iterate hook (k, z, Res) -> stop?, calling ``callback`` by scipy's rule:
@@ -258,11 +269,7 @@ def _core_callback(callback: Callable[..., Any], dc: Optional[np.ndarray],
     alone (``callback(xk)``). Raising StopIteration (or returning True) stops the solve.
     ``dc``: column scaling, mapping the core's z back to the original variables. ``offset[0]``:
     the iterations of earlier rounds (scaled re-solves), added to k as the history does."""
-    try:
-        params = set(inspect.signature(callback).parameters)
-    except (TypeError, ValueError):  # a builtin without a signature: the plain form
-        params = set()
-    wants_result = params == {"intermediate_result"}
+    wants_result = _wants_result(callback)
 
     def hook(k: int, z: np.ndarray, res: float) -> bool:
         zk = z * dc if dc is not None else z  # a fresh array: the core passes a copy
@@ -326,7 +333,12 @@ class Solver:
                  z_update: str = "auto",
                  accelerate: Optional[str] = "none", anderson_m: int = 5, record_history: bool = False,
                  stall_iterations: int = 100, scale: Union[bool, str] = False, verbose: int = 0,
-                 hierarchy: Any = "auto", polish: bool = False) -> None:
+                 hierarchy: Any = "auto", polish: bool = False, _decouple: bool = True) -> None:
+        settings = dict(method=method, omega1=omega1, omega2=omega2, gamma=gamma, phi=phi, alpha=alpha, beta=beta,
+                        inner=inner, tol=tol, rtol=rtol, maxiter=maxiter, theta=theta, z_update=z_update,
+                        accelerate=accelerate, anderson_m=anderson_m, record_history=record_history,
+                        stall_iterations=stall_iterations, scale=scale, verbose=verbose, hierarchy=hierarchy,
+                        polish=polish)
         self.A = as_csr(A, "A")
         n = self.A.shape[0]
         if n == 0:
@@ -350,6 +362,14 @@ class Solver:
                               anderson_m=anderson_m, record_history=record_history,
                               stall_iterations=stall_iterations, verbose=verbose)
         _checked(_iteration_options(opts, **self._defaults), n)
+        # Newton: rows with a lone positive diagonal are solved in closed form, the rest on A_FF
+        # (python/nrmicp/_decoupled.py); another ζ than none/constant solves on A (self._whole).
+        D = decoupled_rows(self.A) if self.method == "newton" and _decouple else None
+        self._reduced = None if D is None else Reduced(Solver, self.A, D, settings)
+        self._settings, self._whole_solver = settings, None
+        if self._reduced is not None:
+            self.polish = self._reduced.inner.polish
+            return
         if self.scale is None:
             self._dr = self._dc = None
             A_core = self.A
@@ -371,17 +391,25 @@ class Solver:
     @property
     def parameters(self) -> dict[str, Any]:
         """The method's parameters with defaults resolved: omega1, omega2, phi, gamma, alpha, beta, inner.
-        With ``scale``, they are those of the scaled problem."""
+        With ``scale``, they are those of the scaled problem; for method 'newton' on an A with
+        decoupled rows (a lone diagonal), those of the coupled rows' problem."""
+        if self._reduced is not None:
+            return self._reduced.inner.parameters
         return dict(self._core.parameters())
 
     @property
     def levels(self) -> int:
         """Levels of nested iteration (method 'newton': 1 + the number of prolongations; else 1)."""
+        if self._reduced is not None:
+            return self._reduced.inner.levels
         return self._core.levels if self.method == "newton" else 1
 
     @property
     def scaling(self) -> Optional[tuple[np.ndarray, np.ndarray]]:
-        """(d_r, d_c), the row and column factors of the scaled matrix D_r A D_c, or None."""
+        """(d_r, d_c), the row and column factors of the scaled matrix D_r A D_c, or None (method
+        'newton' on an A with decoupled rows: those of the coupled rows' matrix A_FF)."""
+        if self._reduced is not None:
+            return self._reduced.inner.scaling
         if self._dr is None:
             return None
         return self._dr.copy(), self._dc.copy()
@@ -398,6 +426,12 @@ class Solver:
         kind, c, B, fn = _make_zeta(zeta, n)
         if callback is not None and not callable(callback):
             raise TypeError(f"callback must be callable, got {type(callback).__name__}")
+        if self._reduced is not None:
+            if kind in (ZetaKind.none, ZetaKind.constant):
+                _newton.jacobian_argument(zeta_jacobian, self, kind, None)   # only its checks: it raises here
+                return self._solve_reduced(qv, c, z0, callback, it, checked_opts)
+            return self._whole().solve(q, zeta, x0=x0, callback=callback, zeta_jacobian=zeta_jacobian,
+                                       **iteration_options)
         core_kw = _newton.jacobian_argument(zeta_jacobian, self, kind, self._dc)
         checked = None if fn is None else CheckedZeta(fn, n)  # read-only input, checked output: one per solve
         problem, z0s = self._core_problem(qv, z0, kind, c, B, checked)
@@ -419,6 +453,28 @@ class Solver:
         if self.polish:
             polished, polish_core = _newton.polish(self, problem, rounds.z, rounds.res, measure, self._dc)
         return self._assemble(rounds, polished, polish_core, tol)
+
+    def _solve_reduced(self, qv, c, z0, callback, it, checked_opts) -> Result:
+        """Solve on the coupled rows (self._reduced); z, w, Res and the status of the whole problem."""
+        kind = ZetaKind.none if c is None else ZetaKind.constant
+        measure = _OriginalResidual(self.A, qv, kind, c, None, None)
+        tol = float(it["tol"])
+        if checked_opts.rtol > 0:
+            tol = checked_opts.target(measure(np.zeros(self.n))[1])
+        r = self._reduced.solve(qv, c, z0, callback, tol, {k: v for k, v in it.items() if k not in ("tol", "rtol")},
+                                measure)
+        if r.status == Status.CONVERGED and not r.residual < tol:
+            r.status, r.message = Status.STAGNATED, (
+                f"stagnated: the coupled rows met tol but Res(z) = {r.residual:.3g} >= tol = {tol:.3g} with the "
+                "decoupled rows; returning the best iterate")
+        r.success = r.status == Status.CONVERGED
+        return r
+
+    def _whole(self) -> "Solver":
+        """The Newton member on the whole A (an affine or callable ζ couples the decoupled rows)."""
+        if self._whole_solver is None:
+            self._whole_solver = Solver(self.A, _decouple=False, **self._settings)
+        return self._whole_solver
 
     def _solve_options(self, iteration_options: dict) -> dict:
         """The set-up's per-solve options overridden by the solve's, checked against the method."""
