@@ -259,3 +259,36 @@ def test_decoupled_rows_with_a_coupling_zeta_solve_the_whole_problem():
     assert np.abs(res.z - ref.z).max() <= 1e-8 * max(1.0, np.abs(ref.z).max())
     w, g = A @ res.z + q, res.z - zeta(res.z)
     assert np.linalg.norm(np.minimum(w, g)) < 1e-10
+
+
+def test_a_hierarchy_over_every_node_is_restricted_to_the_coupled_rows():
+    # 5-point grid with its boundary nodes kept as identity rows and bilinear prolongations over
+    # all nodes (boundary included): P_0 loses the boundary rows, the coarse levels stay
+    def bilinear_1d(N):   # N = 2^k + 1 nodes -> (N + 1) / 2
+        Nc = (N + 1) // 2
+        rows = np.r_[2 * np.arange(Nc), 2 * np.arange(Nc - 1) + 1, 2 * np.arange(Nc - 1) + 1]
+        cols = np.r_[np.arange(Nc), np.arange(Nc - 1), np.arange(1, Nc)]
+        vals = np.r_[np.ones(Nc), np.full(2 * (Nc - 1), 0.5)]
+        return sp.csr_matrix((vals, (rows, cols)), shape=(N, Nc))
+    N = 65
+    T = sp.diags_array([-1.0, 2.0, -1.0], offsets=[-1, 0, 1], shape=(N, N))
+    K = sp.csr_matrix(sp.kron(T, sp.identity(N)) + sp.kron(sp.identity(N), T))
+    X, Y = (g.ravel() for g in np.meshgrid(np.linspace(0, 1, N), np.linspace(0, 1, N), indexing="ij"))
+    boundary = (X == 0) | (X == 1) | (Y == 0) | (Y == 1)
+    A = sp.csr_matrix(sp.diags_array((~boundary).astype(float)) @ K + sp.diags_array(boundary.astype(float)))
+    A.eliminate_zeros()
+    A.sort_indices()
+    q = np.where(boundary, 0.0, 8.0 / (N - 1) ** 2)
+    psi = np.where(boundary, -1.0, 0.1 - (X - 0.55) ** 2 - (Y - 0.45) ** 2)
+    Ps, n = [], N
+    while n > 5:
+        P = bilinear_1d(n)
+        Ps.append(sp.csr_matrix(sp.kron(P, P)))
+        n = (n + 1) // 2
+    from nrmicp.scenes._exact import solve_exact_obstacle
+    res = nrmicp.solve(A, q, zeta=psi, method="newton", hierarchy=Ps, tol=1e-11)
+    assert res.success and res.inner == "cg" and res.level_steps[0] <= 4, res.level_steps
+    assert len(res.level_steps) == len(Ps) + 1
+    assert np.abs(res.z - solve_exact_obstacle(A, q, psi)).max() <= 1e-10
+    w = A @ res.z + q
+    assert (res.z - psi).min() >= 0 and w.min() >= -1e-11 and np.abs(np.minimum(w, res.z - psi)).max() <= 1e-11
