@@ -292,3 +292,47 @@ def test_a_hierarchy_over_every_node_is_restricted_to_the_coupled_rows():
     assert np.abs(res.z - solve_exact_obstacle(A, q, psi)).max() <= 1e-10
     w = A @ res.z + q
     assert (res.z - psi).min() >= 0 and w.min() >= -1e-11 and np.abs(np.minimum(w, res.z - psi)).max() <= 1e-11
+
+
+def _chain_with_identity_rows(n, lone):
+    A = sp.lil_matrix(sp.diags_array([-1.0, 2.0, -1.0], offsets=[-1, 0, 1], shape=(n, n)))
+    for i in lone:
+        A.rows[i], A.data[i] = [i], [1.0]
+    return sp.csr_matrix(A)
+
+
+def test_every_level_of_a_hierarchy_list_keeps_only_what_interpolates_coupled_rows():
+    # aggregation prolongations whose coarse unknowns at several levels only interpolate identity
+    # rows: each level is restricted (a level no coarser than the one above merged into the next),
+    # none is rejected with the reduced shapes, none cut off by a zero Galerkin diagonal
+    def aggregate(nf, nc):
+        return sp.csr_matrix((np.ones(nf), (np.arange(nf), np.arange(nf) * nc // nf)), shape=(nf, nc))
+    from nrmicp.scenes._exact import solve_exact_obstacle
+    for n, lone, sizes in ((8, range(6), (4, 2)), (16, range(6), (8, 4, 2)), (64, range(0, 64, 3), (32, 16, 8, 4))):
+        A, q = _chain_with_identity_rows(n, lone), -np.ones(n)
+        Ps = [aggregate(nf, nc) for nf, nc in zip((n,) + sizes, sizes)]
+        s = nrmicp.Solver(A, method="newton", hierarchy=Ps)
+        res = s.solve(q, np.full(n, -0.5))
+        assert res.success and len(res.level_steps) == s.levels >= 2, (n, res.level_steps, s.levels)
+        assert np.abs(res.z - solve_exact_obstacle(A, q, np.full(n, -0.5))).max() <= 1e-10
+
+
+def test_the_status_is_decided_on_the_whole_problems_res():
+    # large data on the identity rows: the coupled rows' Res and the whole problem's differ by
+    # rounding, and the status follows the returned Res (rule 4 of docs/SPEC.md)
+    m, n = 10, 100
+    T = sp.diags_array([-1.0, 2.0, -1.0], offsets=[-1, 0, 1], shape=(m, m))
+    K = sp.csr_matrix(sp.kron(T, sp.identity(m)) + sp.kron(sp.identity(m), T))
+    rng = np.random.default_rng(0)
+    lone = rng.uniform(size=n) < 0.3
+    A = sp.csr_matrix(sp.diags_array((~lone).astype(float)) @ K + sp.diags_array(3.0 * lone))
+    A.eliminate_zeros()
+    A.sort_indices()
+    q = rng.uniform(-1, 1, n) * 1e7
+    q[lone] = -1e8 * rng.uniform(0.5, 1, lone.sum())
+    psi = rng.uniform(-0.3, 0.3, n) * 1e7
+    for tol in (1e-9, 5.62e-8, 1e-6):
+        res = nrmicp.solve(A, q, psi, method="newton", tol=tol)
+        w = A @ res.z + q
+        assert res.residual == pytest.approx(np.linalg.norm(np.minimum(w, res.z - psi)), rel=1e-12)
+        assert res.success == (res.residual < tol) and (res.status == nrmicp.Status.CONVERGED) == res.success

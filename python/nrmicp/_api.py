@@ -358,9 +358,8 @@ class Solver:
         opts.alpha = math.nan if alpha is None else _scalar(alpha, "alpha")
         opts.beta = math.nan if beta is None else _scalar(beta, "beta")
         opts.inner = getattr(_core.Inner, _choice(inner, INNERS, "inner"))
-        self._defaults = dict(tol=tol, rtol=rtol, maxiter=maxiter, theta=theta, z_update=z_update, accelerate=accelerate,
-                              anderson_m=anderson_m, record_history=record_history,
-                              stall_iterations=stall_iterations, verbose=verbose)
+        self._defaults = {k: settings[k] for k in ("tol", "rtol", "maxiter", "theta", "z_update", "accelerate",
+                                                   "anderson_m", "record_history", "stall_iterations", "verbose")}
         _checked(_iteration_options(opts, **self._defaults), n)
         # Newton: rows with a lone positive diagonal are solved in closed form, the rest on A_FF
         # (python/nrmicp/_decoupled.py); another ζ than none/constant solves on A (self._whole).
@@ -427,10 +426,15 @@ class Solver:
         if callback is not None and not callable(callback):
             raise TypeError(f"callback must be callable, got {type(callback).__name__}")
         if self._reduced is not None:
+            zD = None
             if kind in (ZetaKind.none, ZetaKind.constant):
-                _newton.jacobian_argument(zeta_jacobian, self, kind, None)   # only its checks: it raises here
-                return self._solve_reduced(qv, c, z0, callback, it, checked_opts)
-            return self._whole().solve(q, zeta, x0=x0, callback=callback, zeta_jacobian=zeta_jacobian,
+                _newton.check_jacobian(zeta_jacobian, self.method, kind)
+                zD = self._reduced.z_decoupled(qv, c)
+            if zD is not None:
+                return self._solve_reduced(qv, c, zD, z0, callback, it, checked_opts)
+            # a coupling ζ (or a z_D that overflows): the whole A; ζ as checked here (B converted once)
+            whole_zeta = Affine(B, c) if kind == ZetaKind.affine else zeta
+            return self._whole().solve(qv, whole_zeta, x0=z0, callback=callback, zeta_jacobian=zeta_jacobian,
                                        **iteration_options)
         core_kw = _newton.jacobian_argument(zeta_jacobian, self, kind, self._dc)
         checked = None if fn is None else CheckedZeta(fn, n)  # read-only input, checked output: one per solve
@@ -454,19 +458,24 @@ class Solver:
             polished, polish_core = _newton.polish(self, problem, rounds.z, rounds.res, measure, self._dc)
         return self._assemble(rounds, polished, polish_core, tol)
 
-    def _solve_reduced(self, qv, c, z0, callback, it, checked_opts) -> Result:
-        """Solve on the coupled rows (self._reduced); z, w, Res and the status of the whole problem."""
+    def _solve_reduced(self, qv, c, zD, z0, callback, it, checked_opts) -> Result:
+        """Solve on the coupled rows (self._reduced); z, w, Res and the status of the whole problem,
+        the status re-decided on that Res as rule 1 of docs/SPEC.md does."""
         kind = ZetaKind.none if c is None else ZetaKind.constant
         measure = _OriginalResidual(self.A, qv, kind, c, None, None)
         tol = float(it["tol"])
         if checked_opts.rtol > 0:
             tol = checked_opts.target(measure(np.zeros(self.n))[1])
-        r = self._reduced.solve(qv, c, z0, callback, tol, {k: v for k, v in it.items() if k not in ("tol", "rtol")},
-                                measure)
-        if r.status == Status.CONVERGED and not r.residual < tol:
+        r = self._reduced.solve(qv, c, zD, z0, callback, tol,
+                                {k: v for k, v in it.items() if k not in ("tol", "rtol")}, measure)
+        if r.residual < tol:
+            r.status, r.message = Status.CONVERGED, _core.status_message(int(Status.CONVERGED))
+        elif r.status == Status.CONVERGED:
             r.status, r.message = Status.STAGNATED, (
                 f"stagnated: the coupled rows met tol but Res(z) = {r.residual:.3g} >= tol = {tol:.3g} with the "
                 "decoupled rows; returning the best iterate")
+        else:
+            r.message = f"{r.message}; Res(z) = {r.residual:.3g} with the decoupled rows"
         r.success = r.status == Status.CONVERGED
         return r
 

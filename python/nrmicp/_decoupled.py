@@ -22,43 +22,48 @@ import scipy.sparse as sp
 
 def decoupled_rows(A: sp.csr_matrix) -> Optional[np.ndarray]:
     """The rows of A whose only nonzero is a positive diagonal entry (stored zeros ignored), or
-    None when there are none or all rows are (nothing left to couple)."""
+    None when there are none, all rows are, or some row has no positive diagonal (the whole A is
+    then solved, so that the core's errors name the user's rows)."""
     n = A.shape[0]
+    diagonal = A.diagonal()
+    if not (diagonal > 0).all():
+        return None
     rows = np.repeat(np.arange(n), np.diff(A.indptr))
     off = (A.data != 0) & (A.indices != rows)
-    coupled = np.bincount(rows[off], minlength=n) > 0
-    D = np.flatnonzero(~coupled & (A.diagonal() > 0))
+    D = np.flatnonzero(np.bincount(rows[off], minlength=n) == 0)
     return D if 0 < D.size < n else None
 
 
 def _diagonal_part(value, F):
-    """A diagonal option (omega1, omega2, phi) on the coupled rows: a vector restricted, a scalar kept."""
-    if value is None or np.ndim(value) == 0:
-        return value
-    return np.asarray(value, dtype=np.float64)[F]
+    """A diagonal option (omega1, omega2, phi) on the coupled rows: a vector (any shape as_diagonal
+    takes) restricted, a scalar kept."""
+    v = None if value is None else np.asarray(value, dtype=np.float64)
+    return value if v is None or v.size == 1 else v.ravel()[F]
 
 
 def _hierarchy_part(hierarchy, A, F):
-    """A list of prolongations on the coupled rows: P_0's rows of F, without the coarse columns
-    that only interpolated decoupled rows (their Galerkin row would be zero); a level left no
-    coarser than the one above is merged into the next (P_0 P_1) or, the last, dropped. Strings
+    """A list of prolongations on the coupled rows: each P_l's rows of the unknowns kept on its fine
+    level (F on the first), without the coarse columns that interpolate none of them (their
+    Galerkin row would be zero, and the core would end the hierarchy there); a level left no
+    coarser than the one above is merged into the next, or dropped when it is the last. Strings
     and None kept."""
     if hierarchy is None or isinstance(hierarchy, str):
         return hierarchy
     from ._hierarchy import resolve_hierarchy
-    Ps = resolve_hierarchy(hierarchy, A)   # checked on the whole A: errors name the user's shapes
-    if not Ps:
-        return Ps
-    P0 = sp.csr_matrix(Ps[0][F])
-    P0.eliminate_zeros()
-    keep = np.unique(P0.indices)
-    if keep.size == 0:
-        return []
-    P0 = sp.csr_matrix(P0[:, keep])
-    Ps = [P0] + ([sp.csr_matrix(Ps[1][keep])] + Ps[2:] if len(Ps) > 1 else [])
-    while Ps and Ps[0].shape[1] >= Ps[0].shape[0]:
-        Ps = [sp.csr_matrix(Ps[0] @ Ps[1])] + Ps[2:] if len(Ps) > 1 else []
-    return Ps
+    out, kept, waiting = [], F, None   # waiting: a level not coarser than the one above, merged into the next
+    for P in resolve_hierarchy(hierarchy, A):   # checked on the whole A: errors name the user's shapes
+        P = sp.csr_matrix(P[kept])
+        if waiting is not None:
+            P = sp.csr_matrix(waiting @ P)
+        P.eliminate_zeros()
+        kept = np.unique(P.indices)
+        if kept.size == 0:
+            break
+        P = sp.csr_matrix(P[:, kept])
+        waiting = None if P.shape[1] < P.shape[0] else P
+        if waiting is None:
+            out.append(P)
+    return out
 
 
 class Reduced:
@@ -81,10 +86,11 @@ class Reduced:
         self.inner = solver_cls(A_FF, _decouple=False, **part)
         self.n = n
 
-    def z_decoupled(self, q: np.ndarray, c: Optional[np.ndarray]) -> np.ndarray:
-        """z_D = max(ψ_D, −q_D / a_DD) (ψ = 0 for the LCP)."""
-        zD = -q[self.D] / self.a
-        return np.maximum(zD, 0.0 if c is None else c[self.D])
+    def z_decoupled(self, q: np.ndarray, c: Optional[np.ndarray]) -> Optional[np.ndarray]:
+        """z_D = max(ψ_D, −q_D / a_DD) (ψ = 0 for the LCP), or None when it overflows (a tiny a_ii)."""
+        with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+            zD = np.maximum(-q[self.D] / self.a, 0.0 if c is None else c[self.D])
+        return zD if np.isfinite(zD).all() else None
 
     def expand(self, zF: np.ndarray, zD: np.ndarray) -> np.ndarray:
         z = np.empty(self.n)
@@ -92,12 +98,13 @@ class Reduced:
         z[self.D] = zD
         return z
 
-    def solve(self, q: np.ndarray, c: Optional[np.ndarray], x0: Optional[np.ndarray],
+    def solve(self, q: np.ndarray, c: Optional[np.ndarray], zD: np.ndarray, x0: Optional[np.ndarray],
               callback: Optional[Callable[..., Any]], tol: float, options: dict, measure):
-        """The inner Solver's result for q (full length), the constant obstacle c (or None) and
-        start x0, to the absolute tol, with z, w and Res (`measure(z)` -> (w, Res) on the whole A)
-        in the whole problem's variables; its status is the caller's to re-decide."""
-        zD = self.z_decoupled(q, c)
+        """The inner Solver's result for q (full length), the constant obstacle c (or None), the
+        decoupled rows' zD and the start x0, to the absolute tol, with z, w and Res (`measure(z)` ->
+        (w, Res) on the whole A) in the whole problem's variables; its status is the caller's to
+        re-decide. The history, the callback's residual and the messages are the coupled rows'
+        Res (the decoupled rows' part of it is rounding)."""
         qF = q[self.F] + self.A_FD @ zD
         cb = None if callback is None else _expanding(callback, lambda zF: self.expand(zF, zD))
         r = self.inner.solve(qF, None if c is None else c[self.F], x0=None if x0 is None else x0[self.F],

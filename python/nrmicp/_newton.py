@@ -110,15 +110,22 @@ def result_fields(d) -> dict:
     return {name: getattr(stats, name) for name in _core.NewtonStats.fields}
 
 
+def check_jacobian(zeta_jacobian, method, kind) -> bool:
+    """Whether a ``zeta_jacobian`` was given; TypeError/ValueError when it cannot be used."""
+    if zeta_jacobian is None:
+        return False
+    if not callable(zeta_jacobian):
+        raise TypeError(f"zeta_jacobian must be callable, got {type(zeta_jacobian).__name__}")
+    if method != "newton" or kind != _core.ZetaKind.functor:
+        raise ValueError("zeta_jacobian is used by method 'newton' with a callable zeta only")
+    return True
+
+
 def jacobian_argument(zeta_jacobian, solver, kind, dc) -> dict:
     """The core's ``zeta_jacobian`` keyword: a wrapper returning canonical CSR arrays with the
     core's index type (in the scaled variables y = D_c⁻¹ z: J' = D_c⁻¹ J(D_c y) D_c)."""
-    if zeta_jacobian is None:
+    if not check_jacobian(zeta_jacobian, solver.method, kind):
         return {}
-    if not callable(zeta_jacobian):
-        raise TypeError(f"zeta_jacobian must be callable, got {type(zeta_jacobian).__name__}")
-    if solver.method != "newton" or kind != _core.ZetaKind.functor:
-        raise ValueError("zeta_jacobian is used by method 'newton' with a callable zeta only")
     import scipy.sparse as sp
     from ._inputs import as_csr
 
