@@ -25,8 +25,9 @@ def decoupled_rows(A: sp.csr_matrix) -> Optional[np.ndarray]:
     None when there are none, all rows are, or some row has no positive diagonal (the whole A is
     then solved, so that the core's errors name the user's rows)."""
     n = A.shape[0]
-    diagonal = A.diagonal()
-    if not (diagonal > 0).all():
+    if not (np.diff(A.indptr) == 1).any() and A.data.all():   # no one-entry row, no stored zero: none (3 ms at 10⁶)
+        return None
+    if not (A.diagonal() > 0).all():
         return None
     rows = np.repeat(np.arange(n), np.diff(A.indptr))
     off = (A.data != 0) & (A.indices != rows)
