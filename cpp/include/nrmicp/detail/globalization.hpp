@@ -197,11 +197,13 @@ class Globalized {
     const double forcing = repeat || !Plain::set_fixes_step ? 0.0 : plain_.steps() == 0 ? ctl_.first_forcing : ctl_.forcing;
     loose_ = forcing > 0 && plain_.iterative();
     double r = plain_.solve(inactive_, repeat ? repeat_tol() : ctl_.solve.tol, forcing);
+    bool damped = false;
     if constexpr (Plain::set_fixes_step)
-      if (overshoots()) r = plain_.damp(kOvershootDamping);
+      if (overshoots()) { r = plain_.damp(kOvershootDamping); damped = true; }
     const bool still = Plain::set_fixes_step && plain_.trial_still();  // the solve's own z⁺, before the sweeps
     if (!repeat) {  // a repeat is the exact solve of its set: kept as solved
-      moved_set_ = plain_.smooth(kSmoothingSweeps);
+      // a damped z⁺, or one whose set the sweeps changed, is no set's exact solve: its repeat is solved again
+      moved_set_ = plain_.smooth(kSmoothingSweeps) || damped;
       r = plain_.trial_residual();
     }
     if (!(std::isfinite(r) && (exempt_ || test_.acceptable(r)))) return false;
