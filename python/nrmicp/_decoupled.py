@@ -10,6 +10,8 @@ coarse problems that mix the fixed unknowns into the free ones (P1 membrane, n =
 finest steps and BiCGSTAB on A, 6 and CG on A_FF; docs/finite_elements.md, "Dirichlet rows kept as
 identity rows"). So the Newton member solves on A_FF and puts z_D back; an affine or callable ζ
 couples z_i to other unknowns, and is solved on the whole A (a second Solver, built when first needed).
+Here, not in the C++ core, because the algebraic hierarchy is built here (pyamg) and must be built on
+A_FF; a C++ caller of nrmicp::Newton with such rows passes A_FF itself.
 """
 from __future__ import annotations
 
