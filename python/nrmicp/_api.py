@@ -369,6 +369,11 @@ class Solver:
         if self._reduced is not None:
             self.polish = self._reduced.inner.polish
             return
+        pairs = None
+        if self.method == "newton" and self.scale is None and _newton.resolves_to_amg(hierarchy, n):
+            pairs = _newton.amg_levels_or_rows(self.A)
+            if pairs is None:   # rows scaled apart: equilibrated, the amg hierarchy stays (_newton.py)
+                self.scale = "rows"
         if self.scale is None:
             self._dr = self._dc = None
             A_core = self.A
@@ -379,7 +384,7 @@ class Solver:
         self.polish = _newton.check_polish(polish)
         self._polisher = None
         if self.method == "newton":
-            self._core = _newton.make_core(A_core, opts, hierarchy, self.A, self._dc)
+            self._core = _newton.make_core(A_core, opts, hierarchy, self.A, self._dc, pairs)
             return
         _newton.check_no_hierarchy(hierarchy, self.method)
         core_cls = _core.SolverI64 if self._index_dtype == np.int64 else _core.SolverI32

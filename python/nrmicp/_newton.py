@@ -33,15 +33,33 @@ def check_no_hierarchy(hierarchy, method):
                          f"(got hierarchy={hierarchy!r}; use None)")
 
 
-def levels(hierarchy, A, A_core, dc) -> tuple:
+def resolves_to_amg(hierarchy, n) -> bool:
+    """hierarchy= is 'amg', or 'auto' for n >= AUTO_AMG_MIN_N with pyamg importable."""
+    if not isinstance(hierarchy, str):
+        return False
+    return hierarchy == "amg" or (hierarchy == "auto" and n >= AUTO_AMG_MIN_N and _has_pyamg())
+
+
+def amg_levels_or_rows(A):
+    """The amg levels of an unscaled A, or None when one of their Galerkin operators PᵀAP has a
+    non-positive diagonal: the core would end the hierarchy there and start cold. That happens when
+    A is a symmetric matrix with its rows scaled apart, D·S (P1 n = 130,561, d_i in [0.1, 10]: 51
+    Newton steps with direct solves, 27 CPU s); equilibrated rows keep the diagonals positive (5
+    finest steps, 0.95 s), so the caller then scales the rows (scale='rows')."""
+    pairs = amg_levels(A)
+    return pairs if all((Ac.diagonal() > 0).all() for _, Ac in pairs) else None
+
+
+def levels(hierarchy, A, A_core, dc, pairs=None) -> tuple:
     """hierarchy= -> (prolongations for the core's matrix A_core (= A, or D_r A D_c when scaled),
-    their Galerkin operators or None: the amg set-up forms them, a given list leaves them to the core).
-    'auto': 'amg' for n >= AUTO_AMG_MIN_N when pyamg is importable, else none (cold start)."""
-    if isinstance(hierarchy, str) and hierarchy == "auto":
-        hierarchy = "amg" if A.shape[0] >= AUTO_AMG_MIN_N and _has_pyamg() else None
-    if isinstance(hierarchy, str) and hierarchy == "amg":
-        pairs = amg_levels(A_core)
+    their Galerkin operators or None: the amg set-up forms them (or `pairs`, formed already), a
+    given list leaves them to the core). 'auto': 'amg' for n >= AUTO_AMG_MIN_N when pyamg is
+    importable, else none (cold start)."""
+    if resolves_to_amg(hierarchy, A.shape[0]):
+        pairs = amg_levels(A_core) if pairs is None else pairs
         return [P for P, _ in pairs], [Ac for _, Ac in pairs]
+    if isinstance(hierarchy, str) and hierarchy == "auto":
+        hierarchy = None
     Ps = resolve_hierarchy(hierarchy, A) or []
     if Ps and dc is not None:
         # z = D_c y: a prolongation of y is D_c⁻¹ P (the coarse variables keep their scale).
@@ -50,10 +68,10 @@ def levels(hierarchy, A, A_core, dc) -> tuple:
     return Ps, None
 
 
-def make_core(A_core, opts, hierarchy, A, dc):
+def make_core(A_core, opts, hierarchy, A, dc, pairs=None):
     """The C++ Newton object (NewtonI32/NewtonI64) with its prolongations (and coarse operators)."""
     idx = A_core.indices.dtype
-    Ps, coarse = levels(hierarchy, A, A_core, dc)
+    Ps, coarse = levels(hierarchy, A, A_core, dc, pairs)
 
     def triple(M):
         return (M.indptr.astype(idx, copy=False), M.indices.astype(idx, copy=False),   # the core copies them
