@@ -251,6 +251,14 @@ def _scale_choice(scale):
     raise ValueError(f"scale must be False, True, 'rows' or 'both'; got {scale!r}")
 
 
+def _absolute_target(it: dict, checked_opts, measure, n: int) -> dict:
+    """The iteration options with an absolute tol: the core's rule (Options::target) max(tol,
+    rtol · Res(0)) when rtol > 0, Res(0) in the original variables; then rtol = 0."""
+    if checked_opts.rtol > 0:
+        return dict(it, tol=checked_opts.target(measure(np.zeros(n))[1]), rtol=0.0)
+    return dict(it, tol=float(it["tol"]))
+
+
 def _wants_result(callback: Callable[..., Any]) -> bool:
     """scipy's rule: a callback whose only parameter is named ``intermediate_result`` receives a
     :class:`Result`; any other the iterate alone."""
@@ -424,7 +432,6 @@ class Solver:
         """Solve ICP(q, A, ζ). See :func:`nrmicp.solve` for the arguments."""
         n = self.n
         it, checked_opts = self._solve_options(iteration_options)
-        tol = float(it["tol"])
         qv = as_vector(q, n, "q")
         z0 = None if x0 is None else as_vector(x0, n, "x0")
         kind, c, B, fn = _make_zeta(zeta, n)
@@ -451,11 +458,8 @@ class Solver:
         # a different residual. An unscaled LCP needs no re-check: the core's Res is already
         # min(Az + q, z) of the returned z in the original variables.
         verify = kind in (ZetaKind.constant, ZetaKind.affine) or self._dr is not None
-        if checked_opts.rtol > 0:
-            # The core's rule (Options::target): max(tol, rtol · Res(0)), Res(0) in the original
-            # variables; the core then gets the absolute target.
-            tol = checked_opts.target(measure(np.zeros(n))[1])
-            it = dict(it, tol=tol, rtol=0.0)
+        it = _absolute_target(it, checked_opts, measure, n)
+        tol = it["tol"]
         rounds = _Rounds(self, problem, it, callback, core_kw, measure if verify else None)
         rounds.run(z0s, tol)
         polished = polish_core = None
@@ -468,11 +472,9 @@ class Solver:
         the status re-decided on that Res as rule 1 of docs/SPEC.md does."""
         kind = ZetaKind.none if c is None else ZetaKind.constant
         measure = _OriginalResidual(self.A, qv, kind, c, None, None)
-        tol = float(it["tol"])
-        if checked_opts.rtol > 0:
-            tol = checked_opts.target(measure(np.zeros(self.n))[1])
-        r = self._reduced.solve(qv, c, zD, z0, callback, tol,
-                                {k: v for k, v in it.items() if k not in ("tol", "rtol")}, measure)
+        it = _absolute_target(it, checked_opts, measure, self.n)
+        tol = it["tol"]
+        r = self._reduced.solve(qv, c, zD, z0, callback, it, measure)
         if r.residual < tol:
             r.status, r.message = Status.CONVERGED, _core.status_message(int(Status.CONVERGED))
         elif r.status == Status.CONVERGED:

@@ -101,16 +101,16 @@ class Reduced:
         return z
 
     def solve(self, q: np.ndarray, c: Optional[np.ndarray], zD: np.ndarray, x0: Optional[np.ndarray],
-              callback: Optional[Callable[..., Any]], tol: float, options: dict, measure):
+              callback: Optional[Callable[..., Any]], options: dict, measure):
         """The inner Solver's result for q (full length), the constant obstacle c (or None), the
-        decoupled rows' zD and the start x0, to the absolute tol, with z, w and Res (`measure(z)` ->
-        (w, Res) on the whole A) in the whole problem's variables; its status is the caller's to
-        re-decide. The history, the callback's residual and the messages are the coupled rows'
-        Res (the decoupled rows' part of it is rounding)."""
+        decoupled rows' zD and the start x0 under the iteration `options` (an absolute tol), with
+        z, w and Res (`measure(z)` -> (w, Res) on the whole A) in the whole problem's variables; its
+        status is the caller's to re-decide. The history, the callback's residual and the messages
+        are the coupled rows' Res (the decoupled rows' part of it is rounding)."""
         qF = q[self.F] + self.A_FD @ zD
         cb = None if callback is None else _expanding(callback, lambda zF: self.expand(zF, zD))
         r = self.inner.solve(qF, None if c is None else c[self.F], x0=None if x0 is None else x0[self.F],
-                             callback=cb, **dict(options, tol=tol, rtol=0.0))
+                             callback=cb, **options)
         z = self.expand(r.z, zD)
         w, res = measure(z)
         r.update(z=z, w=w, residual=res)
