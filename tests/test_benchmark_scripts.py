@@ -66,3 +66,12 @@ def test_newton_inner_table(scene):
                                           "umfpack", "cg").splitlines() if ln.startswith("{")]
     assert [ln["inner"] for ln in lines] == ["umfpack", "bicgstab"]
     assert all(ln["status"] == "CONVERGED" and ln["residual"] < 1e-8 for ln in lines), lines
+
+
+def test_time_stepping_table():
+    # README "Time stepping": the two-asset put march, on its smallest grid (n = 1,089); every peer converges
+    # and they agree on the value (the march's answer, not a timing)
+    rows = table_rows(run("time_stepping.py", "--m", "33"))
+    assert [r[1] for r in rows] == ["1,089"]
+    values = [float(c.split("value ")[1]) for c in rows[0][2:]]
+    assert len(values) == 3 and max(values) - min(values) < 1e-6, rows

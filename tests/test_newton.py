@@ -13,6 +13,7 @@ import scipy.sparse as sp
 import nrmicp
 from reference_impl import residual as reference_residual
 from nrmicp import scenes
+from nrmicp.scenes import solve_exact_obstacle
 
 import test_hard_cases as hard
 
@@ -76,6 +77,31 @@ def test_the_projected_sweeps_after_each_step_cut_a_cold_starts_peeling():
     # after each step (several layers each) 6 -> 9 -> 15
     steps = [scenes.obstacle_2d(m, exact=False).solve(method="newton", hierarchy=None).nit for m in (31, 63)]
     assert steps[1] <= 12 and steps[1] < 2 * steps[0], steps
+
+
+
+@pytest.mark.parametrize("hierarchy", ["amg", "grid"])
+def test_a_start_off_the_obstacle_replaces_the_nested_one(hierarchy):
+    # time stepping: the previous step's solution is the start and the hierarchy serves the inner
+    # solves (no coarse level is solved); a start at the obstacle everywhere is a cold start and
+    # the nesting replaces it
+    problem = scenes.obstacle_2d(63, exact=False)
+    h = problem.prolongations() if hierarchy == "grid" else "amg"
+    solver = nrmicp.Solver(problem.A, method="newton", hierarchy=h, tol=1e-10)
+    nested = solver.solve(problem.q, zeta=problem.zeta)
+    assert nested.success and any(nested.level_steps[1:])
+    # the next time step's data: the load changed by 1%; the old solution as the start
+    q_next = 1.01 * problem.q
+    exact = solve_exact_obstacle(problem.A, q_next, problem.zeta)
+    warm = solver.solve(q_next, zeta=problem.zeta, x0=nested.z)
+    assert warm.success, warm.message
+    assert not any(warm.level_steps[1:]) and warm.linear_solves == warm.nit <= 3, warm.level_steps
+    assert np.abs(warm.z - exact).max() < 1e-9
+    assert warm.inner == ("cg" if hierarchy == "grid" else nested.inner)  # the V-cycle still preconditions
+    for cold in (problem.zeta, problem.zeta - 1.0):   # at the obstacle everywhere, or below it
+        again = solver.solve(q_next, zeta=problem.zeta, x0=cold)
+        assert again.success and any(again.level_steps[1:]) and again.nit <= 3
+        assert np.abs(again.z - exact).max() < 1e-9
 
 
 @pytest.mark.parametrize("hierarchy", ["amg", "grid"])

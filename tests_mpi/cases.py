@@ -334,11 +334,31 @@ def case_sweeps():
                 "res": float(oracle_residual(A, pb.q, z, pb.zeta))}
 
 
+
+def case_warm():
+    """The next time step of the 2D obstacle (load 1% larger) from the last solution: it replaces
+    the nested start (no coarse level solved), as in the serial member; a start at the obstacle
+    everywhere is a cold start and nests."""
+    pb = obstacle_2d(63, exact=False)
+    A = sp.csr_matrix(pb.A)
+    lo, hi = split(A.shape[0])
+    first = dist.solve(A[lo:hi], pb.q[lo:hi], pb.zeta[lo:hi], method="newton", tol=1e-10)
+    q_next = 1.01 * pb.q
+    warm = dist.solve(A[lo:hi], q_next[lo:hi], pb.zeta[lo:hi], method="newton", tol=1e-10, x0=first.z)
+    cold = dist.solve(A[lo:hi], q_next[lo:hi], pb.zeta[lo:hi], method="newton", tol=1e-10, x0=pb.zeta[lo:hi])
+    z = dist.gather(warm.z)
+    if RANK == 0:
+        serial = nrmicp.solve(A, q_next, pb.zeta, method="newton", tol=1e-11)
+        return {"status": str(warm.status), "levels": warm.level_steps, "first_levels": first.level_steps,
+                "cold_levels": cold.level_steps, "cold_status": str(cold.status),
+                "err": float(np.max(np.abs(z - serial.z)))}
+
 if __name__ == "__main__":
     name, args = sys.argv[1], sys.argv[2:]
     result = {"agreement": lambda: case_agreement(), "partition": case_partition,
               "bad": lambda: case_bad(args[0], args[1]), "boomeramg": case_boomeramg,
               "floor": case_floor, "ssor": case_ssor, "overshoot": case_overshoot, "sweeps": case_sweeps,
+              "warm": case_warm,
               "fuzz": lambda: case_fuzz(int(args[0]))}[name]()
     if RANK == 0:
         print("RESULT " + json.dumps(result), flush=True)

@@ -73,6 +73,14 @@ def test_projected_sweeps_after_each_step_cut_a_cold_starts_peeling(np_):
     assert out["levels"] == [out["levels"][0]] and out["levels"][0] <= 12, out
 
 
+
+@pytest.mark.parametrize("np_", [1, 2])
+def test_a_start_off_the_obstacle_replaces_the_nested_one(np_):
+    out = mpirun(np_, "warm")
+    assert out["status"] == "CONVERGED" and out["err"] < 1e-8, out
+    assert len(out["first_levels"]) > 1 and len(out["levels"]) == 1 and out["levels"][0] <= 3, out
+    assert out["cold_status"] == "CONVERGED" and len(out["cold_levels"]) > 1, out
+
 def test_coarse_ssor_tries_hand_over_to_boomeramg():
     out = mpirun(2, "ssor")
     for label in ("default", "ssor_fails"):

@@ -807,8 +807,10 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
         projected onto z ≥ ζ and used as the next start; 'amg' builds classical Ruge–Stüben
         prolongations with pyamg; None starts cold (from x0 or zeros). 'auto': 'amg' for
         n >= 4096 when pyamg is installed, else None (measured: README "Mesh-independent solves").
-        With a hierarchy the start is the nested solution and ``x0`` is not used (the American put
-        measured both ways: README "Mesh-independent solves").
+        With a hierarchy the start is the nested solution, unless ζ is None or constant and ``x0``
+        lies off the obstacle somewhere (a time step's previous solution): ``x0`` is then the start
+        and the hierarchy serves the inner solves (an ``x0`` at the obstacle everywhere, such as
+        zeros for an LCP, is a cold start and nests; README "Mesh-independent solves", the American put).
     zeta_jacobian : callable, optional
         Method 'newton' with a callable ζ: ``zeta_jacobian(z)`` returns a generalized Jacobian of ζ
         at z as an (n, n) sparse matrix; then Newton works on the whole ICP (a semismooth Newton

@@ -692,9 +692,11 @@ _RTOL = 1e-6
 
 def _nested_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats):
     """LCP(b, A) by the nested Newton member: coarse problems PᵀAP, Pᵀb, solved coarse to fine,
-    each solution prolongated and projected (y ≥ 0) as the next start. Returns (y, Res, status)."""
+    each solution prolongated and projected (y ≥ 0) as the next start; a start y0 with a positive
+    entry replaces the nested one (the serial rule: NewtonRun::solve_obstacle). Returns (y, Res, status)."""
+    warm = bool(Ps) and y0 is not None and y0.max()[1] > 0
     As, bs = [A], [b]
-    for P, Ac in Ps:
+    for P, Ac in ([] if warm else Ps):
         As.append(Ac if Ac is not None else As[-1].ptap(P))
         bc = P.createVecRight()
         P.multTranspose(bs[-1], bc)
@@ -717,7 +719,7 @@ def _nested_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats):
         y, res, steps, sweeps, status, floor = _newton_loop(
             prob.residual, nt, _lcp_fallback(prob, comm, stats) if finest else None,
             y, tol=tol if finest else 0.0, maxiter=maxiter if finest else _TUNING["coarse_maxiter"],
-            control=_level_control(finest, len(As) > 1, tol), floor=prob.floor, sweep_budget=maxiter)
+            control=_level_control(finest, len(As) > 1 or warm, tol), floor=prob.floor, sweep_budget=maxiter)
         nt.release()
         if finest:
             stats["floor"] = floor
@@ -729,7 +731,7 @@ def _nested_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats):
 
 def _level_control(finest, nested, tol):
     """The serial member's controls (NewtonRun): coarse levels loose to a settled set; the finest
-    level exact (inner solve to tol/10 absolute), loose while its sets are guesses when nested."""
+    level exact (inner solve to tol/10 absolute), loose while its sets are guesses (nested or warm)."""
     exact = (1e-14, 0.1 * tol)
     if not finest:
         return _Control(_TUNING["coarse_forcing"], _TUNING["coarse_forcing"], _TUNING["coarse_repeat_trust"], exact)

@@ -97,9 +97,10 @@ class Newton {
   /// Number of levels (1 without prolongations).
   int levels() const { return levels_.count(); }
 
-  /// Solves ICP(q, A, ζ). The start: with prolongations, the nested coarse-to-fine solution (z0
-  /// is not used; warm starts win only on small time-stepping problems: README, the American
-  /// put); without, z0 (zeros when null). `solve_options`, when given, replace the constructor's
+  /// Solves ICP(q, A, ζ). The start: with prolongations, the nested coarse-to-fine solution, unless
+  /// ζ is none or constant and z0 lies off the obstacle somewhere (z0 is then the start and the
+  /// prolongations serve the inner solves: a time step's previous solution); without, z0 (zeros
+  /// when null). `solve_options`, when given, replace the constructor's
   /// per-solve options (SolveOptions says which the Newton member uses).
   Result solve(const Vector& q, const Zeta<StorageIndex>& zeta = Zeta<StorageIndex>::none(), const Vector* z0 = nullptr,
                const Callback& callback = {}, const Poll& poll = {}, const SolveOptions* solve_options = nullptr,

@@ -212,11 +212,16 @@ class NewtonRun {
     }
     const Vector& q_shift = shifted ? shifted_q : q;
     Vector y0 = !z0 ? Vector::Zero(q.size()) : shifted ? Vector((*z0 - psi).cwiseMax(0.0)) : Vector(z0->cwiseMax(0.0));
-    const bool nested = nest && !levels_.coarse.empty();
+    // The user's start, where it is off the obstacle somewhere, replaces the nested one (the
+    // hierarchy then serves the inner solves): a time step's previous solution is a closer guess
+    // than the coarse levels' (docs/MEASUREMENTS.md, "Warm starts with a hierarchy"). One at the
+    // obstacle everywhere (x0 = 0 for the LCP, or ψ) is a cold start, which the nesting replaces.
+    const bool warm = nest && report && z0 && !levels_.coarse.empty() && (y0.array() > 0).any();
+    const bool nested = nest && !levels_.coarse.empty() && !warm;
     if (nested) y0 = nested_start(q_shift);
     const auto t0 = std::chrono::steady_clock::now();
     auto control = finest_control(psi, tol >= 0 ? tol : o_.tol, maxiter >= 0 ? maxiter : o_.maxiter, report);
-    if (nested) {  // the sets of the finest steps are guesses until one repeats
+    if (nested || warm) {  // the sets of the finest steps are guesses until one repeats
       control.first_forcing = NewtonTuning::nested_first_forcing;
       control.forcing = NewtonTuning::nested_forcing;
       control.repeat_trust = 0;
