@@ -241,9 +241,9 @@ def curve_label(curve: str, scene: str) -> str:
     if curve == "qp":
         label = label.format(solver=_qp_solver())
     if scene == "american_put" and curve == "newton-amg":
-        label = "newton, hierarchy='amg' every step"
+        label = "newton, hierarchy='amg' (warm starts, V-cycle inner solves)"
     if scene == "american_put" and curve == "newton-geo":
-        label = "newton (nested first step, warm starts)"
+        label = "newton (nested first step, warm starts, direct solves)"
     return label
 
 
