@@ -73,6 +73,21 @@ def test_hierarchy_auto_switches_at_4096():
     assert nrmicp.Solver(tridiag(4096), method="newton").levels > 1
 
 
+
+def test_hierarchy_auto_leaves_a_dense_matrix_without_amg():
+    """'auto' builds AMG only on a sparse A (at most 10% of the n² entries stored): a dense SPD
+    matrix of n = 5,000 took 79 CPU s with it against 8 s cold (docs/MEASUREMENTS.md)."""
+    n, rng = 4096, np.random.default_rng(3)
+    for density, levels in ((0.12, 1), (0.08, 2)):
+        R = sp.random(n, n, density=density / 2, random_state=rng)
+        A = sp.csr_matrix(-(R + R.T))
+        A.setdiag(-A.sum(axis=1).A1 + 1.0)   # diagonally dominant, positive diagonal
+        assert (A.nnz / n**2 > 0.1) == (levels == 1)
+        got = nrmicp.Solver(A, method="newton").levels
+        assert (got == 1) if levels == 1 else (got > 1), (density, got)
+        if levels == 1:
+            assert nrmicp.Solver(A, method="newton", hierarchy="amg").levels > 1   # asked for, it is built
+
 @pytest.mark.parametrize("symmetric, krylov", [(True, "cg"), (False, "bicgstab")])
 def test_inner_auto_picks_a_krylov_solve_with_a_hierarchy_from_1000(symmetric, krylov):
     """inner='auto' with a hierarchy: the direct solve below n = 1,000, from there on CG for a

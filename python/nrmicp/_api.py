@@ -378,7 +378,7 @@ class Solver:
             self.polish = self._reduced.inner.polish
             return
         pairs = None
-        if self.method == "newton" and self.scale is None and _newton.resolves_to_amg(hierarchy, n):
+        if self.method == "newton" and self.scale is None and _newton.resolves_to_amg(hierarchy, self.A):
             pairs = _newton.amg_levels_or_rows(self.A)
             if pairs is None:   # rows scaled apart: equilibrated, the amg hierarchy stays (_newton.py)
                 self.scale = "rows"
@@ -806,7 +806,8 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
         problems P_lᵀ A_l P_l, P_lᵀ q_l, solved coarse to fine, each solution prolongated,
         projected onto z ≥ ζ and used as the next start; 'amg' builds classical Ruge–Stüben
         prolongations with pyamg; None starts cold (from x0 or zeros). 'auto': 'amg' for
-        n >= 4096 when pyamg is installed, else None (measured: README "Mesh-independent solves").
+        n >= 4096 when A stores at most 10% of its n² entries and pyamg is installed, else None
+        (measured: README "Mesh-independent solves"; docs/MEASUREMENTS.md, AUTO_AMG_MIN_N).
         With a hierarchy the start is the nested solution, unless ζ is None or constant and ``x0``
         lies off the obstacle somewhere (a time step's previous solution): ``x0`` is then the start
         and the hierarchy serves the inner solves (an ``x0`` at the obstacle everywhere, such as

@@ -11,6 +11,9 @@ from ._hierarchy import amg_levels, resolve_hierarchy
 #: hierarchy="auto" builds the AMG hierarchy (pyamg) for method "newton" from this many unknowns
 #: on, and starts cold below, where AMG's set-up outweighs the steps it saves (docs/MEASUREMENTS.md).
 AUTO_AMG_MIN_N = 4096
+#: ... and only on a matrix with at most this fraction of its n² entries stored: on a dense one the
+#: V-cycle's sweeps and Galerkin products cost more than a dense factorization (docs/MEASUREMENTS.md).
+AUTO_AMG_MAX_DENSITY = 0.1
 
 
 def _has_pyamg() -> bool:
@@ -33,11 +36,14 @@ def check_no_hierarchy(hierarchy, method):
                          f"(got hierarchy={hierarchy!r}; use None)")
 
 
-def resolves_to_amg(hierarchy, n) -> bool:
-    """hierarchy= is 'amg', or 'auto' for n >= AUTO_AMG_MIN_N with pyamg importable."""
+def resolves_to_amg(hierarchy, A) -> bool:
+    """hierarchy= is 'amg', or 'auto' on a sparse A (AUTO_AMG_MAX_DENSITY) of n >= AUTO_AMG_MIN_N
+    with pyamg importable."""
     if not isinstance(hierarchy, str):
         return False
-    return hierarchy == "amg" or (hierarchy == "auto" and n >= AUTO_AMG_MIN_N and _has_pyamg())
+    n = A.shape[0]
+    sparse = A.nnz <= AUTO_AMG_MAX_DENSITY * float(n) * n
+    return hierarchy == "amg" or (hierarchy == "auto" and n >= AUTO_AMG_MIN_N and sparse and _has_pyamg())
 
 
 def amg_levels_or_rows(A):
@@ -53,9 +59,9 @@ def amg_levels_or_rows(A):
 def levels(hierarchy, A, A_core, dc, pairs=None) -> tuple:
     """hierarchy= -> (prolongations for the core's matrix A_core (= A, or D_r A D_c when scaled),
     their Galerkin operators or None: the amg set-up forms them (or `pairs`, formed already), a
-    given list leaves them to the core). 'auto': 'amg' for n >= AUTO_AMG_MIN_N when pyamg is
-    importable, else none (cold start)."""
-    if resolves_to_amg(hierarchy, A.shape[0]):
+    given list leaves them to the core). 'auto': 'amg' for a sparse A of n >= AUTO_AMG_MIN_N when
+    pyamg is importable, else none (cold start)."""
+    if resolves_to_amg(hierarchy, A):
         pairs = amg_levels(A_core) if pairs is None else pairs
         return [P for P, _ in pairs], [Ac for _, Ac in pairs]
     if isinstance(hierarchy, str) and hierarchy == "auto":
