@@ -81,10 +81,10 @@ def test_the_projected_sweeps_after_each_step_cut_a_cold_starts_peeling():
 
 
 @pytest.mark.parametrize("hierarchy", ["amg", "grid"])
-def test_a_start_off_the_obstacle_replaces_the_nested_one(hierarchy):
+def test_a_start_closer_than_a_cold_one_replaces_the_nested_one(hierarchy):
     # time stepping: the previous step's solution is the start and the hierarchy serves the inner
-    # solves (no coarse level is solved); a start at the obstacle everywhere is a cold start and
-    # the nesting replaces it
+    # solves (no coarse level is solved); a start no closer than the obstacle itself (by Res) is a
+    # cold start and the nesting replaces it
     problem = scenes.obstacle_2d(63, exact=False)
     h = problem.prolongations() if hierarchy == "grid" else "amg"
     solver = nrmicp.Solver(problem.A, method="newton", hierarchy=h, tol=1e-10)
@@ -98,7 +98,8 @@ def test_a_start_off_the_obstacle_replaces_the_nested_one(hierarchy):
     assert not any(warm.level_steps[1:]) and warm.linear_solves == warm.nit <= 3, warm.level_steps
     assert np.abs(warm.z - exact).max() < 1e-9
     assert warm.inner == ("cg" if hierarchy == "grid" else nested.inner)  # the V-cycle still preconditions
-    for cold in (problem.zeta, problem.zeta - 1.0):   # at the obstacle everywhere, or below it
+    far = problem.zeta + np.random.default_rng(0).uniform(0, 2 * np.abs(nested.z).max(), problem.n)
+    for cold in (problem.zeta, problem.zeta - 1.0, problem.zeta + 1e-12, far):   # at, below, barely above, a random guess
         again = solver.solve(q_next, zeta=problem.zeta, x0=cold)
         assert again.success and any(again.level_steps[1:]) and again.nit <= 3
         assert np.abs(again.z - exact).max() < 1e-9

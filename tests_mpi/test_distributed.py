@@ -75,7 +75,7 @@ def test_projected_sweeps_after_each_step_cut_a_cold_starts_peeling(np_):
 
 
 @pytest.mark.parametrize("np_", [1, 2])
-def test_a_start_off_the_obstacle_replaces_the_nested_one(np_):
+def test_a_start_closer_than_a_cold_one_replaces_the_nested_one(np_):
     out = mpirun(np_, "warm")
     assert out["status"] == "CONVERGED" and out["err"] < 1e-8, out
     assert len(out["first_levels"]) > 1 and len(out["levels"]) == 1 and out["levels"][0] <= 3, out

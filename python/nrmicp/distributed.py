@@ -692,9 +692,9 @@ _RTOL = 1e-6
 
 def _nested_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats):
     """LCP(b, A) by the nested Newton member: coarse problems PᵀAP, Pᵀb, solved coarse to fine,
-    each solution prolongated and projected (y ≥ 0) as the next start; a start y0 with a positive
-    entry replaces the nested one (the serial rule: NewtonRun::solve_obstacle). Returns (y, Res, status)."""
-    warm = bool(Ps) and y0 is not None and y0.max()[1] > 0
+    each solution prolongated and projected (y ≥ 0) as the next start; a start y0 closer than a cold
+    one replaces the nested start (the serial rule: NewtonRun::solve_obstacle). Returns (y, Res, status)."""
+    warm = bool(Ps) and y0 is not None and _closer_than_cold(A, b, y0)
     As, bs = [A], [b]
     for P, Ac in ([] if warm else Ps):
         As.append(Ac if Ac is not None else As[-1].ptap(P))
@@ -727,6 +727,14 @@ def _nested_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats):
         stats["level_seconds"].insert(0, time.perf_counter() - t0)
         stats["fallback_sweeps"] += sweeps
     return y, res, status
+
+
+def _closer_than_cold(A, b, y0):
+    """Res(max(y0, 0)) < ½ Res(0) on LCP(b, A): the serial member's NewtonRun::closer_than_cold."""
+    y, cold = y0.copy(), b.duplicate()
+    y.setArray(np.maximum(y.getArray(readonly=True), 0.0))
+    cold.setArray(np.minimum(b.getArray(readonly=True), 0.0))
+    return _Problem(A, b).residual(y) < 0.5 * cold.norm()
 
 
 def _level_control(finest, nested, tol):

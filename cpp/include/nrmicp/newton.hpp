@@ -98,7 +98,7 @@ class Newton {
   int levels() const { return levels_.count(); }
 
   /// Solves ICP(q, A, ζ). The start: with prolongations, the nested coarse-to-fine solution, unless
-  /// ζ is none or constant and z0 lies off the obstacle somewhere (z0 is then the start and the
+  /// ζ is none or constant and z0 is closer than a cold start by Res (z0 is then the start and the
   /// prolongations serve the inner solves: a time step's previous solution); without, z0 (zeros
   /// when null). `solve_options`, when given, replace the constructor's
   /// per-solve options (SolveOptions says which the Newton member uses).
