@@ -730,11 +730,11 @@ def _nested_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats):
 
 
 def _closer_than_cold(A, b, y0):
-    """Res(max(y0, 0)) < ½ Res(0) on LCP(b, A): the serial member's NewtonRun::closer_than_cold."""
+    """Res(max(y0, 0)) < warm_start_fraction × Res(0) on LCP(b, A): NewtonRun::closer_than_cold."""
     y, cold = y0.copy(), b.duplicate()
     y.setArray(np.maximum(y.getArray(readonly=True), 0.0))
     cold.setArray(np.minimum(b.getArray(readonly=True), 0.0))
-    return _Problem(A, b).residual(y) < 0.5 * cold.norm()
+    return _Problem(A, b).residual(y) < _TUNING["warm_start_fraction"] * cold.norm()
 
 
 def _level_control(finest, nested, tol):

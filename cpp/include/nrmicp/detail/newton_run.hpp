@@ -185,6 +185,10 @@ struct NewtonTuning {
   /// the iterate's Res while their active set is new; a set that repeats is solved to tol / 10
   /// (NewtonControl::repeat_trust; docs/MEASUREMENTS.md, nested_forcing).
   static constexpr double nested_forcing = 0.1;
+  /// A user's start replaces the nested one when its Res is below this fraction of the cold start's
+  /// (y = 0): a time step's previous solution is at 0.01–0.3 of it, a guess no better (ψ + 10⁻¹²,
+  /// a random guess) at about 1 or more (docs/MEASUREMENTS.md, "Warm starts with a hierarchy").
+  static constexpr double warm_start_fraction = 0.5;
 };
 
 /// One solve: the strategies by ζ, and the statistics they gather over levels and outer steps.
@@ -322,12 +326,11 @@ class NewtonRun {
     return solve_obstacle(q, psi, z0, nest_, 0.0, std::min(start_maxiter, o_.maxiter), false).z;
   }
 
-  /// Res(y) < ½ Res(0) on LCP(q_shift, A): y is a guess worth more than a cold start (a time step's
-  /// previous solution: 0.01–0.3 of Res(0) on the American puts; docs/MEASUREMENTS.md).
+  /// Res(y) < warm_start_fraction × Res(0) on LCP(q_shift, A): y is a guess worth more than a cold start.
   bool closer_than_cold(const Vector& q_shift, const Vector& y) const {
     Vector w = q_shift;
     w.noalias() += levels_.A * y;
-    return residual_of(w, y) < 0.5 * stable_norm(q_shift.cwiseMin(0.0));
+    return residual_of(w, y) < NewtonTuning::warm_start_fraction * stable_norm(q_shift.cwiseMin(0.0));
   }
 
   LevelOutcome finest_lcp(const Vector& q_shift, const Vector& y0, const NewtonControl& control) {
