@@ -479,6 +479,7 @@ void bind_vocabulary(py::module_& m) {
   tuning["nested_first_forcing"] = Tuning::nested_first_forcing;
   tuning["nested_forcing"] = Tuning::nested_forcing;
   tuning["warm_start_fraction"] = Tuning::warm_start_fraction;
+  tuning["warm_steps"] = Tuning::warm_steps;
   tuning["floor_factor"] = nrmicp::detail::kFloorFactor;
   tuning["overshoot_growth"] = nrmicp::detail::kOvershootGrowth;
   tuning["overshoot_damping"] = nrmicp::detail::kOvershootDamping;

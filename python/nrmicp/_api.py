@@ -809,9 +809,9 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
         n >= 4096 when A stores at most 10% of its n² entries and pyamg is installed, else None
         (measured: README "Mesh-independent solves"; docs/MEASUREMENTS.md, AUTO_AMG_MIN_N).
         With a hierarchy the start is the nested solution, unless ζ is None or constant and ``x0``
-        is closer than a cold start (its Res below half the Res at the obstacle: a time step's
-        previous solution): ``x0`` is then the start and the hierarchy serves the inner solves (an
-        ``x0`` no closer, such as zeros for an LCP, nests; README "Time stepping").
+        is nonzero and closer than a cold start (its Res below half the Res at the obstacle: a time
+        step's previous solution): ``x0`` is then tried for up to 6 finest-level steps, the hierarchy
+        serving the inner solves, before the nested start takes over (README "Time stepping").
     zeta_jacobian : callable, optional
         Method 'newton' with a callable ζ: ``zeta_jacobian(z)`` returns a generalized Jacobian of ζ
         at z as an (n, n) sparse matrix; then Newton works on the whole ICP (a semismooth Newton

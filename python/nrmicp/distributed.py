@@ -690,13 +690,30 @@ def _newton_loop(residual, stepper, fallback, y, *, tol, maxiter, control, floor
 _RTOL = 1e-6
 
 
-def _nested_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats):
+def _nested_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats, zero_start=False):
     """LCP(b, A) by the nested Newton member: coarse problems PᵀAP, Pᵀb, solved coarse to fine,
-    each solution prolongated and projected (y ≥ 0) as the next start; a start y0 closer than a cold
-    one replaces the nested start (the serial rule: NewtonRun::solve_obstacle). Returns (y, Res, status)."""
-    warm = bool(Ps) and y0 is not None and _closer_than_cold(A, b, y0)
+    each solution prolongated and projected (y ≥ 0) as the next start. A start y0 closer than a cold
+    one (and not x0 = 0: `zero_start`) is tried first for at most warm_steps finest steps (the serial
+    rule: NewtonRun::solve_obstacle; the hierarchy, built up front, then only serves the nested
+    start if it takes over). Returns (y, Res, status)."""
+    if not (Ps and y0 is not None and not zero_start and _closer_than_cold(A, b, y0)):
+        return _levels_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats)
+    budget = min(maxiter, _TUNING["warm_steps"])
+    y, res, status = _levels_lcp(A, b, y0, [], tol, budget, symmetric, comm, stats, guessed=True)
+    if status != Status.MAX_ITERATIONS or maxiter <= budget:
+        return y, res, status
+    tried, seconds = stats["level_steps"].pop(0), stats["level_seconds"].pop(0)
+    y, res, status = _levels_lcp(A, b, None, Ps, tol, maxiter - tried, symmetric, comm, stats)
+    stats["level_steps"][0] += tried
+    stats["level_seconds"][0] += seconds
+    return y, res, status
+
+
+def _levels_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats, guessed=False):
+    """_nested_lcp's levels: nested over Ps, else from y0 (zeros when None); `guessed`: y0 is the
+    user's guess, its finest steps as loose as a nested start's."""
     As, bs = [A], [b]
-    for P, Ac in ([] if warm else Ps):
+    for P, Ac in Ps:
         As.append(Ac if Ac is not None else As[-1].ptap(P))
         bc = P.createVecRight()
         P.multTranspose(bs[-1], bc)
@@ -719,7 +736,7 @@ def _nested_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats):
         y, res, steps, sweeps, status, floor = _newton_loop(
             prob.residual, nt, _lcp_fallback(prob, comm, stats) if finest else None,
             y, tol=tol if finest else 0.0, maxiter=maxiter if finest else _TUNING["coarse_maxiter"],
-            control=_level_control(finest, len(As) > 1 or warm, tol), floor=prob.floor, sweep_budget=maxiter)
+            control=_level_control(finest, len(As) > 1 or guessed, tol), floor=prob.floor, sweep_budget=maxiter)
         nt.release()
         if finest:
             stats["floor"] = floor
@@ -826,7 +843,8 @@ def _obstacle_newton(A, q, c, z0, Ps, tol, maxiter, symmetric, comm, stats):
         A.multAdd(c, q, b)
         if y0 is not None:
             y0.axpy(-1.0, c)
-    y, res, status = _nested_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats)
+    y, res, status = _nested_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats,
+                                 zero_start=z0 is not None and z0.norm(PETSc.NormType.INFINITY) == 0)
     if c is not None:
         y.axpy(1.0, c)
     return y, res, status

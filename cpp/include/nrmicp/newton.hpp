@@ -98,9 +98,9 @@ class Newton {
   int levels() const { return levels_.count(); }
 
   /// Solves ICP(q, A, ζ). The start: with prolongations, the nested coarse-to-fine solution, unless
-  /// ζ is none or constant and z0 is closer than a cold start by Res (z0 is then the start and the
-  /// prolongations serve the inner solves: a time step's previous solution); without, z0 (zeros
-  /// when null). `solve_options`, when given, replace the constructor's
+  /// ζ is none or constant and z0 is nonzero and closer than a cold start by Res (z0 is then tried for
+  /// NewtonTuning::warm_steps finest steps, the prolongations serving the inner solves: a time step's
+  /// previous solution); without, z0 (zeros when null). `solve_options`, when given, replace the constructor's
   /// per-solve options (SolveOptions says which the Newton member uses).
   Result solve(const Vector& q, const Zeta<StorageIndex>& zeta = Zeta<StorageIndex>::none(), const Vector* z0 = nullptr,
                const Callback& callback = {}, const Poll& poll = {}, const SolveOptions* solve_options = nullptr,

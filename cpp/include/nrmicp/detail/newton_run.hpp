@@ -189,6 +189,9 @@ struct NewtonTuning {
   /// (y = 0): a time step's previous solution is at 0.01–0.3 of it, a guess no better (ψ + 10⁻¹²,
   /// a random guess) at about 1 or more (docs/MEASUREMENTS.md, "Warm starts with a hierarchy").
   static constexpr double warm_start_fraction = 0.5;
+  /// Finest steps a user's start gets before the nested start takes over: the marches' time steps
+  /// took at most 6 (docs/MEASUREMENTS.md, "Warm starts with a hierarchy").
+  static constexpr int warm_steps = 6;
 };
 
 /// One solve: the strategies by ζ, and the statistics they gather over levels and outer steps.
@@ -199,7 +202,7 @@ class NewtonRun {
   using Vector = Eigen::VectorXd;
   using Z = Zeta<StorageIndex>;
 
-  /// `nest`: start from the nested coarse-to-fine solution (z0 is then not used).
+  /// `nest`: start from the nested coarse-to-fine solution (solve_obstacle may try the user's z0 first).
   NewtonRun(const NewtonLevels<MatrixType>& levels, const Options& o, const Hooks& hooks, bool nest)
       : levels_(levels), o_(o), hooks_(hooks), nest_(nest), tally_(levels.A, levels.count()) {}
 
@@ -217,24 +220,28 @@ class NewtonRun {
     }
     const Vector& q_shift = shifted ? shifted_q : q;
     Vector y0 = !z0 ? Vector::Zero(q.size()) : shifted ? Vector((*z0 - psi).cwiseMax(0.0)) : Vector(z0->cwiseMax(0.0));
-    // The user's start, where it is closer than a cold one, replaces the nested start (the
-    // hierarchy then serves the inner solves): a time step's previous solution is a closer guess
-    // than the coarse levels' (docs/MEASUREMENTS.md, "Warm starts with a hierarchy"). One no closer
-    // (x0 = 0 for the LCP, ψ, a guess of another problem) is a cold start, which the nesting replaces.
-    const bool warm = nest && report && z0 && !levels_.coarse.empty() && closer_than_cold(q_shift, y0);
-    const bool nested = nest && !levels_.coarse.empty() && !warm;
+    const bool nested = nest && !levels_.coarse.empty();
+    const double level_tol = tol >= 0 ? tol : o_.tol;
+    int budget = maxiter >= 0 ? maxiter : o_.maxiter;
+    // The user's start, where it is closer than a cold one, replaces the nested start for a bounded
+    // try (the hierarchy then serves the inner solves): a time step's previous solution is a closer
+    // guess than the coarse levels'. A start no closer, or zeros (x0's default), nests; so does one
+    // whose active set is far off although its Res is small (another problem's solution: it peels),
+    // after warm_steps (docs/MEASUREMENTS.md, "Warm starts with a hierarchy").
+    if (nested && report && z0 && !z0->isZero(0.0) && closer_than_cold(q_shift, y0)) {
+      const auto t0 = std::chrono::steady_clock::now();
+      const auto tried = finest_lcp(q_shift, y0, guess_control(psi, level_tol, std::min(budget, NewtonTuning::warm_steps), true));
+      if (tried.status != Status::MaxIterations || budget <= NewtonTuning::warm_steps)
+        return finish_obstacle(tried, psi, q, t0);
+      tally_.absorb(tried, 0, ScopedTimer::seconds_since(t0));
+      budget -= tried.steps;
+    }
     if (nested) y0 = nested_start(q_shift);
     const auto t0 = std::chrono::steady_clock::now();
-    auto control = finest_control(psi, tol >= 0 ? tol : o_.tol, maxiter >= 0 ? maxiter : o_.maxiter, report);
-    if (nested || warm) {  // the sets of the finest steps are guesses until one repeats
-      control.first_forcing = NewtonTuning::nested_first_forcing;
-      control.forcing = NewtonTuning::nested_forcing;
-      control.repeat_trust = 0;
-    }
+    const auto control = nested ? guess_control(psi, level_tol, budget, report) : finest_control(psi, level_tol, budget, report);
     const auto out = set && !set->empty() ? from_set(q_shift, y0, *set, control) : finest_lcp(q_shift, y0, control);
     if (set && !out.inactive.empty()) *set = out.inactive;
-    tally_.absorb(out, 0, ScopedTimer::seconds_since(t0));
-    return shifted ? tally_.finish(out, out.z + psi, q) : tally_.finish(out, out.z, q);
+    return finish_obstacle(out, psi, q, t0);
   }
 
   /// ζ(z) = Bz + c: Newton on the full system, from the obstacle problem with ψ = ζ(z0) (or
@@ -324,6 +331,23 @@ class NewtonRun {
   /// The obstacle problem as the start of an affine or semismooth solve (no report, to a settled set).
   Vector solve_inner_obstacle(const Vector& q, const Vector& psi, const Vector* z0) {
     return solve_obstacle(q, psi, z0, nest_, 0.0, std::min(start_maxiter, o_.maxiter), false).z;
+  }
+
+  /// The finest level's result of the obstacle problem (z = y + ψ), its loop (from t0) tallied.
+  Result finish_obstacle(const LevelOutcome& out, const Vector& psi, const Vector& q,
+                         std::chrono::steady_clock::time_point t0) {
+    tally_.absorb(out, 0, ScopedTimer::seconds_since(t0));
+    return psi.size() > 0 ? tally_.finish(out, out.z + psi, q) : tally_.finish(out, out.z, q);
+  }
+
+  /// The control of a finest-level loop from a guessed start (nested or the user's): the sets of its
+  /// steps are guesses until one repeats, solved loosely till then.
+  NewtonControl guess_control(const Vector& psi, double tol, int maxiter, bool report) const {
+    auto c = finest_control(psi, tol, maxiter, report);
+    c.first_forcing = NewtonTuning::nested_first_forcing;
+    c.forcing = NewtonTuning::nested_forcing;
+    c.repeat_trust = 0;
+    return c;
   }
 
   /// Res(y) < warm_start_fraction × Res(0) on LCP(q_shift, A): y is a guess worth more than a cold start.
