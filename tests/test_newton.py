@@ -155,6 +155,27 @@ def test_affine_zeta_is_solved_on_the_full_system():
     assert res.path == "newton"
 
 
+
+def test_affine_zeta_steps_are_swept_as_the_lcps_are():
+    # From a start whose active set is 3 points off (the obstacle solution with psi = zeta(z1)), the
+    # plain affine Newton path goes Res 0.12 -> 344 -> 560 -> ... -> 4e-11 in 8 steps: its second step
+    # left the non-monotone window and the solve stagnated at 0.124 after 10 fallback sweeps. The
+    # projected sweeps after each step (z_i >= (Bz)_i + c_i) keep the path inside it.
+    m = 127
+    A = scenes.obstacle_2d(m, exact=False).A
+    n, x = m * m, np.linspace(1, m, m) / (m + 1)
+    X, Y = np.meshgrid(x, x)
+    psi1 = (0.2 - 4 * ((X - 0.4) ** 2 + (Y - 0.5) ** 2)).ravel()
+    psi2 = (0.2 - 4 * ((X - 0.45) ** 2 + (Y - 0.5) ** 2)).ravel()
+    q, B = 2.0 * np.ones(n), sp.csr_matrix(0.1 * sp.eye(n, k=1))
+    z1 = solve_exact_obstacle(A, q, psi1)
+    start = solve_exact_obstacle(A, q, B @ z1 + psi2)
+    res = nrmicp.solve(A, q, zeta=nrmicp.Affine(B, psi2), x0=start, method="newton", hierarchy=None, tol=1e-8)
+    assert res.success and res.path == "newton" and res.fallback_sweeps == 0, (res.message, res.nit)
+    w, g = A @ res.z + q, res.z - (B @ res.z + psi2)   # the complementarity conditions themselves
+    assert w.min() > -1e-8 and g.min() > -1e-12 and np.abs(np.minimum(w, g)).max() < 1e-8
+    assert reference_residual(A, q, res.z, B @ res.z + psi2) < 1e-8
+
 def test_nonsymmetric_m_matrix_upwind_convection_diffusion():
     problem = scenes.convection_diffusion_obstacle(31)
     for hierarchy in (None, "amg"):

@@ -67,8 +67,8 @@ inline constexpr double kFloorFactor = 100;
 /// (Globalized::overshoots; docs/MEASUREMENTS.md, kOvershootGrowth).
 inline constexpr double kOvershootGrowth = 3.0;
 inline constexpr double kOvershootDamping = 0.5;
-/// Each new step of an LCP (ζ none or constant) is followed by this many symmetric projected
-/// Gauss–Seidel sweeps before its active set is read: the step leaves a wrong contact band at the
+/// Each new step of an LCP or affine ICP (ζ none, constant or affine) is followed by this many
+/// symmetric projected Gauss–Seidel sweeps before its active set is read: the step leaves a wrong contact band at the
 /// free boundary that the next steps would peel one layer each; a sweep frees or activates
 /// several layers at the cost of two passes over A (NewtonLevel::projected_gauss_seidel;
 /// docs/MEASUREMENTS.md, kSmoothingSweeps).

@@ -20,22 +20,29 @@
 
 namespace nrmicp::detail {
 
-/// `sweeps` symmetric projected Gauss–Seidel sweeps on LCP(q, A) from y (kept ≥ 0): y_i ←
-/// max(0, −(q_i + Σ_{j≠i} a_ij y_j) / a_ii), the rows in order, then in reverse; rows with
-/// a_ii ≤ 0 are left. A: row-major (a matrix or a Map); y: a vector or a Map (updated in place).
-template <typename RowMajorMatrix, typename Q, typename Y>
-void projected_gauss_seidel(const RowMajorMatrix& A, const Q& q, Y& y, int sweeps) {
+/// `sweeps` symmetric projected Gauss–Seidel sweeps on ICP(q, A, ζ) from y: y_i ←
+/// max(lower(i, y), −(q_i + Σ_{j≠i} a_ij y_j) / a_ii), the rows in order, then in reverse; rows with
+/// a_ii ≤ 0 are left. lower(i, y) = ζ_i(y) with y as it stands (0 for an LCP). A: row-major (a
+/// matrix or a Map); y: a vector or a Map (updated in place).
+template <typename RowMajorMatrix, typename Q, typename Y, typename Lower>
+void projected_gauss_seidel(const RowMajorMatrix& A, const Q& q, Y& y, int sweeps, Lower lower) {
   static_assert(RowMajorMatrix::IsRowMajor, "projected_gauss_seidel reads rows");
   auto relax = [&](Eigen::Index i) {
     double s = q[i], d = 0;
     for (typename RowMajorMatrix::InnerIterator it(A, i); it; ++it)
       if (it.index() == i) d = it.value(); else s += it.value() * y[it.index()];
-    if (d > 0) y[i] = std::max(0.0, -s / d);
+    if (d > 0) y[i] = std::max(lower(i, y), -s / d);
   };
   for (int k = 0; k < sweeps; ++k) {
     for (Eigen::Index i = 0; i < A.rows(); ++i) relax(i);
     for (Eigen::Index i = A.rows(); i-- > 0;) relax(i);
   }
+}
+
+/// The sweeps on LCP(q, A): y kept ≥ 0.
+template <typename RowMajorMatrix, typename Q, typename Y>
+void projected_gauss_seidel(const RowMajorMatrix& A, const Q& q, Y& y, int sweeps) {
+  projected_gauss_seidel(A, q, y, sweeps, [](Eigen::Index, const Y&) { return 0.0; });
 }
 
 /// One level: its matrix, the weights Ω1/Ω2 of the active-set test, the reduced LCP system
@@ -167,6 +174,15 @@ class NewtonLevel {
   /// that name); a column-major A (no row access) is not swept at all.
   void projected_gauss_seidel(const Vector& q, Vector& y, int sweeps) const {
     if constexpr (MatrixType::IsRowMajor) detail::projected_gauss_seidel(A_, q, y, sweeps);
+  }
+  /// The same on ICP(q, A, ζ) with ζ(z) = Bz + c, from z: z_i ≥ (Bz)_i + c_i.
+  void projected_gauss_seidel(const Vector& q, const RowMatrix& B, const Vector& c, Vector& z, int sweeps) const {
+    if constexpr (MatrixType::IsRowMajor)
+      detail::projected_gauss_seidel(A_, q, z, sweeps, [&](Eigen::Index i, const Vector& v) {
+        double bz = c[i];
+        for (typename RowMatrix::InnerIterator it(B, i); it; ++it) bz += it.value() * v[it.index()];
+        return bz;
+      });
   }
 
   /// Up to `sweeps` sweeps of the fallback member (nrm) from z0 for ICP(q, A, ζ); the best iterate.

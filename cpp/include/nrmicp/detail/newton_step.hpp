@@ -49,9 +49,12 @@ struct FixedLinearization {
   System& system() { return K; }
   double c_at(Eigen::Index i) const { return c ? (*c)[i] : 0.0; }
   Result sweep(const Vector& z0, int sweeps, double tol) { return level.sweep(q, B, c, z0, sweeps, tol); }
-  /// The LCP (B null): g = z, and projected sweeps keep z ≥ 0.
-  bool smoothable() const { return B == nullptr; }
-  void smooth(Vector& z, int sweeps) const { level.projected_gauss_seidel(q, z, sweeps); }
+  /// Projected sweeps: on the LCP (B null) they keep z ≥ 0, on the affine ICP z ≥ Bz + c.
+  bool smoothable() const { return true; }
+  void smooth(Vector& z, int sweeps) const {
+    if (B) level.projected_gauss_seidel(q, *B, *c, z, sweeps);
+    else level.projected_gauss_seidel(q, z, sweeps);
+  }
 };
 
 /// A callable ζ with its Jacobian: linearized at each step's z.
@@ -135,14 +138,14 @@ class NewtonStep {
     ++steps_;
     return r_new_ = lin_.evaluate(z_new_, w_new_, g_new_, zeta_new_);
   }
-  /// `sweeps` projected Gauss–Seidel sweeps on the trial z⁺ (the LCP only: FixedLinearization
-  /// without B); true when they changed its active set.
+  /// `sweeps` projected Gauss–Seidel sweeps on the trial z⁺ (FixedLinearization: ζ none, constant
+  /// or affine); true when they changed its active set.
   bool smooth(int sweeps) {
     if (sweeps <= 0 || !lin_.smoothable()) return false;
-    level_.active_set(w_new_, z_new_, before_);
+    level_.active_set(w_new_, lin_.g_is_z() ? z_new_ : g_new_, before_);
     lin_.smooth(z_new_, sweeps);
     r_new_ = lin_.evaluate(z_new_, w_new_, g_new_, zeta_new_);
-    return !level_.has_active_set(w_new_, z_new_, before_);
+    return !level_.has_active_set(w_new_, lin_.g_is_z() ? z_new_ : g_new_, before_);
   }
   /// Res of the trial z⁺.
   double trial_residual() const { return r_new_; }
