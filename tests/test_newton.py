@@ -108,6 +108,24 @@ def test_a_start_closer_than_a_cold_one_replaces_the_nested_one(hierarchy):
     assert np.abs(far.z - exact).max() < 1e-9
 
 
+
+def test_a_warm_try_and_the_nested_run_that_spend_maxiter_return_the_better_iterate():
+    # the start: the solution under an obstacle moved from x = 0.3 to 0.6 (its active set far off):
+    # the warm try spends WARM_STEPS steps, the nested run the rest; the best of both is returned
+    m = 127
+    A = scenes.obstacle_2d(m, exact=False).A
+    x = np.linspace(1, m, m) / (m + 1)
+    X, Y = np.meshgrid(x, x)
+    psi = [(0.2 - 4 * ((X - cx) ** 2 + (Y - 0.5) ** 2)).ravel() for cx in (0.3, 0.6)]
+    q = 2.0 * np.ones(m * m)
+    start = solve_exact_obstacle(A, q, psi[0])
+    res = nrmicp.solve(A, q, zeta=psi[1], x0=start, method="newton", tol=1e-8, maxiter=WARM_STEPS + 1,
+                       record_history=True)
+    assert res.status == nrmicp.Status.MAX_ITERATIONS and res.nit == WARM_STEPS + 1
+    best = min(res.history["residual"])
+    assert res.residual == pytest.approx(best, rel=1e-9) and best < res.history["residual"][-1], res.history["residual"]
+    assert reference_residual(A, q, res.z, psi[1]) == pytest.approx(res.residual, rel=1e-6)
+
 @pytest.mark.parametrize("hierarchy", ["amg", "grid"])
 def test_finest_step_count_is_flat_under_refinement(hierarchy):
     steps = []

@@ -719,13 +719,18 @@ def _nested_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats, zero_start=F
     if not (Ps and y0 is not None and not zero_start and _closer_than_cold(A, b, y0)):
         return _levels_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats)
     budget = min(maxiter, _TUNING["warm_steps"])
-    y, res, status = _levels_lcp(A, b, y0, _Levels(), tol, budget, symmetric, comm, stats, guessed=True)
-    if status != Status.MAX_ITERATIONS or maxiter <= budget:
-        return y, res, status
+    yw, rw, sw = _levels_lcp(A, b, y0, _Levels(), tol, budget, symmetric, comm, stats, guessed=True)
+    if sw != Status.MAX_ITERATIONS or maxiter <= budget:
+        return yw, rw, sw
     tried, seconds = stats["level_steps"].pop(0), stats["level_seconds"].pop(0)
-    y, res, status = _levels_lcp(A, b, None, Ps, tol, maxiter - tried, symmetric, comm, stats)
+    if Ps.pairs():   # the nested start; a hierarchy of one level (a small A) goes on from the try
+        y, res, status = _levels_lcp(A, b, None, Ps, tol, maxiter - tried, symmetric, comm, stats)
+    else:
+        y, res, status = _levels_lcp(A, b, yw, Ps, tol, maxiter - tried, symmetric, comm, stats, guessed=True)
     stats["level_steps"][0] += tried
     stats["level_seconds"][0] += seconds
+    if status != Status.CONVERGED and rw < res:   # maxiter spent on both: the try's iterate was better
+        return yw, rw, sw
     return y, res, status
 
 

@@ -29,6 +29,7 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -228,20 +229,23 @@ class NewtonRun {
     // guess than the coarse levels'. A start no closer, or zeros (x0's default), nests; so does one
     // whose active set is far off although its Res is small (another problem's solution: it peels),
     // after warm_steps (docs/MEASUREMENTS.md, "Warm starts with a hierarchy").
+    std::optional<LevelOutcome> tried;
     if (nested && report && z0 && !z0->isZero(0.0) && closer_than_cold(q_shift, y0)) {
       const auto t0 = std::chrono::steady_clock::now();
-      const auto tried = finest_lcp(q_shift, y0, guess_control(psi, level_tol, std::min(budget, NewtonTuning::warm_steps), true));
-      if (tried.status != Status::MaxIterations || budget <= NewtonTuning::warm_steps)
-        return finish_obstacle(tried, psi, q, t0);
-      tally_.absorb(tried, 0, ScopedTimer::seconds_since(t0));
-      budget -= tried.steps;
+      tried = finest_lcp(q_shift, y0, guess_control(psi, level_tol, std::min(budget, NewtonTuning::warm_steps), true));
+      if (tried->status != Status::MaxIterations || budget <= NewtonTuning::warm_steps)
+        return finish_obstacle(*tried, *tried, psi, q, t0);
+      tally_.absorb(*tried, 0, ScopedTimer::seconds_since(t0));
+      budget -= tried->steps;
     }
     if (nested) y0 = nested_start(q_shift);
     const auto t0 = std::chrono::steady_clock::now();
     const auto control = nested ? guess_control(psi, level_tol, budget, report) : finest_control(psi, level_tol, budget, report);
     const auto out = set && !set->empty() ? from_set(q_shift, y0, *set, control) : finest_lcp(q_shift, y0, control);
     if (set && !out.inactive.empty()) *set = out.inactive;
-    return finish_obstacle(out, psi, q, t0);
+    // maxiter spent on both: the warm try's iterate when the nested run ended no better
+    const bool keep_try = tried && out.status != Status::Converged && tried->residual < out.residual;
+    return finish_obstacle(out, keep_try ? *tried : out, psi, q, t0);
   }
 
   /// ζ(z) = Bz + c: Newton on the full system, from the obstacle problem with ψ = ζ(z0) (or
@@ -333,11 +337,12 @@ class NewtonRun {
     return solve_obstacle(q, psi, z0, nest_, 0.0, std::min(start_maxiter, o_.maxiter), false).z;
   }
 
-  /// The finest level's result of the obstacle problem (z = y + ψ), its loop (from t0) tallied.
-  Result finish_obstacle(const LevelOutcome& out, const Vector& psi, const Vector& q,
+  /// The obstacle problem's result from the finest level's `answer` (z = y + ψ), after the loop `run`
+  /// (from t0) is tallied.
+  Result finish_obstacle(const LevelOutcome& run, const LevelOutcome& answer, const Vector& psi, const Vector& q,
                          std::chrono::steady_clock::time_point t0) {
-    tally_.absorb(out, 0, ScopedTimer::seconds_since(t0));
-    return psi.size() > 0 ? tally_.finish(out, out.z + psi, q) : tally_.finish(out, out.z, q);
+    tally_.absorb(run, 0, ScopedTimer::seconds_since(t0));
+    return psi.size() > 0 ? tally_.finish(answer, answer.z + psi, q) : tally_.finish(answer, answer.z, q);
   }
 
   /// The control of a finest-level loop from a guessed start (nested or the user's): the sets of its

@@ -139,13 +139,24 @@ class NewtonStep {
     return r_new_ = lin_.evaluate(z_new_, w_new_, g_new_, zeta_new_);
   }
   /// `sweeps` projected Gauss–Seidel sweeps on the trial z⁺ (FixedLinearization: ζ none, constant
-  /// or affine); true when they changed its active set.
+  /// or affine); true when they changed its active set. An affine ζ's sweeps are kept only when they
+  /// lower Res: projected Gauss–Seidel is no contraction where A's diagonal does not dominate (a
+  /// nonsymmetric A with a weak diagonal: swept 4.0 → 216, rejected, STAGNATED; docs/MEASUREMENTS.md).
   bool smooth(int sweeps) {
     if (sweeps <= 0 || !lin_.smoothable()) return false;
-    level_.active_set(w_new_, lin_.g_is_z() ? z_new_ : g_new_, before_);
+    const Vector& g = lin_.g_is_z() ? z_new_ : g_new_;
+    level_.active_set(w_new_, g, before_);
+    const bool guarded = !lin_.g_is_z();
+    const double r_plain = r_new_;
+    if (guarded) unswept_ = z_new_;
     lin_.smooth(z_new_, sweeps);
     r_new_ = lin_.evaluate(z_new_, w_new_, g_new_, zeta_new_);
-    return !level_.has_active_set(w_new_, lin_.g_is_z() ? z_new_ : g_new_, before_);
+    if (guarded && !(r_new_ < r_plain)) {
+      z_new_.swap(unswept_);
+      r_new_ = lin_.evaluate(z_new_, w_new_, g_new_, zeta_new_);
+      return false;
+    }
+    return !level_.has_active_set(w_new_, g, before_);
   }
   /// Res of the trial z⁺.
   double trial_residual() const { return r_new_; }
@@ -187,6 +198,7 @@ class NewtonStep {
   Linearization lin_;
   Vector z_, w_, g_, zeta_z_, z_new_, w_new_, g_new_, zeta_new_;
   std::vector<char> before_;  // the trial's active set before smooth()
+  Vector unswept_;            // an affine ζ's trial before smooth() (kept if the sweeps raise Res)
   double r_ = 0, r_new_ = 0;
   int steps_ = 0, solves_ = 0;
   long long inner_iterations_ = 0;
