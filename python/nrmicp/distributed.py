@@ -714,8 +714,8 @@ def _nested_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats, zero_start=F
     """LCP(b, A) by the nested Newton member: coarse problems PᵀAP, Pᵀb, solved coarse to fine,
     each solution prolongated and projected (y ≥ 0) as the next start. A start y0 closer than a cold
     one (and not x0 = 0: `zero_start`) is tried first for at most warm_steps finest steps (the serial
-    rule: NewtonRun::solve_obstacle; the hierarchy, built up front, then only serves the nested
-    start if it takes over). Returns (y, Res, status)."""
+    rule: NewtonRun::solve_obstacle; the hierarchy is set up only if the nested start takes over).
+    Returns (y, Res, status)."""
     if not (Ps and y0 is not None and not zero_start and _closer_than_cold(A, b, y0)):
         return _levels_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats)
     budget = min(maxiter, _TUNING["warm_steps"])
