@@ -40,10 +40,11 @@ def test_newton_solves_a_zero_diagonal_lcp_with_its_default_omega2(q):
     assert_solves_lcp(ZERO_DIAG, q, res.z)
 
 
-def test_newton_default_omega2_is_the_diagonal_where_positive_else_the_row_maximum():
+def test_newton_default_omega2_is_the_diagonal_where_positive_else_the_row_maximum_plus_its_diagonal():
+    # a_ii < 0: + |a_ii| keeps the fallback's Omega2 + A off a zero diagonal where a_ii = -max |a_ij|
     A = sp.csr_matrix(np.array([[2.0, -1.0, 0.0], [-3.0, 0.0, 0.5], [0.0, -4.0, -1.0]]))
     omega2 = nrmicp.Solver(A, method="newton", hierarchy=None).parameters["omega2"]
-    assert np.array_equal(omega2, [2.0, 3.0, 4.0])
+    assert np.array_equal(omega2, [2.0, 3.0, 5.0])
 
 
 def test_nrm_advice_on_a_zero_diagonal_names_only_what_runs_there():

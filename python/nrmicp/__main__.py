@@ -9,6 +9,8 @@ from typing import Optional
 
 import numpy as np
 
+from ._cli import int_at_least, positive_float
+
 
 def _table(rows, headers):
     widths = [max(len(str(h)), *(len(str(r[i])) for r in rows)) for i, h in enumerate(headers)]
@@ -24,8 +26,8 @@ def demo(argv: Optional[list[str]] = None, prog: str = "python -m nrmicp demo") 
     from nrmicp import scenes
 
     p = argparse.ArgumentParser(prog=prog, description=demo.__doc__)
-    p.add_argument("--m", type=int, default=256, help="grid side: n = m*m (default 256, n = 65,536)")
-    p.add_argument("--tol", type=float, default=1e-8)
+    p.add_argument("--m", type=int_at_least(1), default=256, help="grid side: n = m*m (default 256, n = 65,536)")
+    p.add_argument("--tol", type=positive_float, default=1e-8)
     p.add_argument("--nonsymmetric", action="store_true", help="Bai's nonsymmetric matrix")
     args = p.parse_args(argv)
 

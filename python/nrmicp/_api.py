@@ -122,16 +122,15 @@ def backends(why: bool = False) -> Union[dict[str, bool], dict[str, str]]:
 
 
 def residual(A: MatrixLike, q: ArrayLike, z: ArrayLike, zeta: ZetaLike = None) -> float:
-    """Res(z) = ‖min(Az + q, z − ζ(z))‖₂, computed in numpy (independent of the C++ core)."""
-    z = np.asarray(z, dtype=float)
-    w = A @ z + q
-    if zeta is None:
-        g = z
-    elif callable(zeta):
-        g = z - CheckedZeta(zeta, z.shape[0])(z)
-    else:
-        g = z - np.asarray(zeta, dtype=float)
-    return _norm(np.minimum(w, g))
+    """Res(z) = ‖min(Az + q, z − ζ(z))‖₂, computed in numpy (independent of the C++ core); +inf when
+    Az + q overflows. The arguments are checked as :func:`solve` checks them (TypeError/ValueError
+    naming the argument)."""
+    A = as_csr(A, "A")
+    n = A.shape[0]
+    qv, zv = as_vector(q, n, "q"), as_vector(z, n, "z")
+    kind, c, B, fn = _make_zeta(zeta, n)
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _OriginalResidual(A, qv, kind, c, B, None if fn is None else CheckedZeta(fn, n))(zv)[1]
 
 
 def _norm(m) -> float:
@@ -164,6 +163,8 @@ def _scalar(value, name, *, low=None, low_inclusive=False, high=None, allow_none
         high = _INT_MAX
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise TypeError(f"{name} must be a {'whole ' if integer else ''}number, got {value!r}")
+    if isinstance(value, (float, np.floating)) and not math.isfinite(value):
+        raise ValueError(f"{name} must be finite, got {value!r}")
     if integer and int(value) != value:
         raise TypeError(f"{name} must be a whole number, got {value!r}")
     v = int(value) if integer else float(value)
@@ -187,6 +188,9 @@ def _iteration_options(opts, *, tol, maxiter, z_update, accelerate, anderson_m, 
     opts.accelerate = getattr(_core.Accelerate, _choice(accelerate or "none", ACCELERATIONS, "accelerate"))
     opts.anderson_m = _scalar(anderson_m, "anderson_m", integer=True)
     opts.theta = _scalar(theta, "theta")
+    if not (isinstance(record_history, (bool, np.bool_)) or (isinstance(record_history, (int, np.integer))
+                                                               and record_history in (0, 1))):
+        raise TypeError(f"record_history must be True or False, got {record_history!r}")
     opts.record_history = bool(record_history)
     opts.stall_iterations = _scalar(stall_iterations, "stall_iterations", integer=True)
     # True/False mean on/off, as scikit-learn's verbose and scipy's disp: 1 and 0
@@ -324,7 +328,9 @@ class Solver:
     iteration options (tol, rtol, maxiter, theta, z_update, accelerate, anderson_m, record_history,
     stall_iterations, verbose), each of which :meth:`solve` may override. A is referenced, not
     copied, when it is canonical float64 CSR and ``scale`` is off: do not modify it while the
-    Solver lives.
+    Solver lives. Threads may share a Solver (a ``newton`` one runs their solves one at a time); a
+    ``newton`` solve started from inside a solve of the same Solver (its callback or ζ) raises
+    RuntimeError: use a second Solver for an inner problem.
 
     Typical use: implicit time stepping (the same A every step, warm start from the previous
     solution)::
@@ -463,7 +469,14 @@ class Solver:
         rounds = _Rounds(self, problem, it, callback, core_kw, measure if verify else None)
         rounds.run(z0s, tol)
         polished = polish_core = None
-        if self.polish:
+        if self.method == "newton" and kind == ZetaKind.constant and rounds.met_only_its_own_tol(tol):
+            # The shifted LCP's y = z − ψ holds z to rounding of |ψ|: on a graded mesh (diagonal up to
+            # 7e7, n = 65,025) z = y + ψ stopped at Res 2.3e-8 where the same active set solved in z
+            # gives 6e-15. Newton steps on ζ as Affine(0, ψ) solve for z itself (one step there).
+            affine, _ = self._core_problem(qv, None, ZetaKind.affine, c, sp.csr_matrix((n, n)), None)
+            polished, _ = _newton.polish(self, affine, rounds.z, rounds.res, measure, self._dc)
+            rounds.in_z = polished is not None
+        if self.polish and polished is None:
             polished, polish_core = _newton.polish(self, problem, rounds.z, rounds.res, measure, self._dc)
         return self._assemble(rounds, polished, polish_core, tol)
 
@@ -570,6 +583,8 @@ class _OriginalResidual:
             g = z - (self.B @ z + self.c)
         else:
             g = z - self.checked(z)  # on a read-only copy: ζ never sees (or writes into) the result
+        if not (np.all(np.isfinite(w)) and np.all(np.isfinite(z))):
+            return w, math.inf   # an overflowing Az + q is no certificate: min(w, g) is blind to w = +inf
         return w, _norm(np.minimum(w, g))
 
 
@@ -591,6 +606,7 @@ class _Rounds:
         self.counters: dict[str, int] = {}
         self.refined = 0
         self.last = None
+        self.in_z = False   # finished by Newton steps in z itself (Solver.solve, a constant ζ)
 
     def run(self, z0s, tol):
         tol_k, x0k = tol, z0s
@@ -609,6 +625,12 @@ class _Rounds:
                 return
             tol_k, x0k = new_tol, d["z"]
             self.refined += 1
+
+    def met_only_its_own_tol(self, tol) -> bool:
+        """The core's last round ended where it meant to (its tol, or its own rounding floor:
+        CONVERGED or STAGNATED), but Res(z) >= tol in the original variables."""
+        return (self.measure is not None and self.rounds[-1][1] in (Status.CONVERGED, Status.STAGNATED)
+                and tol <= self.res < math.inf)
 
     def ran_away(self) -> bool:
         """The scaled ζ was handed a z that overflowed in the user's variables (docs/SPEC.md)."""
@@ -631,6 +653,8 @@ class _Rounds:
         if status == Status.ZETA_FAILED:
             raise ValueError(f"{d['message']} (NaN or Inf)")
         z = d["z"] * solver._dc if self.scaled else d["z"]
+        if not np.all(np.isfinite(z)):   # z_s · dc overflowed in the user's variables: the start stands in
+            z = np.zeros_like(d["z"]) if x0k is None else np.asarray(x0k) * (solver._dc if self.scaled else 1.0)
         w, res = self.measure(z) if self.measure is not None else (d["w"], d["residual"])
         key = res if res == res else math.inf
         if self.best is None or key < self.best[0]:
@@ -666,8 +690,13 @@ class _Rounds:
         last_status, last_message = self.rounds[-1][1], self.last["message"]
         if self.measure is None:
             return last_status, last_message
+        if not math.isfinite(res):
+            return Status.DIVERGED, ("diverged: Res of the returned iterate is not finite in the original variables "
+                                     "(A z + q or z overflowed); scale the data")
         if res < tol:
             message = _core.status_message(int(Status.CONVERGED))
+            if self.in_z:
+                message += " (after Newton steps on z itself: the shifted problem in z − ψ had reached its rounding floor)"
             if self.refined:
                 message += f" (after {self.refined} re-solve(s) with a tighter tolerance on the scaled problem)"
             return Status.CONVERGED, message

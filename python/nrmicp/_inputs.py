@@ -1,6 +1,7 @@
 """Validation and conversion of user input. Nothing the user passed is ever mutated."""
 from __future__ import annotations
 
+import math
 import os
 import sys
 import warnings
@@ -175,9 +176,13 @@ def as_constant(value, n: int, name: str) -> np.ndarray:
         v = value[()] if isinstance(value, np.ndarray) else value
         if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
             raise TypeError(f"{name} must be a real number or a length-{n} vector, got {value!r}")
-        if not np.isfinite(v):
+        try:
+            f = float(v)   # a Python int beyond float's range overflows here
+        except OverflowError:
+            f = math.inf
+        if not math.isfinite(f):
             raise ValueError(f"{name} must be finite, got {value!r}")
-        return np.full(n, float(v))
+        return np.full(n, f)
     return as_vector(value, n, name)
 
 

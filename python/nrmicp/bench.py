@@ -75,6 +75,8 @@ from typing import Optional
 
 import numpy as np
 
+from ._cli import int_at_least, positive_float
+
 # --------------------------------------------------------------------------- scenes
 
 #: Scenes of the default sweep, in plotting order.
@@ -816,15 +818,15 @@ def _parser(prog: str = "python -m nrmicp bench --family"):
                    help="comma-separated from auto,explicit,solve (default auto, which is explicit; "
                         "use explicit,solve to compare the two)")
     p.add_argument("--tols", help="comma-separated tolerances (overrides --tol-min/--tol-max)")
-    p.add_argument("--tol-min", type=float, help="smallest tol (default 1e-12); one tol per decade")
-    p.add_argument("--tol-max", type=float, help="largest tol (default 1e-2)")
+    p.add_argument("--tol-min", type=positive_float, help="smallest tol (default 1e-12); one tol per decade")
+    p.add_argument("--tol-max", type=positive_float, help="largest tol (default 1e-2)")
     p.add_argument("--size", default=None, choices=tuple(SIZES),
                    help="problem sizes (default small; --quick: tiny)")
     p.add_argument("--quick", action="store_true",
                    help=f"tiny sizes, tols 1e-2..1e-8 (4), methods {','.join(QUICK_METHODS)} and the peers: "
                         "a smoke run of seconds")
-    p.add_argument("--repeat", type=int, default=1, help="time each solve r times and keep the best (default 1)")
-    p.add_argument("--maxiter", type=int, default=10000, help="iteration cap per solve (default 10000)")
+    p.add_argument("--repeat", type=int_at_least(1), default=1, help="time each solve r times and keep the best (default 1)")
+    p.add_argument("--maxiter", type=int_at_least(1), default=10000, help="iteration cap per solve (default 10000)")
     p.add_argument("--history-scene", help="scene of the convergence-history figure "
                                            "(default obstacle_2d if swept, where newton and the peers all run; else the first scene)")
     p.add_argument("--out", default="bench-out", help="output directory (default bench-out/)")

@@ -33,6 +33,8 @@ from typing import Optional
 
 import numpy as np
 
+from ._cli import positive_float
+
 #: Scene -> (label, builder(small) -> Problem). Sizes: the README's (and --small's for tests).
 SCENES = {
     "obstacle_2d": "2D obstacle, n = {n:,}",
@@ -331,7 +333,7 @@ def _parser(prog):
                                 epilog="'--family' runs the family sweep on Bai's matrices instead (see --family --help).")
     p.add_argument("--scenes", default=",".join(SCENES), help=f"comma-separated from {', '.join(SCENES)}")
     p.add_argument("--curves", default=",".join(CURVES), help=f"comma-separated from {', '.join(CURVES)}")
-    p.add_argument("--budget", type=float, default=30.0, help="CPU seconds per curve (default 30)")
+    p.add_argument("--budget", type=positive_float, default=30.0, help="CPU seconds per curve (default 30)")
     p.add_argument("--small", action="store_true", help="small sizes (seconds; for tests)")
     p.add_argument("--out", default="bench-out", help="output directory (default bench-out/)")
     p.add_argument("--plot", nargs="+", metavar="CSV", help="only draw the figure from these realistic.csv files")
@@ -350,7 +352,13 @@ def main(argv: Optional[list] = None, prog: str = "nrmicp bench") -> int:
             raise SystemExit(f"{prog}: unknown curve {c!r}; choose from {', '.join(CURVES)}")
     os.makedirs(a.out, exist_ok=True)
     if a.plot:
-        results = read_csv(a.plot)
+        try:
+            results = read_csv(a.plot)
+        except (OSError, KeyError, ValueError, csv.Error) as exc:
+            raise SystemExit(f"{prog}: --plot: cannot read a realistic.csv from {' '.join(a.plot)}: "
+                             f"{type(exc).__name__}: {exc}") from None
+        if not results:
+            raise SystemExit(f"{prog}: --plot: no rows of a realistic.csv in {' '.join(a.plot)}")
         results = {s: results[s] for s in SCENES if s in results}
     else:
         results = run(scenes, curves, a.budget, a.small, csv_path=os.path.join(a.out, "realistic.csv"))

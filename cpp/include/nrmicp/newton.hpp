@@ -40,6 +40,7 @@
 #include <Eigen/SparseCore>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <functional>
@@ -48,6 +49,7 @@
 #include <mutex>
 #include <optional>
 #include <stdexcept>
+#include <thread>
 #include <string>
 #include <vector>
 
@@ -105,7 +107,7 @@ class Newton {
   Result solve(const Vector& q, const Zeta<StorageIndex>& zeta = Zeta<StorageIndex>::none(), const Vector* z0 = nullptr,
                const Callback& callback = {}, const Poll& poll = {}, const SolveOptions* solve_options = nullptr,
                const Progress& progress = {}) const {
-    std::lock_guard<std::mutex> lock(mutex_);
+    const Busy busy(*this);
     const Options o = solve_options ? options_.with(solve_options, levels_.A.rows()) : options_;
     return run(q, zeta, z0, {callback, poll, progress}, o, levels() > 1);
   }
@@ -115,7 +117,7 @@ class Newton {
   /// Res there; STAGNATED, the message gives the floor), at most polish_steps. Returns the best
   /// iterate, z included.
   Result polish(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector& z, double tol) const {
-    std::lock_guard<std::mutex> lock(mutex_);
+    const Busy busy(*this);
     Options o = options_;
     o.tol = tol;
     o.maxiter = polish_steps;
@@ -129,6 +131,26 @@ class Newton {
  private:
   /// One step lands a member's answer on the rounding floor; a second one shows it is there.
   static constexpr int polish_steps = 3;
+
+  /// Held by a solve: solves from other threads wait for it (the levels' systems are shared); one
+  /// from the same thread, inside this solve's callback or ζ, would wait for itself: it throws.
+  class Busy {
+   public:
+    explicit Busy(const Newton& n) : n_(n) {
+      if (n.owner_.load() == std::this_thread::get_id())
+        throw std::logic_error("Newton::solve called from inside a solve of the same solver (its callback or zeta): "
+                               "a solve is not re-entrant; use a second solver for the inner problem");
+      lock_ = std::unique_lock<std::mutex>(n.mutex_);
+      n.owner_.store(std::this_thread::get_id());
+    }
+    ~Busy() { n_.owner_.store(std::thread::id()); }
+    Busy(const Busy&) = delete;
+    Busy& operator=(const Busy&) = delete;
+
+   private:
+    const Newton& n_;
+    std::unique_lock<std::mutex> lock_;
+  };
 
   static Options as_newton(Options o) {
     o.method = Method::Newton;
@@ -217,6 +239,7 @@ class Newton {
   detail::NewtonLevels<MatrixType> levels_;
   double setup_seconds_ = 0;
   mutable std::mutex mutex_;
+  mutable std::atomic<std::thread::id> owner_{};  // the thread inside solve or polish (Busy)
 };
 
 }  // namespace nrmicp

@@ -3,6 +3,8 @@
 
 #include <Eigen/Core>
 
+#include <cmath>
+#include <limits>
 #include <map>
 #include <string>
 #include <vector>
@@ -91,5 +93,24 @@ struct Result {
   NewtonStats newton;        ///< the Newton member's statistics (empty for the stationary members)
   bool success() const { return status == Status::Converged; }
 };
+
+namespace detail {
+/// Every member's last check of the iterate it returns, with w = Az + q formed: a w that overflowed
+/// is no certificate (Res reads min(w, z − ζ(z)), blind to w = +inf: ζ ≡ 1e308 reported CONVERGED
+/// with w = inf), so such a result is DIVERGED with Res = +inf; a NaN Res (the products of an
+/// overflowing iterate) is +inf. Left alone: ZETA_FAILED, whose Res is undefined.
+inline void refuse_overflow(Result& r) {
+  if (r.status == Status::ZetaFailed) return;
+  if (r.w.allFinite() && r.z.allFinite()) {
+    if (std::isnan(r.residual)) r.residual = std::numeric_limits<double>::infinity();
+    return;
+  }
+  r.residual = std::numeric_limits<double>::infinity();
+  if (r.status == Status::Converged || r.status == Status::Stagnated) {
+    r.status = Status::Diverged;
+    r.message = std::string(to_string(r.status)) + ": A z + q overflowed at the returned iterate (|w_i| > 1.8e308); scale the data";
+  }
+}
+}  // namespace detail
 
 }  // namespace nrmicp

@@ -192,6 +192,7 @@ class Solver {
     Vector Az(A_.rows());
     ctx.spmv(res.z, Az);  // w of the returned iterate (honest even if it is not the last one)
     res.w = Az + q;
+    detail::refuse_overflow(res);
     return res;
   }
 

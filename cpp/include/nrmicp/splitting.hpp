@@ -34,8 +34,10 @@ Eigen::VectorXd diagonal(const MatrixType& A) {
 }
 
 /// The Newton member's default Ω2: diag(A) where it is positive (not subnormal), else the row's
-/// largest |a_ij| (1 for an empty row). Ω2 only weighs w against z − ζ in the active-set test
-/// and sets the fallback member's Ω2, so a zero diagonal (contact, games) needs no refusal.
+/// largest |a_ij| plus |a_ii| (1 for an empty row). Ω2 only weighs w against z − ζ in the
+/// active-set test and sets the fallback member's Ω2, so a zero diagonal (contact, games) needs no
+/// refusal; |a_ii| keeps the fallback's Ω2 + A from a zero diagonal where a_ii = −max_j |a_ij|
+/// (the row (−1, 0, 0) made it singular).
 template <typename MatrixType>
 Eigen::VectorXd newton_default_omega2(const MatrixType& A, const Eigen::VectorXd& d) {
   Eigen::VectorXd row_max = Eigen::VectorXd::Zero(A.rows());
@@ -44,7 +46,10 @@ Eigen::VectorXd newton_default_omega2(const MatrixType& A, const Eigen::VectorXd
       row_max[it.row()] = std::max(row_max[it.row()], std::abs(it.value()));
   Eigen::VectorXd omega2 = d;
   for (Eigen::Index i = 0; i < d.size(); ++i)
-    if (!(d[i] >= DBL_MIN)) omega2[i] = row_max[i] >= DBL_MIN && std::isfinite(row_max[i]) ? row_max[i] : 1.0;
+    if (!(d[i] >= DBL_MIN)) {
+      const double m = row_max[i] + std::abs(d[i]);
+      omega2[i] = row_max[i] >= DBL_MIN && std::isfinite(m) ? m : 1.0;
+    }
   return omega2;
 }
 

@@ -81,6 +81,14 @@ inline std::string floor_message(double best, double tol, double floor) {
          ", rounding level eps (||A||z| + |q||| + ||z| + |zeta(z)||) = " + to_text(floor) + "; returning the best iterate";
 }
 
+/// A settled set (or a z that stood still) far above the rounding level: no floor to blame (a
+/// positive definite nonsymmetric A, n = 200, stopped at Res 3.8e-7 with the level 9.5e-11).
+inline std::string repeat_message(double best, double tol, double floor) {
+  return "stagnated: the Newton steps stopped moving (the active set repeated, or a step left z unchanged) at best "
+         "Res " + to_text(best) + " >= tol " + to_text(tol) + ", above the rounding level " + to_text(floor) +
+         "; returning the best iterate (another member, e.g. 'nrmm' or 'nrm', may converge)";
+}
+
 /// The fallback's runs of sweeps from the best iterate: 10, then 20, 40, ... sweeps, within a
 /// budget of sweeps in all (a level's loop, and the outer fixed point: newton_run.hpp).
 class SweepRuns {
@@ -251,6 +259,8 @@ class Globalized {
     const int k = runs_.next(sweeps_);
     if (!k) return give_up();
     const Result fr = plain_.sweep(best_z_, k, ctl_.solve.tol);
+    if (fr.iterations == 0 && !fr.message.empty())  // no fallback to be had (NewtonLevel::sweep)
+      return void(end_ = StepEnd{Status::Stagnated, "Newton's active sets cycled and " + fr.message});
     sweeps_ += fr.iterations;
     seen_.clear();
     have_last_ = false;
@@ -265,7 +275,8 @@ class Globalized {
   void settle() {
     settled_ = true;
     if (!(floor_ > 0)) floor_ = plain_.rounding_level();
-    end_ = StepEnd{Status::Stagnated, floor_message(best_r_, ctl_.solve.tol, floor_)};
+    end_ = StepEnd{Status::Stagnated, best_r_ <= kFloorFactor * floor_ ? floor_message(best_r_, ctl_.solve.tol, floor_)
+                                                                       : repeat_message(best_r_, ctl_.solve.tol, floor_)};
   }
   void stop(Status s) { end_ = StepEnd{s, std::string()}; }
 

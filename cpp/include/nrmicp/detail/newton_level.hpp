@@ -186,8 +186,19 @@ class NewtonLevel {
   }
 
   /// Up to `sweeps` sweeps of the fallback member (nrm) from z0 for ICP(q, A, ζ); the best iterate.
+  /// A fallback whose Ω2 + AΩ1 is singular sweeps nothing: Res +inf and the reason in the message.
   Result sweep(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector& z0, int sweeps, double tol) {
-    if (!fallback_) fallback_.emplace(A_, fallback_options());  // factorizes Ω2 + AΩ1 once
+    if (!fallback_) try {
+      fallback_.emplace(A_, fallback_options());  // factorizes Ω2 + AΩ1 once
+    } catch (const FactorizationError& e) {
+      if (e.reason() != FactorizationError::Reason::Singular) throw;
+      Result none;
+      none.z = z0;
+      none.residual = std::numeric_limits<double>::infinity();
+      none.status = Status::Stagnated;
+      none.message = std::string("its fallback member nrm cannot be set up: ") + e.what();
+      return none;
+    }
     SolveOptions it = fallback_->options();
     it.tol = tol > 0 ? tol : std::numeric_limits<double>::min();
     it.maxiter = sweeps;

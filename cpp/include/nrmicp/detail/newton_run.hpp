@@ -153,6 +153,7 @@ class NewtonTally {
     r.status = status;
     r.message = std::move(message);
     r.newton.path = r.newton.fallback_sweeps ? (r.nit ? "newton+fallback" : "fallback") : "newton";
+    refuse_overflow(r);
     return r;
   }
 
