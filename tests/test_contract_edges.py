@@ -203,3 +203,15 @@ def test_a_constant_obstacle_is_finished_in_z_where_z_minus_psi_loses_digits():
     z = psi.copy()
     z[free] = spla.spsolve(sp.csc_matrix(A[free][:, free]), -q[free] - A[free][:, ~free] @ psi[~free])
     assert np.abs(res.z - z).max() < 1e-10
+
+
+def test_durations_masked_arrays_and_array_valued_callbacks_are_refused_by_name():
+    A, q = tridiag(5, 4.0), -np.ones(5)
+    with pytest.raises(TypeError, match="q must be a real numeric array"):
+        nrmicp.solve(A, np.arange(5).astype("timedelta64[s]"))
+    with pytest.raises(TypeError, match="x0 is a masked array"):
+        nrmicp.solve(A, q, x0=np.ma.masked_array(np.zeros(5), mask=[0, 1, 0, 0, 0]))
+    assert nrmicp.solve(A, np.ma.masked_array(q, mask=False)).success    # nothing masked: its values
+    with pytest.raises(TypeError, match="callback must return None or a bool"):
+        nrmicp.solve(A, q, callback=lambda zk: zk)
+    assert nrmicp.solve(A, q, callback=lambda zk: 0).success              # a falsy int: go on

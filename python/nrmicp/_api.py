@@ -291,7 +291,13 @@ def _core_callback(callback: Callable[..., Any], dc: Optional[np.ndarray],
                 else callback(zk)
         except StopIteration:
             return True
-        return bool(stop)
+        if stop is None or isinstance(stop, (bool, np.bool_)):
+            return bool(stop)
+        try:
+            return bool(stop)
+        except (TypeError, ValueError):   # an array of several entries has no truth value
+            raise TypeError(f"callback must return None or a bool (True stops the solve), "
+                            f"got {type(stop).__name__}") from None
 
     return hook
 

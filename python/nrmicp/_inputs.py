@@ -153,9 +153,12 @@ def as_vector(v, n: int, name: str) -> np.ndarray:
         arr = np.asarray(v)
     except Exception as exc:  # pragma: no cover - numpy's own message is fine
         raise TypeError(f"{name} must be array-like: {exc}") from None
-    if arr.dtype == object or not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)
-                                   or arr.dtype == bool):
+    # (timedelta64 is an integer subtype in numpy: a duration is no number here)
+    if arr.dtype == object or arr.dtype.kind in "mM" or not (
+            np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer) or arr.dtype == bool):
         raise TypeError(f"{name} must be a real numeric array, got dtype {arr.dtype}")
+    if np.ma.is_masked(v):
+        raise TypeError(f"{name} is a masked array with masked entries: fill them (v.filled(...)) first")
     if arr.ndim == 2 and 1 in arr.shape:
         arr = arr.reshape(-1)
     if arr.ndim != 1:
