@@ -15,7 +15,7 @@ from numpy.typing import ArrayLike
 from scipy.optimize import OptimizeResult
 
 from . import _core
-from ._inputs import as_constant, as_csr, as_diagonal, as_vector
+from ._inputs import as_constant, as_csr, as_diagonal, as_float, as_vector
 from ._scaling import SCALINGS, ScaledCallable, equilibrate, scale_matrix
 from . import _newton
 from ._zeta import CheckedZeta
@@ -163,13 +163,11 @@ def _scalar(value, name, *, low=None, low_inclusive=False, high=None, allow_none
         high = _INT_MAX
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise TypeError(f"{name} must be a {'whole ' if integer else ''}number, got {value!r}")
-    if isinstance(value, (float, np.floating)) and not math.isfinite(value):
+    if not math.isfinite(as_float(value)):   # before int(): int(nan) and int(inf) raise unnamed
         raise ValueError(f"{name} must be finite, got {value!r}")
     if integer and int(value) != value:
         raise TypeError(f"{name} must be a whole number, got {value!r}")
     v = int(value) if integer else float(value)
-    if not math.isfinite(v):
-        raise ValueError(f"{name} must be finite, got {value!r}")
     if low is not None and (v < low or (v == low and not low_inclusive)):
         raise ValueError(f"{name} must be {'>=' if low_inclusive else '>'} {low}, got {value!r}")
     if high is not None and v > high:
@@ -291,8 +289,6 @@ def _core_callback(callback: Callable[..., Any], dc: Optional[np.ndarray],
                 else callback(zk)
         except StopIteration:
             return True
-        if stop is None or isinstance(stop, (bool, np.bool_)):
-            return bool(stop)
         try:
             return bool(stop)
         except (TypeError, ValueError):   # an array of several entries has no truth value

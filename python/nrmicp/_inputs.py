@@ -9,7 +9,7 @@ import warnings
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["as_csr", "as_vector", "as_constant", "as_diagonal", "ConversionWarning"]
+__all__ = ["as_csr", "as_vector", "as_constant", "as_diagonal", "as_float", "ConversionWarning"]
 
 
 class ConversionWarning(sp.SparseEfficiencyWarning):
@@ -172,6 +172,14 @@ def as_vector(v, n: int, name: str) -> np.ndarray:
     return arr
 
 
+def as_float(v) -> float:
+    """float(v) of a real number, ±inf where a Python int is beyond float's range (float() raises)."""
+    try:
+        return float(v)
+    except OverflowError:
+        return math.inf if v > 0 else -math.inf
+
+
 def as_constant(value, n: int, name: str) -> np.ndarray:
     """A real scalar (broadcast to length n; a 0-d array counts as one) or a length-n vector
     -> float64 vector, finite. Raises TypeError/ValueError naming `name`."""
@@ -179,10 +187,7 @@ def as_constant(value, n: int, name: str) -> np.ndarray:
         v = value[()] if isinstance(value, np.ndarray) else value
         if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
             raise TypeError(f"{name} must be a real number or a length-{n} vector, got {value!r}")
-        try:
-            f = float(v)   # a Python int beyond float's range overflows here
-        except OverflowError:
-            f = math.inf
+        f = as_float(v)
         if not math.isfinite(f):
             raise ValueError(f"{name} must be finite, got {value!r}")
         return np.full(n, f)

@@ -49,8 +49,8 @@
 #include <mutex>
 #include <optional>
 #include <stdexcept>
-#include <thread>
 #include <string>
+#include <thread>
 #include <vector>
 
 namespace nrmicp {
