@@ -184,31 +184,6 @@ def test_newton_solves_positive_definite_nonsymmetric_lcps_and_blames_no_floor_i
         assert other.success and np.abs(res.z - other.z).max() < 1e-7
 
 
-def test_a_constant_obstacle_is_finished_in_z_where_z_minus_psi_loses_digits():
-    # P1 membrane on a mesh graded x = s^4 towards a corner (diagonal 4 .. 7e7), n = 65,025: the
-    # shifted LCP in y = z - psi stopped STAGNATED at Res(z) 2.3e-8 > tol, its own rounding floor,
-    # while the same active set solved for z itself has Res 6e-15
-    import scipy.sparse.linalg as spla
-    skfem = pytest.importorskip("skfem")
-    from skfem.helpers import dot, grad
-    s = np.linspace(0, 1, 257) ** 4
-    basis = skfem.Basis(skfem.MeshTri.init_tensor(s, s), skfem.ElementTriP1())
-    K = skfem.BilinearForm(lambda u, v, w: dot(grad(u), grad(v))).assemble(basis)
-    b = skfem.LinearForm(lambda v, w: -10.0 * v).assemble(basis)
-    inner = basis.complement_dofs(basis.get_dofs())
-    A, q = sp.csr_matrix(K[inner][:, inner]), -b[inner]
-    x, y = basis.doflocs[:, inner]
-    psi = np.maximum(0.2 - 2 * ((x - 0.5) ** 2 + (y - 0.5) ** 2), -0.5)
-    res = nrmicp.solve(A, q, psi, method="newton")
-    assert res.success and res.residual < 1e-8, res.message
-    assert "z itself" in res.message
-    check_certificate(A, q, res, psi)
-    free = res.z - psi > 0          # the answer's free set, solved directly: the same z
-    z = psi.copy()
-    z[free] = spla.spsolve(sp.csc_matrix(A[free][:, free]), -q[free] - A[free][:, ~free] @ psi[~free])
-    assert np.abs(res.z - z).max() < 1e-10
-
-
 def test_durations_masked_arrays_and_array_valued_callbacks_are_refused_by_name():
     A, q = tridiag(5, 4.0), -np.ones(5)
     with pytest.raises(TypeError, match="q must be a real numeric array"):

@@ -471,14 +471,7 @@ class Solver:
         rounds = _Rounds(self, problem, it, callback, core_kw, measure if verify else None)
         rounds.run(z0s, tol)
         polished = polish_core = None
-        if self.method == "newton" and kind == ZetaKind.constant and rounds.met_only_its_own_tol(tol):
-            # The shifted LCP's y = z − ψ holds z to rounding of |ψ|: on a graded mesh (diagonal up to
-            # 7e7, n = 65,025) z = y + ψ stopped at Res 2.3e-8 where the same active set solved in z
-            # gives 6e-15. Newton steps on ζ as Affine(0, ψ) solve for z itself (one step there).
-            affine, _ = self._core_problem(qv, None, ZetaKind.affine, c, sp.csr_matrix((n, n)), None)
-            polished, _ = _newton.polish(self, affine, rounds.z, rounds.res, measure, self._dc)
-            rounds.in_z = polished is not None
-        if self.polish and polished is None:
+        if self.polish:
             polished, polish_core = _newton.polish(self, problem, rounds.z, rounds.res, measure, self._dc)
         return self._assemble(rounds, polished, polish_core, tol)
 
@@ -608,7 +601,6 @@ class _Rounds:
         self.counters: dict[str, int] = {}
         self.refined = 0
         self.last = None
-        self.in_z = False   # finished by Newton steps in z itself (Solver.solve, a constant ζ)
 
     def run(self, z0s, tol):
         tol_k, x0k = tol, z0s
@@ -627,12 +619,6 @@ class _Rounds:
                 return
             tol_k, x0k = new_tol, d["z"]
             self.refined += 1
-
-    def met_only_its_own_tol(self, tol) -> bool:
-        """The core's last round ended where it meant to (its tol, or its own rounding floor:
-        CONVERGED or STAGNATED), but Res(z) >= tol in the original variables."""
-        return (self.measure is not None and self.rounds[-1][1] in (Status.CONVERGED, Status.STAGNATED)
-                and tol <= self.res < math.inf)
 
     def ran_away(self) -> bool:
         """The scaled ζ was handed a z that overflowed in the user's variables (docs/SPEC.md)."""
@@ -697,8 +683,6 @@ class _Rounds:
                                      "(A z + q or z overflowed); scale the data")
         if res < tol:
             message = _core.status_message(int(Status.CONVERGED))
-            if self.in_z:
-                message += " (after Newton steps on z itself: the shifted problem in z − ψ had reached its rounding floor)"
             if self.refined:
                 message += f" (after {self.refined} re-solve(s) with a tighter tolerance on the scaled problem)"
             return Status.CONVERGED, message
