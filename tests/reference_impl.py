@@ -94,6 +94,21 @@ def residual(A, q, z, zeta=None):
     return float(np.linalg.norm(np.minimum(sp.csr_matrix(A) @ z + q, g)))
 
 
+def units_residual(A, q, z, zeta=None):
+    """nrmicp's default stopping measure Res_E(z) = || min(sigma (Az + q), z - zeta(z)) ||_2 with
+    sigma = 2^-round(mean log2 |a_ii|) over the nonzero diagonal (README "What you get back"), from
+    the original data, sharing no code with nrmicp."""
+    d = np.abs(sp.csr_matrix(A).diagonal())
+    sigma = 2.0 ** -round(float(np.mean(np.log2(d[d > 0]))))
+    if zeta is None:
+        g = z
+    elif callable(zeta):
+        g = z - np.asarray(zeta(z), dtype=np.float64)
+    else:
+        g = z - np.asarray(zeta, dtype=np.float64)
+    return float(np.linalg.norm(np.minimum(sigma * (sp.csr_matrix(A) @ z + q), g)))
+
+
 def reference_solve(A, q, zeta=None, *, method, z_update, gamma, omega1=None, omega2=None,
                     phi=None, alpha=None, beta=None, theta=1.0, tol=1e-8, maxiter=10000,
                     z0=None, keep_x=10):

@@ -315,8 +315,10 @@ def test_inputs_not_mutated(n, seed, kind, scale, method, index_dtype):
     np.testing.assert_array_equal(res.z, res2.z)
     assert np.all(np.isfinite(res.z))
     assert res.residual == pytest.approx(reference_residual(A, q, res.z, zeta), rel=1e-6, abs=1e-14)
-    if res.success:
+    if res.success and res.criterion["measure"] == "paper":
         assert reference_residual(A, q, res.z, zeta) < 1e-8
+    elif res.success:   # the default rule, judged on the equilibration the solve iterated on
+        assert res.criterion["value"] < res.criterion["target"]
     # z returned is not a view of the caller's data
     assert not np.shares_memory(res.z, x0) and not np.shares_memory(res.z, q)
 

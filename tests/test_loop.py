@@ -4,6 +4,7 @@ scales, progress output. Each test names the behaviour it checks; oracles are in
 import numpy as np
 import pytest
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
 import nrmicp
 from nrmicp import scenes
@@ -22,7 +23,7 @@ def test_per_solve_theta_is_used():
     ref_one = reference_solve(P.A, P.q, method="two_sweep", z_update="explicit", gamma=1.0, omega2=d,
                               alpha=1.0, beta=1.0, theta=1.0, tol=1e-8)
     assert ref.nit != ref_one.nit  # theta matters here
-    s = nrmicp.Solver(P.A, method="two_sweep", z_update="explicit")
+    s = nrmicp.Solver(P.A, method="two_sweep", z_update="explicit", tol=1e-8)   # the reference's rule
     res = s.solve(P.q, theta=0.5)
     assert res.success
     assert res.nit == ref.nit
@@ -60,7 +61,7 @@ def test_slow_return_within_budget_is_not_cut():
     """nrm on obstacle_2d(32) needs 965 iterations to get back below its first Res, then keeps
     improving (converging after ~89,000): at maxiter = 3000 it must run to maxiter."""
     P = scenes.obstacle_2d(32)
-    res = nrmicp.solve(P.A, P.q, P.zeta, method="nrm", maxiter=3000, record_history=True)
+    res = nrmicp.solve(P.A, P.q, P.zeta, method="nrm", tol=1e-8, maxiter=3000, record_history=True)
     assert res.status == nrmicp.Status.MAX_ITERATIONS, res.message
     r = res.history["residual"]
     assert np.argmin(r) == len(r) - 1 == 3000  # still improving at the end
@@ -161,11 +162,22 @@ def test_subnormal_parameters_are_rejected_by_name(name, kwargs):
         nrmicp.solve(A, -np.ones(A.shape[0]), **kwargs)
 
 
-def test_subnormal_matrix_diagonal_is_rejected_naming_A():
+def test_subnormal_matrix_diagonal_is_rejected_naming_A_under_the_papers_tol():
     """1e-320 * A: the default Omega2 = diag(A) is subnormal (it returned [inf inf ...], Res NaN)."""
     A = scenes.bai(4).A
     with pytest.raises(ValueError, match=r"A\[0,0\]"):
-        nrmicp.solve(1e-320 * A, -np.ones(A.shape[0]))
+        nrmicp.solve(1e-320 * A, -np.ones(A.shape[0]), tol=1e-8)
+
+
+def test_a_tiny_matrix_is_a_matrix_in_other_units_under_the_default_rule():
+    """1e-300 * A (entries near the bottom of the normal range): the default rule iterates on
+    sigma A, sigma q with sigma a power of two, so it solves it as it solves A."""
+    A = 1e-300 * scenes.bai(4).A
+    q = -1e-300 * np.ones(A.shape[0])
+    res = nrmicp.solve(A, q)
+    exact = spla.spsolve(sp.csc_matrix(1e300 * A), -1e300 * q)   # an M-matrix and q < 0: z > 0 everywhere
+    assert res.success and res.criterion["measure"] == "units"
+    assert np.abs(res.z - exact).max() <= 1e-8 * np.abs(exact).max()
 
 
 # ---- one fact in one place: names, statuses and the 'auto' rule come from the core ---------

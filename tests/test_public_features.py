@@ -63,8 +63,12 @@ def test_solver_parameters_levels_and_scaling():
     big_r, big_c = abs(S).max(axis=1).toarray().ravel(), abs(S).max(axis=0).toarray().ravel()
     assert np.all((big_r > 0.25) & (big_r <= 4)) and np.all((big_c > 0.25) & (big_c <= 4)), (big_r, big_c)
     q = -np.ones(50)
-    res = s.solve(q)
-    assert res.success and reference_residual(B, q, res.z) < 1e-8  # judged on the original problem
+    res = s.solve(q, tol=1e-8)
+    assert res.success and reference_residual(B, q, res.z) < 1e-8  # the paper's tol: judged on the original problem
+    res = s.solve(q)   # the default rule: judged on the equilibrated problem, relative to its Res at 0
+    dq = dr * q
+    assert res.success and np.linalg.norm(np.minimum(S @ (res.z / dc) + dq, res.z / dc)) < \
+        1e-10 * np.linalg.norm(np.minimum(dq, 0))
 
 
 def test_hierarchy_auto_switches_at_4096():

@@ -236,7 +236,7 @@ def test_default_parameters_follow_spec_table(method):
     expected_update = "solve" if method in ("nrm", "mms") else "explicit"
     ref = reference_solve(P.A, P.q, P.zeta, method=method, z_update=expected_update, gamma=1.0,
                           tol=TOL, maxiter=3, **SPEC_DEFAULTS[method](P.A))
-    res = nrmicp.solve(P.A, P.q, P.zeta, method=method, maxiter=3, record_history=True)
+    res = nrmicp.solve(P.A, P.q, P.zeta, method=method, tol=TOL, maxiter=3, record_history=True)
     np.testing.assert_allclose(res.history["residual"], ref.residuals, rtol=1e-10, atol=0)
 
 
@@ -248,5 +248,5 @@ def test_default_initial_guess_is_zero(kind):
     ref = reference_solve(P.A, P.q, P.zeta, method="nrmgs", z_update="explicit", gamma=GAMMA,
                           tol=TOL, maxiter=2, z0=np.zeros(P.q.size), **params)
     res = nrmicp.solve(P.A, P.q, core_zeta(P.zeta), method="nrmgs", z_update="explicit",
-                       gamma=GAMMA, maxiter=2, record_history=True, **params)
+                       gamma=GAMMA, tol=TOL, maxiter=2, record_history=True, **params)
     np.testing.assert_allclose(res.history["residual"], ref.residuals, rtol=1e-10, atol=0)

@@ -158,3 +158,12 @@ def test_the_documented_example_is_the_one_the_tests_run():
     doc = open(os.path.join(root, "docs", "DISTRIBUTED.md"), encoding="utf-8").read()
     block = re.findall(r"^```py\n(.*?)^```", doc, flags=re.S | re.M)[0]
     assert block == open(os.path.join(root, "examples", "distributed_obstacle.py"), encoding="utf-8").read()
+
+
+@pytest.mark.parametrize("np_", [1, 2])
+def test_the_default_rule_does_not_depend_on_units(np_):
+    out = mpirun(np_, "units")
+    for key, r in out.items():
+        assert r["status"] == "CONVERGED" and r["criterion"] == "units", (np_, key, r)
+        assert r["err"] < 1e-6, (np_, key, r)
+        assert r["res_is_papers"], (np_, key, r)

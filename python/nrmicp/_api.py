@@ -1,10 +1,12 @@
 """The Python API: solve(), Solver, Affine, Result, Status."""
 from __future__ import annotations
 
+import contextlib
 import enum
 import inspect
 import logging
 import math
+import re
 import sys
 from dataclasses import dataclass
 from typing import Any, Callable, Optional, Union
@@ -16,7 +18,7 @@ from scipy.optimize import OptimizeResult
 
 from . import _core
 from ._inputs import as_constant, as_csr, as_diagonal, as_float, as_vector
-from ._scaling import SCALINGS, ScaledCallable, equilibrate, scale_matrix
+from ._scaling import SCALINGS, ScaledCallable, equilibrate, scale_matrix, units_factor
 from . import _newton
 from ._zeta import CheckedZeta
 from ._decoupled import Reduced, decoupled_rows
@@ -33,6 +35,8 @@ DiagonalLike = Union[None, float, ArrayLike]
 # The option names and the statuses are defined once, in the C++ core (options.hpp, result.hpp).
 #: The methods, in the order of the paper: the NRM family, then the baselines.
 METHODS = tuple(_core.Method.__members__)
+#: method= also takes "auto" (the default): nrmgs or newton by choose_method's rule.
+METHOD_CHOICES = ("auto",) + METHODS
 Z_UPDATES = tuple(_core.ZUpdate.__members__)
 INNERS = tuple(_core.Inner.__members__)
 ACCELERATIONS = tuple(_core.Accelerate.__members__)
@@ -253,11 +257,29 @@ def _scale_choice(scale):
     raise ValueError(f"scale must be False, True, 'rows' or 'both'; got {scale!r}")
 
 
+#: The default stopping rule (tol and rtol both left None): Res measured in the units of z,
+#: Res_E(z) = ‖min(σ(Az + q), z − ζ(z))‖₂ with σ = 1/(the size of A's entries) (_scaling.units_factor),
+#: below DEFAULT_RTOL · Res_E(0). A change of units of A and q, or of z, changes nothing (README
+#: "What you get back"). Measured: relative error of z below 1e-6 for nrmgs on the README membrane
+#: (n = 65,025) and Bai's matrices, and Newton's rounding floor stays below it up to n = 10^6.
+DEFAULT_RTOL = 1e-10
+
+
+def _criterion(it: dict) -> tuple[dict, bool]:
+    """(it with numeric tol and rtol, units): units is True for the default rule (tol and rtol both
+    None: DEFAULT_RTOL on the units-free measure Res_E); else the paper's Res with max(tol, rtol ·
+    Res(0)), a missing one taken as 0."""
+    tol, rtol = it["tol"], it["rtol"]
+    if tol is None and rtol is None:
+        return dict(it, tol=0.0, rtol=DEFAULT_RTOL), True
+    return dict(it, tol=0.0 if tol is None else tol, rtol=0.0 if rtol is None else rtol), False
+
+
 def _absolute_target(it: dict, checked_opts, measure, n: int) -> dict:
     """The iteration options with an absolute tol: the core's rule (Options::target) max(tol,
     rtol · Res(0)) when rtol > 0, Res(0) in the original variables; then rtol = 0."""
     if checked_opts.rtol > 0:
-        return dict(it, tol=checked_opts.target(measure(np.zeros(n))[1]), rtol=0.0)
+        return dict(it, tol=checked_opts.target(measure(np.zeros(n))[1]), rtol=0.0)   # target: inf Res(0) counts 0
     return dict(it, tol=float(it["tol"]))
 
 
@@ -317,6 +339,77 @@ def _omega2_hint(A, method, omega2, accelerate) -> str:
             f"{dmean:.3g}: pass omega2=A.diagonal() or use method 'nrmm' or 'nrmgs'")
 
 
+@contextlib.contextmanager
+def _user_entries(A, A_core):
+    """The core's ValueErrors name entries of the matrix it was given: "A[i,j] = v" of a scaled
+    A_core is rewritten to the user's A[i,j]."""
+    try:
+        yield
+    except ValueError as exc:
+        if A_core is A:
+            raise
+        text = re.sub(r"A\[(\d+),(\d+)\] = [-+0-9.eE]+|A\[(\d+),(\d+)\] = (?:-?inf|nan)",
+                      lambda m: f"A[{m[1]},{m[2]}] = {A[int(m[1]), int(m[2])]:g}" if m[1] else m[0], str(exc))
+        if text == str(exc):
+            raise
+        raise type(exc)(text) from None   # LinAlgError stays LinAlgError
+
+
+def _units_parameters(opts, method: str, sigma: float, n: int) -> None:
+    """The parameters in the units of w (Ω2, φ, nrmm's α) for the core's σA, σq, so that the
+    iterates are those of A, q (σ a power of two: bit for bit); nrm's default Ω2 = I becomes σI."""
+    if opts.omega2.size:
+        opts.omega2 = sigma * np.asarray(opts.omega2)
+    elif method == "nrm":
+        opts.omega2 = np.full(n, sigma)
+    if opts.phi.size:
+        opts.phi = sigma * np.asarray(opts.phi)
+    if method == "nrmm" and not math.isnan(opts.alpha):
+        opts.alpha = sigma * opts.alpha
+
+
+#: method="auto" takes nrmgs when every row of A is diagonally dominant by at least this fraction of
+#: its diagonal (Gauss–Seidel then contracts by about 1 − margin a sweep: tens of sweeps, as on Bai's
+#: shifted matrices, margin 0.5), else newton: an unshifted elliptic A (margin 0 on its interior
+#: rows) needs O(h⁻²) sweeps, and a zero or negative diagonal stops the AOR-type members.
+AUTO_MARGIN = 0.25
+#: Options only the stationary members read: given with method="auto", they choose nrmgs.
+_STATIONARY_ONLY = {"accelerate": "none", "z_update": "auto", "theta": 1.0, "alpha": None, "beta": None}
+
+
+def dominance_margin(A: sp.csr_matrix) -> float:
+    """min_i (a_ii − Σ_{j≠i} |a_ij|) / a_ii over the rows of A; −inf when some a_ii <= 0."""
+    d = A.diagonal()
+    if A.shape[0] == 0 or not np.all(d > 0):
+        return -math.inf
+    rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr)) if 0 in np.diff(A.indptr) else None
+    row_sums = (np.add.reduceat(np.abs(A.data), A.indptr[:-1]) if rows is None   # one pass, no copy of A
+                else np.bincount(rows, weights=np.abs(A.data), minlength=A.shape[0]))
+    return float(np.min((2 * d - row_sums) / d))
+
+
+def choose_method(A: sp.csr_matrix, options: dict) -> str:
+    """What method="auto" takes for A (the rule of README "Which method for which problem"):
+    the member of any stationary-only option given, newton for a hierarchy list or a ζ Jacobian,
+    else nrmgs where A's rows are dominant by AUTO_MARGIN and newton elsewhere."""
+    if any(options.get(k, v) is not None and options.get(k, v) != v for k, v in _STATIONARY_ONLY.items()):
+        return "nrmgs"
+    if isinstance(options.get("hierarchy"), (list, tuple)):
+        return "newton"
+    return "nrmgs" if dominance_margin(A) >= AUTO_MARGIN else "newton"
+
+
+def _member_hint(A: sp.csr_matrix, method: str) -> str:
+    """Advice for a stationary solve that did not converge, when newton is the member for this A."""
+    if method == "newton" or choose_method(A, {}) != "newton":
+        return ""
+    margin = dominance_margin(A)
+    why = ("A has a diagonal entry <= 0" if margin == -math.inf else
+           f"A's rows are dominant by only {max(margin, 0.0):.2g} of their diagonal")
+    return (f"; {why}, where the stationary members need O(h^-2) iterations: method='newton' "
+            f"(what method='auto' takes here) solves such problems in a few Newton steps")
+
+
 #: With scaling, at most this many re-solves with a tighter tolerance when the scaled problem
 #: converged but Res in the original variables is still >= tol.
 MAX_REFINEMENTS = 3
@@ -342,14 +435,15 @@ class Solver:
             res = s.solve(q_k, zeta=payoff, x0=res.z if k else None)
     """
 
-    def __init__(self, A: MatrixLike, *, method: str = "nrmgs", omega1: DiagonalLike = None,
+    def __init__(self, A: MatrixLike, *, method: str = "auto", omega1: DiagonalLike = None,
                  omega2: DiagonalLike = None, gamma: float = 1.0, phi: DiagonalLike = None,
                  alpha: Optional[float] = None, beta: Optional[float] = None, inner: str = "auto",
-                 tol: float = 1e-8, rtol: float = 0.0, maxiter: int = 10000, theta: float = 1.0,
+                 tol: Optional[float] = None, rtol: Optional[float] = None, maxiter: int = 10000, theta: float = 1.0,
                  z_update: str = "auto",
                  accelerate: Optional[str] = "none", anderson_m: int = 5, record_history: bool = False,
                  stall_iterations: int = 100, scale: Union[bool, str] = False, verbose: int = 0,
-                 hierarchy: Any = "auto", polish: bool = False, _decouple: bool = True) -> None:
+                 hierarchy: Any = "auto", polish: bool = False, _decouple: bool = True,
+                 _units_factor: Optional[float] = None) -> None:
         settings = dict(method=method, omega1=omega1, omega2=omega2, gamma=gamma, phi=phi, alpha=alpha, beta=beta,
                         inner=inner, tol=tol, rtol=rtol, maxiter=maxiter, theta=theta, z_update=z_update,
                         accelerate=accelerate, anderson_m=anderson_m, record_history=record_history,
@@ -360,7 +454,9 @@ class Solver:
         if n == 0:
             raise ValueError("A must have at least one row, got shape (0, 0)")
         self.n = n
-        self.method = _choice(method, METHODS, "method")
+        self._dr = self._dc = None
+        method = _choice(method, METHOD_CHOICES, "method")
+        self.method = choose_method(self.A, settings) if method == "auto" else method
         # The paper's NRM fixes Omega2 = I, which only suits diag(A) of order 1; say so on failure.
         self._omega2_hint = _omega2_hint(self.A, self.method, omega2, accelerate)
         self.scale = _scale_choice(scale)
@@ -376,37 +472,48 @@ class Solver:
         opts.inner = getattr(_core.Inner, _choice(inner, INNERS, "inner"))
         self._defaults = {k: settings[k] for k in ("tol", "rtol", "maxiter", "theta", "z_update", "accelerate",
                                                    "anderson_m", "record_history", "stall_iterations", "verbose")}
-        _checked(_iteration_options(opts, **self._defaults), n)
+        resolved, units = _criterion(self._defaults)
+        _checked(_iteration_options(opts, **resolved), n)
+        # the default rule's σ: the whole A's (a Reduced passes it to the solver of its coupled rows)
+        self._units_factor = units_factor(self.A) if _units_factor is None else _units_factor
         # Newton: rows with a lone positive diagonal are solved in closed form, the rest on A_FF
         # (python/nrmicp/_decoupled.py); another ζ than none/constant solves on A (self._whole).
         D = decoupled_rows(self.A) if self.method == "newton" and _decouple else None
-        self._reduced = None if D is None else Reduced(Solver, self.A, D, settings)
+        self._reduced = None if D is None else Reduced(Solver, self.A, D, settings, self._units_factor)
         self._settings, self._whole_solver = settings, None
         if self._reduced is not None:
             self.polish = self._reduced.inner.polish
             return
         pairs = None
-        if self.method == "newton" and self.scale is None and _newton.resolves_to_amg(hierarchy, self.A):
+        if units and self.scale is None:   # the default rule iterates on σA, σq (σ a power of two: exact)
+            self.scale = "units"
+        if self.method == "newton" and self.scale in (None, "units") and _newton.resolves_to_amg(hierarchy, self.A):
             pairs = _newton.amg_levels_or_rows(self.A)
             if pairs is None:   # rows scaled apart: equilibrated, the amg hierarchy stays (_newton.py)
                 self.scale = "rows"
+            elif self.scale == "units":
+                pairs = [(P, self._units_factor * Ac) for P, Ac in pairs]
         if self.scale is None:
             self._dr = self._dc = None
             A_core = self.A
         else:
-            self._dr, self._dc = equilibrate(self.A, self.scale)
+            self._dr, self._dc = ((np.full(n, self._units_factor), np.ones(n)) if self.scale == "units"
+                                  else equilibrate(self.A, self.scale))
             A_core = scale_matrix(self.A, self._dr, self._dc)
+            if self.scale == "units":   # parameters in w's units (Ω2, φ, nrmm's α) follow A; nrm's Ω2 = I
+                _units_parameters(opts, self.method, self._units_factor, n)
         self._index_dtype = A_core.indices.dtype
         self.polish = _newton.check_polish(polish)
         self._polisher = None
-        if self.method == "newton":
-            self._core = _newton.make_core(A_core, opts, hierarchy, self.A, self._dc, pairs)
-            return
-        _newton.check_no_hierarchy(hierarchy, self.method)
-        core_cls = _core.SolverI64 if self._index_dtype == np.int64 else _core.SolverI32
-        # A failed factorization raises numpy.linalg.LinAlgError (MemoryError when out of memory),
-        # here or in a lazy one during solve().
-        self._core = core_cls(A_core.indptr, A_core.indices, A_core.data, n, opts)
+        with _user_entries(self.A, A_core):
+            if self.method == "newton":
+                self._core = _newton.make_core(A_core, opts, hierarchy, self.A, self._dc, pairs)
+                return
+            _newton.check_no_hierarchy(hierarchy, self.method)
+            core_cls = _core.SolverI64 if self._index_dtype == np.int64 else _core.SolverI32
+            # A failed factorization raises numpy.linalg.LinAlgError (MemoryError when out of memory),
+            # here or in a lazy one during solve().
+            self._core = core_cls(A_core.indptr, A_core.indices, A_core.data, n, opts)
 
     @property
     def parameters(self) -> dict[str, Any]:
@@ -415,7 +522,13 @@ class Solver:
         decoupled rows (a lone diagonal), those of the coupled rows' problem."""
         if self._reduced is not None:
             return self._reduced.inner.parameters
-        return dict(self._core.parameters())
+        p = dict(self._core.parameters())
+        if self.scale == "units":   # reported in the user's units, as given
+            sigma = self._units_factor
+            p.update({k: p[k] / sigma for k in ("omega2", "phi") if k in p})
+            if self.method == "nrmm":
+                p["alpha"] = p["alpha"] / sigma
+        return p
 
     @property
     def levels(self) -> int:
@@ -430,7 +543,7 @@ class Solver:
         'newton' on an A with decoupled rows: those of the coupled rows' matrix A_FF)."""
         if self._reduced is not None:
             return self._reduced.inner.scaling
-        if self._dr is None:
+        if self._dr is None or self.scale == "units":   # the default rule's σ is not the user's scaling
             return None
         return self._dr.copy(), self._dc.copy()
 
@@ -439,7 +552,8 @@ class Solver:
               **iteration_options: Any) -> Result:
         """Solve ICP(q, A, ζ). See :func:`nrmicp.solve` for the arguments."""
         n = self.n
-        it, checked_opts = self._solve_options(iteration_options)
+        units = iteration_options.pop("_units", None)   # a Reduced's inner solve: the whole problem's rule
+        it, checked_opts, units = self._solve_options(iteration_options, units)
         qv = as_vector(q, n, "q")
         z0 = None if x0 is None else as_vector(x0, n, "x0")
         kind, c, B, fn = _make_zeta(zeta, n)
@@ -451,7 +565,7 @@ class Solver:
                 _newton.check_jacobian(zeta_jacobian, self.method, kind)
                 zD = self._reduced.z_decoupled(qv, c)
             if zD is not None:
-                return self._solve_reduced(qv, c, zD, z0, callback, it, checked_opts)
+                return self._solve_reduced(qv, c, zD, z0, callback, it, checked_opts, units)
             # a coupling ζ (or a z_D that overflows): the whole A; ζ as checked here (B converted once)
             whole_zeta = Affine(B, c) if kind == ZetaKind.affine else zeta
             return self._whole().solve(qv, whole_zeta, x0=z0, callback=callback, zeta_jacobian=zeta_jacobian,
@@ -459,13 +573,13 @@ class Solver:
         core_kw = _newton.jacobian_argument(zeta_jacobian, self, kind, self._dc)
         checked = None if fn is None else CheckedZeta(fn, n)  # read-only input, checked output: one per solve
         problem, z0s = self._core_problem(qv, z0, kind, c, B, checked)
-        measure = _OriginalResidual(self.A, qv, kind, c, B, checked)
+        measure = _OriginalResidual(self.A, qv, kind, c, B, checked, self._units_weights() if units else None)
         # Res is re-measured in the original variables whenever that costs no call of a user ζ
         # (constant: the core iterated the shifted LCP; Affine), and always with scaling (then a
         # callable ζ is called once more per round): success is never declared on the strength of
         # a different residual. An unscaled LCP needs no re-check: the core's Res is already
         # min(Az + q, z) of the returned z in the original variables.
-        verify = kind in (ZetaKind.constant, ZetaKind.affine) or self._dr is not None
+        verify = kind in (ZetaKind.constant, ZetaKind.affine) or self._dr is not None or units
         it = _absolute_target(it, checked_opts, measure, n)
         tol = it["tol"]
         rounds = _Rounds(self, problem, it, callback, core_kw, measure if verify else None)
@@ -473,16 +587,23 @@ class Solver:
         polished = polish_core = None
         if self.polish:
             polished, polish_core = _newton.polish(self, problem, rounds.z, rounds.res, measure, self._dc)
-        return self._assemble(rounds, polished, polish_core, tol)
+        return self._assemble(rounds, polished, polish_core, tol, measure)
 
-    def _solve_reduced(self, qv, c, zD, z0, callback, it, checked_opts) -> Result:
+    def _units_weights(self):
+        """(d_r, d_c) of the default rule's measure: the equilibration the core iterates on ('units',
+        or the user's 'rows'/'both'), else σI (a Solver set up for the paper's tol)."""
+        if self._dr is not None:
+            return self._dr, self._dc
+        return np.full(self.n, self._units_factor), np.ones(self.n)
+
+    def _solve_reduced(self, qv, c, zD, z0, callback, it, checked_opts, units) -> Result:
         """Solve on the coupled rows (self._reduced); z, w, Res and the status of the whole problem,
         the status re-decided on that Res as rule 1 of docs/SPEC.md does."""
         kind = ZetaKind.none if c is None else ZetaKind.constant
-        measure = _OriginalResidual(self.A, qv, kind, c, None, None)
+        measure = _OriginalResidual(self.A, qv, kind, c, None, None, self._units_weights() if units else None)
         it = _absolute_target(it, checked_opts, measure, self.n)
         tol = it["tol"]
-        r = self._reduced.solve(qv, c, zD, z0, callback, it, measure)
+        r = self._reduced.solve(qv, c, zD, z0, callback, dict(it, _units=units), measure)
         if r.residual < tol:
             r.status, r.message = Status.CONVERGED, _core.status_message(int(Status.CONVERGED))
         elif r.status == Status.CONVERGED:
@@ -491,6 +612,8 @@ class Solver:
                 "decoupled rows; returning the best iterate")
         else:
             r.message = f"{r.message}; Res(z) = {r.residual:.3g} with the decoupled rows"
+        r.status, r.message, r.residual, r.criterion = _criterion_outcome(measure, r.z, r.residual, tol, r.status,
+                                                                          r.message)
         r.success = r.status == Status.CONVERGED
         return r
 
@@ -500,18 +623,22 @@ class Solver:
             self._whole_solver = Solver(self.A, _decouple=False, **self._settings)
         return self._whole_solver
 
-    def _solve_options(self, iteration_options: dict) -> dict:
-        """The set-up's per-solve options overridden by the solve's, checked against the method."""
+    def _solve_options(self, iteration_options: dict, units=None) -> tuple:
+        """(options, checked core options, units): the set-up's per-solve options overridden by the
+        solve's, tol/rtol resolved by _criterion (`units` given: kept as they are, under that rule),
+        checked against the method."""
         unknown = set(iteration_options) - set(self._defaults)
         if unknown:
             raise TypeError(f"Solver.solve() got unexpected keyword argument(s) {sorted(unknown)}; the splitting "
                             "options (method, omega1, omega2, gamma, phi, alpha, beta, inner, scale) are fixed at "
                             "set-up")
         it = dict(self._defaults, **iteration_options)
+        if units is None:
+            it, units = _criterion(it)
         checked = _iteration_options(_core.Options(), **it)
         checked.method = getattr(_core.Method, self.method)
         _checked(checked, self.n)  # validates every iteration option once, against this method
-        return it, checked
+        return it, checked, units
 
     def _core_problem(self, qv, z0, kind, c, B, checked):
         """The problem handed to the core, (q, kind, c, B-indptr, B-indices, B-data, fn), and its
@@ -534,7 +661,7 @@ class Solver:
             bp = bi = bd = None
         return (qs, kind, cs, bp, bi, bd, fns), z0s
 
-    def _assemble(self, rounds: "_Rounds", polished, polish_core, tol: float) -> Result:
+    def _assemble(self, rounds: "_Rounds", polished, polish_core, tol: float, measure) -> Result:
         """The result: the best round's z, the status re-decided as docs/SPEC.md says ("When the
         Python layer changes the core's status"), the rounds' history, timings and counters."""
         z, w, res = rounds.z, rounds.w, rounds.res
@@ -543,8 +670,10 @@ class Solver:
         status, message = rounds.status(res, tol)
         if status != Status.CONVERGED and self._omega2_hint:
             message += self._omega2_hint
+        if status in (Status.MAX_ITERATIONS, Status.STAGNATED):
+            message += _member_hint(self.A, self.method)
         extra = {}
-        if self._dr is not None:
+        if self._dr is not None and self.scale != "units":
             extra["scaling"] = {"kind": self.scale, "refinements": rounds.refined,
                                 "rounds": [(float(tk), Status(s).name, float(r)) for tk, s, r in rounds.rounds]}
         if self.polish:
@@ -556,6 +685,7 @@ class Solver:
                 status, message = Status.STAGNATED, f"{message}; polish: {polish_core['message']}"
         if self.method == "newton":
             extra.update(_newton.result_fields(rounds.best_d))
+        status, message, res, extra["criterion"] = _criterion_outcome(measure, z, res, tol, status, message)
         return Result(z=z, w=w, success=status == Status.CONVERGED, status=status, message=message,
                       nit=rounds.nit, iterations=rounds.done_iters, residual=res, history=rounds.history(),
                       timings=rounds.timings, method=self.method, inner=rounds.best_d["inner"],
@@ -563,24 +693,66 @@ class Solver:
 
 
 class _OriginalResidual:
-    """(w, Res(z)) in the original variables, in numpy: w = Az + q, g = z − ζ(z)."""
+    """(w, Res(z)) in the original variables, in numpy: w = Az + q, g = z − ζ(z). With `weights`
+    (d_r, d_c), the default rule's units-free Res_E = ‖min(d_r w, g / d_c)‖₂ (w itself unweighted)."""
 
-    def __init__(self, A, qv, kind, c, B, checked):
+    def __init__(self, A, qv, kind, c, B, checked, weights=None):
         self.A, self.qv, self.kind, self.c, self.B, self.checked = A, qv, kind, c, B, checked
+        self.weights = weights
 
-    def __call__(self, z):
-        w = self.A @ z + self.qv
+    def _g(self, z):
         if self.kind == ZetaKind.none:
-            g = z
-        elif self.kind == ZetaKind.constant:
-            g = z - self.c
-        elif self.kind == ZetaKind.affine:
-            g = z - (self.B @ z + self.c)
-        else:
-            g = z - self.checked(z)  # on a read-only copy: ζ never sees (or writes into) the result
+            return z
+        if self.kind == ZetaKind.constant:
+            return z - self.c
+        if self.kind == ZetaKind.affine:
+            return z - (self.B @ z + self.c)
+        return z - self.checked(z)  # on a read-only copy: ζ never sees (or writes into) the result
+
+    def __call__(self, z, weighted=True):
+        w = self.A @ z + self.qv
+        g = self._g(z)
         if not (np.all(np.isfinite(w)) and np.all(np.isfinite(z))):
             return w, math.inf   # an overflowing Az + q is no certificate: min(w, g) is blind to w = +inf
-        return w, _norm(np.minimum(w, g))
+        if self.weights is None or not weighted:
+            return w, _norm(np.minimum(w, g))
+        dr, dc = self.weights
+        with np.errstate(over="ignore", invalid="ignore"):
+            r = _norm(np.minimum(dr * w, g / dc))
+        return w, r if r == r else math.inf   # a factor beyond float range (inf · 0): no certificate
+
+    def rounding_level(self, z) -> float:
+        """ε (‖d_r(|A||z| + |q|)‖₂ + ‖(|z| + |z − g|)/d_c‖₂): what double precision can resolve of
+        Res_E at z (the Newton member's floor, newton_level.hpp, in the default rule's measure)."""
+        dr, dc = self.weights
+        with np.errstate(over="ignore", invalid="ignore"):
+            t = dr * (abs(self.A) @ np.abs(z) + np.abs(self.qv))
+            u = (np.abs(z) + np.abs(z - self._g(z))) / dc
+        return float(np.finfo(float).eps * (_norm(t) + _norm(u)))
+
+
+#: The default rule accepts a Res_E within this factor of its rounding level (as the Newton member's
+#: floor does): double precision can do no better, whatever DEFAULT_RTOL asks.
+FLOOR_FACTOR = 100.0
+
+
+def _criterion_outcome(measure, z, res, tol, status, message):
+    """(status, message, the paper's Res of z, the criterion field) of a solve whose stopping measure
+    gave `res` against the absolute target `tol`. Under the default rule a Newton solve (or polish)
+    that settled at its rounding floor is success when Res_E is within FLOOR_FACTOR of its rounding
+    level (a target below it is the rule's, not the user's), and Res is re-measured as the paper's
+    for ``residual``."""
+    if measure.weights is None:
+        return status, message, res, {"measure": "paper", "target": float(tol), "value": float(res)}
+    crit = {"measure": "units", "target": float(tol), "value": float(res)}
+    if status == Status.STAGNATED and "rounding floor" in message and math.isfinite(res):
+        level = measure.rounding_level(z)
+        if res <= FLOOR_FACTOR * level:
+            status, message = Status.CONVERGED, (
+                f"converged to the rounding level: Res_E(z) = {res:.3g} is within {FLOOR_FACTOR:g}x of what "
+                f"double precision resolves ({level:.3g}), above the default target {tol:.3g}")
+    paper = measure(z, weighted=False)[1] if math.isfinite(res) else res
+    return status, message, paper, crit
 
 
 class _Rounds:
@@ -690,9 +862,14 @@ class _Rounds:
             tol_k = self.rounds[-1][0]
             return Status.STAGNATED, (
                 f"stagnated: the {'scaled' if self.scaled else 'shifted'} problem met its tolerance {tol_k:.3g} "
-                f"but Res(z) = {res:.3g} >= tol = {tol:.3g} in the original variables"
+                f"but {self.label}(z) = {res:.3g} >= tol = {tol:.3g} in the original variables"
                 f"{' after %d re-solve(s)' % self.refined if self.refined else ''}; returning the best iterate")
-        return last_status, f"{last_message}; Res(z) = {res:.3g} in the original variables"
+        return last_status, f"{last_message}; {self.label}(z) = {res:.3g} in the original variables"
+
+    @property
+    def label(self) -> str:
+        """The stopping measure's name in messages: the paper's Res, or the default rule's Res_E."""
+        return "Res" if self.measure is None or self.measure.weights is None else "Res_E"
 
     def history(self):
         if not self.histories:
@@ -702,8 +879,8 @@ class _Rounds:
                 "residual": np.concatenate([h[2] for h in self.histories])}
 
 
-def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "nrmgs", tol: float = 1e-8,
-          rtol: float = 0.0, maxiter: int = 10000, omega1: DiagonalLike = None, omega2: DiagonalLike = None, gamma: float = 1.0,
+def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "auto", tol: Optional[float] = None,
+          rtol: Optional[float] = None, maxiter: int = 10000, omega1: DiagonalLike = None, omega2: DiagonalLike = None, gamma: float = 1.0,
           phi: DiagonalLike = None, alpha: Optional[float] = None, beta: Optional[float] = None,
           theta: float = 1.0, z_update: str = "auto", inner: str = "auto", accelerate: Optional[str] = "none",
           anderson_m: int = 5, x0: Optional[ArrayLike] = None, callback: Optional[Callable[..., Any]] = None,
@@ -730,7 +907,11 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
         ζ returning an array of the wrong shape or dtype raises TypeError/ValueError; ζ
         returning NaN or Inf raises ValueError (the core's status ZETA_FAILED).
     method : str
-        ``'nrmgs'`` (default), ``'nrm'``, ``'nrmm'``, ``'nrmaor'``, ``'nrmsor'``, ``'nrmj'``,
+        ``'auto'`` (default): ``'nrmgs'`` when every row of A is diagonally dominant by at least
+        a quarter of its diagonal (Bai's shifted matrices, implicit time steps with a large mass
+        term: tens of sweeps), else ``'newton'`` (unshifted elliptic A, zero diagonals); an option
+        only the stationary members read (accelerate, z_update, theta, alpha, beta) picks
+        ``'nrmgs'``, a hierarchy list ``'newton'``; ``result.method`` says which ran. Or ``'nrmgs'``, ``'nrm'``, ``'nrmm'``, ``'nrmaor'``, ``'nrmsor'``, ``'nrmj'``,
         ``'mms'`` (Zheng–Vong baseline), ``'two_sweep'`` (two-sweep baseline). The AOR-type
         methods need no factorization (forward substitution, O(nnz) per iteration); NRM and
         NRMM factorize Ω2 + (A + φ)Ω1 once. ``'newton'``: the semismooth Newton member on the same
@@ -738,14 +919,21 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
         symbolic analysis once; nested iteration over ``hierarchy``; falls back to sweeps of 'nrm'
         when a step does not reduce Res or the active set cycles). Its ``maxiter`` counts Newton
         steps (and bounds the fallback sweeps). Default by measurement: see README "Choosing a method".
-    tol : float
+    tol : float, optional
         Stop when Res(z) = ‖min(Az + q, z − ζ(z))‖₂ < tol (absolute, the paper's criterion;
         scipy.sparse.linalg's ``atol``). With ``rtol``, the target is max(tol, rtol · Res(0)).
-    rtol : float in [0, 1)
+        Giving ``tol`` or ``rtol`` selects the paper's Res (the other one defaults to 0).
+    rtol : float in [0, 1), optional
         Relative tolerance, as scipy.sparse.linalg's: stop when Res(z) < max(tol, rtol · Res(0)),
         Res(0) = ‖min(q, −ζ(0))‖₂ the residual at z = 0 (scipy's ‖b‖; it does not depend on
-        ``x0``). Default 0: the absolute ``tol`` alone, as before. ``tol=0`` with ``rtol > 0`` is
-        a purely relative target.
+        ``x0``). ``tol=0`` with ``rtol > 0`` is a purely relative target.
+
+        **Default (both None): a rule that does not depend on units.** Res is measured in the
+        units of z, Res_E(z) = ‖min(σ(Az + q), z − ζ(z))‖₂ with σ = 1/(geometric mean of |a_ii|), a
+        power of two, and the solve stops when Res_E(z) < 1e-10 · Res_E(0) (``DEFAULT_RTOL``), or when
+        Res_E is within 100x of the rounding level of double precision at z. Scaling A and q
+        together, or z, changes neither the iterates nor the decision. ``result.criterion`` says
+        which rule decided, its target and value; ``residual`` is always the paper's Res of ``z``.
     maxiter : int
     omega1, omega2 : float or array_like (n,), positive
         Ω1, Ω2. Defaults: Ω1 = I; Ω2 = I (nrm, the paper's definition), αI (nrmm),

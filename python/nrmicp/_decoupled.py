@@ -72,7 +72,7 @@ class Reduced:
     """The Newton member on the coupled rows F of A, the decoupled rows D solved in closed form.
     `settings`: the Solver's constructor arguments (checked on the whole A already)."""
 
-    def __init__(self, solver_cls, A: sp.csr_matrix, D: np.ndarray, settings: dict):
+    def __init__(self, solver_cls, A: sp.csr_matrix, D: np.ndarray, settings: dict, units_factor: float):
         n = A.shape[0]
         self.D = D
         coupled = np.ones(n, dtype=bool)
@@ -85,7 +85,7 @@ class Reduced:
         A_FF.sort_indices()
         part = dict(settings, hierarchy=_hierarchy_part(settings["hierarchy"], A, self.F),
                     **{k: _diagonal_part(settings[k], self.F) for k in ("omega1", "omega2", "phi")})
-        self.inner = solver_cls(A_FF, _decouple=False, **part)
+        self.inner = solver_cls(A_FF, _decouple=False, _units_factor=units_factor, **part)
         self.n = n
 
     def z_decoupled(self, q: np.ndarray, c: Optional[np.ndarray]) -> Optional[np.ndarray]:

@@ -13,6 +13,8 @@ Every factor is a power of two, so D_r A D_c, D_r q, z = D_c y are computed with
 (barring over/underflow) and scaling adds no error of its own.
 
 kinds:
+  'units' D_r = σI, D_c = I with σ = units_factor(A): the default stopping rule's measure (nrmicp's
+          default tol/rtol, README "What you get back"), one number so that A keeps its symmetry.
   'rows'  D_r = 1/max_j |a_ij| (rows that are entirely zero keep factor 1), D_c = I; ζ unchanged.
   'both'  Ruiz equilibration: a few sweeps of D_r ← D_r/√(row max), D_c ← D_c/√(column max) of
           the current scaled matrix, until every nonzero row and column has max |entry| in
@@ -31,6 +33,26 @@ def _pow2(v: np.ndarray) -> np.ndarray:
     return np.exp2(np.round(np.log2(v)))
 
 
+def units_factor(A: sp.csr_matrix) -> float:
+    """σ = the power of two nearest 1/(geometric mean of the nonzero |a_ii|) (without a nonzero
+    diagonal entry: of the nonzero |a_ij|; 1 for A = 0): the size of A's entries in the units the user
+    chose. A mean of logarithms, so that a few penalty or identity rows (Dirichlet values) hardly
+    move it, and the distributed engine forms it from two global sums (sigma_from_logs)."""
+    d = np.abs(A.diagonal())
+    d = d[d > 0]
+    if d.size == 0:
+        d = np.abs(A.data[A.data != 0])
+    return sigma_from_logs(float(np.sum(np.log2(d))), d.size)
+
+
+def sigma_from_logs(sum_log2: float, count: int) -> float:
+    """The default rule's σ from Σ log2 |a_ii| over `count` entries: 2^-round(mean), 1 for none."""
+    if count == 0:
+        return 1.0
+    e = -round(sum_log2 / count)
+    return float(np.exp2(min(max(e, -1022), 1023)))
+
+
 def _row_max(M: sp.csr_matrix) -> np.ndarray:
     return np.asarray(abs(M).max(axis=1).todense()).ravel()
 
@@ -40,8 +62,10 @@ def _col_max(M: sp.csr_matrix) -> np.ndarray:
 
 
 def equilibrate(A: sp.csr_matrix, kind: str) -> tuple[np.ndarray, np.ndarray]:
-    """-> (d_r, d_c), positive powers of two, for kind 'rows' or 'both'. A is not modified."""
+    """-> (d_r, d_c), positive powers of two, for kind 'units', 'rows' or 'both'. A is not modified."""
     n = A.shape[0]
+    if kind == "units":
+        return np.full(n, units_factor(A)), np.ones(n)
     if kind == "rows":
         r = _row_max(A)
         dr = np.ones(n)
@@ -74,6 +98,8 @@ def equilibrate(A: sp.csr_matrix, kind: str) -> tuple[np.ndarray, np.ndarray]:
 
 def scale_matrix(A: sp.csr_matrix, dr: np.ndarray, dc: np.ndarray) -> sp.csr_matrix:
     """D_r A D_c as a new canonical float64 CSR with A's index dtype (A is not modified)."""
+    if dr[0] == dr[-1] and np.all(dc == 1.0) and np.all(dr == dr[0]):   # 'units': one factor
+        return sp.csr_matrix((A.data * dr[0], A.indices, A.indptr), shape=A.shape, copy=False)  # pattern shared
     rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
     data = A.data * dr[rows] * dc[A.indices]
     return sp.csr_matrix((data, A.indices.copy(), A.indptr.copy()), shape=A.shape)

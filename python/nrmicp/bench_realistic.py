@@ -175,6 +175,7 @@ def _march_curve(problem, curve, small):
             if options.get("hierarchy") == "geo":
                 options.pop("hierarchy")  # the scene's own rule: nested first step, then warm starts
             method = options.pop("method")
+            options["tol"] = tol   # set up for the rule the march solves by
             solver = nrmicp.Solver(m.A, method=method, **options)
             first = _nested_first_step(solver, m.A, method, options)
         for step, kind in enumerate(m.steps()):

@@ -30,7 +30,9 @@ except ImportError as exc:  # the core package needs no MPI; this module does
                       f"(make mpideps installs them on Debian); {exc}") from exc
 
 from . import _core
-from ._api import Affine, Result, Status, _checked, _choice, _iteration_options, _scalar
+from ._api import (FLOOR_FACTOR, Affine, Result, Status, _checked, _choice, _criterion, _iteration_options,
+                   _scalar)
+from ._scaling import sigma_from_logs
 from ._inputs import as_constant, as_diagonal, as_vector
 from ._zeta import CheckedZeta
 
@@ -172,10 +174,10 @@ def _vec(A, arr):
     return out
 
 
-def _check_options(method, n, tol, maxiter, omega1, omega2, gamma, alpha, beta, nloc):
+def _check_options(method, n, tol, maxiter, omega1, omega2, gamma, alpha, beta, nloc, rtol=0.0):
     """The serial library's checks (nrmicp._api and the core's Options.check)."""
     method = _choice(method, METHODS, "method")
-    opts = _iteration_options(_core.Options(), tol=tol, maxiter=maxiter, z_update="auto", accelerate="none",
+    opts = _iteration_options(_core.Options(), tol=tol, rtol=rtol, maxiter=maxiter, z_update="auto", accelerate="none",
                               anderson_m=5, theta=1.0, record_history=False, stall_iterations=100)
     opts.method = getattr(_core.Method, method)
     opts.gamma = _scalar(gamma, "gamma")
@@ -936,14 +938,14 @@ def _polish(A, q, zeta, z, res, comm, symmetric, stats):
 
 
 # ----------------------------------------------------------------------------- the entry points
-def _prepare(A, q, zeta, x0, comm, method, tol, maxiter, omega1, omega2, gamma, alpha, beta, hierarchy):
+def _prepare(A, q, zeta, x0, comm, method, tol, maxiter, omega1, omega2, gamma, alpha, beta, hierarchy, rtol=0.0):
     """Every check, with every rank's failure raised on all ranks; returns the PETSc objects."""
     A_in = _collective(comm, _check_mat, A)
     Am = _as_mat(A_in, comm) if sp.issparse(A_in) else A_in
     n, nloc = Am.getSize()[0], Am.getLocalSize()[0]
 
     def local():
-        m, w1, w2 = _check_options(method, n, tol, maxiter, omega1, omega2, gamma, alpha, beta, nloc)
+        m, w1, w2 = _check_options(method, n, tol, maxiter, omega1, omega2, gamma, alpha, beta, nloc, rtol)
         if m != "newton" and hierarchy not in (None, "amg", "auto"):
             raise ValueError(f"hierarchy is the nested iteration of method 'newton'; got {hierarchy!r}")
         if m == "newton" and not (hierarchy in (None, "amg", "auto") or isinstance(hierarchy, (list, tuple))):
@@ -965,7 +967,7 @@ def _prepare(A, q, zeta, x0, comm, method, tol, maxiter, omega1, omega2, gamma, 
     return Am, m, w1, w2, _vec(Am, qa), None if xa is None else _vec(Am, xa), zf.make(Am)
 
 
-def solve(A, q, zeta=None, *, method: str = "newton", tol: float = 1e-8, maxiter: int = 10000,
+def solve(A, q, zeta=None, *, method: str = "newton", tol=None, rtol=None, maxiter: int = 10000,
           omega1=None, omega2=None, gamma: float = 1.0, alpha=None, beta=None, hierarchy="amg",
           x0=None, polish: bool = False, comm=None) -> Result:
     """Solve ICP(q, A, ζ) on all ranks of A's communicator (call it on every rank).
@@ -977,14 +979,25 @@ def solve(A, q, zeta=None, *, method: str = "newton", tol: float = 1e-8, maxiter
     (entry-wise or row-local ζ only). method: 'newton' (nested over hypre BoomerAMG's
     prolongations with hierarchy='amg', cold with None, or a list of PETSc prolongation Mats,
     finest first) or 'nrmj', 'nrmgs', 'nrmsor', 'nrmaor' (synchronous multisplitting).
-    The options mean what they mean in :func:`nrmicp.solve` and are checked by the same code.
+    The options mean what they mean in :func:`nrmicp.solve` and are checked by the same code;
+    tol and rtol both None is nrmicp.solve's default rule (units-free Res_E, rtol 1e-10), applied by
+    solving σA, σq (σ from the diagonal's global geometric mean), ``residual`` the paper's Res.
     Returns a :class:`nrmicp.Result` on every rank, with ``z`` and ``w`` as PETSc Vecs
     (:func:`gather` copies one to rank 0). A failure on any rank raises on every rank.
     """
     comm = comm or (A.getComm() if isinstance(A, PETSc.Mat) else PETSc.COMM_WORLD)
     t_start = time.perf_counter()
-    Am, m, w1, w2, qv, z0, zf = _prepare(A, q, zeta, x0, comm, method, tol, maxiter, omega1, omega2,
-                                         gamma, alpha, beta, hierarchy)
+    it, units = _criterion({"tol": tol, "rtol": rtol})
+    Am, m, w1, w2, qv, z0, zf = _prepare(A, q, zeta, x0, comm, method, it["tol"], maxiter, omega1, omega2,
+                                         gamma, alpha, beta, hierarchy, it["rtol"])
+    A_user, q_user = Am, qv
+    if units:   # the iteration runs on σA, σq: its Res is the units-free Res_E
+        sigma = _units_sigma(Am)
+        Am, qv = Am.copy(), qv.copy()
+        Am.scale(sigma)
+        qv.scale(sigma)
+        w2 = None if w2 is None else sigma * w2
+    tol = _target(Am, qv, zf, it["tol"], it["rtol"])
     polish = bool(_collective(comm, lambda: _check_polish(polish)))
     stats = {"linear_solves": 0, "inner_iterations": 0, "fallback_sweeps": 0, "outer_iterations": 0,
              "level_steps": [], "level_seconds": [], "nit": 0}
@@ -1009,12 +1022,25 @@ def solve(A, q, zeta=None, *, method: str = "newton", tol: float = 1e-8, maxiter
             z = zp
             if res < tol:
                 status = Status.CONVERGED
-    w = z.duplicate()
-    Am.multAdd(z, qv, w)
+    message = _message(status, res, tol, stats.get("floor"))
+    criterion = {"measure": "units" if units else "paper", "target": float(tol), "value": float(res)}
+    w, g, zt = z.duplicate(), z.duplicate(), z.duplicate()
+    if units:
+        if status in (Status.STAGNATED, Status.MAX_ITERATIONS) and math.isfinite(res):
+            zeta_z = zt.duplicate()
+            zf(z, zeta_z)
+            level = _rounding_level(Am, qv, z, zeta_z)
+            if res <= FLOOR_FACTOR * level:
+                status, message = Status.CONVERGED, (
+                    f"converged to the rounding level: Res_E(z) = {res:.3g} is within {FLOOR_FACTOR:g}x of what "
+                    f"double precision resolves ({level:.3g}), above the default target {tol:.3g}")
+        res = _icp_residual(A_user, q_user, zf, z, w, g, zt)   # the paper's Res, and w, in the user's units
+    else:
+        Am.multAdd(z, qv, w)
     t_end = time.perf_counter()
     fields = dict(z=z, w=w, success=status == Status.CONVERGED, status=Status(status),
-                  message=_message(status, res, tol, stats.get("floor")), nit=int(nit), iterations=int(iterations),
-                  residual=float(res), history=None,
+                  message=message, nit=int(nit), iterations=int(iterations),
+                  residual=float(res), history=None, criterion=criterion,
                   timings={"setup": t_iter - t_setup + Ps.seconds, "iterations": t_end - t_iter - Ps.seconds,
                            "total": t_end - t_start},
                   method=m, inner=("cg" if symmetric else "bicgstab") if m == "newton" else "none",
@@ -1024,6 +1050,29 @@ def solve(A, q, zeta=None, *, method: str = "newton", tol: float = 1e-8, maxiter
     if polish:
         fields["polished"] = polished
     return Result(**fields)
+
+
+def _units_sigma(Am):
+    """The default rule's σ (nrmicp._scaling.units_factor) from global sums over the diagonal."""
+    d = Am.getDiagonal()
+    a = np.abs(d.getArray(readonly=True))
+    logs, count = d.duplicate(), d.duplicate()
+    logs.setArray(np.log2(np.where(a > 0, a, 1.0)))
+    count.setArray((a > 0).astype(float))
+    return sigma_from_logs(float(logs.sum()), int(round(count.sum())))
+
+
+def _target(Am, qv, zf, tol, rtol):
+    """The absolute target max(tol, rtol · Res(0)) of the problem the iteration runs on."""
+    if not rtol > 0:
+        return tol
+    zero, zt = qv.duplicate(), qv.duplicate()
+    zero.set(0.0)
+    zf(zero, zt)
+    m = qv.duplicate()
+    m.setArray(np.minimum(qv.getArray(readonly=True), -zt.getArray(readonly=True)))
+    t = max(tol, rtol * m.norm())
+    return t if t > 0 else np.finfo(float).tiny
 
 
 def _message(status, res, tol, floor):

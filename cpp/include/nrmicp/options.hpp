@@ -119,9 +119,10 @@ struct Options : SolveOptions {
   }
 
   /// The absolute Res target of a solve whose Res at z = 0 is `res0`: max(tol, rtol · res0).
-  /// (A zero target, tol = 0 with Res(0) = 0, is the smallest normal number: z = 0 solves.)
+  /// (A zero target, tol = 0 with Res(0) = 0, is the smallest normal number: z = 0 solves. A
+  /// non-finite Res(0), where Az + q or ζ(0) overflowed, gives no scale: it counts as 0.)
   double target(double res0) const {
-    const double t = std::max(tol, rtol * res0);
+    const double t = std::max(tol, std::isfinite(res0) ? rtol * res0 : 0.0);
     return t > 0 ? t : DBL_MIN;
   }
 

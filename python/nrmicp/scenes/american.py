@@ -167,6 +167,7 @@ def american_put_price(S0: float, K: float = 100.0, r: float = 0.05, sigma: floa
     else:
         import nrmicp
 
+        solver_options = dict(solver_options, tol=tol)   # set up for the rule the march solves by
         solver = nrmicp.Solver(m.A, method=method, **solver_options)
         first = _nested_first_step(solver, m.A, method, solver_options)
         for step, kind in enumerate(m.steps()):

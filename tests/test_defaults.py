@@ -1,0 +1,145 @@
+"""The defaults never mislead (issue 38): a change of units changes neither the answer nor the
+verdict, method='auto' takes the member that works, and the advice in a failed solve's message works
+on the problem that produced it. The reference is a plain primal-dual active-set method written here."""
+import math
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+import nrmicp
+from nrmicp.scenes.bai import bai_matrix
+
+
+def pdas_obstacle(A, q, psi, maxit=200):
+    """min-complementarity z >= psi, Az + q >= 0 by the primal-dual active-set method with exact
+    sparse solves (Hintermüller–Ito–Kunisch), independent of nrmicp."""
+    A = sp.csr_matrix(A)
+    n = A.shape[0]
+    active = np.zeros(n, dtype=bool)
+    for _ in range(maxit):
+        z = psi.copy()
+        free = ~active
+        rhs = -(q[free] + A[free][:, active] @ psi[active])
+        z[free] = spla.spsolve(sp.csc_matrix(A[free][:, free]), rhs) if free.any() else z[free]
+        w = A @ z + q
+        new = (z - psi) - w / A.diagonal() < 0   # the active-set rule with c = 1/a_ii
+        if np.array_equal(new, active):
+            return z
+        active = new
+    raise AssertionError("reference PDAS did not settle")
+
+
+def laplacian_2d(m):
+    T = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(m, m))
+    return ((sp.kron(sp.identity(m), T) + sp.kron(T, sp.identity(m))) * (m + 1) ** 2).tocsr()
+
+
+def membrane(m=15):
+    h = 1.0 / (m + 1)
+    x = np.linspace(h, 1 - h, m)
+    X, Y = np.meshgrid(x, x)
+    psi = (0.3 - 2 * ((X - .5) ** 2 + (Y - .5) ** 2)).ravel()
+    return laplacian_2d(m), np.full(m * m, 8.0), psi
+
+
+def bai_obstacle(m=8):
+    A = bai_matrix(m)
+    rng = np.random.default_rng(3)
+    psi = rng.uniform(-0.5, 0.5, A.shape[0])
+    return A, rng.uniform(-2, 1, A.shape[0]), psi
+
+
+def fe_p1():
+    pytest.importorskip("skfem")
+    from nrmicp.scenes.finite_elements import fe_obstacle
+    p = fe_obstacle("P1", refinements=1, exact=False)
+    return p.A, p.q, p.zeta
+
+
+PROBLEMS = {"membrane": membrane, "bai": bai_obstacle, "fe_p1": fe_p1}
+SCALES = (1e-6, 1.0, 1e6)
+
+
+@pytest.mark.parametrize("problem", sorted(PROBLEMS))
+@pytest.mark.parametrize("method", ("auto",) + nrmicp.METHODS)
+def test_a_change_of_units_changes_neither_answer_nor_verdict(problem, method):
+    A, q, psi = PROBLEMS[problem]()
+    ref = pdas_obstacle(A, q, psi)
+    contact = ref - psi <= 1e-12
+    outcomes = []
+    for s in SCALES:
+        r = nrmicp.solve(s * A, s * q, zeta=psi, method=method)
+        outcomes.append((r.success, r.nit, r.method))
+        if r.success:
+            err = np.abs(r.z - ref).max() / np.abs(ref).max()
+            assert err < 1e-6, (s, r.method, err, r.message)
+            assert np.array_equal(r.z - psi <= 1e-7 * np.abs(ref).max(), contact), (s, r.method)
+            assert r.criterion["measure"] == "units" and r.criterion["value"] < r.criterion["target"] or \
+                "rounding level" in r.message
+    if method == "nrm":   # the paper's Ω2 = I is a number in w's units: its iteration depends on them
+        return
+    assert len({o[0] for o in outcomes}) == 1, outcomes          # the same verdict in every unit
+    assert len({o[2] for o in outcomes}) == 1, outcomes          # auto takes the same member
+    nits = [o[1] for o in outcomes]
+    assert max(nits) - min(nits) <= 0.02 * max(nits) + 1, outcomes
+
+
+def test_the_papers_absolute_tol_is_kept_when_asked_for():
+    A, q, psi = membrane()
+    r = nrmicp.solve(A, q, zeta=psi, method="nrmgs", accelerate="anderson", tol=1e-8)
+    assert r.success and r.criterion["measure"] == "paper" and r.residual < 1e-8
+    assert r.residual == pytest.approx(nrmicp.residual(A, q, r.z, psi), rel=1e-9, abs=1e-300)
+    # the same absolute tol on the problem in other units is what the user asked for: met in Res
+    r6 = nrmicp.solve(1e-6 * A, 1e-6 * q, zeta=psi, method="nrmgs", accelerate="anderson", tol=1e-8)
+    assert r6.success and r6.residual < 1e-8
+
+
+@pytest.mark.parametrize("method", ["nrmgs", "newton", "nrm"])
+def test_residual_is_the_papers_res_of_the_returned_z_under_the_default_rule(method):
+    A, q, psi = membrane()
+    r = nrmicp.solve(A, q, zeta=psi, method=method, maxiter=50)
+    assert r.residual == pytest.approx(nrmicp.residual(A, q, r.z, psi), rel=1e-9, abs=1e-300)
+    sigma = 2.0 ** -round(np.mean(np.log2(A.diagonal())))   # 1/(geometric mean of a_ii)
+    res_e = np.linalg.norm(np.minimum(sigma * (A @ r.z + q), r.z - psi))
+    assert r.criterion["value"] == pytest.approx(res_e, rel=1e-9)
+    assert r.criterion["measure"] == "units"
+
+
+def test_a_target_below_the_rounding_level_ends_converged_at_that_level():
+    # 1D Laplacian, a tiny load: Res_E(0) ~ 1e-6 while ||z|| ~ 1e3, so 1e-10 Res_E(0) lies below
+    # what double precision resolves at z; z > 0 everywhere: the reference is a linear solve.
+    n = 50_000
+    A = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(n, n), format="csr")
+    q = np.full(n, -1e-8)
+    ref = spla.spsolve(sp.csc_matrix(A), -q)
+    r = nrmicp.solve(A, q, method="newton")
+    assert r.success, r.message
+    assert r.criterion["value"] >= r.criterion["target"] and "rounding level" in r.message
+    assert np.abs(r.z - ref).max() / ref.max() < 1e-9
+
+
+def test_auto_takes_nrmgs_on_dominant_rows_and_newton_elsewhere():
+    A, q, psi = bai_obstacle()
+    assert nrmicp.solve(A, q, zeta=psi).method == "nrmgs"
+    A, q, psi = membrane()
+    r = nrmicp.solve(A, q, zeta=psi)
+    assert r.method == "newton" and r.success
+    zero_diag = sp.csr_matrix(np.array([[0.0, 1.0], [-1.0, 0.0]]))
+    assert nrmicp.Solver(zero_diag).method == "newton"
+    assert nrmicp.Solver(A, accelerate="anderson").method == "nrmgs"   # a stationary-only option
+    assert nrmicp.Solver(A, method="nrmj").method == "nrmj"            # an explicit member stays
+
+
+def test_a_stationary_failure_names_newton_and_newton_then_solves_it():
+    A, q, psi = membrane(31)
+    r = nrmicp.solve(A, q, zeta=psi, method="nrmgs", maxiter=100)
+    assert not r.success and "method='newton'" in r.message
+    again = nrmicp.solve(A, q, zeta=psi, method="newton")
+    assert again.success
+    assert np.abs(again.z - pdas_obstacle(A, q, psi)).max() < 1e-8
+    # on Bai's matrix nrmgs is the right member: no such advice
+    A, q, psi = bai_obstacle()
+    r = nrmicp.solve(A, q, zeta=psi, method="nrmgs", maxiter=2)
+    assert not r.success and "method='newton'" not in r.message
