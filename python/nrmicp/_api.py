@@ -6,6 +6,7 @@ import inspect
 import logging
 import math
 import sys
+import time
 from dataclasses import dataclass
 from typing import Any, Callable, Optional, Union
 
@@ -210,13 +211,20 @@ def _log_progress(line):
 
 
 def _progress_hook(method, n):
-    """The core calls this every `verbose` seconds (not every iteration), and once at the end."""
+    """The core calls this every `verbose` seconds (not every iteration), and once at the end with
+    its message: that last call is left out, Solver.solve's final line reports the Result instead
+    (re-solves, polishing and the decoupled rows change status, message and nit after the core)."""
     def report(k, res, best, seconds, message):
-        if message:
-            _log_progress(f"nrmicp {method}: {message} ({k} iterations, {seconds:.2f} s)")
-        else:
+        if not message:
             _log_progress(f"nrmicp {method}: iteration {k:>7d}  Res {res:.3e}  best {best:.3e}  {seconds:9.2f} s")
     return report
+
+
+def _log_final(method, result, seconds):
+    """The final progress line: the returned result's message, nit (and the iterations run when
+    they differ: the best iterate is not the last), the call's seconds."""
+    count = f"nit = {result.nit}" + (f" of {result.iterations} iterations" if result.iterations != result.nit else "")
+    _log_progress(f"nrmicp {method}: {result.message} ({count}, {seconds:.2f} s)")
 
 
 def _checked(opts, n):
@@ -438,6 +446,14 @@ class Solver:
               callback: Optional[Callable[..., Any]] = None, zeta_jacobian: Optional[Callable[..., Any]] = None,
               **iteration_options: Any) -> Result:
         """Solve ICP(q, A, ζ). See :func:`nrmicp.solve` for the arguments."""
+        t0 = time.perf_counter()
+        result = self._solve(q, zeta, x0=x0, callback=callback, zeta_jacobian=zeta_jacobian, **iteration_options)
+        if self._solve_options(iteration_options)[1].verbose > 0:
+            _log_final(self.method, result, time.perf_counter() - t0)
+        return result
+
+    def _solve(self, q, zeta=None, *, x0=None, callback=None, zeta_jacobian=None, **iteration_options) -> Result:
+        """:meth:`solve` without its final progress line (the inner solves of the decoupled rows)."""
         n = self.n
         it, checked_opts = self._solve_options(iteration_options)
         qv = as_vector(q, n, "q")
@@ -454,7 +470,7 @@ class Solver:
                 return self._solve_reduced(qv, c, zD, z0, callback, it, checked_opts)
             # a coupling ζ (or a z_D that overflows): the whole A; ζ as checked here (B converted once)
             whole_zeta = Affine(B, c) if kind == ZetaKind.affine else zeta
-            return self._whole().solve(qv, whole_zeta, x0=z0, callback=callback, zeta_jacobian=zeta_jacobian,
+            return self._whole()._solve(qv, whole_zeta, x0=z0, callback=callback, zeta_jacobian=zeta_jacobian,
                                        **iteration_options)
         core_kw = _newton.jacobian_argument(zeta_jacobian, self, kind, self._dc)
         checked = None if fn is None else CheckedZeta(fn, n)  # read-only input, checked output: one per solve
@@ -799,7 +815,8 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
         not be reached again within maxiter (README "What a solve returns").
     verbose : int >= 0 or bool
         0 or False (default): silent; True means 1. k > 0: a progress line (iteration, Res, best Res, elapsed seconds) at
-        the first iterate, then about every k seconds, and a final line with the status. Lines go
+        the first iterate, then about every k seconds, and a final line with the result's message,
+        ``nit`` (and ``iterations`` when they differ) and the call's seconds. Lines go
         to the ``logging`` logger ``"nrmicp"`` at level INFO, and to stderr when logging is not
         configured. The C++ loop decides when to report: there is no per-iteration Python call.
     scale : False, True, 'rows' or 'both'
