@@ -753,7 +753,7 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
         modulus equation (one sparse factorization of A restricted to the inactive set per step,
         symbolic analysis once; nested iteration over ``hierarchy``; falls back to sweeps of 'nrm'
         when a step does not reduce Res or the active set cycles). Its ``maxiter`` counts Newton
-        steps (and bounds the fallback sweeps). Default by measurement: see README "Choosing a method".
+        steps (and bounds the fallback sweeps). Default by measurement: see README "Which method for which problem".
     tol : float
         Stop when Res(z) = ‖min(Az + q, z − ζ(z))‖₂ < tol (absolute, the paper's criterion;
         scipy.sparse.linalg's ``atol``). With ``rtol``, the target is max(tol, rtol · Res(0)).
@@ -812,7 +812,7 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
         The window of the no-progress rules: STAGNATED when Res stops improving at rounding level
         for this many iterations, when 3 consecutive windows of this many iterations bring no lower
         Res, or when the best Res has not improved for 10 windows and, at the rate Res falls, would
-        not be reached again within maxiter (README "What a solve returns").
+        not be reached again within maxiter (README "What you get back").
     verbose : int >= 0 or bool
         0 or False (default): silent; True means 1. k > 0: a progress line (iteration, Res, best Res, elapsed seconds) at
         the first iterate, then about every k seconds, and a final line with the result's message,
