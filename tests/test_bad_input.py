@@ -207,7 +207,7 @@ def _problem(n=4):
 @pytest.mark.parametrize("scale", [False, "both"])
 @pytest.mark.parametrize("ret,exc,match", [
     (lambda z: np.zeros(3), ValueError, r"shape \(4,\)"),
-    (lambda z: np.zeros((4, 1)), ValueError, r"shape \(4,\)"),
+    (lambda z: np.zeros((4, 2)), ValueError, r"shape \(4,\)"),   # a column (4, 1) is a vector: accepted
     (lambda z: None, (TypeError, ValueError), "zeta"),
     (lambda z: z.astype(complex), TypeError, "dtype"),
     (lambda z: z > 0, TypeError, "dtype"),

@@ -172,12 +172,13 @@ def flat_vector(arr: np.ndarray, n: int, name: str) -> np.ndarray:
     """The one shape rule for every vector nrmicp reads or ζ returns: shape (n,), or a column (n, 1)
     or row (1, n) as MATLAB-style code passes them, -> arr as shape (n,) (a view); ValueError naming
     `name` otherwise."""
-    if arr.ndim == 2 and 1 in arr.shape:
+    shape, accepted = arr.shape, f"shape ({n},) or a column ({n}, 1)"
+    if arr.ndim == 2 and 1 in shape:
         arr = arr.reshape(-1)
     if arr.ndim != 1:
-        raise ValueError(f"{name} must be 1-D of length {n} (or a column ({n}, 1)), got shape {arr.shape}")
+        raise ValueError(f"{name} must be 1-D of length {n} ({accepted}), got shape {shape}")
     if arr.shape[0] != n:
-        raise ValueError(f"{name} must have length n = {n}, got {arr.shape[0]}")
+        raise ValueError(f"{name} must have length n = {n} ({accepted}), got shape {shape}")
     return arr
 
 
