@@ -2,7 +2,7 @@
 """Anderson's cost per iteration relative to a plain nrmgs iteration (obstacle_2d, n = 16,384
 and 65,536; interleaved runs, best of 5, on the core's iteration clock), and how nrmgs +
 Anderson's iteration count grows with n on the unshifted scenes (obstacle_2d, thermoforming_2d,
-one American-put step; tol 1e-8). The README's "Choosing a method" quotes its output.
+one American-put step; tol 1e-8). The README's "Which method for which problem" quotes its output.
 
     python benchmarks/anderson_cost.py
 """

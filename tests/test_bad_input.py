@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import nrmicp
+from nrmicp import scenes
 from reference_impl import residual as reference_residual
 from snapshots import assert_unchanged, snapshot
 
@@ -206,7 +207,7 @@ def _problem(n=4):
 @pytest.mark.parametrize("scale", [False, "both"])
 @pytest.mark.parametrize("ret,exc,match", [
     (lambda z: np.zeros(3), ValueError, r"shape \(4,\)"),
-    (lambda z: np.zeros((4, 1)), ValueError, r"shape \(4,\)"),
+    (lambda z: np.zeros((4, 2)), ValueError, r"shape \(4,\)"),   # a column (4, 1) is a vector: accepted
     (lambda z: None, (TypeError, ValueError), "zeta"),
     (lambda z: z.astype(complex), TypeError, "dtype"),
     (lambda z: z > 0, TypeError, "dtype"),
@@ -336,3 +337,76 @@ def test_scaled_affine_and_callable_agree():
     r2 = nrmicp.solve(A, q, lambda z: B @ z + c, scale=True)
     assert r1.success and r2.success
     np.testing.assert_allclose(r1.z, r2.z, rtol=1e-6, atol=1e-12)
+
+
+# ---- one shape rule for vectors: (n,) and the column (n, 1) alike, in and out ---------------
+
+def _column_paths(n, rng):
+    """Every vector input and output of a solve: name -> (solve keywords with a flat vector, the same
+    with that vector a column (n, 1), and with it of shape (n, 2))."""
+    c = rng.uniform(-0.5, 0.5, n)
+    B = sp.csr_matrix(sp.diags(np.full(n, 0.1)))
+    out = {}
+    for name in ("q", "x0", "zeta", "omega1", "omega2", "phi"):
+        v = {"q": rng.uniform(-2, 2, n), "x0": rng.uniform(0, 1, n), "zeta": c, "omega1": np.full(n, 1.5),
+             "omega2": np.full(n, 0.8), "phi": np.full(n, 0.2)}[name]
+        out[name] = tuple({name: w} for w in (v, v[:, None], np.column_stack([v, v])))
+    out["zeta.c"] = tuple({"zeta": nrmicp.Affine(B, w)} for w in (c, c[:, None], np.column_stack([c, c])))
+    for method in ("nrmgs", "newton"):
+        out[f"zeta(z) ({method})"] = tuple(
+            {"zeta": fn, "method": method} for fn in (lambda z: 0.1 * np.tanh(z) + c,
+                                                      lambda z: (0.1 * np.tanh(z) + c)[:, None],
+                                                      lambda z: np.column_stack([z, z])))
+    return out
+
+
+@pytest.mark.parametrize("path", ["q", "x0", "zeta", "omega1", "omega2", "phi", "zeta.c", "zeta(z) (nrmgs)",
+                                  "zeta(z) (newton)"])
+def test_a_column_vector_is_accepted_wherever_a_vector_is(path):
+    """MATLAB-style code passes columns: q of shape (n, 1) was accepted while ζ returning (n, 1)
+    raised (issue 38). Each path: the column gives the flat vector's answer, (n, 2) is refused by name."""
+    n, rng = 12, np.random.default_rng(5)
+    A = bai_like(n, rng)
+    flat, column, wide = _column_paths(n, rng)[path]
+    base = {"q": rng.uniform(-2, 2, n), "zeta": None}
+    ref = nrmicp.solve(A, **dict(base, **flat))
+    res = nrmicp.solve(A, **dict(base, **column))
+    assert ref.success and res.success and res.status == ref.status
+    np.testing.assert_array_equal(res.z, ref.z)
+    zeta = dict(base, **flat)["zeta"]
+    zeta_fn = (lambda z: zeta.B @ z + zeta.c) if isinstance(zeta, nrmicp.Affine) else zeta
+    assert reference_residual(A, dict(base, **flat)["q"], res.z, zeta_fn) < 1e-8
+    name = path.split(" ")[0].replace("(", r"\(").replace(")", r"\)")
+    with pytest.raises(ValueError, match=f"{name}.*shape \\(12, 2\\)"):
+        nrmicp.solve(A, **dict(base, **wide))
+
+
+def test_residual_takes_a_zeta_returning_a_column():
+    A, rng = bai_like(8, np.random.default_rng(2)), np.random.default_rng(3)
+    q, z, c = rng.uniform(-1, 1, 8), rng.uniform(0, 1, 8), rng.uniform(-1, 1, 8)
+    assert nrmicp.residual(A, q, z, lambda v: c[:, None]) == nrmicp.residual(A, q, z, c) \
+        == pytest.approx(reference_residual(A, q, z, c), rel=1e-14)
+
+
+# ---- a Jacobian in any scipy sparse format, converted without a warning per step -----------
+
+@pytest.mark.parametrize("fmt", ["dia", "coo", "csc", "lil", "bsr", "dok", "dense"])
+def test_a_zeta_jacobian_in_any_format_gives_the_csr_answer_without_warnings(fmt):
+    """sp.diags builds DIA: every Newton step warned 'converting DIA to CSR' (9 warnings in one
+    solve, issue 38); the conversion is nrmicp's business."""
+    problem = scenes.obstacle_2d(15, exact=False)
+    psi = problem.zeta
+
+    def jacobian(form):
+        def J(z):
+            D = sp.diags(0.1 / np.cosh(z) ** 2, format="csr")
+            return D.toarray() if form == "dense" else D.asformat(form)
+        return J
+    zeta = lambda z: psi + 0.1 * np.tanh(z)   # noqa: E731
+    ref = nrmicp.solve(problem.A, problem.q, zeta, method="newton", hierarchy=None, zeta_jacobian=jacobian("csr"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = nrmicp.solve(problem.A, problem.q, zeta, method="newton", hierarchy=None, zeta_jacobian=jacobian(fmt))
+    assert ref.success and res.success and res.nit == ref.nit >= 2
+    np.testing.assert_array_equal(res.z, ref.z)
+    assert reference_residual(problem.A, problem.q, res.z, zeta) < 1e-8

@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import nrmicp
+from nrmicp import scenes
 from nrmicp.__main__ import prog_name
 
 
@@ -54,3 +55,22 @@ def test_unknown_command_fails():
 def test_prog_name():
     assert prog_name("/usr/local/bin/nrmicp") == "nrmicp"
     assert prog_name("/x/site-packages/nrmicp/__main__.py") == "python -m nrmicp"
+
+
+def test_demo_table_headers_say_what_each_column_is_with_units():
+    """`nrmicp demo`'s columns: the seconds with their unit and clock, Result.inner named as such
+    (the column was 'left solve' and 'seconds', issue 38)."""
+    p = _run("demo", "--m", "4")
+    assert p.returncode == 0, p.stderr
+    lines = p.stdout.splitlines()
+    headers = [line for line in lines if line.startswith("method ")]
+    assert len(headers) == 2   # the LCP and the ICP table
+    for header in headers:
+        columns = [c.strip() for c in header.split("  ") if c.strip()]
+        assert columns == ["method", "status", "iterations (nit)", "wall s", "Res", "max|z-z*|", "inner solver"]
+    rows = [r for r in map(str.split, lines) if len(r) == 7 and r[0] in nrmicp.METHODS]
+    assert len(rows) == 2 * len(nrmicp.METHODS)
+    P = scenes.bai(4, kind="lcp")
+    for method, row in zip(nrmicp.METHODS, rows):   # the LCP table's column is Result.inner
+        assert row[-1] == nrmicp.solve(P.A, P.q, P.zeta, method=method, tol=1e-8).inner
+    assert "left solve" not in p.stdout

@@ -545,7 +545,7 @@ def test_duplicates_and_explicit_zeros_do_not_change_the_answer():
 
 
 # ---------------------------------------------------------------------------------------------
-# the README's stabilizer table ("Hard cases and stabilizers"): moderate size, nrmgs, maxiter 3000,
+# the README's stabilizer table ("Stabilizers"): moderate size, nrmgs, maxiter 3000,
 # against the paper's z-update ('solve' for an ICP)
 
 STABILIZERS = {"explicit": dict(z_update="explicit"), "anderson": dict(accelerate="anderson", anderson_m=5),

@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
+import nrmicp
 from nrmicp._hierarchy import amg_prolongations, resolve_hierarchy  # noqa: E402
+from reference_impl import residual as reference_residual
 
 
 def laplacian_2d(m):
@@ -141,6 +143,34 @@ def test_resolve_accepts_a_tuple_of_matrices_and_converts_them_to_csr():
 
 def test_resolve_empty_list_means_no_coarse_level():
     assert resolve_hierarchy([], laplacian_2d(4)) == []
+
+
+@pytest.mark.parametrize("empty_at, count", [(0, 1), (1, 2), (1, 3), (2, 3)])
+def test_resolve_drops_levels_from_the_first_empty_one_on_naming_it(empty_at, count):
+    """A coarsest level without unknowns (shape (5, 0), as an L-shaped mesh's coarsening left
+    it) was refused; it and every level after it are dropped, with a warning naming it."""
+    A = laplacian_2d(4)   # n = 16
+    sizes = [16, 6, 3][:empty_at + 1] + [0] * (count - empty_at)
+    levels = [sp.csr_matrix(np.ones((sizes[l], sizes[l + 1]))) for l in range(count)]
+    with pytest.warns(nrmicp.ConversionWarning,
+                      match=rf"hierarchy\[{empty_at}\] has shape \({sizes[empty_at]}, 0\).*without unknowns"):
+        out = resolve_hierarchy(levels, A)
+    assert [P.shape for P in out] == [P.shape for P in levels[:empty_at]]
+
+
+def test_a_newton_solve_with_an_empty_coarsest_level_uses_the_others():
+    from nrmicp import scenes
+    p = scenes.obstacle_2d(15, exact=False)   # n = 225, its geometric prolongations 225 -> 49 -> 9 -> 1
+    given = p.prolongations()
+    Ps = given + [sp.csr_matrix((given[-1].shape[1], 0))]
+    with pytest.warns(nrmicp.ConversionWarning, match=rf"hierarchy\[{len(Ps) - 1}\]"):
+        solver = nrmicp.Solver(p.A, method="newton", hierarchy=Ps)
+    assert solver.levels == len(given) + 1 == 4   # the finest level and the non-empty prolongations
+    res = solver.solve(p.q, zeta=p.zeta)
+    ref = nrmicp.solve(p.A, p.q, p.zeta, method="newton", hierarchy=given)
+    assert res.success and res.nit == ref.nit
+    np.testing.assert_array_equal(res.z, ref.z)
+    assert reference_residual(p.A, p.q, res.z, p.zeta) < 1e-8
 
 
 @pytest.mark.parametrize("bad, match", [

@@ -226,7 +226,42 @@ def test_verbose_logs_first_iterate_and_final_status(caplog):
     lines = [r.getMessage() for r in caplog.records if r.name == "nrmicp"]
     assert res.success
     assert "iteration       0" in lines[0] and "Res" in lines[0]
-    assert "converged" in lines[-1] and f"({res.iterations} iterations" in lines[-1]
+    assert "converged" in lines[-1] and f"(nit = {res.nit}, " in lines[-1]
+
+
+def _final_line(caplog, **kw):
+    """(result, last 'nrmicp' log line) of nrmicp.solve(**kw, verbose=1) on the README's membrane
+    at m = 31 (its figures scale, the paths are the same)."""
+    m = 31
+    h = 1 / (m + 1)
+    T = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(m, m))
+    A = ((sp.kron(sp.identity(m), T) + sp.kron(T, sp.identity(m))) / h**2).tocsr()
+    x = np.linspace(h, 1 - h, m)
+    X, Y = np.meshgrid(x, x)
+    psi = (0.3 - 2 * ((X - .5)**2 + (Y - .5)**2)).ravel()
+    zeta = {"psi": psi, "tanh": lambda z: psi + 0.1 * np.tanh(z),
+            "affine": nrmicp.Affine(0.1 * sp.identity(m * m, format="csr"), psi)}[kw.pop("zeta")]
+    jac = {"zeta_jacobian": lambda z: sp.diags(0.1 / np.cosh(z) ** 2)} if kw.pop("jacobian", False) else {}
+    with caplog.at_level("INFO", logger="nrmicp"):
+        res = nrmicp.solve(A, np.full(m * m, 8.0), zeta, verbose=1, **jac, **kw)
+    lines = [r.getMessage() for r in caplog.records if r.name == "nrmicp"]
+    return res, lines[-1]
+
+
+@pytest.mark.parametrize("kw", [
+    dict(zeta="tanh", method="newton", hierarchy="amg"),          # the README's callable: outer fixed point
+    dict(zeta="tanh", method="newton", hierarchy=None, jacobian=True),   # semismooth: said 7 where nit was 18
+    dict(zeta="affine", method="newton", hierarchy=None),         # its start's steps count in nit
+    dict(zeta="psi", method="nrmgs", maxiter=50, polish=True),    # polished: said max iterations
+    dict(zeta="psi", method="nrmgs", maxiter=50, scale=True),
+], ids=["callable", "jacobian", "affine", "polish", "scaled"])
+def test_verbose_final_line_counts_nit_and_says_the_results_message(kw, caplog):
+    """The final verbose line counted the last loop's iterations where nit counts every Newton step
+    of the finest level (9 against 13 in issue 38), and told the core's status before polishing."""
+    res, last = _final_line(caplog, **kw)
+    count = f"nit = {res.nit}" + ("" if res.iterations == res.nit else f" of {res.iterations} iterations")
+    assert f"({count}, " in last
+    assert last.startswith(f"nrmicp {res.method}: {res.message} (")
 
 
 def test_verbose_reports_by_time_not_per_iteration(caplog):
@@ -239,7 +274,8 @@ def test_verbose_reports_by_time_not_per_iteration(caplog):
     lines = [r.getMessage() for r in caplog.records if r.name == "nrmicp"]
     assert res.iterations == 2000
     assert len(lines) == 2, lines
-    assert "iteration       0" in lines[0] and "(2000 iterations" in lines[1]
+    assert "iteration       0" in lines[0]
+    assert f"(nit = {res.nit}{'' if res.nit == 2000 else ' of 2000 iterations'}, " in lines[1]
 
 
 def test_verbose_prints_to_stderr_when_logging_is_not_configured(capsys):

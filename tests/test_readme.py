@@ -48,3 +48,52 @@ def test_every_command_the_readme_names_exists():
         assert os.path.exists(os.path.join(root, script)), script
     for image in set(re.findall(r"\]\((docs/[\w.]+\.png)\)", text)):
         assert os.path.exists(os.path.join(root, image)), image
+
+
+ROOT = os.path.dirname(README)
+#: A README section named in the sources: README "X", README, "X", README's "X", README ('X') ...
+_SECTION_REFERENCE = re.compile(r"""README(?:['’]s\s+|(?!['’]s\b),?\s*)\(?\s*\\?(?:"([^"\\\n]+)\\?"|'([^'\\\n]+)\\?'|“([^”\n]+)”)""")
+
+
+def readme_headings(text):
+    """The README's section names: its # headings and its bold run-in headings (a paragraph opening
+    with **Name** or **Name.**), fenced code left out."""
+    names, fenced = set(), False
+    for line in text.splitlines():
+        if line.startswith("```"):
+            fenced = not fenced
+        elif not fenced and line.startswith("#"):
+            names.add(line.lstrip("#").strip())
+        elif not fenced and line.startswith("**"):
+            bold = re.match(r"\*\*(.+?)\*\*", line)
+            if bold:
+                names.add(bold.group(1).strip().rstrip("."))
+    return names
+
+
+def section_references():
+    """(file, line number, section name) of every README section named in python/, cpp/, docs/,
+    benchmarks/ and tests/."""
+    out = []
+    for top in ("python", "cpp", "docs", "benchmarks", "tests"):
+        for folder, _, files in os.walk(os.path.join(ROOT, top)):
+            for name in files:
+                path = os.path.join(folder, name)
+                if not name.endswith((".py", ".hpp", ".cpp", ".h", ".md", ".txt", ".cmake")) or path == __file__:
+                    continue   # (this file's own examples are no references)
+                with open(path, encoding="utf-8") as f:
+                    text = f.read()
+                for m in _SECTION_REFERENCE.finditer(text):
+                    section = next(g for g in m.groups() if g)
+                    out.append((os.path.relpath(path, ROOT), text.count("\n", 0, m.start()) + 1, section))
+    return out
+
+
+def test_every_readme_section_the_sources_name_exists():
+    """solve's docstring sent readers to "Choosing a method" and "What a solve returns", sections
+    the README does not have (issue 38)."""
+    headings = readme_headings(_text())
+    refs = section_references()
+    assert len(refs) >= 10   # the scan finds them (solve's docstring alone names five)
+    dangling = [f"{path}:{line}: README \"{section}\"" for path, line, section in refs if section not in headings]
+    assert not dangling, "no such README section:\n" + "\n".join(dangling)

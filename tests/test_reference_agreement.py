@@ -202,7 +202,7 @@ def test_large_problem_finds_known_solution(method, z_update, kind, symmetric):
 # ---- defaults the contract fixes -------------------------------------------------------------
 
 # 'auto' is the explicit update: measured faster (no solve with A) and more robust than the
-# paper's 'solve' on the hard-case suite (README, "Choosing the z-update"); the baseline mms keeps
+# paper's 'solve' on the hard-case suite (README, "Options": z_update); the baseline mms keeps
 # its defining 'solve' update on an ICP (a constant obstacle is an LCP: explicit).
 @pytest.mark.parametrize("method, kind, expected_update", [
     ("nrmgs", "lcp", "explicit"), ("nrmgs", "icp", "explicit"), ("nrmgs", "affine", "explicit"),

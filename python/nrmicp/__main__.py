@@ -20,6 +20,11 @@ def _table(rows, headers):
     return "\n".join(out)
 
 
+#: The demo table's columns: nit, wall-clock seconds of the solve() call, Res(z), the error against the
+#: known solution, Result.inner.
+DEMO_COLUMNS = ("method", "status", "iterations (nit)", "wall s", "Res", "max|z-z*|", "inner solver")
+
+
 def demo(argv: Optional[list[str]] = None, prog: str = "python -m nrmicp demo") -> int:
     """Every method on Bai's problem (LCP and ICP, known solution): iterations, seconds, Res."""
     import nrmicp
@@ -44,7 +49,9 @@ def demo(argv: Optional[list[str]] = None, prog: str = "python -m nrmicp demo") 
             err = np.max(np.abs(r.z - P.z_exact))
             rows.append((method, r.status.name.lower(), r.nit, f"{dt:.4f}", f"{r.residual:.2e}", f"{err:.1e}",
                          r.inner))
-        print(_table(rows, ("method", "status", "iterations", "seconds", "Res", "max|z-z*|", "left solve")))
+        print(_table(rows, DEMO_COLUMNS))
+    print("\ninner solver (Result.inner): the linear solver of each iteration, for the left matrix of "
+          "the stationary\nmembers and for newton's step; wall s: the solve() call's wall-clock seconds.")
     print("\nDefaults: Omega1 = I; Omega2 = diag(A) for the AOR types, I for nrm (the paper's), "
           "alpha*I for nrmm; phi = 0.\nz-update 'explicit' (no solve with A), except 'solve' (the paper's) on the "
           "ICP for nrm and the baseline mms.\nnrm with the paper's Omega2 = I is slow when diag(A) is far from 1 "

@@ -8,6 +8,7 @@ import logging
 import math
 import re
 import sys
+import time
 from dataclasses import dataclass
 from typing import Any, Callable, Optional, Union
 
@@ -214,13 +215,20 @@ def _log_progress(line):
 
 
 def _progress_hook(method, n):
-    """The core calls this every `verbose` seconds (not every iteration), and once at the end."""
+    """The core calls this every `verbose` seconds (not every iteration), and once at the end with
+    its message: that last call is left out, Solver.solve's final line reports the Result instead
+    (re-solves, polishing and the decoupled rows change status, message and nit after the core)."""
     def report(k, res, best, seconds, message):
-        if message:
-            _log_progress(f"nrmicp {method}: {message} ({k} iterations, {seconds:.2f} s)")
-        else:
+        if not message:
             _log_progress(f"nrmicp {method}: iteration {k:>7d}  Res {res:.3e}  best {best:.3e}  {seconds:9.2f} s")
     return report
+
+
+def _log_final(method, result, seconds):
+    """The final progress line: the returned result's message, nit (and the iterations run when
+    they differ: the best iterate is not the last), the call's seconds."""
+    count = f"nit = {result.nit}" + (f" of {result.iterations} iterations" if result.iterations != result.nit else "")
+    _log_progress(f"nrmicp {method}: {result.message} ({count}, {seconds:.2f} s)")
 
 
 def _checked(opts, n):
@@ -551,6 +559,14 @@ class Solver:
               callback: Optional[Callable[..., Any]] = None, zeta_jacobian: Optional[Callable[..., Any]] = None,
               **iteration_options: Any) -> Result:
         """Solve ICP(q, A, ζ). See :func:`nrmicp.solve` for the arguments."""
+        t0 = time.perf_counter()
+        result = self._solve(q, zeta, x0=x0, callback=callback, zeta_jacobian=zeta_jacobian, **iteration_options)
+        if self._solve_options(iteration_options)[1].verbose > 0:
+            _log_final(self.method, result, time.perf_counter() - t0)
+        return result
+
+    def _solve(self, q, zeta=None, *, x0=None, callback=None, zeta_jacobian=None, **iteration_options) -> Result:
+        """:meth:`solve` without its final progress line (the inner solves of the decoupled rows)."""
         n = self.n
         units = iteration_options.pop("_units", None)   # a Reduced's inner solve: the whole problem's rule
         it, checked_opts, units = self._solve_options(iteration_options, units)
@@ -568,7 +584,7 @@ class Solver:
                 return self._solve_reduced(qv, c, zD, z0, callback, it, checked_opts, units)
             # a coupling ζ (or a z_D that overflows): the whole A; ζ as checked here (B converted once)
             whole_zeta = Affine(B, c) if kind == ZetaKind.affine else zeta
-            return self._whole().solve(qv, whole_zeta, x0=z0, callback=callback, zeta_jacobian=zeta_jacobian,
+            return self._whole()._solve(qv, whole_zeta, x0=z0, callback=callback, zeta_jacobian=zeta_jacobian,
                                        **iteration_options)
         core_kw = _newton.jacobian_argument(zeta_jacobian, self, kind, self._dc)
         checked = None if fn is None else CheckedZeta(fn, n)  # read-only input, checked output: one per solve
@@ -911,14 +927,14 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
         a quarter of its diagonal (Bai's shifted matrices, implicit time steps with a large mass
         term: tens of sweeps), else ``'newton'`` (unshifted elliptic A, zero diagonals); an option
         only the stationary members read (accelerate, z_update, theta, alpha, beta) picks
-        ``'nrmgs'``, a hierarchy list ``'newton'``; ``result.method`` says which ran. Or ``'nrmgs'``, ``'nrm'``, ``'nrmm'``, ``'nrmaor'``, ``'nrmsor'``, ``'nrmj'``,
-        ``'mms'`` (Zheng–Vong baseline), ``'two_sweep'`` (two-sweep baseline). The AOR-type
+        ``'nrmgs'``, a hierarchy list ``'newton'``; ``result.method`` says which ran. Or one member: ``'nrmgs'``, ``'nrm'``, ``'nrmm'``,
+        ``'nrmaor'``, ``'nrmsor'``, ``'nrmj'``, ``'mms'`` (Zheng–Vong baseline), ``'two_sweep'`` (two-sweep baseline). The AOR-type
         methods need no factorization (forward substitution, O(nnz) per iteration); NRM and
         NRMM factorize Ω2 + (A + φ)Ω1 once. ``'newton'``: the semismooth Newton member on the same
         modulus equation (one sparse factorization of A restricted to the inactive set per step,
         symbolic analysis once; nested iteration over ``hierarchy``; falls back to sweeps of 'nrm'
         when a step does not reduce Res or the active set cycles). Its ``maxiter`` counts Newton
-        steps (and bounds the fallback sweeps). Default by measurement: see README "Choosing a method".
+        steps (and bounds the fallback sweeps). The rule of 'auto': README "Which method for which problem".
     tol : float, optional
         Stop when Res(z) = ‖min(Az + q, z − ζ(z))‖₂ < tol (absolute, the paper's criterion;
         scipy.sparse.linalg's ``atol``). With ``rtol``, the target is max(tol, rtol · Res(0)).
@@ -984,10 +1000,11 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
         The window of the no-progress rules: STAGNATED when Res stops improving at rounding level
         for this many iterations, when 3 consecutive windows of this many iterations bring no lower
         Res, or when the best Res has not improved for 10 windows and, at the rate Res falls, would
-        not be reached again within maxiter (README "What a solve returns").
+        not be reached again within maxiter (README "What you get back").
     verbose : int >= 0 or bool
         0 or False (default): silent; True means 1. k > 0: a progress line (iteration, Res, best Res, elapsed seconds) at
-        the first iterate, then about every k seconds, and a final line with the status. Lines go
+        the first iterate, then about every k seconds, and a final line with the result's message,
+        ``nit`` (and ``iterations`` when they differ) and the call's seconds. Lines go
         to the ``logging`` logger ``"nrmicp"`` at level INFO, and to stderr when logging is not
         configured. The C++ loop decides when to report: there is no per-iteration Python call.
     scale : False, True, 'rows' or 'both'

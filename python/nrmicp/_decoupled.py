@@ -109,8 +109,8 @@ class Reduced:
         are the coupled rows' Res (the decoupled rows' part of it is rounding)."""
         qF = q[self.F] + self.A_FD @ zD
         cb = None if callback is None else _expanding(callback, lambda zF: self.expand(zF, zD))
-        r = self.inner.solve(qF, None if c is None else c[self.F], x0=None if x0 is None else x0[self.F],
-                             callback=cb, **options)
+        r = self.inner._solve(qF, None if c is None else c[self.F], x0=None if x0 is None else x0[self.F],
+                              callback=cb, **options)
         z = self.expand(r.z, zD)
         w, res = measure(z)
         r.update(z=z, w=w, residual=res)

@@ -24,7 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import _core
-from ._inputs import as_csr
+from ._inputs import ConversionWarning, _warn, as_csr
 
 __all__ = ["amg_prolongations", "amg_levels", "resolve_hierarchy"]
 
@@ -272,7 +272,8 @@ def resolve_hierarchy(hierarchy, A) -> list | None:
     Accepts ``"amg"`` (→ :func:`amg_prolongations`), a list or tuple of prolongation
     matrices P_0, P_1, … (P_l of shape (n_l, n_{l+1}) with n_0 = A's size and each level
     strictly coarser; finite; converted to canonical float64 CSR), or None. An empty list
-    means no coarse level (a cold start). Raises TypeError/ValueError naming ``hierarchy``
+    means no coarse level (a cold start). A level with no columns (no coarse unknowns) is dropped
+    with the levels after it, with a ConversionWarning. Raises TypeError/ValueError naming ``hierarchy``
     and the offending level.
     """
     if hierarchy is None:
@@ -294,9 +295,23 @@ def resolve_hierarchy(hierarchy, A) -> list | None:
         if n_fine != rows:
             where = "A's size" if level == 0 else f"the columns of hierarchy[{level - 1}]"
             raise ValueError(f"{name} has shape {P.shape}: its rows must match {where} ({rows})")
-        if not 1 <= n_coarse < n_fine:
+        if n_coarse == 0:
+            _drop_empty(level, P.shape, len(hierarchy))
+            return out
+        if not n_coarse < n_fine:
             raise ValueError(f"{name} has shape {P.shape}: a prolongation maps a strictly "
                              f"coarser level (1 <= columns < rows)")
         out.append(P)
         rows = n_coarse
     return out
+
+
+def _drop_empty(level: int, shape: tuple, count: int) -> None:
+    """Warn that hierarchy[level] (of `shape`, no column) and the levels after it are dropped: a
+    level without unknowns (a coarsening of a small or L-shaped mesh can leave none) has nothing
+    to solve, and every level below it would be empty too."""
+    after = count - level - 1
+    also = f" and the {after} level(s) after it" if after else ""
+    kept = f"the solve keeps hierarchy[:{level}]" if level else "no coarse level is left (a cold start)"
+    _warn(f"hierarchy[{level}] has shape {shape}: a coarse level without unknowns; dropping it{also}: {kept}",
+          ConversionWarning)

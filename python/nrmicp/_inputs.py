@@ -9,12 +9,13 @@ import warnings
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["as_csr", "as_vector", "as_constant", "as_diagonal", "as_float", "ConversionWarning"]
+__all__ = ["as_csr", "as_vector", "flat_vector", "as_constant", "as_diagonal", "as_float", "ConversionWarning"]
 
 
 class ConversionWarning(sp.SparseEfficiencyWarning):
     """An input had to be copied/converted before nrmicp could use it (zero-copy needs
-    canonical float64 CSR with int32/int64 indices and float64 C-contiguous vectors)."""
+    canonical float64 CSR with int32/int64 indices and float64 C-contiguous vectors), or trimmed
+    (a hierarchy's coarse levels without unknowns are dropped). The answer is the same."""
 
 
 _PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__)) + os.sep
@@ -29,15 +30,16 @@ def _warn(msg: str, category: type = ConversionWarning) -> None:
     warnings.warn(msg, category, stacklevel=level)
 
 
-def as_csr(A, name: str = "A", *, square: bool = True) -> sp.csr_matrix:
+def as_csr(A, name: str = "A", *, square: bool = True, warn: bool = True) -> sp.csr_matrix:
     """Return A as canonical float64 CSR (sorted indices, no duplicates), int32 or int64
     indices. Canonical float64 CSR is returned as-is (zero-copy); anything else is copied
-    with a ConversionWarning. Raises TypeError/ValueError naming `name`."""
+    with a ConversionWarning (silently with ``warn=False``). Raises TypeError/ValueError naming `name`."""
+    note = _warn if warn else (lambda msg: None)
     canonical = None  # unknown
     if sp.issparse(A):
         M, canonical = _check_structure(A, name)
         if M.format != "csr":
-            _warn(f"{name}: converting {M.format.upper()} to CSR (copy); pass CSR to avoid it")
+            note(f"{name}: converting {M.format.upper()} to CSR (copy); pass CSR to avoid it")
             M = M.tocsr()
             copied = True
         else:
@@ -49,7 +51,7 @@ def as_csr(A, name: str = "A", *, square: bool = True) -> sp.csr_matrix:
         if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)
                 or arr.dtype == bool):
             raise TypeError(f"{name} must have a real numeric dtype, got {arr.dtype}")
-        _warn(f"{name}: a dense array was converted to CSR (copy); pass a scipy.sparse matrix")
+        note(f"{name}: a dense array was converted to CSR (copy); pass a scipy.sparse matrix")
         M = sp.csr_matrix(arr.astype(np.float64))
         copied = True
     else:
@@ -65,13 +67,13 @@ def as_csr(A, name: str = "A", *, square: bool = True) -> sp.csr_matrix:
         if not (np.issubdtype(M.dtype, np.floating) or np.issubdtype(M.dtype, np.integer) or M.dtype == bool):
             raise TypeError(f"{name} must have a real numeric dtype, got {M.dtype}")
         if not copied:
-            _warn(f"{name}: converting dtype {M.dtype} to float64 (copy)")
+            note(f"{name}: converting dtype {M.dtype} to float64 (copy)")
         M = M.astype(np.float64)
         copied = True
     if M.indices.dtype not in (np.int32, np.int64) or M.indptr.dtype != M.indices.dtype:
         idx = np.int64 if max(M.nnz, M.shape[0]) > np.iinfo(np.int32).max else np.int32
         if not copied:
-            _warn(f"{name}: converting index arrays to {np.dtype(idx).name} (copy)")
+            note(f"{name}: converting index arrays to {np.dtype(idx).name} (copy)")
         M = sp.csr_matrix((M.data, M.indices.astype(idx), M.indptr.astype(idx)), shape=M.shape)
         copied = True
         canonical = None
@@ -79,7 +81,7 @@ def as_csr(A, name: str = "A", *, square: bool = True) -> sp.csr_matrix:
         canonical = _is_canonical(M, name)
     if not canonical:
         if not copied:
-            _warn(f"{name}: sorting indices / summing duplicate entries (copy)")
+            note(f"{name}: sorting indices / summing duplicate entries (copy)")
             M = M.copy()
         M.sum_duplicates()  # also sorts
     if not (M.data.flags.c_contiguous and M.indices.flags.c_contiguous and M.indptr.flags.c_contiguous):
@@ -159,16 +161,24 @@ def as_vector(v, n: int, name: str) -> np.ndarray:
         raise TypeError(f"{name} must be a real numeric array, got dtype {arr.dtype}")
     if np.ma.is_masked(v):
         raise TypeError(f"{name} is a masked array with masked entries: fill them (v.filled(...)) first")
-    if arr.ndim == 2 and 1 in arr.shape:
-        arr = arr.reshape(-1)
-    if arr.ndim != 1:
-        raise ValueError(f"{name} must be 1-D of length {n}, got shape {arr.shape}")
-    if arr.shape[0] != n:
-        raise ValueError(f"{name} must have length n = {n}, got {arr.shape[0]}")
-    arr = np.ascontiguousarray(arr, dtype=np.float64)
+    arr = np.ascontiguousarray(flat_vector(arr, n, name), dtype=np.float64)
     if not np.all(np.isfinite(arr)):
         i = int(np.flatnonzero(~np.isfinite(arr))[0])
         raise ValueError(f"{name} has a non-finite entry {arr[i]} at index {i}")
+    return arr
+
+
+def flat_vector(arr: np.ndarray, n: int, name: str) -> np.ndarray:
+    """The one shape rule for every vector nrmicp reads or ζ returns: shape (n,), or a column (n, 1)
+    or row (1, n) as MATLAB-style code passes them, -> arr as shape (n,) (a view); ValueError naming
+    `name` otherwise."""
+    shape, accepted = arr.shape, f"shape ({n},) or a column ({n}, 1)"
+    if arr.ndim == 2 and 1 in shape:
+        arr = arr.reshape(-1)
+    if arr.ndim != 1:
+        raise ValueError(f"{name} must be 1-D of length {n} ({accepted}), got shape {shape}")
+    if arr.shape[0] != n:
+        raise ValueError(f"{name} must have length n = {n} ({accepted}), got shape {shape}")
     return arr
 
 

@@ -157,7 +157,8 @@ def jacobian_argument(zeta_jacobian, solver, kind, dc) -> dict:
 
     def jac(y):
         z = y * dc if dc is not None else y
-        J = as_csr(zeta_jacobian(z), "zeta_jacobian(z)")
+        # silent: J is copied every step anyway (index type, scaling); sp.diags' DIA is no mistake
+        J = as_csr(zeta_jacobian(z), "zeta_jacobian(z)", warn=False)
         if J.shape != (n, n):
             raise ValueError(f"zeta_jacobian(z) must return an ({n}, {n}) matrix, got shape {J.shape}")
         if dc is not None:

@@ -11,7 +11,7 @@ import warnings
 
 import numpy as np
 
-from ._inputs import ConversionWarning
+from ._inputs import ConversionWarning, flat_vector
 
 #: numpy's messages for a write into a read-only array (item assignment; a ufunc's out=, e.g. z += 1).
 _NUMPY_READ_ONLY = ("assignment destination is read-only", "output array is read-only")
@@ -51,8 +51,9 @@ class CheckedZeta:
                 f"compute on a copy (z = z.copy()) or return a new array ({exc})")
 
     def output(self, r) -> np.ndarray:
-        """ζ's return value as a C-contiguous float64 vector of length n; TypeError/ValueError naming
-        zeta otherwise. Other real dtypes are converted, with one ConversionWarning per solve."""
+        """ζ's return value as a C-contiguous float64 vector of length n (shapes as every vector input:
+        _inputs.flat_vector); TypeError/ValueError naming zeta otherwise. Other real dtypes are
+        converted, with one ConversionWarning per solve."""
         n = self.n
         expected = f"a real floating-point array of shape ({n},)"
         if r is None or isinstance(r, (str, bytes)):
@@ -64,8 +65,7 @@ class CheckedZeta:
         if arr.dtype.kind not in "fiu":
             raise TypeError(f"zeta(z) returned {'an array' if isinstance(r, np.ndarray) else type(r).__name__} "
                             f"of dtype {arr.dtype}; expected {expected}")
-        if arr.shape != (n,):
-            raise ValueError(f"zeta(z) must return an array of shape ({n},), got shape {arr.shape}")
+        arr = flat_vector(arr, n, "zeta(z)'s return value")
         if arr.dtype != np.float64 or not arr.dtype.isnative:
             if not self.warned:
                 self.warned = True

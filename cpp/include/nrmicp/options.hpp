@@ -31,7 +31,7 @@ enum class Method {
 
 /// How z⁽ᵏ⁾ is recovered from the modulus vector x⁽ᵏ⁾.
 enum class ZUpdate {
-  Auto,      ///< Explicit, but Solve on an ICP for the paper's NRM (Ω2 = I) and for MMS (README "Choosing the z-update")
+  Auto,      ///< Explicit, but Solve on an ICP for the paper's NRM (Ω2 = I) and for MMS (README "Options", z_update)
   Explicit,  ///< z = ζ(z_prev) + Ω1(|x| + x)/γ — no solve with A
   Solve,     ///< A z = Ω2(|x| − x)/γ − q — the paper's Step 1 (a factorization of A)
 };
