@@ -97,3 +97,18 @@ def test_every_readme_section_the_sources_name_exists():
     assert len(refs) >= 10   # the scan finds them (solve's docstring alone names five)
     dangling = [f"{path}:{line}: README \"{section}\"" for path, line, section in refs if section not in headings]
     assert not dangling, "no such README section:\n" + "\n".join(dangling)
+
+
+def test_every_figure_in_a_readme_code_comment_is_asserted_on_its_line():
+    """A number in a comment of a README python block is a claim: the statement on the same line
+    asserts it (the example said '17 outer steps on ζ, 0.2 s' where the solve took 9; issue 38).
+    Timings cannot be asserted, so they live in the prose, not in the blocks."""
+    unasserted = []
+    for block in python_blocks(_text()):
+        for line in block.splitlines():
+            code, _, comment = line.partition("#")
+            for figure in re.findall(r"(?<![\w.])\d[\d,]*(?:\.\d+)?(?:e-?\d+)?", comment):
+                if not ("assert " in code and figure.replace(",", "") in code.replace("_", "")):
+                    unasserted.append(f"{figure!r} in: {line.strip()}")
+    assert not unasserted, "figures in README code comments that no assert on their line checks:\n" + \
+        "\n".join(unasserted)

@@ -64,6 +64,11 @@ def test_nrm_advice_for_a_far_from_one_diagonal_is_unchanged():
     A = sp.csr_matrix(1e4 * (4 * sp.identity(4) - sp.eye(4, k=1) - sp.eye(4, k=-1)))
     res = nrmicp.solve(A, -np.ones(4), method="nrm", maxiter=3)
     assert "pass omega2=A.diagonal() or use method 'nrmm' or 'nrmgs'" in res.message
+    # the advice, followed, converges within the same budget of iterations (issue 38)
+    for option in ({"method": "nrm", "omega2": A.diagonal()}, {"method": "nrmm"}, {"method": "nrmgs"}):
+        tried = nrmicp.solve(A, -np.ones(4), maxiter=50, **option)
+        assert tried.success, (option, tried.message)
+        assert_solves_lcp(A, -np.ones(4), tried.z)
 
 
 @pytest.mark.parametrize("method", AOR_TYPES)
