@@ -20,6 +20,7 @@ from ._scaling import SCALINGS, ScaledCallable, equilibrate, scale_matrix
 from . import _newton
 from ._zeta import CheckedZeta
 from ._decoupled import Reduced, decoupled_rows
+from ._infeasible import evident_infeasibility
 
 __all__ = ["solve", "Solver", "Affine", "Result", "Status", "METHODS", "residual", "backends"]
 
@@ -468,12 +469,12 @@ class Solver:
         verify = kind in (ZetaKind.constant, ZetaKind.affine) or self._dr is not None
         it = _absolute_target(it, checked_opts, measure, n)
         tol = it["tol"]
-        rounds = _Rounds(self, problem, it, callback, core_kw, measure if verify else None)
+        rounds = _Rounds(self, problem, it, callback, core_kw, measure if verify else None, z0)
         rounds.run(z0s, tol)
         polished = polish_core = None
         if self.polish:
             polished, polish_core = _newton.polish(self, problem, rounds.z, rounds.res, measure, self._dc)
-        return self._assemble(rounds, polished, polish_core, tol)
+        return self._assemble(rounds, polished, polish_core, tol, measure)
 
     def _solve_reduced(self, qv, c, zD, z0, callback, it, checked_opts) -> Result:
         """Solve on the coupled rows (self._reduced); z, w, Res and the status of the whole problem,
@@ -491,6 +492,8 @@ class Solver:
                 "decoupled rows; returning the best iterate")
         else:
             r.message = f"{r.message}; Res(z) = {r.residual:.3g} with the decoupled rows"
+        if r.status != Status.CONVERGED:
+            r.message += measure.infeasibility()
         r.success = r.status == Status.CONVERGED
         return r
 
@@ -519,7 +522,8 @@ class Solver:
         dr, dc = self._dr, self._dc
         if dr is not None:
             qs = dr * qv
-            z0s = None if z0 is None else z0 / dc
+            with np.errstate(over="ignore"):  # x0 / dc beyond float's range: _Rounds returns x0 instead
+                z0s = None if z0 is None else z0 / dc
             cs = None if c is None else c / dc
             Bs = None if B is None else scale_matrix(B, 1.0 / dc, dc)
             fns = None if checked is None else (checked if np.all(dc == 1.0) else
@@ -534,15 +538,15 @@ class Solver:
             bp = bi = bd = None
         return (qs, kind, cs, bp, bi, bd, fns), z0s
 
-    def _assemble(self, rounds: "_Rounds", polished, polish_core, tol: float) -> Result:
+    def _assemble(self, rounds: "_Rounds", polished, polish_core, tol: float, measure) -> Result:
         """The result: the best round's z, the status re-decided as docs/SPEC.md says ("When the
         Python layer changes the core's status"), the rounds' history, timings and counters."""
         z, w, res = rounds.z, rounds.w, rounds.res
         if polished is not None:
             z, w, res = polished
         status, message = rounds.status(res, tol)
-        if status != Status.CONVERGED and self._omega2_hint:
-            message += self._omega2_hint
+        if status != Status.CONVERGED:
+            message += measure.infeasibility() or self._omega2_hint  # (no parameter helps an infeasible problem)
         extra = {}
         if self._dr is not None:
             extra["scaling"] = {"kind": self.scale, "refinements": rounds.refined,
@@ -568,6 +572,11 @@ class _OriginalResidual:
     def __init__(self, A, qv, kind, c, B, checked):
         self.A, self.qv, self.kind, self.c, self.B, self.checked = A, qv, kind, c, B, checked
 
+    def infeasibility(self) -> str:
+        """The message part naming a row that makes the problem evidently infeasible, or ""."""
+        lcp = self.kind in (ZetaKind.none, ZetaKind.constant)
+        return evident_infeasibility(self.A, self.qv, lcp, self.c if self.kind == ZetaKind.constant else None)
+
     def __call__(self, z):
         w = self.A @ z + self.qv
         if self.kind == ZetaKind.none:
@@ -588,8 +597,9 @@ class _Rounds:
     the original variables and the core met its tol but Res(z) >= tol) at most MAX_REFINEMENTS
     re-solves with a tighter tolerance. Keeps the best iterate and sums what the rounds report."""
 
-    def __init__(self, solver, problem, it, callback, core_kw, measure):
+    def __init__(self, solver, problem, it, callback, core_kw, measure, z0):
         self.solver, self.problem, self.it, self.core_kw, self.measure = solver, problem, it, core_kw, measure
+        self.z0 = np.zeros(solver.n) if z0 is None else z0  # the start in the original variables
         self.scaled = solver._dr is not None
         self.cb_offset = [0]  # the callback's nit counts on over re-solves, as the history's
         self.cb = None if callback is None else _core_callback(callback, solver._dc if self.scaled else None,
@@ -641,8 +651,11 @@ class _Rounds:
         if status == Status.ZETA_FAILED:
             raise ValueError(f"{d['message']} (NaN or Inf)")
         z = d["z"] * solver._dc if self.scaled else d["z"]
-        if not np.all(np.isfinite(z)):   # z_s · dc overflowed in the user's variables: the start stands in
-            z = np.zeros_like(d["z"]) if x0k is None else np.asarray(x0k) * (solver._dc if self.scaled else 1.0)
+        if not np.all(np.isfinite(z)):
+            # z_s · dc overflowed in the user's variables, or the scaled start x0 / dc did (then the
+            # core had no finite iterate): the user's start stands in, finite whenever x0 was
+            z = self.z0
+            d["message"] += "; the iterate overflowed in the original variables: returning the initial guess"
         w, res = self.measure(z) if self.measure is not None else (d["w"], d["residual"])
         key = res if res == res else math.inf
         if self.best is None or key < self.best[0]:
