@@ -348,11 +348,12 @@ def _writes_into_z(z):
 def oracle_residual(A, q, z, zeta_ref):
     """Res(z) from the original data in numpy, and a bound on the rounding in computing it."""
     Ad = A.toarray()
-    w = Ad @ z + q
-    zz = zeta_ref(z)
-    g = z - zz
-    res = stable_norm(np.minimum(w, g))
-    slack = 64 * EPS * stable_norm(np.abs(Ad) @ np.abs(z) + np.abs(q) + np.abs(z) + np.abs(zz))
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflowing Az + q is Res = inf
+        w = Ad @ z + q
+        zz = zeta_ref(z)
+        g = z - zz
+        res = stable_norm(np.minimum(w, g))
+        slack = 64 * EPS * stable_norm(np.abs(Ad) @ np.abs(z) + np.abs(q) + np.abs(z) + np.abs(zz))
     return res, slack
 
 
@@ -410,12 +411,15 @@ def check_case(case):
     assert isinstance(res.status, nrmicp.Status)
     event(f"valid input: {res.status.name}")
     assert np.all(np.isfinite(res.z)), res.message
+    true_res, slack = oracle_residual(A, q, res.z, zeta_ref)
+    if np.isfinite(res.residual) and np.isfinite(true_res):  # the reported Res is the returned z's
+        assert abs(res.residual - true_res) <= slack + 1e-10 * true_res, (res.residual, true_res, res.message)
     if res.success:
-        true_res, slack = oracle_residual(A, q, res.z, zeta_ref)
         assert true_res < opts["tol"] + slack, (res.residual, true_res, opts["tol"], res.message)
         if case["corrupt"] is None:
             REACHED["converged"][opts["method"]] += 1
             REACHED["n_converged"][opts["method"]].append(A.shape[0])
+    return res
 
 
 def _combo_id(combo):
@@ -475,3 +479,62 @@ REGRESSIONS = [
 @given(seed=st.just(0))  # (run under Hypothesis, as check_case records events)
 def test_fuzz_regressions(method, zkind, hierarchy, regression, seed):
     check_case(build_case(regression, method, zkind, hierarchy))
+
+
+def _adversarial(A, q, opts, x0=None, zkind="none", c=None, B=None):
+    """A case of the adversarial run (issue 38), built by hand in check_case's form."""
+    A = sp.csr_matrix(A)
+    n = A.shape[0]
+    return dict(A=A, q=np.asarray(q, float), zkind=zkind, c=np.zeros(n) if c is None else c,
+                B=sp.csr_matrix((n, n)) if B is None else B, x0=x0, opts=opts, corrupt=None, rng=None, jacobian=None)
+
+
+def _huge_entries(rng, n):
+    """Entries 5e292 ... 6e296 on a full diagonal and 5% off it."""
+    A = sp.lil_matrix(sp.random(n, n, density=0.05, random_state=rng,
+                                data_rvs=lambda k: 10.0 ** rng.uniform(292.7, 296.8, k)))
+    A.setdiag(10.0 ** rng.uniform(292.7, 296.8, n))
+    return sp.csr_matrix(A)
+
+
+def _adversarial_cases():
+    """name -> (case, the most iterations the solve may take)."""
+    rng = np.random.default_rng(38)
+    stuck_A = np.array([[0, 0, 0], [0, 3e-323, -1e-323], [0, 0, 0]])
+    huge = _huge_entries(rng, 185)
+    huge_x0 = 10.0 ** rng.uniform(0, 172.8, 185)
+    small = _huge_entries(rng, 30)
+    neg_x0 = rng.uniform(0, 1, 30)
+    neg_x0[7] = -1.6e296
+    B = sp.csr_matrix(rng.uniform(-0.2, 0.2, (15, 15)) * (rng.random((15, 15)) < 0.5))
+    return {
+        # Res bit-identical from iteration 0 while z_0 grew: MAX_ITERATIONS after 10**6 iterations
+        "nrm zero row, q_0 < 0": (_adversarial(stuck_A, [-0.0512, -1.3045, 0.0229],
+                                               dict(method="nrm", tol=7.8e-13, gamma=11.59, maxiter=2**31 - 1)), 10),
+        # x bitwise fixed at 1e20 (each step below its rounding): 100 iterations to the rounding floor
+        "nrmgs fixed point": (_adversarial([[1e-30]], [0.0], dict(method="nrmgs", omega2=[1.0], tol=1e-12),
+                                           x0=np.array([2e20])), 10),
+        # scale=True: x0 / d_c overflowed, z came back non-finite
+        "nrmaor huge A, scaled": (_adversarial(huge, rng.standard_normal(185), dict(method="nrmaor", scale=True),
+                                               x0=huge_x0), 10_000),
+        "nrm huge A, x0 -1.6e296, scaled": (_adversarial(small, rng.standard_normal(30),
+                                                         dict(method="nrm", scale=True), x0=neg_x0), 10_000),
+        # A = 0, Affine ζ, a start of 1e59: the reported Res against the oracle's
+        "nrmm A = 0, affine": (_adversarial(sp.csr_matrix((15, 15)), 0.1 * rng.standard_normal(15),
+                                            dict(method="nrmm", alpha=0.0069, gamma=0.89, scale="rows", maxiter=300,
+                                                 stall_iterations=5),
+                                            x0=rng.uniform(-1, 1, 15) * 1e59, zkind="affine",
+                                            c=rng.standard_normal(15), B=B), 300),
+    }
+
+
+ADVERSARIAL = _adversarial_cases()
+
+
+@pytest.mark.parametrize("name", sorted(ADVERSARIAL))
+@settings(max_examples=1, deadline=None, database=None)
+@given(seed=st.just(0))  # (run under Hypothesis, as check_case records events)
+def test_fuzz_adversarial_regressions(name, seed):
+    case, most = ADVERSARIAL[name]
+    res = check_case(case)
+    assert res.iterations <= most, res.message

@@ -398,7 +398,7 @@ EXPECTED_STATUS = {
     "lipschitz-3.0":           "SCSSSSSSS",
     "nonsmooth-zeta":          "CCCSCCCCC",
     "near-singular":           "CCCCCCCCC",
-    "not-P-no-solution":       "SMSMSSSSM",
+    "not-P-no-solution":       "SSSSSSSSS",  # nrm: z runs away along (1, 1) with Res constant (was M)
     "not-P-three-solutions":   "CLCLCCCCL",
     "not-P-negative-diag":     "VLVLVVVVL",
     "n1-lcp":                  "CCCCCCCCC",

@@ -23,6 +23,7 @@ from ._scaling import SCALINGS, ScaledCallable, equilibrate, scale_matrix, units
 from . import _newton
 from ._zeta import CheckedZeta
 from ._decoupled import Reduced, decoupled_rows
+from ._infeasible import evident_infeasibility
 
 __all__ = ["solve", "Solver", "Affine", "Result", "Status", "METHODS", "residual", "backends"]
 
@@ -598,7 +599,7 @@ class Solver:
         verify = kind in (ZetaKind.constant, ZetaKind.affine) or self._dr is not None or units
         it = _absolute_target(it, checked_opts, measure, n)
         tol = it["tol"]
-        rounds = _Rounds(self, problem, it, callback, core_kw, measure if verify else None)
+        rounds = _Rounds(self, problem, it, callback, core_kw, measure if verify else None, z0)
         rounds.run(z0s, tol)
         polished = polish_core = None
         if self.polish:
@@ -630,6 +631,8 @@ class Solver:
             r.message = f"{r.message}; Res(z) = {r.residual:.3g} with the decoupled rows"
         r.status, r.message, r.residual, r.criterion = _criterion_outcome(measure, r.z, r.residual, tol, r.status,
                                                                           r.message)
+        if r.status != Status.CONVERGED:
+            r.message += measure.infeasibility()
         r.success = r.status == Status.CONVERGED
         return r
 
@@ -662,7 +665,8 @@ class Solver:
         dr, dc = self._dr, self._dc
         if dr is not None:
             qs = dr * qv
-            z0s = None if z0 is None else z0 / dc
+            with np.errstate(over="ignore"):  # x0 / dc beyond float's range: _Rounds returns x0 instead
+                z0s = None if z0 is None else z0 / dc
             cs = None if c is None else c / dc
             Bs = None if B is None else scale_matrix(B, 1.0 / dc, dc)
             fns = None if checked is None else (checked if np.all(dc == 1.0) else
@@ -684,10 +688,11 @@ class Solver:
         if polished is not None:
             z, w, res = polished
         status, message = rounds.status(res, tol)
-        if status != Status.CONVERGED and self._omega2_hint:
-            message += self._omega2_hint
-        if status in (Status.MAX_ITERATIONS, Status.STAGNATED):
-            message += _member_hint(self.A, self.method)
+        if status != Status.CONVERGED:   # (no parameter or member helps an infeasible problem)
+            infeasible = measure.infeasibility()
+            message += infeasible or self._omega2_hint
+            if not infeasible and status in (Status.MAX_ITERATIONS, Status.STAGNATED):
+                message += _member_hint(self.A, self.method)
         extra = {}
         if self._dr is not None and self.scale != "units":
             extra["scaling"] = {"kind": self.scale, "refinements": rounds.refined,
@@ -715,6 +720,11 @@ class _OriginalResidual:
     def __init__(self, A, qv, kind, c, B, checked, weights=None):
         self.A, self.qv, self.kind, self.c, self.B, self.checked = A, qv, kind, c, B, checked
         self.weights = weights
+
+    def infeasibility(self) -> str:
+        """The message part naming a row that makes the problem evidently infeasible, or ""."""
+        lcp = self.kind in (ZetaKind.none, ZetaKind.constant)
+        return evident_infeasibility(self.A, self.qv, lcp, self.c if self.kind == ZetaKind.constant else None)
 
     def _g(self, z):
         if self.kind == ZetaKind.none:
@@ -776,8 +786,9 @@ class _Rounds:
     the original variables and the core met its tol but Res(z) >= tol) at most MAX_REFINEMENTS
     re-solves with a tighter tolerance. Keeps the best iterate and sums what the rounds report."""
 
-    def __init__(self, solver, problem, it, callback, core_kw, measure):
+    def __init__(self, solver, problem, it, callback, core_kw, measure, z0):
         self.solver, self.problem, self.it, self.core_kw, self.measure = solver, problem, it, core_kw, measure
+        self.z0 = np.zeros(solver.n) if z0 is None else z0  # the start in the original variables
         self.scaled = solver._dr is not None
         self.cb_offset = [0]  # the callback's nit counts on over re-solves, as the history's
         self.cb = None if callback is None else _core_callback(callback, solver._dc if self.scaled else None,
@@ -829,8 +840,11 @@ class _Rounds:
         if status == Status.ZETA_FAILED:
             raise ValueError(f"{d['message']} (NaN or Inf)")
         z = d["z"] * solver._dc if self.scaled else d["z"]
-        if not np.all(np.isfinite(z)):   # z_s · dc overflowed in the user's variables: the start stands in
-            z = np.zeros_like(d["z"]) if x0k is None else np.asarray(x0k) * (solver._dc if self.scaled else 1.0)
+        if not np.all(np.isfinite(z)):
+            # z_s · dc overflowed in the user's variables, or the scaled start x0 / dc did (then the
+            # core had no finite iterate): the user's start stands in, finite whenever x0 was
+            z = self.z0
+            d["message"] += "; the iterate overflowed in the original variables: returning the initial guess"
         w, res = self.measure(z) if self.measure is not None else (d["w"], d["residual"])
         key = res if res == res else math.inf
         if self.best is None or key < self.best[0]:

@@ -87,7 +87,8 @@ struct SolveOptions {
   /// (tol below what floating point reaches), after 3 consecutive windows of this many
   /// iterations whose smallest Res does not improve on the previous windows' (a cycle), or when
   /// the best Res has not improved for 10 windows and, at the rate Res falls, would not be
-  /// reached again within maxiter (detail/stopping.hpp). Plateaus of bit-identical Res are neutral.
+  /// reached again within maxiter (detail/stopping.hpp). Plateaus of bit-identical Res are neutral,
+  /// except that 5 of them in a row with x fixed, or with max|z| growing, end the solve at once.
   int stall_iterations = 100;
   /// DIVERGED when Res exceeds this factor times the best Res seen, or the modulus vector x grows
   /// by this factor while Res does not improve.

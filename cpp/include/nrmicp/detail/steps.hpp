@@ -139,14 +139,15 @@ class SplittingStep : public StepBase {
     ScopedTimer t(ctx_.tm.inner_solve);
     sp_.solve(rhs_, dx_);
   }
-  // dx ← θ dx, x += dx, s.step = ‖dx‖∞.
+  // dx ← θ dx, x += dx, s.step = ‖x⁽ᵏ⁺¹⁾ − x⁽ᵏ⁾‖∞ as taken (0 when x is unchanged, however large dx).
   void relax(Iterate& s, double theta) {
     double step = 0;
     for (Eigen::Index i = 0; i < ctx_.n(); ++i) {
       const double d = theta * dx_[i];
       dx_[i] = d;
-      s.x[i] += d;
-      step = std::max(step, std::abs(d));
+      const double xn = s.x[i] + d;
+      step = std::max(step, std::abs(xn - s.x[i]));
+      s.x[i] = xn;
     }
     s.step = step;
   }

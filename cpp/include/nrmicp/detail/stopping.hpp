@@ -66,6 +66,7 @@ class Monitor {
     if (!s.finite) return finish_with(Status::Diverged, k);
     if (!s.zeta_ok) return finish_with(Status::ZetaFailed, k);
     record(k, r);
+    track_stuck(r, s);
     const bool improved = track_best(k, r, s);
     track_windows(k, r);
     res_.iterations = k;
@@ -123,7 +124,8 @@ class Monitor {
   std::optional<Status> verdict(double r) const {
     if (r < o_.tol) return Status::Converged;
     if (!std::isfinite(r) || r > o_.divergence_factor * best_ || x_runaway_) return Status::Diverged;
-    if (floor_count_ >= o_.stall_iterations || bad_windows_ >= 3 || out_of_reach_) return Status::Stagnated;
+    if (floor_count_ >= o_.stall_iterations || bad_windows_ >= 3 || out_of_reach_ || stuck_ != Stuck::None)
+      return Status::Stagnated;
     return std::nullopt;
   }
 
@@ -135,6 +137,12 @@ class Monitor {
       m += " (the best Res was not improved in " + std::to_string(since_best_) +
            " iterations, and at the rate Res fell in the last " + std::to_string(o_.stall_iterations) +
            " it would not get back to it within maxiter)";
+    if (res_.status == Status::Stagnated && stuck_ == Stuck::FixedPoint)
+      m += " (the iterate no longer changes: a fixed point of the iteration that is not a solution; Res was "
+           "bit-identical for " + std::to_string(kStuck) + " iterations)";
+    if (res_.status == Status::Stagnated && stuck_ == Stuck::Runaway)
+      m += " (Res was bit-identical for " + std::to_string(kStuck) + " iterations while max|z| kept growing: the "
+           "iterate runs away along a direction Res does not see, e.g. on a zero row of A with q_i < 0)";
     if (start)
       m += "; returning the initial guess z0 (no iterate had a lower Res)";
     else if (res_.status != Status::Converged && res_.status != Status::ZetaFailed)
@@ -187,6 +195,31 @@ class Monitor {
     }
     if (!(xnorm <= o_.divergence_factor * x_ref_) || !std::isfinite(xnorm)) x_runaway_ = true;
   }
+  // Stuck: Res bit-identical for kStuck iterates in a row, and either x did not move in those
+  // steps (a fixed point of the iteration that is not a solution) or ‖z‖∞ grew at each of them
+  // (a runaway Res does not see: nrm on a zero row with q_i < 0 grows z_i by the same amount
+  // each step, forever). z moving otherwise is not stuck: on impulse control Res stays
+  // bit-identical while max z falls by 0.1 a step, then converges; and a run where z stays and x
+  // moves is a plateau (below). ‖z‖∞ is computed only on the iterates of a run.
+  static constexpr int kStuck = 5;
+  enum class Stuck { None, FixedPoint, Runaway };
+  void track_stuck(double r, const Iterate& s) {
+    if (!(r == last_r_)) {
+      same_ = 0;
+      return;
+    }
+    const double znorm = s.z.lpNorm<Eigen::Infinity>();
+    if (same_++ == 0) {
+      x_still_ = z_grows_ = true;
+    } else {
+      z_grows_ = z_grows_ && znorm > run_znorm_;
+    }
+    run_znorm_ = znorm;
+    x_still_ = x_still_ && s.step == 0;
+    if (same_ < kStuck) return;
+    if (x_still_) stuck_ = Stuck::FixedPoint;
+    else if (z_grows_) stuck_ = Stuck::Runaway;
+  }
   // No progress, two ways, judged at the end of each window of stall_iterations iterates.
   // (1) In 3 consecutive windows the smallest Res of a window is not below the previous
   // window's (a cycle, or a slow divergence). Windows, not the global best: Res may jump up at
@@ -231,6 +264,10 @@ class Monitor {
   Result& res_;
   std::string step_message_;
   Vector best_z_;
+  int same_ = 0;
+  bool x_still_ = true, z_grows_ = true;
+  double run_znorm_ = 0;
+  Stuck stuck_ = Stuck::None;
   double best_ = std::numeric_limits<double>::infinity();
   int best_k_ = 0, floor_count_ = 0, win_count_ = 0, bad_windows_ = 0, since_best_ = 0;
   bool out_of_reach_ = false, x_runaway_ = false;

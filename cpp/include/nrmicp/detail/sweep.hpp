@@ -51,7 +51,7 @@ ResidualSum aor_sweep_impl(const MatrixType& A, const Eigen::VectorXd& z, const 
     dx[i] = d;
     const double xn = xi + d;
     x[i] = xn;
-    max_step = std::max(max_step, std::abs(d));
+    max_step = std::max(max_step, std::abs(xn - xi));  // the step taken: 0 when x is unchanged
     z_next[i] = (zeta_z ? (*zeta_z)[i] : 0.0) + om1(i) * (std::abs(xn) + xn) * inv_gamma;
   }
   step = max_step;
