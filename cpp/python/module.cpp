@@ -216,6 +216,19 @@ nrmicp::detail::Progress make_progress(const py::object& progress) {
   };
 }
 
+// The phases' seconds by name (result.hpp's Timings).
+py::dict timings_dict(const nrmicp::Timings& tm) {
+  py::dict t;
+  t["setup"] = tm.setup;
+  t["factorization"] = tm.factorization;
+  t["iterations"] = tm.iterations;
+  t["zeta"] = tm.zeta;
+  t["spmv"] = tm.spmv;
+  t["inner_solve"] = tm.inner_solve;
+  t["total"] = tm.total;
+  return t;
+}
+
 py::dict result_dict(const nrmicp::Result& r, bool record_history) {
   py::dict d;
   d["z"] = py::array_t<double>(r.z.size(), r.z.data());
@@ -236,15 +249,7 @@ py::dict result_dict(const nrmicp::Result& r, bool record_history) {
   } else {
     d["history"] = py::none();
   }
-  py::dict t;
-  t["setup"] = r.timings.setup;
-  t["factorization"] = r.timings.factorization;
-  t["iterations"] = r.timings.iterations;
-  t["zeta"] = r.timings.zeta;
-  t["spmv"] = r.timings.spmv;
-  t["inner_solve"] = r.timings.inner_solve;
-  t["total"] = r.timings.total;
-  d["timings"] = t;
+  d["timings"] = timings_dict(r.timings);
   d["newton"] = r.newton;  // the Newton member's statistics (bound NewtonStats; empty for the others)
   return d;
 }
@@ -287,6 +292,8 @@ class PyCore {
         without_gil([&] { return core_->solve(qv, zeta, z0v ? &*z0v : nullptr, cb, poll_signals, &it, report); });
     return result_dict(r, it.record_history);
   }
+  /// The constructor's seconds (setup, and the factorization part of it).
+  py::dict setup_timings() const { return timings_dict(core_->setup_timings()); }
 
   /// The solve's arguments, for both bindings.
   template <typename Class>
@@ -294,6 +301,7 @@ class PyCore {
     cls.def("solve", &PyCore::solve, py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("b_indptr"),
             py::arg("b_indices"), py::arg("b_data"), py::arg("zeta_fn"), py::arg("x0"), py::arg("callback"),
             py::arg("options"), py::arg("zeta_jacobian") = py::none(), py::arg("progress") = py::none());
+    cls.def("setup_timings", &PyCore::setup_timings);
   }
 
  protected:

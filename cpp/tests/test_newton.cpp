@@ -674,6 +674,14 @@ TEST_CASE("nrmicp::Newton fills timings.iterations") {
     CHECK(r.timings.iterations > 0);
     CHECK(r.timings.iterations <= r.timings.total);
     CHECK(r.timings.iterations >= r.history_seconds.back());
+    // every phase of the steps timed, each inside its container (docs/SPEC.md, "Timings")
+    const Timings& t = r.timings;
+    CHECK(t.factorization > 0);
+    CHECK(t.inner_solve > 0);
+    CHECK(t.spmv > 0);
+    CHECK(t.setup > 0);  // the reduced system's analysis, on first use
+    CHECK(t.setup + t.iterations <= t.total + 1e-6);
+    CHECK(t.factorization + t.zeta + t.spmv + t.inner_solve <= t.iterations + 1e-6);
   }
 }
 

@@ -73,10 +73,17 @@ class Result(OptimizeResult):
     Attributes: ``z`` (the solution, or the best iterate when not converged), ``w`` (= Az + q),
     ``success``, ``status`` (:class:`Status`), ``message``, ``nit`` (iterations to reach ``z``),
     ``residual`` (Res(z) = ‖min(Az+q, z−ζ(z))‖₂), ``history`` (dict of arrays ``iteration``,
-    ``seconds``, ``residual``; None unless ``record_history``), ``timings`` (dict of seconds:
-    ``setup``, ``factorization``, ``iterations``, ``zeta``, ``spmv``, ``inner_solve``, ``total``;
-    ``factorization`` is part of ``setup``, and for the AOR-type methods the one-pass sweep,
-    product and forward substitution together, counts as ``spmv``),
+    ``seconds``, ``residual``; None unless ``record_history``), ``timings`` (dict of wall-clock
+    seconds of this call: ``total`` the whole call from entry to return, so for
+    :func:`nrmicp.solve` the set-up included, for :meth:`Solver.solve` that call only (the
+    constructor's seconds are :attr:`Solver.setup_timings`); ``setup`` the set-up done in the
+    call (nrmicp.solve: the constructor's, the AMG hierarchy included; any call: what is set up
+    on first use, e.g. the Newton member's reduced systems and their symbolic analysis) and
+    ``iterations`` the iteration loop without it, disjoint parts of ``total``; ``factorization``
+    the numeric factorizations, in ``setup`` + ``iterations`` (Newton: each step's, or the
+    V-cycle's update with inner 'cg', and the fallback member's); ``zeta``, ``spmv`` (products
+    with A and ζ's B; the AOR types' one-pass sweep, Newton's projected sweeps) and
+    ``inner_solve`` (Newton: the reduced solves), parts of ``iterations``; docs/SPEC.md, "Timings"),
     ``method``, ``inner`` (the solver used for the left matrix), ``counters`` (dict name -> int:
     what the step kind counts beyond the iterations, e.g. ``anderson_rejections``, the
     accelerated steps replaced by the plain one; empty when it counts nothing).
@@ -453,6 +460,7 @@ class Solver:
                  stall_iterations: int = 100, scale: Union[bool, str] = False, verbose: int = 0,
                  hierarchy: Any = "auto", polish: bool = False, _decouple: bool = True,
                  _units_factor: Optional[float] = None) -> None:
+        t0 = time.perf_counter()
         settings = dict(method=method, omega1=omega1, omega2=omega2, gamma=gamma, phi=phi, alpha=alpha, beta=beta,
                         inner=inner, tol=tol, rtol=rtol, maxiter=maxiter, theta=theta, z_update=z_update,
                         accelerate=accelerate, anderson_m=anderson_m, record_history=record_history,
@@ -492,7 +500,15 @@ class Solver:
         self._settings, self._whole_solver = settings, None
         if self._reduced is not None:
             self.polish = self._reduced.inner.polish
-            return
+            factorization = self._reduced.inner.setup_timings["factorization"]
+        else:
+            self._build_core(opts, hierarchy, polish)
+            factorization = self._core.setup_timings()["factorization"]
+        self._setup_timings = {"setup": time.perf_counter() - t0, "factorization": factorization}
+
+    def _build_core(self, opts, hierarchy, polish) -> None:
+        """The C++ core on A (scaled when asked; method 'newton': with its hierarchy)."""
+        n = self.n
         pairs = None
         if units and self.scale is None:   # the default rule iterates on σA, σq (σ a power of two: exact)
             self.scale = "units"
@@ -523,6 +539,14 @@ class Solver:
             # A failed factorization raises numpy.linalg.LinAlgError (MemoryError when out of memory),
             # here or in a lazy one during solve().
             self._core = core_cls(A_core.indptr, A_core.indices, A_core.data, n, opts)
+
+    @property
+    def setup_timings(self) -> dict[str, float]:
+        """Seconds of this Solver's set-up (the constructor): ``setup`` (validation, conversion,
+        scaling, the hierarchy, the core's set-up) and ``factorization`` (the part of it spent in
+        factorizations). A :meth:`solve`'s ``timings`` count that call only; :func:`nrmicp.solve`'s
+        include this set-up (docs/SPEC.md, "Timings")."""
+        return dict(self._setup_timings)
 
     @property
     def parameters(self) -> dict[str, Any]:
@@ -559,15 +583,18 @@ class Solver:
     def solve(self, q: ArrayLike, zeta: ZetaLike = None, *, x0: Optional[ArrayLike] = None,
               callback: Optional[Callable[..., Any]] = None, zeta_jacobian: Optional[Callable[..., Any]] = None,
               **iteration_options: Any) -> Result:
-        """Solve ICP(q, A, ζ). See :func:`nrmicp.solve` for the arguments."""
+        """Solve ICP(q, A, ζ). See :func:`nrmicp.solve` for the arguments. ``timings`` count this
+        call (its ``total``: from entry to return); the constructor's are :attr:`setup_timings`."""
         t0 = time.perf_counter()
-        result = self._solve(q, zeta, x0=x0, callback=callback, zeta_jacobian=zeta_jacobian, **iteration_options)
+        res = self._solve(q, zeta, x0=x0, callback=callback, zeta_jacobian=zeta_jacobian, **iteration_options)
+        res.timings["total"] = time.perf_counter() - t0
         if self._solve_options(iteration_options)[1].verbose > 0:
-            _log_final(self.method, result, time.perf_counter() - t0)
-        return result
+            _log_final(self.method, res, res.timings["total"])
+        return res
 
     def _solve(self, q, zeta=None, *, x0=None, callback=None, zeta_jacobian=None, **iteration_options) -> Result:
-        """:meth:`solve` without its final progress line (the inner solves of the decoupled rows)."""
+        """:meth:`solve` without its final progress line and ``total`` (the inner solves of the
+        decoupled rows and of the whole A)."""
         n = self.n
         units = iteration_options.pop("_units", None)   # a Reduced's inner solve: the whole problem's rule
         it, checked_opts, units = self._solve_options(iteration_options, units)
@@ -585,8 +612,12 @@ class Solver:
                 return self._solve_reduced(qv, c, zD, z0, callback, it, checked_opts, units)
             # a coupling ζ (or a z_D that overflows): the whole A; ζ as checked here (B converted once)
             whole_zeta = Affine(B, c) if kind == ZetaKind.affine else zeta
-            return self._whole()._solve(qv, whole_zeta, x0=z0, callback=callback, zeta_jacobian=zeta_jacobian,
+            built = self._whole_solver is None
+            res = self._whole()._solve(qv, whole_zeta, x0=z0, callback=callback, zeta_jacobian=zeta_jacobian,
                                        **iteration_options)
+            if built:   # its set-up happened in this call
+                _charge_setup(res.timings, self._whole_solver._setup_timings)
+            return res
         core_kw = _newton.jacobian_argument(zeta_jacobian, self, kind, self._dc)
         checked = None if fn is None else CheckedZeta(fn, n)  # read-only input, checked output: one per solve
         problem, z0s = self._core_problem(qv, z0, kind, c, B, checked)
@@ -604,6 +635,8 @@ class Solver:
         polished = polish_core = None
         if self.polish:
             polished, polish_core = _newton.polish(self, problem, rounds.z, rounds.res, measure, self._dc)
+            if polish_core is not None:
+                rounds.add_timings(polish_core["timings"])
         return self._assemble(rounds, polished, polish_core, tol, measure)
 
     def _units_weights(self):
@@ -861,12 +894,12 @@ class _Rounds:
         return d, status
 
     def add_timings(self, t):
+        """A core call's timings summed in (each counts its own call only; the caller sets total)."""
         if self.timings is None:
             self.timings = dict(t)
             return
         for name in t:
-            if name != "setup":
-                self.timings[name] += t[name]
+            self.timings[name] += t[name]
 
     z = property(lambda self: self.best[1])
     w = property(lambda self: self.best[2])
@@ -1070,8 +1103,18 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
         success is declared (this matters for a constant obstacle, which the core solves as the
         shifted LCP), with the same re-solve rule as for ``scale``.
     """
+    t0 = time.perf_counter()
     s = Solver(A, method=method, omega1=omega1, omega2=omega2, gamma=gamma, phi=phi, alpha=alpha, beta=beta,
                inner=inner, tol=tol, rtol=rtol, maxiter=maxiter, theta=theta, z_update=z_update, accelerate=accelerate,
                anderson_m=anderson_m, record_history=record_history, stall_iterations=stall_iterations,
                scale=scale, verbose=verbose, hierarchy=hierarchy, polish=polish)
-    return s.solve(q, zeta, x0=x0, callback=callback, zeta_jacobian=zeta_jacobian)
+    res = s.solve(q, zeta, x0=x0, callback=callback, zeta_jacobian=zeta_jacobian)
+    _charge_setup(res.timings, s._setup_timings)   # the whole call: the set-up is part of it
+    res.timings["total"] = time.perf_counter() - t0
+    return res
+
+
+def _charge_setup(timings: dict, setup: dict) -> None:
+    """A Solver's set-up (Solver.setup_timings) into the timings of the call that built it."""
+    timings["setup"] += setup["setup"]
+    timings["factorization"] += setup["factorization"]

@@ -49,17 +49,22 @@ inline const char* to_string(Status s) {
   return "?";
 }
 
-/// Wall-clock seconds by phase. `factorization` is part of `setup` (Solver construction) or
-/// happens lazily during the first solve that needs A factorized.
+/// Wall-clock seconds by phase, of the call that returned them (a constructor's are its
+/// setup_timings()). `setup` and `iterations` are disjoint parts of `total`; `factorization` lies
+/// in setup + iterations; `zeta`, `spmv` and `inner_solve` lie in `iterations` (docs/SPEC.md, "Timings").
 struct Timings {
-  double setup = 0;          ///< building Lm and factorizations (Solver construction)
-  double factorization = 0;  ///< sparse factorizations (Lm and, when needed, A)
-  double iterations = 0;     ///< the iteration loop of this solve
-  double zeta = 0;           ///< evaluating ζ
+  double setup = 0;          ///< set-up done in this call: a lazy factorization of A; Newton: the reduced
+                             ///< systems' patterns and symbolic analyses (or V-cycle set-up), the hierarchy's
+                             ///< operators formed again
+  double factorization = 0;  ///< numeric factorizations (Lm, A; Newton: each step's reduced system or its
+                             ///< V-cycle's update, a callable ζ's per-step system, the fallback member's)
+  double iterations = 0;     ///< the iteration loop of this solve (Newton: all levels, without their set-up)
+  double zeta = 0;           ///< evaluating ζ (and its Jacobian)
   double spmv = 0;           ///< products with A (and ζ's B, two-sweep's N2); for the AOR types on a
-                             ///< row-major A the one-pass sweep (product + forward substitution) is here
-  double inner_solve = 0;    ///< solves with Lm and A (factor or triangular)
-  double total = 0;          ///< this solve, from entry to return
+                             ///< row-major A the one-pass sweep (product + forward substitution) is here,
+                             ///< for Newton the projected Gauss–Seidel sweeps
+  double inner_solve = 0;    ///< solves with Lm and A (factor or triangular); Newton: the reduced solves
+  double total = 0;          ///< this call, from entry to return
 };
 
 /// The Newton member's statistics (newton.hpp; polish); zero/empty for the stationary members.

@@ -114,8 +114,13 @@ class Solver {
       splitting_.emplace(A, options_.method, params_, options_.inner);
     }
     if (options_.z_update == ZUpdate::Solve) factorize_A();
-    setup_seconds_ = detail::ScopedTimer::seconds_since(t0);
+    setup_timings_.setup = detail::ScopedTimer::seconds_since(t0);
+    setup_timings_.factorization = setup_factorization_ + a_factorization_;
   }
+
+  /// The constructor's seconds: setup (parameters, splitting, factorizations) and the
+  /// factorization part of it. A solve's Result::timings count only that solve's call (result.hpp).
+  const Timings& setup_timings() const { return setup_timings_; }
 
   const Options& options() const { return options_; }
   const Parameters& parameters() const { return params_; }
@@ -147,8 +152,6 @@ class Solver {
     } else {
       r = iterate(q, zeta, z0, {callback, poll, progress}, o, Vector());
     }
-    r.timings.setup = setup_seconds_;
-    r.timings.factorization += setup_factorization_;
     r.timings.total = detail::ScopedTimer::seconds_since(t0);
     r.inner = splitting_->inner_name();
     return r;
@@ -174,6 +177,7 @@ class Solver {
       const double before = a_factorization_;
       factorize_A();
       res.timings.factorization += a_factorization_ - before;  // only if this solve paid for it
+      res.timings.setup += a_factorization_ - before;          // a lazy set-up, before the loop
     }
     detail::Context<MatrixType> ctx(A_, q, zeta, params_, zu, a_solver_, res.timings);
     detail::Monitor monitor(o, hooks.callback, hooks.poll, hooks.progress, shift, res, A_.rows());
@@ -187,10 +191,10 @@ class Solver {
       return res;
     }
     run_steps(ctx, s, monitor, o);
-    res.timings.iterations = monitor.seconds();
     monitor.finish(z0 ? *z0 : Vector::Zero(A_.rows()), ctx.start_residual);
     Vector Az(A_.rows());
     ctx.spmv(res.z, Az);  // w of the returned iterate (honest even if it is not the last one)
+    res.timings.iterations = monitor.seconds();  // its product counted in spmv: inside the loop's time
     res.w = Az + q;
     detail::refuse_overflow(res);
     return res;
@@ -231,7 +235,8 @@ class Solver {
   Options options_;
   Parameters params_;
   std::optional<Splitting<StorageIndex>> splitting_;
-  double setup_seconds_ = 0, setup_factorization_ = 0;
+  Timings setup_timings_;
+  double setup_factorization_ = 0;
   mutable std::mutex a_mutex_;
   mutable InnerSolver<StorageIndex> a_solver_;
   mutable double a_factorization_ = 0;

@@ -8,6 +8,7 @@
 #include "../zeta.hpp"
 #include "active_set.hpp"
 #include "residual.hpp"
+#include "timer.hpp"
 
 #include <Eigen/SparseCore>
 
@@ -74,14 +75,24 @@ class NewtonLevel {
   const MatrixType& matrix() const { return A_; }
   Eigen::Index size() const { return A_.rows(); }
 
-  /// The reduced system of the (shifted) LCP, analysed once.
+  /// Where this level's work is timed (a solve's Result::timings, set by NewtonRun for its
+  /// duration; nullptr: a scratch record nobody reads).
+  void record_into(Timings* tm) { tm_ = tm; }
+  Timings& timings() const { return tm_ ? *tm_ : unrecorded_; }
+
+  /// The reduced system of the (shifted) LCP, analysed once (its pattern and analysis: setup).
   System& lcp_system() {
-    if (!lcp_system_) lcp_system_ = std::make_unique<System>(A_, nullptr, options_.inner, below_, borrow_);
+    if (!lcp_system_) {
+      ScopedTimer t(timings().setup);
+      lcp_system_ = std::make_unique<System>(A_, nullptr, options_.inner, below_, borrow_);
+    }
     return *lcp_system_;
   }
-  /// The hierarchy's operators, freed by the LCP system's V-cycle, formed again.
+  /// The hierarchy's operators, freed by the LCP system's V-cycle, formed again (setup).
   void restore_hierarchy() {
-    if (lcp_system_) lcp_system_->restore_hierarchy();
+    if (!lcp_system_) return;
+    ScopedTimer t(timings().setup);
+    lcp_system_->restore_hierarchy();
   }
   /// Frees what a solve on this level built (the reduced system, the fallback's factorization).
   /// Nested iteration releases each coarse level once its solution is prolongated: the finer
@@ -91,15 +102,18 @@ class NewtonLevel {
     lcp_system_.reset();
     fallback_.reset();
   }
-  /// A system of the affine ICP (ζ = Bz + c), its V-cycle on copies of the hierarchy's operators.
-  std::unique_ptr<System> affine_system(const RowMatrix& B) {
+  /// A system of the affine ICP (ζ = Bz + c), its V-cycle on copies of the hierarchy's operators;
+  /// its time goes to `phase` (setup for a fixed ζ, factorization for a step's linearization).
+  std::unique_ptr<System> affine_system(const RowMatrix& B, double Timings::*phase) {
     restore_hierarchy();
+    ScopedTimer t(timings().*phase);
     return std::make_unique<System>(A_, &B, options_.inner, below_);
   }
   const char* inner_name() const { return lcp_system_ ? lcp_system_->inner_name() : "none"; }
 
   /// Res of z; w = Az + q and g = z − ζ(z) (ζ = Bz + c; when B is null ζ = 0, g = z is not written).
   double evaluate(const Vector& z, const Vector& q, const RowMatrix* B, const Vector* c, Vector& w, Vector& g) const {
+    ScopedTimer t(timings().spmv);  // the products with A and B
     w.noalias() = A_ * z;
     w += q;
     if (!B) return residual_of(w, z);
@@ -114,7 +128,8 @@ class NewtonLevel {
                       Vector& wv) const {
     constexpr double inf = std::numeric_limits<double>::infinity();
     if (!v.allFinite()) return inf;
-    if (!zeta.eval(v, zv)) return std::numeric_limits<double>::quiet_NaN();
+    if (!eval_zeta(zeta, v, zv)) return std::numeric_limits<double>::quiet_NaN();
+    ScopedTimer t(timings().spmv);
     wv.noalias() = A_ * v;
     wv += q;
     const double r = residual_of(wv, v - zv);
@@ -124,6 +139,7 @@ class NewtonLevel {
   /// The rounding level of Res at z: ε (‖|A||z| + |q|‖₂ + ‖|z| + |ζ(z)|‖₂), the size of the rounding
   /// error in w = Az + q and g = z − ζ(z) (ζ(z) = z − g), below which no step brings Res.
   double rounding_level(const Vector& z, const Vector& q, const Vector& g) const {
+    ScopedTimer timer(timings().spmv);
     Vector t = q.cwiseAbs();
     t.noalias() += A_.cwiseAbs() * z.cwiseAbs();
     constexpr double eps = std::numeric_limits<double>::epsilon();
@@ -173,10 +189,12 @@ class NewtonLevel {
   /// `sweeps` symmetric projected Gauss–Seidel sweeps on LCP(q, A) from y (the free function of
   /// that name); a column-major A (no row access) is not swept at all.
   void projected_gauss_seidel(const Vector& q, Vector& y, int sweeps) const {
+    ScopedTimer t(timings().spmv);  // a sweep is a product with A (as the AOR types' one-pass sweep)
     if constexpr (MatrixType::IsRowMajor) detail::projected_gauss_seidel(A_, q, y, sweeps);
   }
   /// The same on ICP(q, A, ζ) with ζ(z) = Bz + c, from z: z_i ≥ (Bz)_i + c_i.
   void projected_gauss_seidel(const Vector& q, const RowMatrix& B, const Vector& c, Vector& z, int sweeps) const {
+    ScopedTimer t(timings().spmv);
     if constexpr (MatrixType::IsRowMajor)
       detail::projected_gauss_seidel(A_, q, z, sweeps, [&](Eigen::Index i, const Vector& v) {
         double bz = c[i];
@@ -189,6 +207,7 @@ class NewtonLevel {
   /// A fallback whose Ω2 + AΩ1 is singular sweeps nothing: Res +inf and the reason in the message.
   Result sweep(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector& z0, int sweeps, double tol) {
     if (!fallback_) try {
+      ScopedTimer t(timings().factorization);
       fallback_.emplace(A_, fallback_options());  // factorizes Ω2 + AΩ1 once
     } catch (const FactorizationError& e) {
       if (e.reason() != FactorizationError::Reason::Singular) throw;
@@ -203,7 +222,14 @@ class NewtonLevel {
     it.tol = tol > 0 ? tol : std::numeric_limits<double>::min();
     it.maxiter = sweeps;
     it.stall_iterations = std::max(1, sweeps);
-    return fallback_->solve(q, zeta, &z0, {}, {}, &it);
+    Result r = fallback_->solve(q, zeta, &z0, {}, {}, &it);
+    absorb(r.timings);
+    return r;
+  }
+  /// ζ(v) into zv, timed; false when ζ failed.
+  bool eval_zeta(const Zeta<StorageIndex>& zeta, const Vector& v, Vector& zv) const {
+    ScopedTimer t(timings().zeta);
+    return zeta.eval(v, zv);
   }
   Result sweep(const Vector& q, const RowMatrix* B, const Vector* c, const Vector& z0, int sweeps, double tol) {
     using Z = Zeta<StorageIndex>;
@@ -212,6 +238,13 @@ class NewtonLevel {
 
  private:
   bool is_inactive(const Vector& w, const Vector& g, Eigen::Index i) const { return (g[i] - ratio_[i] * w[i]) >= 0; }
+  /// The fallback's sweeps' phases into this level's record (its set-up, a lazy factorization, as factorization).
+  void absorb(const Timings& f) const {
+    timings().factorization += f.factorization;
+    timings().zeta += f.zeta;
+    timings().spmv += f.spmv;
+    timings().inner_solve += f.inner_solve;
+  }
 
   const MatrixType& A_;
   Vector ratio_;  // Ω1/Ω2: x ≥ 0 ⇔ g − (Ω1/Ω2) w ≥ 0
@@ -233,6 +266,8 @@ class NewtonLevel {
   Hierarchy<StorageIndex> below_;
   bool borrow_ = false;
   std::optional<Solver<MatrixType>> fallback_;
+  Timings* tm_ = nullptr;
+  mutable Timings unrecorded_;
 };
 
 }  // namespace nrmicp::detail

@@ -104,6 +104,8 @@ class NewtonTally {
   }
 
   int nit() const { return tally_.nit; }
+  /// The phases' seconds of this solve (the levels record into it: NewtonLevel::record_into).
+  Timings& timings() { return tally_.timings; }
   /// nit, for a Monitor that numbers its iterates by it (Monitor::number_by).
   const int* nit_counter() const { return &tally_.nit; }
   int fallback_sweeps() const { return tally_.newton.fallback_sweeps; }
@@ -148,7 +150,10 @@ class NewtonTally {
   Result finish(const Vector& z, double residual, Status status, std::string message, const Vector& q) const {
     Result r = tally_;
     r.z = z;
-    r.w = A_ * z + q;
+    {
+      ScopedTimer t(r.timings.spmv);
+      r.w = A_ * z + q;
+    }
     r.residual = residual;
     r.status = status;
     r.message = std::move(message);
@@ -206,7 +211,12 @@ class NewtonRun {
 
   /// `nest`: start from the nested coarse-to-fine solution (solve_obstacle may try the user's z0 first).
   NewtonRun(const NewtonLevels<MatrixType>& levels, const Options& o, const Hooks& hooks, bool nest)
-      : levels_(levels), o_(o), hooks_(hooks), nest_(nest), tally_(levels.A, levels.count()) {}
+      : levels_(levels), o_(o), hooks_(hooks), nest_(nest), tally_(levels.A, levels.count()) {
+    record_into(&tally_.timings());
+  }
+  ~NewtonRun() { record_into(nullptr); }
+  NewtonRun(const NewtonRun&) = delete;
+  NewtonRun& operator=(const NewtonRun&) = delete;
 
   /// The obstacle problem z ≥ ψ as LCP(q + Aψ, A) in y = z − ψ; an empty ψ is ψ = 0, the LCP itself
   /// (no shifted copy of q, no vector of zeros: two n-vectors of the finest level's peak memory).
@@ -217,6 +227,7 @@ class NewtonRun {
     const bool shifted = psi.size() > 0;
     Vector shifted_q;
     if (shifted) {
+      ScopedTimer t(tally_.timings().spmv);
       shifted_q = q;
       shifted_q.noalias() += levels_.A * psi;
     }
@@ -254,10 +265,10 @@ class NewtonRun {
   Result solve_affine(const Vector& q, const Z& zeta, const Vector* z0) {
     const Eigen::Index n = q.size();
     Vector psi(n);
-    zeta.eval(z0 ? *z0 : Vector::Zero(n), psi);
+    levels_.finest->eval_zeta(zeta, z0 ? *z0 : Vector::Zero(n), psi);
     const Vector start = (z0 && !nest_) ? *z0 : solve_inner_obstacle(q, psi, z0);
     const auto t0 = std::chrono::steady_clock::now();
-    auto K = levels_.finest->affine_system(zeta.B());
+    auto K = levels_.finest->affine_system(zeta.B(), &Timings::setup);  // analysed once for the solve
     const Vector& c = zeta.c();
     const auto out = newton_loop(*levels_.finest, *K, q, &zeta.B(), &c, start,
                                  finest_control(Vector::Zero(n), o_.tol, o_.maxiter, true));
@@ -292,7 +303,7 @@ class NewtonRun {
     const Eigen::Index n = q.size();
     Vector psi(n);
     const Vector z_start = z0 ? *z0 : Vector::Zero(n);
-    if (!zeta.eval(z_start, psi)) return tally_.zeta_failed(z_start, q);
+    if (!levels_.finest->eval_zeta(zeta, z_start, psi)) return tally_.zeta_failed(z_start, q);
     Vector start = (z0 && !nest_) ? *z0 : solve_inner_obstacle(q, psi, z0);
     const auto t0 = std::chrono::steady_clock::now();
     Step plain(*levels_.finest, {*levels_.finest, q, zeta, {}, {}, {}}, start);
@@ -333,6 +344,12 @@ class NewtonRun {
     int sweep_budget() const { return run.o_.maxiter; }
   };
 
+  /// Every level records its work into this solve's timings (nullptr: into none).
+  void record_into(Timings* tm) const {
+    levels_.finest->record_into(tm);
+    for (const auto& level : levels_.coarse) level->record_into(tm);
+  }
+
   /// The obstacle problem as the start of an affine or semismooth solve (no report, to a settled set).
   Vector solve_inner_obstacle(const Vector& q, const Vector& psi, const Vector* z0) {
     return solve_obstacle(q, psi, z0, nest_, 0.0, std::min(start_maxiter, o_.maxiter), false).z;
@@ -357,7 +374,8 @@ class NewtonRun {
   }
 
   /// Res(y) < warm_start_fraction × Res(0) on LCP(q_shift, A): y is a guess worth more than a cold start.
-  bool closer_than_cold(const Vector& q_shift, const Vector& y) const {
+  bool closer_than_cold(const Vector& q_shift, const Vector& y) {
+    ScopedTimer t(tally_.timings().spmv);
     Vector w = q_shift;
     w.noalias() += levels_.A * y;
     return residual_of(w, y) < NewtonTuning::warm_start_fraction * stable_norm(q_shift.cwiseMin(0.0));

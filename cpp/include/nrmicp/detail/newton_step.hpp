@@ -16,6 +16,7 @@
 #include "../zeta.hpp"
 #include "active_set.hpp"
 #include "newton_level.hpp"
+#include "timer.hpp"
 
 #include <Eigen/SparseCore>
 
@@ -80,10 +81,14 @@ struct JacobianLinearization {
     return r;
   }
   /// B = J(z), c = ζ(z) − Jz and a new system on their pattern; false when the Jacobian failed.
+  /// The Jacobian counts as ζ's time; the new system's analysis as this step's factorization.
   bool linearize(const Vector& z, const Vector& zeta_z) {
-    if (!zeta.jacobian(z, J)) return false;
+    {
+      ScopedTimer t(level.timings().zeta);
+      if (!zeta.jacobian(z, J)) return false;
+    }
     c = zeta_z - J * z;
-    K = level.affine_system(J);
+    K = level.affine_system(J, &Timings::factorization);
     return true;
   }
   System& system() { return *K; }
@@ -124,7 +129,10 @@ class NewtonStep {
   /// ζ's linearization at z; false when ζ's Jacobian failed.
   bool linearize() { return lin_.linearize(z_, zeta_z_); }
   /// The reduced system of the piece `inactive`; false when it is singular.
-  bool factorize(const std::vector<char>& inactive) { return lin_.system().factorize(inactive); }
+  bool factorize(const std::vector<char>& inactive) {
+    ScopedTimer t(level_.timings().factorization);  // direct: numeric factorization; cg: the V-cycle's update
+    return lin_.system().factorize(inactive);
+  }
 
   /// The trial iterate z⁺ of the piece `inactive` (after factorize); its Res. The one inner solve
   /// of the Newton member: an iterative one (inner = cg) starts from z and stops at tol / 10, or
@@ -133,7 +141,10 @@ class NewtonStep {
     Vector& rhs = w_new_;  // w⁺ is written after the solve: its storage holds the right-hand side
     for (Eigen::Index i = 0; i < size(); ++i) rhs[i] = inactive[i] ? -lin_.q[i] : lin_.c_at(i);
     z_new_ = z_;
-    inner_iterations_ += lin_.system().solve(rhs, z_new_, std::max(0.1 * tol, forcing * r_));
+    {
+      ScopedTimer t(level_.timings().inner_solve);
+      inner_iterations_ += lin_.system().solve(rhs, z_new_, std::max(0.1 * tol, forcing * r_));
+    }
     ++solves_;
     ++steps_;
     return r_new_ = lin_.evaluate(z_new_, w_new_, g_new_, zeta_new_);
