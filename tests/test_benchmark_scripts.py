@@ -75,3 +75,15 @@ def test_time_stepping_table():
     assert [r[1] for r in rows] == ["4,225"]
     values = [float(c.split("value ")[1]) for c in rows[0][2:]]
     assert len(values) == 3 and max(values) - min(values) < 1e-6, rows
+
+
+def test_units_table():
+    # README "What you get back": the units table's command, on its quick sizes (n <= 2,000)
+    text = run("units.py", "--quick")
+    rows = table_rows(text.split("\n\n")[0])
+    assert {r[0] for r in rows} >= {"README membrane", "Bai (mu = 4)"}
+    for r in rows:
+        if r[2].startswith("auto"):   # the defaults succeed in every unit, with the exact contact set
+            assert r[3] == "ok / ok / ok" and r[5] == "same" and float(r[4]) < 1e-6, r
+        if "ok" in r[3]:
+            assert float(r[4]) < 1e-6 and r[5] == "same", r   # every success, in any unit, is one
