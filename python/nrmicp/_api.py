@@ -72,8 +72,11 @@ class Result(OptimizeResult):
 
     Attributes: ``z`` (the solution, or the best iterate when not converged), ``w`` (= Az + q),
     ``success``, ``status`` (:class:`Status`), ``message``, ``nit`` (iterations to reach ``z``),
-    ``residual`` (Res(z) = ‖min(Az+q, z−ζ(z))‖₂), ``history`` (dict of arrays ``iteration``,
-    ``seconds``, ``residual``; None unless ``record_history``), ``timings`` (dict of wall-clock
+    ``residual`` (Res(z) = ‖min(Az+q, z−ζ(z))‖₂, the paper's measure, whatever rule decided),
+    ``criterion`` (what decided ``success``: ``measure`` "units" (the default rule, Res_E) or
+    "paper", its ``target`` and its ``value`` at z), ``history`` (dict of arrays ``iteration``,
+    ``seconds``, ``residual``: the deciding measure, as the callback's; None unless
+    ``record_history``), ``timings`` (dict of wall-clock
     seconds of this call: ``total`` the whole call from entry to return, so for
     :func:`nrmicp.solve` the set-up included, for :meth:`Solver.solve` that call only (the
     constructor's seconds are :attr:`Solver.setup_timings`); ``setup`` the set-up done in the
