@@ -440,7 +440,9 @@ class Solver:
     ``Solver(A, method=..., **options)`` accepts the set-up options of :func:`solve`
     (method, omega1, omega2, gamma, phi, alpha, beta, inner, scale, hierarchy, polish) and defaults for the
     iteration options (tol, rtol, maxiter, theta, z_update, accelerate, anderson_m, record_history,
-    stall_iterations, verbose), each of which :meth:`solve` may override. A is referenced, not
+    stall_iterations, verbose), each of which :meth:`solve` may override (give ``tol``/``rtol`` here
+    when every solve uses them: a Solver set up for the default rule iterates on σA, and a solve under
+    the paper's tol then re-measures and may re-solve). A is referenced, not
     copied, when it is canonical float64 CSR and ``scale`` is off: do not modify it while the
     Solver lives. Threads may share a Solver (a ``newton`` one runs their solves one at a time); a
     ``newton`` solve started from inside a solve of the same Solver (its callback or ζ) raises
