@@ -301,6 +301,7 @@ def _chain_with_identity_rows(n, lone):
     return sp.csr_matrix(A)
 
 
+@pytest.mark.filterwarnings("ignore::nrmicp.HierarchyWarning")   # n = 8: its last level, 1 x 1 on the coupled rows, goes
 def test_every_level_of_a_hierarchy_list_keeps_only_what_interpolates_coupled_rows():
     # aggregation prolongations whose coarse unknowns at several levels only interpolate identity
     # rows: each level is restricted (a level no coarser than the one above merged into the next),
@@ -314,6 +315,8 @@ def test_every_level_of_a_hierarchy_list_keeps_only_what_interpolates_coupled_ro
         s = nrmicp.Solver(A, method="newton", hierarchy=Ps)
         res = s.solve(q, np.full(n, -0.5))
         assert res.success and len(res.level_steps) == s.levels >= 2, (n, res.level_steps, s.levels)
+        assert res.hierarchy["requested"] == len(Ps) + 1 and res.hierarchy["used"] == s.levels
+        assert (res.hierarchy["reason"] is None) == (s.levels == len(Ps) + 1)
         assert np.abs(res.z - solve_exact_obstacle(A, q, np.full(n, -0.5))).max() <= 1e-10
 
 

@@ -377,6 +377,12 @@ class PyNewton : public PyCore<I, nrmicp::Newton<CsrMap<I>>> {
     return result_dict(r, false);
   }
   int levels() const { return this->core_->levels(); }
+  py::dict hierarchy() const {
+    const nrmicp::HierarchyReport& h = this->core_->hierarchy();
+    py::dict d;
+    d["requested"] = h.requested; d["used"] = h.used; d["reason"] = h.reason;
+    return d;
+  }
   py::dict parameters() const {
     const auto& p = this->core_->parameters();
     py::dict d;
@@ -402,6 +408,8 @@ void bind_newton(py::module_& m, const char* name) {
       .def("polish", &PyNewton<I>::polish, py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"),
            py::arg("b_indptr"), py::arg("b_indices"), py::arg("b_data"), py::arg("zeta_fn"), py::arg("z"), py::arg("tol"))
       .def_property_readonly("levels", &PyNewton<I>::levels)
+      .def_property_readonly("hierarchy", &PyNewton<I>::hierarchy,
+                             "{'requested', 'used', 'reason'}: the levels given and used, why fewer ('' when none)")
       .def("parameters", &PyNewton<I>::parameters);
   PyNewton<I>::def_solve(cls);
 }

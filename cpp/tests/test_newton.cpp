@@ -512,6 +512,31 @@ TEST_CASE("a Krylov solve that does not converge is redone by the direct solve: 
   CHECK((zk - zd).lpNorm<Eigen::Infinity>() < 1e-8);
 }
 
+TEST_CASE("a coarse operator with a non-positive diagonal ends the hierarchy there, and hierarchy() says where") {
+  const int m = 31;  // 31 -> 15 -> 7 -> 3
+  const RowMat A = laplacian_2d(m);
+  const Vec psi = paraboloid(m), q = Vec::Zero(m * m);
+  std::vector<RowMat> P = hierarchy_2d(m);
+  const Newton<RowMat> kept(A, Options(), P);
+  CHECK(kept.hierarchy().requested == 4);
+  CHECK(kept.hierarchy().used == 4);
+  CHECK(kept.hierarchy().reason.empty());
+  // column 5 of P_1 emptied: (P_1ᵀ A_1 P_1)_55 = 0, so level 2 and the levels below it go
+  for (int k = P[1].outerIndexPtr()[0]; k < P[1].outerIndexPtr()[P[1].rows()]; ++k)
+    if (P[1].innerIndexPtr()[k] == 5) P[1].valuePtr()[k] = 0.0;
+  Options o;
+  o.tol = 1e-9;
+  const Newton<RowMat> cut(A, o, P);
+  CHECK(cut.levels() == 2);
+  CHECK(cut.hierarchy().requested == 4);
+  CHECK(cut.hierarchy().used == 2);
+  CHECK(cut.hierarchy().reason.find("level 2 (prolongations[1]) has a_ii = 0 <= 0 at row 5") != std::string::npos);
+  const Result r = cut.solve(q, Zeta<int>::constant(psi));
+  CHECK(r.status == Status::Converged);
+  CHECK(r.newton.level_steps.size() == 2);
+  check_complementarity(A, q, r.z, psi, 1e-9);
+}
+
 TEST_CASE("a prolongation of the wrong shape is refused, naming it") {
   const RowMat A = laplacian_2d(7);
   std::vector<RowMat> P{interpolation_2d(15)};

@@ -90,6 +90,11 @@ class Result(OptimizeResult):
     ``method``, ``inner`` (the solver used for the left matrix), ``counters`` (dict name -> int:
     what the step kind counts beyond the iterations, e.g. ``anderson_rejections``, the
     accelerated steps replaced by the plain one; empty when it counts nothing).
+    Method 'newton' adds ``hierarchy``: ``{"requested": levels requested (1 + the prolongations
+    listed; for 'amg', the levels its set-up built plus one it gave up), "used": levels nested
+    over (:attr:`Solver.levels`), "reason": why fewer are used (which level, what was wrong), or
+    None}``; a shortened hierarchy also raises a :class:`nrmicp.HierarchyWarning` at set-up and is
+    named in the message of a solve that does not converge.
     ``x`` is an alias of ``z`` (scipy's name for the solution).
     """
 
@@ -464,7 +469,7 @@ class Solver:
                  accelerate: Optional[str] = "none", anderson_m: int = 5, record_history: bool = False,
                  stall_iterations: int = 100, scale: Union[bool, str] = False, verbose: int = 0,
                  hierarchy: Any = "auto", polish: bool = False, _decouple: bool = True,
-                 _units_factor: Optional[float] = None) -> None:
+                 _units_factor: Optional[float] = None, _hierarchy_asked: Optional[tuple] = None) -> None:
         t0 = time.perf_counter()
         settings = dict(method=method, omega1=omega1, omega2=omega2, gamma=gamma, phi=phi, alpha=alpha, beta=beta,
                         inner=inner, tol=tol, rtol=rtol, maxiter=maxiter, theta=theta, z_update=z_update,
@@ -505,25 +510,26 @@ class Solver:
         self._settings, self._whole_solver = settings, None
         if self._reduced is not None:
             self.polish = self._reduced.inner.polish
+            self._hierarchy = self._reduced.inner._hierarchy   # it warned
             factorization = self._reduced.inner.setup_timings["factorization"]
         else:
-            self._build_core(opts, hierarchy, polish, units)
+            self._build_core(opts, hierarchy, polish, units, _hierarchy_asked)
             factorization = self._core.setup_timings()["factorization"]
         self._setup_timings = {"setup": time.perf_counter() - t0, "factorization": factorization}
 
-    def _build_core(self, opts, hierarchy, polish, units) -> None:
-        """The C++ core on A (scaled when asked, or σA under the default rule `units`; method 'newton':
-        with its hierarchy)."""
+    def _build_core(self, opts, hierarchy, polish, units, asked=None) -> None:
+        """The C++ core on A (scaled when asked or, under the default rule `units`, by σ; method
+        'newton': with its hierarchy, `asked` as _newton.levels takes it)."""
         n = self.n
-        pairs = None
+        built = self._hierarchy = None
         if units and self.scale is None:   # the default rule iterates on σA, σq (σ a power of two: exact)
             self.scale = "units"
         if self.method == "newton" and self.scale in (None, "units") and _newton.resolves_to_amg(hierarchy, self.A):
-            pairs = _newton.amg_levels_or_rows(self.A)
-            if pairs is None:   # rows scaled apart: equilibrated, the amg hierarchy stays (_newton.py)
+            built = _newton.amg_levels_or_rows(self.A)
+            if built is None:   # rows scaled apart: equilibrated, the amg hierarchy stays (_newton.py)
                 self.scale = "rows"
             elif self.scale == "units":
-                pairs = [(P, self._units_factor * Ac) for P, Ac in pairs]
+                built = ([(P, self._units_factor * Ac) for P, Ac in built[0]], built[1])
         if self.scale is None:
             self._dr = self._dc = None
             A_core = self.A
@@ -538,7 +544,9 @@ class Solver:
         self._polisher = None
         with _user_entries(self.A, A_core):
             if self.method == "newton":
-                self._core = _newton.make_core(A_core, opts, hierarchy, self.A, self._dc, pairs)
+                self._core, self._hierarchy = _newton.make_core(A_core, opts, hierarchy, self.A, self._dc, built,
+                                                                asked)
+                _newton.warn_shortened(self._hierarchy, hierarchy)
                 return
             _newton.check_no_hierarchy(hierarchy, self.method)
             core_cls = _core.SolverI64 if self._index_dtype == np.int64 else _core.SolverI32
@@ -571,7 +579,8 @@ class Solver:
 
     @property
     def levels(self) -> int:
-        """Levels of nested iteration (method 'newton': 1 + the number of prolongations; else 1)."""
+        """Levels of nested iteration (method 'newton': 1 + the number of prolongations used, fewer
+        than requested when the set-up gave some up (a HierarchyWarning said why); else 1)."""
         if self._reduced is not None:
             return self._reduced.inner.levels
         return self._core.levels if self.method == "newton" else 1
@@ -671,7 +680,7 @@ class Solver:
         r.status, r.message, r.residual, r.criterion = _criterion_outcome(measure, r.z, r.residual, tol, r.status,
                                                                           r.message)
         if r.status != Status.CONVERGED:
-            r.message += measure.infeasibility()
+            r.message = _newton.with_shortening(r.status, r.message + measure.infeasibility(), self._hierarchy)
         r.success = r.status == Status.CONVERGED
         return r
 
@@ -744,8 +753,9 @@ class Solver:
                   and "rounding floor" in polish_core["message"]):
                 status, message = Status.STAGNATED, f"{message}; polish: {polish_core['message']}"
         if self.method == "newton":
-            extra.update(_newton.result_fields(rounds.best_d))
+            extra.update(_newton.result_fields(rounds.best_d, self._hierarchy))
         status, message, res, extra["criterion"] = _criterion_outcome(measure, z, res, tol, status, message)
+        message = _newton.with_shortening(status, message, self._hierarchy)
         return Result(z=z, w=w, success=status == Status.CONVERGED, status=status, message=message,
                       nit=rounds.nit, iterations=rounds.done_iters, residual=res, history=rounds.history(),
                       timings=rounds.timings, method=self.method, inner=rounds.best_d["inner"],
@@ -1085,6 +1095,8 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
         is nonzero and closer than a cold start (its Res below half the Res at the obstacle: a time
         step's previous solution): ``x0`` is then tried for up to 6 finest-level steps, the hierarchy
         serving the inner solves, before the nested start takes over (README "Time stepping").
+        A coarse operator with a non-positive diagonal ends the hierarchy there; any level given up
+        raises a :class:`nrmicp.HierarchyWarning` at set-up and shows in ``result.hierarchy``.
     zeta_jacobian : callable, optional
         Method 'newton' with a callable ζ: ``zeta_jacobian(z)`` returns a generalized Jacobian of ζ
         at z as an (n, n) sparse matrix; then Newton works on the whole ICP (a semismooth Newton
@@ -1103,8 +1115,9 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
         ``timings``. A solve that does not converge says so in ``status`` and returns its best iterate.
         Method 'newton' adds ``linear_solves`` (all levels), ``inner_iterations`` (CG or BiCGSTAB
         iterations of ``inner='cg'``, all levels; 0 for direct solves), ``fallback_sweeps``, ``outer_iterations``
-        (callable ζ), ``level_steps`` and ``level_seconds`` (per level, finest first) and ``path``
-        ('newton', 'newton+fallback' or 'fallback'); its ``nit`` counts finest-level Newton steps.
+        (callable ζ), ``level_steps`` and ``level_seconds`` (per level, finest first), ``path``
+        ('newton', 'newton+fallback' or 'fallback') and ``hierarchy`` (levels requested and used,
+        and why fewer: :class:`Result`); its ``nit`` counts finest-level Newton steps.
         Without a callable ζ, Res(z) is re-measured in numpy in the original variables before
         success is declared (this matters for a constant obstacle, which the core solves as the
         shifted LCP), with the same re-solve rule as for ``scale``.

@@ -44,28 +44,36 @@ def _diagonal_part(value, F):
 
 
 def _hierarchy_part(hierarchy, A, F):
-    """A list of prolongations on the coupled rows: each P_l's rows of the unknowns kept on its fine
-    level (F on the first), without the coarse columns that interpolate none of them (their
+    """(A list of prolongations on the coupled rows: each P_l's rows of the unknowns kept on its
+    fine level (F on the first), without the coarse columns that interpolate none of them (their
     Galerkin row would be zero, and the core would end the hierarchy there); a level left no
-    coarser than the one above is merged into the next, or dropped when it is the last. Strings
-    and None kept."""
+    coarser than the one above is merged into the next, or dropped when it is the last; the
+    `asked` of _newton.levels: (levels requested, why fewer are left, or None)). Strings and None
+    kept (asked None)."""
     if hierarchy is None or isinstance(hierarchy, str):
-        return hierarchy
+        return hierarchy, None
     from ._hierarchy import resolve_hierarchy
-    out, kept, waiting = [], F, None   # waiting: a level not coarser than the one above, merged into the next
-    for P in resolve_hierarchy(hierarchy, A):   # checked on the whole A: errors name the user's shapes
+    Ps = resolve_hierarchy(hierarchy, A)   # checked on the whole A: errors name the user's shapes
+    out, kept, waiting, why = [], F, None, []   # waiting: a level not coarser than the one above, merged into the next
+    for level, P in enumerate(Ps):
         P = sp.csr_matrix(P[kept])
         if waiting is not None:
             P = sp.csr_matrix(waiting @ P)
         P.eliminate_zeros()
         kept = np.unique(P.indices)
         if kept.size == 0:
+            why.append(f"hierarchy[{level}] interpolates none of the coupled rows (those not a lone diagonal): "
+                       "dropped with the levels after it")
             break
         P = sp.csr_matrix(P[:, kept])
         waiting = None if P.shape[1] < P.shape[0] else P
         if waiting is None:
+            P.sort_indices()   # canonical: the inner Solver would warn of a conversion the user never asked for
             out.append(P)
-    return out
+        else:
+            why.append(f"hierarchy[{level}] is no coarser than its fine level on the coupled rows ({P.shape[1]} "
+                       f"columns for {P.shape[0]} rows): {'merged into the next' if level + 1 < len(Ps) else 'dropped'}")
+    return out, (len(Ps) + 1, "; ".join(why) or None)
 
 
 class Reduced:
@@ -83,9 +91,10 @@ class Reduced:
         self.A_FD = sp.csr_matrix(rows[:, D])
         A_FF = sp.csr_matrix(rows[:, self.F])
         A_FF.sort_indices()
-        part = dict(settings, hierarchy=_hierarchy_part(settings["hierarchy"], A, self.F),
+        hierarchy, asked = _hierarchy_part(settings["hierarchy"], A, self.F)
+        part = dict(settings, hierarchy=hierarchy,
                     **{k: _diagonal_part(settings[k], self.F) for k in ("omega1", "omega2", "phi")})
-        self.inner = solver_cls(A_FF, _decouple=False, _units_factor=units_factor, **part)
+        self.inner = solver_cls(A_FF, _decouple=False, _units_factor=units_factor, _hierarchy_asked=asked, **part)
         self.n = n
 
     def z_decoupled(self, q: np.ndarray, c: Optional[np.ndarray]) -> Optional[np.ndarray]:

@@ -26,7 +26,14 @@ import scipy.sparse as sp
 from . import _core
 from ._inputs import ConversionWarning, _warn, as_csr
 
-__all__ = ["amg_prolongations", "amg_levels", "resolve_hierarchy"]
+__all__ = ["amg_prolongations", "amg_levels", "amg_levels_why", "resolve_hierarchy", "HierarchyWarning"]
+
+
+class HierarchyWarning(UserWarning):
+    """A requested hierarchy (``hierarchy='amg'``, ``'auto'`` where it builds amg, or a list) was
+    shortened or given up at set-up: the Newton member nests over fewer levels than requested (a
+    cold start with one). The answer meets the same tol; its cost may not. Raised once per Solver
+    set-up; ``result.hierarchy`` and :attr:`Solver.levels` say what is used."""
 
 # Classical strength of connection on A's rows, θ = 0.25 (pyamg's default): it needs no
 # symmetry. On the upwind convection–diffusion obstacle (scenes, ε = 0.01, m = 63 → 191,
@@ -167,12 +174,21 @@ def _canonical(P) -> sp.csr_matrix:
     return P
 
 
+def nonpositive_diagonal(M, what: str):
+    """Why `what` (a matrix M) cannot be a level: its first entry a_ii <= 0, or None."""
+    d = M.diagonal()
+    bad = np.flatnonzero(~(d > 0))
+    return None if bad.size == 0 else f"{what} has a_ii = {d[bad[0]]:.3g} <= 0 at row {bad[0]}"
+
+
 def _auxiliary_level(A, theta, sweeps, truncate):
     """One prolongation of A built on :func:`auxiliary_m_matrix`, or None when the splitting
-    leaves no coarse (or no fine) point."""
+    leaves no coarse (or no fine) point, or why the level is given up (a str)."""
     B = auxiliary_m_matrix(A)
-    if not (B.diagonal() > 0).all():   # the weights divide by it (and Newton needs it > 0 anyway)
-        return None
+    # the weights divide by its diagonal (and Newton needs it > 0 anyway)
+    why = nonpositive_diagonal(B, "auxiliary M-matrix (its positive off-diagonals lumped into the diagonal)")
+    if why is not None:
+        return why
     # norm='min': only negative couplings are strong (pyamg 5's 'abs' counts the positive P2
     # couplings: 88 finest steps on P2 at n = 32,513, and P entries down to -2.7)
     S = _strength(B, theta, "min")
@@ -224,6 +240,13 @@ def amg_levels(A, **opts) -> list:
     A's rows). Returns a list of pairs of float64 canonical ``scipy.sparse.csr_matrix``, P_l of
     shape (n_l, n_{l+1}) and A_{l+1}; ``[]`` when A is already small enough to be the coarsest level.
     """
+    return amg_levels_why(A, **opts)[0]
+
+
+def amg_levels_why(A, **opts) -> tuple:
+    """(:func:`amg_levels`, why the set-up gave up the next level: a str naming the level, the
+    row and the non-positive diagonal entry that stopped it; None when it ended by its own rules
+    (max_coarse, max_levels, a splitting without coarse or fine points))."""
     _pyamg()
     A = sp.csr_matrix(A, dtype=np.float64)
     if A.shape[0] != A.shape[1]:
@@ -235,17 +258,17 @@ def amg_levels(A, **opts) -> list:
         return _levels(A, {**_RS_DEFAULTS, **opts})
 
 
-def _levels(A, kw) -> list:
-    """amg_levels' levels of A with the options kw (all given)."""
+def _levels(A, kw) -> tuple:
+    """amg_levels_why's (levels, why) of A with the options kw (all given)."""
     out = []
     while len(out) < kw["aux_levels"] and A.shape[0] > kw["max_coarse"] and len(out) < kw["max_levels"] - 1:
         P = _auxiliary_level(A, kw["theta"], kw["sweeps"], kw["truncate"])
-        if P is None:
-            return out
+        if P is None or isinstance(P, str):
+            return out, None if P is None else f"the amg set-up gave up level {len(out) + 1}: level {len(out)}'s {P}"
         A_fine, A = A, _canonical(P.T @ (A @ P))   # our own product: canonical in place, no copy
         out.append((P, A))
     if A.shape[0] <= kw["max_coarse"] or len(out) >= kw["max_levels"] - 1:
-        return out
+        return out, None
     # A first coarse operator denser than A (7-point 3D: 546k unknowns, 18.7 nonzeros a row
     # against 6.9) costs more per V-cycle and per Newton step than the finest level: it is then
     # folded into the next (P_0 P_1, nonnegative), whose levels use direct interpolation (a
@@ -263,7 +286,7 @@ def _levels(A, kw) -> list:
             _rs_levels(A, kw["theta"], kw["max_coarse"], kw["max_levels"] - len(out), "direct" if dense else "classical")]
     if dense and len(out) > 1:   # (P_0 P_1)ᵀ A (P_0 P_1) = P_1ᵀ A_1 P_1 = A_2
         out[:2] = [(_canonical(out[0][0] @ out[1][0]), out[1][1])]
-    return out
+    return out, None
 
 
 def resolve_hierarchy(hierarchy, A) -> list | None:

@@ -8,7 +8,8 @@ import time
 import numpy as np
 
 from . import _core
-from ._hierarchy import amg_levels, resolve_hierarchy
+from ._hierarchy import HierarchyWarning, amg_levels_why, resolve_hierarchy
+from ._inputs import _warn
 
 #: hierarchy="auto" builds the AMG hierarchy (pyamg) for method "newton" from this many unknowns
 #: on, and starts cold below, where AMG's set-up outweighs the steps it saves (docs/MEASUREMENTS.md).
@@ -49,23 +50,25 @@ def resolves_to_amg(hierarchy, A) -> bool:
 
 
 def amg_levels_or_rows(A):
-    """The amg levels of an unscaled A, or None when one of their Galerkin operators PᵀAP has a
+    """amg_levels_why of an unscaled A, or None when one of its Galerkin operators PᵀAP has a
     non-positive diagonal: the core would end the hierarchy there and start cold. That happens when
     A is a symmetric matrix with its rows scaled apart, D·S (P1 n = 130,561, d_i in [0.1, 10]: 51
     Newton steps with direct solves, 27 CPU s); equilibrated rows keep the diagonals positive (5
     finest steps, 0.95 s), so the caller then scales the rows (scale='rows')."""
-    pairs = amg_levels(A)
-    return pairs if all((Ac.diagonal() > 0).all() for _, Ac in pairs) else None
+    pairs, why = amg_levels_why(A)
+    return (pairs, why) if all((Ac.diagonal() > 0).all() for _, Ac in pairs) else None
 
 
-def levels(hierarchy, A, A_core, dc, pairs=None) -> tuple:
+def levels(hierarchy, A, A_core, dc, built=None, asked=None) -> tuple:
     """hierarchy= -> (prolongations for the core's matrix A_core (= A, or D_r A D_c when scaled),
-    their Galerkin operators or None: the amg set-up forms them (or `pairs`, formed already), a
-    given list leaves them to the core). 'auto': 'amg' for a sparse A of n >= AUTO_AMG_MIN_N when
-    pyamg is importable, else none (cold start)."""
+    their Galerkin operators or None: the amg set-up forms them (or `built`, amg_levels_why's
+    formed already), a given list leaves them to the core; the levels requested; why some are
+    given up before the core, or None). 'auto': 'amg' for a sparse A of n >= AUTO_AMG_MIN_N when
+    pyamg is importable, else none (cold start). `asked`: (levels requested, why) of a list made
+    from the user's (the coupled rows' part: _decoupled.py)."""
     if resolves_to_amg(hierarchy, A):
-        pairs = amg_levels(A_core) if pairs is None else pairs
-        return [P for P, _ in pairs], [Ac for _, Ac in pairs]
+        pairs, why = amg_levels_why(A_core) if built is None else built
+        return [P for P, _ in pairs], [Ac for _, Ac in pairs], len(pairs) + 1 + (why is not None), why
     if isinstance(hierarchy, str) and hierarchy == "auto":
         hierarchy = None
     Ps = resolve_hierarchy(hierarchy, A) or []
@@ -73,13 +76,39 @@ def levels(hierarchy, A, A_core, dc, pairs=None) -> tuple:
         # z = D_c y: a prolongation of y is D_c⁻¹ P (the coarse variables keep their scale).
         import scipy.sparse as sp
         Ps = [sp.csr_matrix(sp.diags(1.0 / dc) @ Ps[0])] + Ps[1:]
-    return Ps, None
+    requested, why = asked or (len(Ps) + 1, None)
+    return Ps, None, requested, why
 
 
-def make_core(A_core, opts, hierarchy, A, dc, pairs=None):
-    """The C++ Newton object (NewtonI32/NewtonI64) with its prolongations (and coarse operators)."""
+def hierarchy_report(requested: int, why, core) -> dict:
+    """The result field ``hierarchy``: {"requested": levels requested, "used": levels the core
+    nests over (Solver.levels), "reason": why fewer are used (the Python layer's `why`, then the
+    core's), None when all are}."""
+    used, core_why = core.levels, core.hierarchy["reason"]
+    reasons = [r for r in (why, core_why) if r]
+    return {"requested": requested, "used": used, "reason": "; ".join(reasons) if used < requested else None}
+
+
+def warn_shortened(report: dict, hierarchy) -> None:
+    """The HierarchyWarning of a set-up whose requested hierarchy was shortened (once per set-up)."""
+    if report["reason"] is None:
+        return
+    what = f"[{report['requested'] - 1} prolongations]" if isinstance(hierarchy, (list, tuple)) else repr(hierarchy)
+    _warn(f"hierarchy={what}: {shortened(report)}", HierarchyWarning)
+
+
+def shortened(report: dict) -> str:
+    """The shortening in words: levels requested and used, and why."""
+    used = report["used"]
+    how = "a cold start (no nested iteration)" if used == 1 else f"nested iteration over {used} levels"
+    return f"{report['requested']} levels requested, {used} used, {how}: {report['reason']}"
+
+
+def make_core(A_core, opts, hierarchy, A, dc, built=None, asked=None):
+    """(The C++ Newton object (NewtonI32/NewtonI64) with its prolongations (and coarse operators),
+    the hierarchy_report of its set-up)."""
     idx = A_core.indices.dtype
-    Ps, coarse = levels(hierarchy, A, A_core, dc, pairs)
+    Ps, coarse, requested, why = levels(hierarchy, A, A_core, dc, built, asked)
 
     def triple(M):
         return (M.indptr.astype(idx, copy=False), M.indices.astype(idx, copy=False),   # the core copies them
@@ -88,7 +117,8 @@ def make_core(A_core, opts, hierarchy, A, dc, pairs=None):
     cls = _core.NewtonI64 if idx == np.int64 else _core.NewtonI32
     prolongations, coarse_operators = [triple(P) for P in Ps], [triple(Ac) for Ac in coarse or []]
     del Ps, coarse  # the core copies each level and empties these lists as it goes: one copy at a time
-    return cls(A_core.indptr, A_core.indices, A_core.data, A_core.shape[0], opts, prolongations, coarse_operators)
+    core = cls(A_core.indptr, A_core.indices, A_core.data, A_core.shape[0], opts, prolongations, coarse_operators)
+    return core, hierarchy_report(requested, why, core)
 
 
 def polisher(solver):
@@ -102,7 +132,7 @@ def polisher(solver):
         opts = _core.Options()
         opts.method = _core.Method.newton
         try:
-            solver._polisher = make_core(A_core, opts, None, solver.A, solver._dc)
+            solver._polisher = make_core(A_core, opts, None, solver.A, solver._dc)[0]
         except ValueError:
             solver._polisher = False
     return solver._polisher or None
@@ -133,10 +163,19 @@ def polish(solver, problem, z, res, original_residual, dc):
     return (zp, wp, rp), d
 
 
-def result_fields(d) -> dict:
-    """The Newton member's result fields: every field of the core's NewtonStats (result.hpp)."""
+def result_fields(d, report: dict) -> dict:
+    """The Newton member's result fields: every field of the core's NewtonStats (result.hpp), and
+    ``hierarchy`` (a copy of the set-up's hierarchy_report)."""
     stats = d["newton"]
-    return {name: getattr(stats, name) for name in _core.NewtonStats.fields}
+    return {**{name: getattr(stats, name) for name in _core.NewtonStats.fields}, "hierarchy": dict(report)}
+
+
+def with_shortening(status, message: str, report) -> str:
+    """A message of a solve that did not converge, with the hierarchy's shortening (once) if any."""
+    if int(status) == int(_core.Status.CONVERGED) or report is None or report["reason"] is None:
+        return message
+    note = f"; the hierarchy: {shortened(report)}"
+    return message if note in message else message + note
 
 
 def check_jacobian(zeta_jacobian, method, kind) -> bool:

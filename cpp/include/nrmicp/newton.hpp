@@ -55,6 +55,14 @@
 
 namespace nrmicp {
 
+/// What became of the prolongations given to nrmicp::Newton: `requested` levels (1 + the
+/// prolongations), `used` (Newton::levels()) and, when fewer are used, why ("" when all are).
+struct HierarchyReport {
+  int requested = 1;
+  int used = 1;
+  std::string reason;
+};
+
 /// The Newton member. Set-up once (coarse operators PᵀAP, symbolic analyses on first use);
 /// solve(q, ζ) many times. `A` is held by reference and must outlive the object. Concurrent
 /// solves on one object are serialized (the factorizations are reused state).
@@ -99,8 +107,10 @@ class Newton {
   Parameters parameters() const { return resolve_parameters(levels_.A, options_); }
   /// The inner solver of the reduced systems ("none" before the first solve).
   const char* inner_name() const { return levels_.finest->inner_name(); }
-  /// Number of levels (1 without prolongations).
+  /// Number of levels (1 without prolongations; fewer than given when hierarchy() says why).
   int levels() const { return levels_.count(); }
+  /// The levels requested and used, and why a level was given up (build_hierarchy's rule).
+  const HierarchyReport& hierarchy() const { return report_; }
 
   /// Solves ICP(q, A, ζ). The start: with prolongations, the nested coarse-to-fine solution, unless
   /// ζ is none or constant and z0 is nonzero and closer than a cold start by Res (z0 is then tried for
@@ -179,7 +189,8 @@ class Newton {
   }
 
   /// Galerkin coarse operators (formed here unless given); a level whose operator has a
-  /// non-positive diagonal ends the hierarchy there (the active-set test needs Ω2 = diag > 0).
+  /// non-positive diagonal ends the hierarchy there (the active-set test needs Ω2 = diag > 0),
+  /// and report_ says which level and row.
   void build_hierarchy(std::vector<RowMatrix> prolongations, std::vector<RowMatrix> coarse) {
     // Eigen 3.4's SparseMatrix has no move constructor: std::move copies it. The matrices are
     // swapped into place and the vector reserved (its growth would copy every level so far).
@@ -197,11 +208,14 @@ class Newton {
                                                        : detail::product(levels_.A, level.P));
         level.A.swap(A);
       }
-      if (!(diagonal(level.A).array() > 0).all()) {
+      report_.reason = nonpositive_diagonal(level.A, static_cast<int>(l) + 1);
+      if (!report_.reason.empty()) {
         hierarchy.pop_back();
         break;
       }
     }
+    report_.requested = 1 + static_cast<int>(prolongations.size());
+    report_.used = 1 + static_cast<int>(hierarchy.size());
     Options co;
     co.inner = options_.inner;
     for (auto& level : hierarchy)
@@ -209,6 +223,17 @@ class Newton {
     detail::Hierarchy<StorageIndex> below{hierarchy.data(), hierarchy.size()};
     levels_.finest->use_hierarchy(below, true);  // the finest level frees the A_l while it solves
     for (auto& level : levels_.coarse) level->use_hierarchy(below = below.below());
+  }
+
+  /// Why level `l`'s operator A_l cannot be a level (its first entry a_ii <= 0), or "".
+  static std::string nonpositive_diagonal(const RowMatrix& A, int l) {
+    const Vector d = diagonal(A);
+    for (Eigen::Index i = 0; i < d.size(); ++i)
+      if (!(d[i] > 0))
+        return "the coarse operator P^T A P of level " + std::to_string(l) + " (prolongations[" + std::to_string(l - 1) +
+               "]) has a_ii = " + to_text(d[i]) + " <= 0 at row " + std::to_string(i) +
+               " (the active-set test needs a positive diagonal): the hierarchy ends above it";
+    return {};
   }
 
   Result run(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0, const detail::Hooks& hooks,
@@ -242,6 +267,7 @@ class Newton {
   Options options_;
   detail::NewtonLevels<MatrixType> levels_;
   Timings setup_timings_;
+  HierarchyReport report_;
   mutable std::mutex mutex_;
   mutable std::atomic<std::thread::id> owner_{};  // the thread inside solve or polish (Busy)
 };
