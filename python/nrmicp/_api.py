@@ -502,12 +502,13 @@ class Solver:
             self.polish = self._reduced.inner.polish
             factorization = self._reduced.inner.setup_timings["factorization"]
         else:
-            self._build_core(opts, hierarchy, polish)
+            self._build_core(opts, hierarchy, polish, units)
             factorization = self._core.setup_timings()["factorization"]
         self._setup_timings = {"setup": time.perf_counter() - t0, "factorization": factorization}
 
-    def _build_core(self, opts, hierarchy, polish) -> None:
-        """The C++ core on A (scaled when asked; method 'newton': with its hierarchy)."""
+    def _build_core(self, opts, hierarchy, polish, units) -> None:
+        """The C++ core on A (scaled when asked; method 'newton': with its hierarchy); `units`: the
+        default stopping rule is in force (_criterion)."""
         n = self.n
         pairs = None
         if units and self.scale is None:   # the default rule iterates on σA, σq (σ a power of two: exact)
