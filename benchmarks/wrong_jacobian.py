@@ -3,8 +3,8 @@ nonlocal obstacle ζ(z) = ψ + c·S^k z (S the row-normalized 5-point averaging 
 contracts with factor c and its exact Jacobian c·S^k is sparse), given the exact Jacobian, its
 local (diagonal) part, zero, the negated Jacobian, ten times the Jacobian, or none (the outer
 fixed point); and scenes.thermoforming_2d with a strong heat coupling and the local part of its
-dense Jacobian (the issue's 'thermoforming-like ζ with an approximate Jacobian'). Newton steps, outer steps, linear solves, fallback sweeps, CPU s, status, path, and
-the complementarity of the answer measured here in numpy (min(Az+q, z−ζ(z)), independent of nrmicp).
+dense Jacobian (the issue's 'thermoforming-like ζ with an approximate Jacobian'). Newton steps,
+outer steps, linear solves, fallback sweeps, CPU s, status, path, and the complementarity of the answer measured here in numpy (min(Az+q, z−ζ(z)), independent of nrmicp).
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/wrong_jacobian.py --m 63 127 255   # --problem averaging thermoforming
 """
