@@ -88,6 +88,9 @@ ZETA_KINDS = ["none", "constant", "affine", "callable", "callable_f32", "callabl
 CALLABLES = ("callable", "callable_f32", "callable_column")
 #: The formats a valid zeta_jacobian returns J in (sp.diags' DIA warned at every Newton step).
 JACOBIAN_FORMATS = ["csr", "dia", "coo", "csc", "dense"]
+#: Wrong Jacobians of those callables (valid input: a solve may give them up for the outer fixed
+#: point, path 'newton+outer', and must say so; a success is still checked by the oracle).
+WRONG_JACOBIANS = {"negated": -1.0, "10x": 10.0, "zero": 0.0}
 HIERARCHIES = [None, "auto", "amg", "list", "dense list"]
 #: Every (method, ζ kind, hierarchy) the valid cases run; the hierarchy is 'newton''s argument.
 COMBOS = ([(m, z, None) for m in STATIONARY for z in ZETA_KINDS]
@@ -107,6 +110,7 @@ def _fuzz_settings(per_test):
 
 #: What the fuzz slice reached in this session (checked by test_fuzz_coverage).
 REACHED = {"combos": collections.Counter(), "drawn": collections.Counter(), "rejected": collections.Counter(),
+           "gave_up": collections.Counter(),
            "converged": collections.Counter(), "n_converged": collections.defaultdict(list)}
 
 
@@ -184,6 +188,9 @@ def build_case(seed, method, zkind, hierarchy=None, corrupt=None):
             opts["inner"] = "cg"  # the iterative inner solve: CG or BiCGSTAB, by K's symmetry
         if zkind in CALLABLES and rng.integers(2):
             jacobian = str(extra.choice(JACOBIAN_FORMATS))
+            wrong = np.random.default_rng([seed, 37])   # issue 37's draw, a stream of its own
+            if not corrupt and wrong.uniform() < 0.3:
+                jacobian = str(wrong.choice(list(WRONG_JACOBIANS)))
     return dict(A=A, q=q, zkind=zkind, c=c, B=B, x0=x0, opts=opts, corrupt=corrupt, rng=rng, jacobian=jacobian)
 
 
@@ -255,7 +262,9 @@ def zeta_jacobian(z):
 
 
 def jacobian_in(fmt):
-    """zeta_jacobian returning J in the format `fmt` ('dense': a numpy array)."""
+    """zeta_jacobian returning J in the format `fmt` ('dense': a numpy array), or a wrong J (WRONG_JACOBIANS)."""
+    if fmt in WRONG_JACOBIANS:
+        return lambda z: WRONG_JACOBIANS[fmt] * zeta_jacobian(z)
     return lambda z: zeta_jacobian(z).toarray() if fmt == "dense" else zeta_jacobian(z).asformat(fmt)
 
 
@@ -414,6 +423,10 @@ def check_case(case):
     true_res, slack = oracle_residual(A, q, res.z, zeta_ref)
     if np.isfinite(res.residual) and np.isfinite(true_res):  # the reported Res is the returned z's
         assert abs(res.residual - true_res) <= slack + 1e-10 * true_res, (res.residual, true_res, res.message)
+    if opts["method"] == "newton":   # the Jacobian given up (and only a wrong one), and said so
+        assert (res.path == "newton+outer") == ("zeta_jacobian looks wrong" in res.message), res.message
+        assert res.path != "newton+outer" or case["jacobian"] in WRONG_JACOBIANS, (case["jacobian"], res.message)
+        REACHED["gave_up"][case["jacobian"]] += res.path == "newton+outer"
     if res.success:
         assert true_res < opts["tol"] + slack, (res.residual, true_res, opts["tol"], res.message)
         if case["corrupt"] is None:

@@ -754,6 +754,7 @@ class Solver:
                 status, message = Status.STAGNATED, f"{message}; polish: {polish_core['message']}"
         if self.method == "newton":
             extra.update(_newton.result_fields(rounds.best_d, self._hierarchy))
+            message = _newton.with_jacobian_note(message, extra["path"], rounds.best_d["message"])
         status, message, res, extra["criterion"] = _criterion_outcome(measure, z, res, tol, status, message)
         message = _newton.with_shortening(status, message, self._hierarchy)
         return Result(z=z, w=w, success=status == Status.CONVERGED, status=status, message=message,
@@ -1116,8 +1117,10 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
         Method 'newton' adds ``linear_solves`` (all levels), ``inner_iterations`` (CG or BiCGSTAB
         iterations of ``inner='cg'``, all levels; 0 for direct solves), ``fallback_sweeps``, ``outer_iterations``
         (callable ζ), ``level_steps`` and ``level_seconds`` (per level, finest first), ``path``
-        ('newton', 'newton+fallback' or 'fallback') and ``hierarchy`` (levels requested and used,
-        and why fewer: :class:`Result`); its ``nit`` counts finest-level Newton steps.
+        ('newton', 'newton+fallback', 'fallback', or 'newton+outer': a ``zeta_jacobian`` whose Newton
+        steps did not deliver was given up for the outer fixed point, and the message says so) and
+        ``hierarchy`` (levels requested and used, and why fewer: :class:`Result`); its ``nit`` counts
+        finest-level Newton steps.
         Without a callable ζ, Res(z) is re-measured in numpy in the original variables before
         success is declared (this matters for a constant obstacle, which the core solves as the
         shifted LCP), with the same re-solve rule as for ``scale``.

@@ -178,6 +178,18 @@ def with_shortening(status, message: str, report) -> str:
     return message if note in message else message + note
 
 
+#: The start of the core's note that it gave up a zeta_jacobian (path 'newton+outer'; detail::JacobianCheck).
+JACOBIAN_NOTE = "zeta_jacobian looks wrong"
+
+
+def with_jacobian_note(message: str, path: str, core_message: str) -> str:
+    """`message` with the core's note that it gave up the zeta_jacobian, when the returned round did
+    (path 'newton+outer') and the message, re-decided in Python, lost it."""
+    if path != "newton+outer" or JACOBIAN_NOTE in message or JACOBIAN_NOTE not in core_message:
+        return message
+    return f"{message}; {core_message[core_message.index(JACOBIAN_NOTE):]}"
+
+
 def check_jacobian(zeta_jacobian, method, kind) -> bool:
     """Whether a ``zeta_jacobian`` was given; TypeError/ValueError when it cannot be used."""
     if zeta_jacobian is None:

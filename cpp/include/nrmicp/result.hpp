@@ -76,7 +76,8 @@ struct NewtonStats {
   int outer_iterations = 0;            ///< callable ζ: outer fixed-point steps on ζ
   std::vector<int> level_steps;        ///< Newton steps per level of nested iteration, finest first
   std::vector<double> level_seconds;   ///< seconds per level, finest first
-  std::string path;                    ///< "newton", "newton+fallback" (Newton steps and fallback sweeps), "fallback"
+  std::string path;                    ///< "newton", "newton+fallback" (Newton steps and fallback sweeps), "fallback",
+                                       ///< "newton+outer" (ζ's Jacobian did not deliver: the outer fixed point took over)
 };
 
 struct Result {

@@ -74,6 +74,39 @@ inline constexpr double kOvershootDamping = 0.5;
 /// docs/MEASUREMENTS.md, kSmoothingSweeps).
 inline constexpr int kSmoothingSweeps = 2;
 
+/// A step that does not reduce Res by this factor is slow: near Res's rounding level it is taken
+/// as the floor (Globalized::at_rounding_level), above it as a poor Jacobian's (JacobianCheck).
+inline constexpr double kSlowStep = 0.5;
+
+/// A callable ζ's `zeta_jacobian` that does not deliver. With ζ's derivative, Newton solves an
+/// active set that has settled in one step (ζ affine) or converges superlinearly on it; with a poor
+/// one, each step on the set contracts only as the outer fixed point does, and a wrong one makes Res
+/// grow. Judged poor: kPoorSlowSteps accepted steps in a row, each slow (kSlowStep) above the rounding
+/// level, or kPoorGrowthSteps steps rejected because Res grew, each on the active set of the step
+/// before (a step that moves the set may raise Res with the right Jacobian too: a random non-M-matrix
+/// of the fuzz test did; docs/MEASUREMENTS.md, "A Jacobian that does not deliver"). The solve then goes on without it.
+inline constexpr int kPoorSlowSteps = 3;
+inline constexpr int kPoorGrowthSteps = 2;
+
+class JacobianCheck {
+ public:
+  /// An accepted step: `slow` (above the rounding level) on the same active set as the step before.
+  void accepted(bool same_set, bool slow) { slow_ = same_set && slow ? slow_ + 1 : 0; }
+  /// A step rejected by the acceptance test (Res grew beyond the non-monotone reference, or is not finite).
+  void rejected(bool same_set) { grew_ += same_set; }
+  bool poor() const { return slow_ >= kPoorSlowSteps || grew_ >= kPoorGrowthSteps; }
+  /// Why (the start of the solve's message).
+  std::string message() const {
+    return slow_ >= kPoorSlowSteps
+               ? "zeta_jacobian looks wrong: " + std::to_string(slow_) + " Newton steps in a row on one active set each "
+                 "reduced Res by less than a factor " + to_text(1 / kSlowStep) + " (with the derivative of zeta one step solves a settled set)"
+               : "zeta_jacobian looks wrong: " + std::to_string(grew_) + " of its Newton steps on the active set of the step before made Res grow";
+  }
+
+ private:
+  int slow_ = 0, grew_ = 0;
+};
+
 /// The message of a Newton loop that settled at Res's rounding floor above tol.
 inline std::string floor_message(double best, double tol, double floor) {
   return "stagnated: Res reached its rounding floor (the active set has settled and a further Newton step does not "
@@ -167,9 +200,10 @@ class Globalized {
   /// A Newton step, or the fallback, or the end.
   void move_x(Iterate&) {
     if (still_ || at_floor_) return settle();
+    if (jacobian_.poor()) return give_up_jacobian();
     if (plain_.steps() >= ctl_.solve.maxiter) return stop(Status::MaxIterations);
     if (!plain_.linearize()) return stop(Status::ZetaFailed);
-    if (!newton()) fall_back();
+    if (!newton()) jacobian_.poor() ? give_up_jacobian() : fall_back();
   }
   void update_z(Iterate& s) { s.z = plain_.z(); }
   const StepEnd* end() const { return end_ ? &*end_ : nullptr; }
@@ -180,6 +214,8 @@ class Globalized {
   /// The inactive set of the last accepted step (empty if none).
   const std::vector<char>& inactive() const { return last_inactive_; }
   int sweeps() const { return sweeps_; }
+  /// The loop ended because ζ's Jacobian does not deliver (JacobianCheck; never for a fixed ζ).
+  bool jacobian_poor() const { return jacobian_poor_; }
 
  private:
   // A Newton step on z's active set (or the guess); false when the fallback must take over.
@@ -214,10 +250,16 @@ class Globalized {
       moved_set_ = plain_.smooth(kSmoothingSweeps) || damped;
       r = plain_.trial_residual();
     }
-    if (!(std::isfinite(r) && (exempt_ || test_.acceptable(r)))) return false;
+    const bool same_set = have_last_ && inactive_ == last_inactive_;
+    if (!(std::isfinite(r) && (exempt_ || test_.acceptable(r)))) {
+      if constexpr (!Plain::set_fixes_step) jacobian_.rejected(same_set);
+      return false;
+    }
     const double r_old = plain_.residual();
     accept(r, h, still);
-    if (!(r < ctl_.solve.tol) && !(r < 0.5 * r_old) && !still_) at_floor_ = at_rounding_level(std::max(r, r_old));
+    const bool slow = !(r < ctl_.solve.tol) && !(r < kSlowStep * r_old) && !still_;
+    if (slow) at_floor_ = at_rounding_level(std::max(r, r_old));
+    if constexpr (!Plain::set_fixes_step) jacobian_.accepted(same_set, slow && !at_floor_);
     return true;
   }
   // What a repeated set is solved to (a tenth of it: NewtonStep::solve): tol, or where a repeat is
@@ -271,6 +313,10 @@ class Globalized {
     if (r < best_r_) { best_r_ = r; best_z_ = plain_.z(); }
   }
   void give_up() { stop(runs_.give_up(sweeps_)); }
+  void give_up_jacobian() {
+    jacobian_poor_ = true;
+    end_ = StepEnd{Status::Stagnated, jacobian_.message()};
+  }
   // The active set repeated, z stood still, or a step at the rounding level did not reduce Res.
   void settle() {
     settled_ = true;
@@ -295,6 +341,8 @@ class Globalized {
   double floor_ = 0;  // the rounding level of Res (computed when a stop at it is considered)
   SweepRuns runs_;
   int sweeps_ = 0;
+  JacobianCheck jacobian_;
+  bool jacobian_poor_ = false;
   std::optional<StepEnd> end_;
 };
 

@@ -43,6 +43,7 @@ struct LevelOutcome : Result {
   int steps = 0;               ///< Newton steps (the Monitor's nit is the best iterate's index)
   bool settled = false;        ///< the active set repeated: z solves the problem to rounding
   std::vector<char> inactive;  ///< the inactive set of z's last step (empty if no step was taken)
+  bool jacobian_poor = false;  ///< ζ's Jacobian did not deliver (JacobianCheck): the loop gave up on it
 };
 
 /// The Newton member on one level: the plain step `plain` (at its start), globalized, in the
@@ -62,6 +63,7 @@ LevelOutcome newton_loop(Plain& plain, const NewtonControl& ctl, const Eigen::Ve
   o.steps = plain.steps();
   o.settled = step.settled();
   o.inactive = step.inactive();
+  o.jacobian_poor = step.jacobian_poor();
   o.newton.fallback_sweeps = step.sweeps();
   o.newton.linear_solves = plain.solves();
   o.newton.inner_iterations = plain.inner_iterations();
@@ -110,16 +112,19 @@ class NewtonTally {
   const int* nit_counter() const { return &tally_.nit; }
   int fallback_sweeps() const { return tally_.newton.fallback_sweeps; }
   void outer_step() { ++tally_.newton.outer_iterations; }
+  /// The solve left Newton with ζ's Jacobian for the outer fixed point (path "newton+outer").
+  void switch_to_outer() { outer_after_newton_ = true; }
   /// Sweeps of the fallback member outside a level's loop (the outer fixed point's).
   void sweeps(int k) {
     tally_.newton.fallback_sweeps += k;
     tally_.iterations += k;
   }
-  /// The history of the outer fixed point's Monitor (numbered by nit already).
-  void take_history(Result& from) {
-    tally_.history_iteration = std::move(from.history_iteration);
-    tally_.history_seconds = std::move(from.history_seconds);
-    tally_.history_residual = std::move(from.history_residual);
+  /// The history of the outer fixed point's Monitor (numbered by nit already), after the Newton steps' if any.
+  void take_history(const Result& from) {
+    auto append = [](auto& to, const auto& v) { to.insert(to.end(), v.begin(), v.end()); };
+    append(tally_.history_iteration, from.history_iteration);
+    append(tally_.history_seconds, from.history_seconds);
+    append(tally_.history_residual, from.history_residual);
   }
 
   /// A level's loop into the tally (the finest level's history too, numbered on).
@@ -157,7 +162,8 @@ class NewtonTally {
     r.residual = residual;
     r.status = status;
     r.message = std::move(message);
-    r.newton.path = r.newton.fallback_sweeps ? (r.nit ? "newton+fallback" : "fallback") : "newton";
+    r.newton.path = outer_after_newton_ ? "newton+outer"
+                    : r.newton.fallback_sweeps ? (r.nit ? "newton+fallback" : "fallback") : "newton";
     refuse_overflow(r);
     return r;
   }
@@ -165,6 +171,7 @@ class NewtonTally {
  private:
   const MatrixType& A_;
   Result tally_;
+  bool outer_after_newton_ = false;
 };
 
 /// The Newton member's measured constants, one definition: NewtonRun uses them, and the
@@ -313,7 +320,12 @@ class NewtonRun {
     control.sweep_budget = o_.maxiter - tally_.fallback_sweeps();
     const auto out = newton_loop(plain, control, start);
     tally_.absorb(out, 0, ScopedTimer::seconds_since(t0));
-    return tally_.finish(out, out.z, q);
+    if (!out.jacobian_poor) return tally_.finish(out, out.z, q);
+    // the Jacobian does not deliver (detail::JacobianCheck): the path without it, from the best iterate
+    tally_.switch_to_outer();
+    Result r = solve_outer_fixed_point(q, zeta, &out.z);
+    r.message += "; " + out.message + ", so the solve went on with the outer fixed point without it (path newton+outer)";
+    return r;
   }
 
  private:
