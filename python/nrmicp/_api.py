@@ -807,9 +807,9 @@ class _OriginalResidual:
         return float(np.finfo(float).eps * (_norm(t) + _norm(u)))
 
 
-#: The default rule accepts a Res_E within this factor of its rounding level (as the Newton member's
-#: floor does): double precision can do no better, whatever DEFAULT_RTOL asks.
-FLOOR_FACTOR = 100.0
+#: The default rule accepts a Res_E within this factor of its rounding level: the Newton member's
+#: floor rule (kFloorFactor, globalization.hpp), asked of the core.
+FLOOR_FACTOR = float(_core.newton_tuning["floor_factor"])
 
 
 def _criterion_outcome(measure, z, res, tol, status, message):
