@@ -770,6 +770,7 @@ class _OriginalResidual:
     def __init__(self, A, qv, kind, c, B, checked, weights=None):
         self.A, self.qv, self.kind, self.c, self.B, self.checked = A, qv, kind, c, B, checked
         self.weights = weights
+        self._last = None   # (z, w, g) of the last call: the paper's Res of the returned z calls no ζ again
 
     def infeasibility(self) -> str:
         """The message part naming a row that makes the problem evidently infeasible, or ""."""
@@ -786,8 +787,12 @@ class _OriginalResidual:
         return z - self.checked(z)  # on a read-only copy: ζ never sees (or writes into) the result
 
     def __call__(self, z, weighted=True):
-        w = self.A @ z + self.qv
-        g = self._g(z)
+        if self._last is not None and self._last[0] is z:
+            w, g = self._last[1], self._last[2]
+        else:
+            w = self.A @ z + self.qv
+            g = self._g(z)
+            self._last = (z, w, g)
         if not (np.all(np.isfinite(w)) and np.all(np.isfinite(z))):
             return w, math.inf   # an overflowing Az + q is no certificate: min(w, g) is blind to w = +inf
         if self.weights is None or not weighted:
