@@ -81,17 +81,20 @@ def aor_parameters(method, alpha, beta):
     return alpha, beta
 
 
+def _g(z, zeta):
+    """g = z - zeta(z) for zeta as nrmicp takes it (None, a constant, or a callable)."""
+    if zeta is None:
+        return z
+    if callable(zeta):
+        return z - np.asarray(zeta(z), dtype=np.float64)
+    return z - np.asarray(zeta, dtype=np.float64)
+
+
 def residual(A, q, z, zeta=None):
     """Res(z) = || min(Az + q, z - zeta(z)) ||_2, in numpy from the original data; zeta as nrmicp
     takes it (None, a constant, or a callable such as nrmicp.Affine). The tests' check of the
     product: it shares no code with nrmicp.residual."""
-    if zeta is None:
-        g = z
-    elif callable(zeta):
-        g = z - np.asarray(zeta(z), dtype=np.float64)
-    else:
-        g = z - np.asarray(zeta, dtype=np.float64)
-    return float(np.linalg.norm(np.minimum(sp.csr_matrix(A) @ z + q, g)))
+    return float(np.linalg.norm(np.minimum(sp.csr_matrix(A) @ z + q, _g(z, zeta))))
 
 
 def units_residual(A, q, z, zeta=None):
@@ -100,13 +103,7 @@ def units_residual(A, q, z, zeta=None):
     the original data, sharing no code with nrmicp."""
     d = np.abs(sp.csr_matrix(A).diagonal())
     sigma = 2.0 ** -round(float(np.mean(np.log2(d[d > 0]))))
-    if zeta is None:
-        g = z
-    elif callable(zeta):
-        g = z - np.asarray(zeta(z), dtype=np.float64)
-    else:
-        g = z - np.asarray(zeta, dtype=np.float64)
-    return float(np.linalg.norm(np.minimum(sigma * (sp.csr_matrix(A) @ z + q), g)))
+    return float(np.linalg.norm(np.minimum(sigma * (sp.csr_matrix(A) @ z + q), _g(z, zeta))))
 
 
 def reference_solve(A, q, zeta=None, *, method, z_update, gamma, omega1=None, omega2=None,
