@@ -19,6 +19,8 @@ from typing import Any, Callable, Optional
 import numpy as np
 import scipy.sparse as sp
 
+from ._result import Result, wants_result
+
 
 def decoupled_rows(A: sp.csr_matrix) -> Optional[np.ndarray]:
     """The rows of A whose only nonzero is a positive diagonal entry (stored zeros ignored), or
@@ -128,8 +130,7 @@ class Reduced:
 def _expanding(callback: Callable[..., Any], expand: Callable[[np.ndarray], np.ndarray]) -> Callable[..., Any]:
     """The user's callback, called with the whole iterate (its calling form kept: scipy's
     ``intermediate_result`` or the plain ``callback(xk)``)."""
-    from ._api import Result, _wants_result
-    if _wants_result(callback):
+    if wants_result(callback):
         def hook(intermediate_result):
             ir = intermediate_result
             return callback(intermediate_result=Result(z=expand(ir.z), nit=ir.nit, residual=ir.residual))
