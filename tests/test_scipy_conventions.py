@@ -121,3 +121,39 @@ def test_stop_iteration_stops(form):
     res = nrmicp.solve(A, q, tol=1e-300, callback=plain if form == "xk" else named)
     assert res.status == nrmicp.Status.CALLBACK_STOP and not res.success
     assert len(calls) == 3
+
+
+def _path_with_a_decoupled_row(n=20):
+    """The 1D path Laplacian with row 0 replaced by 3 e_0 (its column kept): the Newton member
+    solves row 0 in closed form, z_0 = max(0, −q_0 / 3), and Newton on the other rows."""
+    A = sp.diags([-np.ones(n - 1), 2 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1], format="lil")
+    A[0, :] = 0
+    A[0, 0] = 3.0
+    return sp.csr_matrix(A), -np.ones(n)
+
+
+def test_intermediate_result_callback_gets_the_whole_iterate_with_decoupled_rows():
+    A, q = _path_with_a_decoupled_row()
+    seen = []
+    res = nrmicp.solve(A, q, method="newton", callback=lambda intermediate_result: seen.append(intermediate_result))
+    assert res.success and seen
+    assert all(isinstance(r, nrmicp.Result) and r.x.shape == (A.shape[0],) for r in seen)
+    assert all(r.z[0] == pytest.approx(1 / 3) for r in seen)   # the closed-form row, put back
+
+
+def test_result_survives_pickling():
+    import pickle
+    A, q = _lcp()
+    res = nrmicp.solve(A, q)
+    back = pickle.loads(pickle.dumps(res))
+    assert type(back) is nrmicp.Result and back.status is nrmicp.Status.CONVERGED
+    assert np.array_equal(back.z, res.z) and repr(back) == repr(res)
+
+
+def test_result_pickled_under_its_former_module_loads():
+    import pickle
+    A, q = _lcp()
+    data = pickle.dumps(nrmicp.solve(A, q), protocol=0)
+    assert b"cnrmicp\nResult\n" in data   # pickles name the public path
+    old = data.replace(b"cnrmicp\nResult\n", b"cnrmicp._api\nResult\n")
+    assert type(pickle.loads(old)) is nrmicp.Result

@@ -1,6 +1,7 @@
 """nrmicp.distributed against PETSc's SNES VI (vinewtonrsls), one invocation for both sides.
 
     python benchmarks/distributed/bench.py [--m2 1023] [--m3 99] [--dims 2 3] [--ranks 1 2] [--cold-max-n 300000]
+                                           [--out rows.jsonl]
 
 For each scene (2D obstacle m², 3D obstacle m³) and each rank count it runs, under mpirun:
   ours   nrmicp.distributed.solve(method='newton', hierarchy='amg'), tol 1e-8 (this file, --worker)
@@ -8,6 +9,7 @@ For each scene (2D obstacle m², 3D obstacle m³) and each rank count it runs, u
   gs     vinewtonrsls with DMDA grid sequencing (vi_gridseq.c, -snes_grid_sequence k; it needs a grid)
 and prints wall seconds (of the solve, slowest rank), finest-level Newton steps and Res, and the
 MPI messages / bytes per rank and Newton step of ours (PETSc's -log_view, stage 'solve').
+With --out, each row's raw measurements are also written to that file (JSON lines, replaced).
 The C peer is compiled here with mpicc against the PETSc of pkg-config.
 """
 import argparse
@@ -118,12 +120,14 @@ def main():
     ap.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--cold-max-n", type=int, default=300_000, help="run the cold peer only up to this n")
     ap.add_argument("--python", default=sys.executable)
+    ap.add_argument("--out", help="write each row's raw measurements here (JSON lines; the file is replaced)")
     a = ap.parse_args()
     exe = os.path.join(tempfile.mkdtemp(), "vi_gridseq")
     flags = subprocess.run(["pkg-config", "--cflags", "--libs", "PETSc"], capture_output=True, text=True,
                            check=True).stdout.split()
     subprocess.run(["mpicc", "-O2", "-o", exe, os.path.join(HERE, "vi_gridseq.c")] + flags, check=True)
     rows = []
+    out = open(a.out, "w") if a.out else None
     for dim, m in ((d, a.m2 if d == 2 else a.m3) for d in a.dims):
         n = m ** dim
         for np_ in a.ranks:
@@ -131,7 +135,11 @@ def main():
                    "gs": run_peer(exe, dim, m, np_, True)}
             row["cold"] = run_peer(exe, dim, m, np_, False) if n <= a.cold_max_n else None
             rows.append(row)
-            print(json.dumps(row), flush=True)
+            print(f"done: {row['scene']}, np {np_}", file=sys.stderr, flush=True)
+            if out:   # row by row: partial results survive
+                print(json.dumps(row), file=out, flush=True)
+    if out:
+        out.close()
     print("\nfinest steps, CPU s (slowest rank), wall s")
     print("\n| scene | n | np | serial nrmicp newton | ours (nrmicp.distributed) | vinewtonrsls cold | vinewtonrsls + grid sequencing |"
           " msgs/rank/step | bytes/rank/step | reductions/step |")

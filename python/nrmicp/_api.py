@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import contextlib
 import enum
-import inspect
 import logging
 import math
 import re
@@ -15,7 +14,6 @@ from typing import Any, Callable, Optional, Union
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike
-from scipy.optimize import OptimizeResult
 
 from . import _core
 from ._inputs import as_constant, as_csr, as_diagonal, as_float, as_vector
@@ -23,6 +21,7 @@ from ._scaling import SCALINGS, ScaledCallable, equilibrate, scale_matrix, units
 from . import _newton
 from ._zeta import CheckedZeta
 from ._decoupled import Reduced, decoupled_rows
+from ._result import Result, wants_result
 from ._infeasible import evident_infeasibility
 
 __all__ = ["solve", "Solver", "Affine", "Result", "Status", "METHODS", "residual", "backends"]
@@ -65,49 +64,6 @@ class _NamedIntEnum(enum.IntEnum):
 #: The members come from the C++ core (result.hpp), the one place they are defined.
 Status = _NamedIntEnum("Status", [(name, int(v)) for name, v in _core.Status.__members__.items()],
                        module=__name__)
-
-
-class Result(OptimizeResult):
-    """Result of a solve (a scipy ``OptimizeResult``).
-
-    Attributes: ``z`` (the solution, or the best iterate when not converged), ``w`` (= Az + q),
-    ``success``, ``status`` (:class:`Status`), ``message``, ``nit`` (iterations to reach ``z``),
-    ``residual`` (Res(z) = ‖min(Az+q, z−ζ(z))‖₂, the paper's measure, whatever rule decided),
-    ``criterion`` (what decided ``success``: ``measure`` "units" (the default rule, Res_E) or
-    "paper", its ``target`` and its ``value`` at z), ``history`` (dict of arrays ``iteration``,
-    ``seconds``, ``residual``: the deciding measure, as the callback's; None unless
-    ``record_history``), ``timings`` (dict of wall-clock
-    seconds of this call: ``total`` the whole call from entry to return, so for
-    :func:`nrmicp.solve` the set-up included, for :meth:`Solver.solve` that call only (the
-    constructor's seconds are :attr:`Solver.setup_timings`); ``setup`` the set-up done in the
-    call (nrmicp.solve: the constructor's, the AMG hierarchy included; any call: what is set up
-    on first use, e.g. the Newton member's reduced systems and their symbolic analysis) and
-    ``iterations`` the iteration loop without it, disjoint parts of ``total``; ``factorization``
-    the numeric factorizations, in ``setup`` + ``iterations`` (Newton: each step's, or the
-    V-cycle's update with inner 'cg', and the fallback member's); ``zeta``, ``spmv`` (products
-    with A and ζ's B; the AOR types' one-pass sweep, Newton's projected sweeps) and
-    ``inner_solve`` (Newton: the reduced solves), parts of ``iterations``; docs/SPEC.md, "Timings"),
-    ``method``, ``inner`` (the solver used for the left matrix), ``counters`` (dict name -> int:
-    what the step kind counts beyond the iterations, e.g. ``anderson_rejections``, the
-    accelerated steps replaced by the plain one; empty when it counts nothing).
-    Method 'newton' adds ``hierarchy``: ``{"requested": levels requested (1 + the prolongations
-    listed; for 'amg', the levels its set-up built plus one it gave up), "used": levels nested
-    over (:attr:`Solver.levels`), "reason": why fewer are used (which level, what was wrong), or
-    None}``; a shortened hierarchy also raises a :class:`nrmicp.HierarchyWarning` at set-up and is
-    named in the message of a solve that does not converge.
-    ``x`` is an alias of ``z`` (scipy's name for the solution).
-    """
-
-    @property
-    def x(self) -> np.ndarray:
-        """The solution z (scipy's ``OptimizeResult.x``)."""
-        return self["z"]
-
-    def __repr__(self) -> str:
-        # scipy's formatter fails on an empty nested dict (max() of no keys): print it as {}
-        if any(isinstance(v, dict) and not v for v in self.values()):
-            return repr(Result({k: "{}" if isinstance(v, dict) and not v else v for k, v in self.items()}))
-        return super().__repr__()
 
 
 @dataclass(frozen=True)
@@ -307,16 +263,6 @@ def _absolute_target(it: dict, checked_opts, measure, n: int) -> dict:
     return dict(it, tol=float(it["tol"]))
 
 
-def _wants_result(callback: Callable[..., Any]) -> bool:
-    """scipy's rule: a callback whose only parameter is named ``intermediate_result`` receives a
-    :class:`Result`; any other the iterate alone."""
-    try:
-        params = set(inspect.signature(callback).parameters)
-    except (TypeError, ValueError):  # a builtin without a signature: the plain form
-        params = set()
-    return params == {"intermediate_result"}
-
-
 def _core_callback(callback: Callable[..., Any], dc: Optional[np.ndarray],
                    offset: Optional[list] = None) -> Callable[[int, np.ndarray, float], bool]:
     """The core's per-iterate hook (k, z, Res) -> stop?, calling ``callback`` by scipy's rule:
@@ -325,13 +271,13 @@ def _core_callback(callback: Callable[..., Any], dc: Optional[np.ndarray],
     alone (``callback(xk)``). Raising StopIteration (or returning True) stops the solve.
     ``dc``: column scaling, mapping the core's z back to the original variables. ``offset[0]``:
     the iterations of earlier rounds (scaled re-solves), added to k as the history does."""
-    wants_result = _wants_result(callback)
+    wants = wants_result(callback)
 
     def hook(k: int, z: np.ndarray, res: float) -> bool:
         zk = z * dc if dc is not None else z  # a fresh array: the core passes a copy
         try:
             nit = k + offset[0] if offset else k
-            stop = callback(intermediate_result=Result(z=zk, nit=nit, residual=res)) if wants_result \
+            stop = callback(intermediate_result=Result(z=zk, nit=nit, residual=res)) if wants \
                 else callback(zk)
         except StopIteration:
             return True

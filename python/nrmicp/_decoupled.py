@@ -6,9 +6,8 @@ column then moves to the right-hand side of the others: q_F + A_FD z_D. Finite-e
 leave such rows where they impose Dirichlet values by replacing rows with identity rows and
 keep the columns (FEniCS' ``DirichletBC.apply``, PETSc's ``MatZeroRows``): A is then
 nonsymmetric although A_FF is symmetric, and the algebraic hierarchy built on the full A makes
-coarse problems that mix the fixed unknowns into the free ones (P1 membrane, n = 525,313: 27
-finest steps and BiCGSTAB on A, 6 and CG on A_FF; docs/finite_elements.md, "Dirichlet rows kept as
-identity rows"). So the Newton member solves on A_FF and puts z_D back; an affine or callable ζ
+coarse problems that mix the fixed unknowns into the free ones (docs/finite_elements.md, "Dirichlet
+rows kept as identity rows"). So the Newton member solves on A_FF and puts z_D back; an affine or callable ζ
 couples z_i to other unknowns, and is solved on the whole A (a second Solver, built when first needed).
 Here, not in the C++ core, because the algebraic hierarchy is built here (pyamg) and must be built on
 A_FF; a C++ caller of nrmicp::Newton with such rows passes A_FF itself.
@@ -20,13 +19,15 @@ from typing import Any, Callable, Optional
 import numpy as np
 import scipy.sparse as sp
 
+from ._result import Result, wants_result
+
 
 def decoupled_rows(A: sp.csr_matrix) -> Optional[np.ndarray]:
     """The rows of A whose only nonzero is a positive diagonal entry (stored zeros ignored), or
     None when there are none, all rows are, or some row has no positive diagonal (the whole A is
     then solved, so that the core's errors name the user's rows)."""
     n = A.shape[0]
-    if not (np.diff(A.indptr) == 1).any() and A.data.all():   # no one-entry row, no stored zero: none (3 ms at 10⁶)
+    if not (np.diff(A.indptr) == 1).any() and A.data.all():   # no one-entry row, no stored zero: none (the common case)
         return None
     if not (A.diagonal() > 0).all():
         return None
@@ -129,8 +130,7 @@ class Reduced:
 def _expanding(callback: Callable[..., Any], expand: Callable[[np.ndarray], np.ndarray]) -> Callable[..., Any]:
     """The user's callback, called with the whole iterate (its calling form kept: scipy's
     ``intermediate_result`` or the plain ``callback(xk)``)."""
-    from ._api import Result, _wants_result
-    if _wants_result(callback):
+    if wants_result(callback):
         def hook(intermediate_result):
             ir = intermediate_result
             return callback(intermediate_result=Result(z=expand(ir.z), nit=ir.nit, residual=ir.residual))

@@ -35,16 +35,8 @@ class HierarchyWarning(UserWarning):
     cold start with one). The answer meets the same tol; its cost may not. Raised once per Solver
     set-up; ``result.hierarchy`` and :attr:`Solver.levels` say what is used."""
 
-# Classical strength of connection on A's rows, θ = 0.25 (pyamg's default): it needs no
-# symmetry. On the upwind convection–diffusion obstacle (scenes, ε = 0.01, m = 63 → 191,
-# nested active-set Newton of benchmarks/newton_prototype.py) it gave 7 → 10 finest-level
-# steps where 'symmetric' strength gave 17 → 53 (cold start: 21 → 57); at ε = 0.1, 3 steps
-# flat (m = 63 → 255).
-# sweeps/truncate: 3 sweeps truncated at 0.2 took P2 (n = 130,561) to 6 finest steps, 2.4 CPU s;
-# 2 and 4 sweeps, or truncation at 0.1 / 0.05 / 0.3, took 6-9 steps and 2.0-3.8 s.
-# aux_levels = 1: the auxiliary level on the finest operator only, pyamg's own RS below; on
-# every level the grid obstacles' coarse levels took more steps (2D n = 1M: 13 against 7 on
-# level 1, 2x the CPU time) and P2 gained nothing (6 finest steps either way).
+# Classical strength on A's rows (needs no symmetry); each value took the fewest finest steps
+# measured (docs/MEASUREMENTS.md, "`_RS_DEFAULTS` of the amg set-up").
 _RS_DEFAULTS = {"theta": 0.25, "max_coarse": 10, "max_levels": 30, "sweeps": 3, "truncate": 0.2, "aux_levels": 1}
 
 
@@ -63,10 +55,8 @@ def _pyamg():
 def _small_pages():
     """numpy's madvise(MADV_HUGEPAGE) on its large arrays switched off for the set-up's
     temporaries (restored after). Each of them is written once and freed: where the kernel
-    backs madvised memory by freshly zeroed 2 MB pages, that zeroing was the largest single
-    cost of the set-up. Measured (this project's 2-core VM, THP 'always', defrag 'madvise';
-    obstacle_3d n = 1.09M, amg, one solve, 3 alternating runs each): 5.69-5.82 CPU s with numpy's
-    default, 4.90-5.12 s without (perf: clear_page_erms 23% of the solve -> 0.5%)."""
+    backs madvised memory by freshly zeroed 2 MB pages, that zeroing is the largest single
+    cost of the set-up (docs/MEASUREMENTS.md, "Set-up: fresh pages and copies")."""
     try:
         from numpy._core.multiarray import _set_madvise_hugepage   # numpy >= 2
     except ImportError:   # numpy 1.x
@@ -81,7 +71,7 @@ def _small_pages():
 # The Ruge–Stüben level of pyamg's ruge_stuben_solver (classical strength, RS splitting, direct
 # or classical interpolation) built from its compiled kernels: the same C/F splitting and P,
 # without its Python-level copies of values that neither the splitting nor the interpolation
-# reads (a quarter of the 3D set-up: docs/MEASUREMENTS.md).
+# reads (docs/MEASUREMENTS.md, "The amg set-up on pyamg's kernels").
 
 def _strength(A: sp.csr_matrix, theta: float, norm: str) -> sp.csr_matrix:
     """The classical strength graph of A with its diagonal, holding A's values (pyamg's
@@ -158,8 +148,8 @@ def _relax_interpolation(B, P, is_c, sweeps, truncate):
     P_F ← −D_F⁻¹((B_FF − D_FF) P_F + B_FC), C rows kept as identity (P stays ≥ 0 for an
     M-matrix B), each new row truncated at ``truncate`` × its largest entry, row sums kept (the
     fill of a sweep grows the V-cycle's coarse operators). Compiled (the core's
-    relax_interpolation): one pass per sweep, where scipy's product, sums, scaling and the
-    truncation pass took 0.86 of the 1.97 CPU s set-up of tetrahedral P1 (n = 250,047)."""
+    relax_interpolation): one pass per sweep instead of scipy's four intermediates
+    (docs/MEASUREMENTS.md, "The amg set-up's interpolation sweeps")."""
     index = B.indices.dtype
     ip, ix, data = _core.relax_interpolation(B.indptr, B.indices, B.data, np.ascontiguousarray(is_c, dtype=bool),
                                              P.indptr.astype(index, copy=False), P.indices.astype(index, copy=False),
@@ -189,8 +179,7 @@ def _auxiliary_level(A, theta, sweeps, truncate):
     why = nonpositive_diagonal(B, "auxiliary M-matrix (its positive off-diagonals lumped into the diagonal)")
     if why is not None:
         return why
-    # norm='min': only negative couplings are strong (pyamg 5's 'abs' counts the positive P2
-    # couplings: 88 finest steps on P2 at n = 32,513, and P entries down to -2.7)
+    # norm='min': only negative couplings are strong ('abs' counts P2's positive ones: P < 0, many steps)
     S = _strength(B, theta, "min")
     is_c = _rs_split(S)
     if is_c.all() or not is_c.any():
@@ -269,18 +258,9 @@ def _levels(A, kw) -> tuple:
         out.append((P, A))
     if A.shape[0] <= kw["max_coarse"] or len(out) >= kw["max_levels"] - 1:
         return out, None
-    # A first coarse operator denser than A (7-point 3D: 546k unknowns, 18.7 nonzeros a row
-    # against 6.9) costs more per V-cycle and per Newton step than the finest level: it is then
-    # folded into the next (P_0 P_1, nonnegative), whose levels use direct interpolation (a
-    # third of classical's set-up there). Measured (obstacle_3d, tol 1e-8, one solve, CPU s):
-    # m = 103, 12.0 -> 8.5 s, 2.3 -> 1.46 GB peak, 3 -> 4 finest steps; m = 47, 1.08 -> 0.53 s.
-    # Folding the 2D 5-point first level (not denser) took 14 finest steps instead of 4 (n = 10⁶);
-    # θ = 0.5 changed nothing on the 7-point stencil (all its connections are equally strong);
-    # PMIS with direct interpolation took 18-26 finest steps.
-    # Aggressive coarsening of the auxiliary level (n/4 on the 5-point grid, bilinear P) took 8
-    # finest steps on P1/P2 instead of 5 (docs/MEASUREMENTS.md, "The algebraic hierarchy on grids").
-    # "denser" = 1.2x A's nonzeros: 7-point 3D gives 1.26-1.33; P1 on the Delaunay disk 1.01-1.07,
-    # where folding took 7 finest steps instead of 5 at n = 8,000
+    # A first coarse operator denser than A costs more per V-cycle and Newton step than the finest
+    # level: folded into the next (P_0 P_1, nonnegative), whose levels use direct interpolation.
+    # "denser" = 1.2x A's nonzeros (docs/MEASUREMENTS.md, "The fold of a denser first coarse level")
     dense = len(out) == 1 and A.nnz > 1.2 * A_fine.nnz
     out += [(_canonical(P), _canonical(Ac)) for P, Ac in
             _rs_levels(A, kw["theta"], kw["max_coarse"], kw["max_levels"] - len(out), "direct" if dense else "classical")]

@@ -52,9 +52,9 @@ def resolves_to_amg(hierarchy, A) -> bool:
 def amg_levels_or_rows(A):
     """amg_levels_why of an unscaled A, or None when one of its Galerkin operators PᵀAP has a
     non-positive diagonal: the core would end the hierarchy there and start cold. That happens when
-    A is a symmetric matrix with its rows scaled apart, D·S (P1 n = 130,561, d_i in [0.1, 10]: 51
-    Newton steps with direct solves, 27 CPU s); equilibrated rows keep the diagonals positive (5
-    finest steps, 0.95 s), so the caller then scales the rows (scale='rows')."""
+    A is a symmetric matrix with its rows scaled apart, D·S; equilibrated rows keep the diagonals
+    positive, so the caller then scales the rows (scale='rows'; docs/MEASUREMENTS.md, "Row-scaled
+    matrices and the amg set-up")."""
     pairs, why = amg_levels_why(A)
     return (pairs, why) if all((Ac.diagonal() > 0).all() for _, Ac in pairs) else None
 

@@ -289,8 +289,7 @@ _HIERARCHY_PREFIX = "nrmicp_hierarchy_"
 def _hierarchy(A, comm, prefix):
     """hypre BoomerAMG's classical prolongations and its Galerkin operators PᵀAP, finest first
     (A excluded), read through PCHMG. PCMG's smoothers are never applied here: Richardson without
-    a preconditioner spares their set-up (Chebyshev's eigenvalue estimates: 0.6 of 1.8 s at
-    n = 10⁶ in 2D)."""
+    a preconditioner spares their set-up (Chebyshev's eigenvalue estimates: docs/MEASUREMENTS.md)."""
     ours = {"pc_hmg_reuse_interpolation": True, "hmg_inner_pc_type": "hypre",
             "mg_levels_ksp_type": "richardson", "mg_levels_pc_type": "none"}
     # the user's -nrmicp_hierarchy_pc_hypre_boomeramg_... options reach hypre's set-up
@@ -315,19 +314,16 @@ class _Newton:
     else BiCGSTAB). With `ssor_first` (the coarse levels) a step first tries local SSOR as the
     preconditioner, at most _SSOR_ITERATIONS iterations, and sets up BoomerAMG only when that
     does not reach the step's tolerance, going on from SSOR's iterate: a coarse step needs only
-    0.1 × Res and BoomerAMG's set-up was most of its cost (2D n = 10⁶, np 1: 8.6 → 6.9 CPU s;
-    docs/DISTRIBUTED.md). The last set's systems are kept: a set solved again (an exact repeat of
+    0.1 × Res and BoomerAMG's set-up is most of its cost (docs/MEASUREMENTS.md, "The distributed
+    Newton member's choices"). The last set's systems are kept: a set solved again (an exact repeat of
     a loose step) reuses its submatrix and preconditioners."""
 
     def __init__(self, prob, comm, symmetric, stats, ssor_first=False, sweeps=False):
         self.p, self.comm, self.stats = prob, comm, stats
         self.ksp_type = "cg" if symmetric else "bcgs"
-        # The projected sweeps after each step (`sweeps`: the finest level; on the coarse levels, whose
-        # steps are cheap SSOR-first solves, they cost more than the steps they saved: 2D n = 10⁶,
-        # np 1, 5.64 against 5.11 CPU s), on a symmetric A only: there a sweep is coordinate descent on
-        # the LCP's quadratic energy and cannot start a cycle; on a nonsymmetric 3 x 3 P-matrix (np 2)
-        # the swept steps cycled and this member's fallback (nrmgs, weaker than the serial nrm)
-        # stagnated where the plain steps converged.
+        # The projected sweeps after each step: the finest level only (the coarse levels' SSOR-first
+        # steps are cheaper than a sweep) and a symmetric A only (there a sweep descends the LCP's
+        # quadratic energy and cannot start a cycle; docs/MEASUREMENTS.md).
         self.smoothing = _TUNING["smoothing_sweeps"] if sweeps and symmetric else 0
         self.ssor_first = ssor_first
         self.inactive = self.h = None
@@ -423,7 +419,7 @@ class _Newton:
 
 
 #: The coarse levels' SSOR tries: at most this many Krylov iterations before BoomerAMG is set up
-#: (2D n = 10⁶: 30 and 100 gave the same steps and time; -nrmicp_ssor_ksp_max_it overrides).
+#: (more did not pay: docs/MEASUREMENTS.md; -nrmicp_ssor_ksp_max_it overrides).
 _SSOR_ITERATIONS = 30
 
 
@@ -469,8 +465,8 @@ def _scoped_options(prefix, values):
 def _boomeramg_defaults(M) -> dict:
     """BoomerAMG options for a reduced matrix: HMIS coarsening, ext+i interpolation (at most 4
     weights a row) and one level of aggressive coarsening when M has more than 6 nonzeros a row
-    (7-point 3D, P1 triangles: 1.6x less CPU, docs/DISTRIBUTED.md); hypre's defaults on sparser
-    ones (5-point 2D: 1.2x faster with them)."""
+    (7-point 3D, P1 triangles); hypre's defaults on sparser ones (5-point 2D), the faster on each
+    (docs/MEASUREMENTS.md, "The distributed Newton member's choices")."""
     rows = max(M.getSize()[0], 1)
     if M.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"] <= 6 * rows:
         return {}

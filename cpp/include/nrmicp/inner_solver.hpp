@@ -64,7 +64,7 @@ namespace detail {
 
 /// ‖M − Mᵀ‖_F ≤ 1e-14 ‖M‖_F, read off M's compressed storage (each entry's mirror found by
 /// binary search in its sorted inner vector; a mirror that is not stored is 0), without
-/// forming Mᵀ: measured with perf, forming it was 4% of a nested Newton solve at n = 10⁶.
+/// forming Mᵀ, which showed in a nested Newton solve's profile (docs/MEASUREMENTS.md).
 template <typename SpMat>
 bool is_symmetric(const SpMat& M) {
   using StorageIndex = typename SpMat::StorageIndex;
@@ -197,8 +197,7 @@ bool factored(EigenSolver& s) {
 }
 #if defined(NRMICP_HAVE_CHOLMOD)
 /// Pivots this close to rounding (min/max pivot of LLᵀ; κ ≳ 4.5e12) mean a singular matrix: its
-/// solves would follow the machine's rounding. Measured: nrm's Lm = [[2, 2], [2, 2]] factored
-/// with rcond = ε (a pivot of 4e-16) on an AMD EPYC, and was refused (negative pivot) elsewhere.
+/// solves would follow the machine's rounding, which differs between CPUs (docs/MEASUREMENTS.md).
 inline constexpr double singular_rcond = 1e3 * std::numeric_limits<double>::epsilon();
 template <typename ColMatrix>
 bool factored(CholmodLLT<ColMatrix>& s) {
@@ -239,7 +238,7 @@ decltype(auto) with_backend(Inner k, F&& f) {
     case Inner::EigenLLT:
       return f(Backend<Eigen::SimplicialLLT<ColMatrix, Eigen::Lower, Eigen::AMDOrdering<StorageIndex>>>{});
     case Inner::EigenLU:
-      // COLAMD: AMD ordering took 450 s at n = 250,000 on this machine, COLAMD 2.5 s.
+      // COLAMD: AMD ordering is far slower for SparseLU (docs/MEASUREMENTS.md, "Inner solvers").
       return f(Backend<Eigen::SparseLU<ColMatrix, Eigen::COLAMDOrdering<StorageIndex>>>{});
     case Inner::CG:
       throw std::invalid_argument("inner = 'cg' is the iterative inner solve of method 'newton' only; the "

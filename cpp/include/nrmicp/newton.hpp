@@ -103,7 +103,7 @@ class Newton {
   /// done there). A solve's Result::timings count only that solve's call (result.hpp).
   const Timings& setup_timings() const { return setup_timings_; }
   /// Ω1, Ω2 (of the active-set test x > 0 ⇔ (z − ζ)/Ω1 > w/Ω2) and γ with defaults resolved;
-  /// computed when asked (a solve needs only Ω1/Ω2: four n-vectors not held, 34 MB at n = 10⁶).
+  /// computed when asked (a solve needs only Ω1/Ω2: four n-vectors not held).
   Parameters parameters() const { return resolve_parameters(levels_.A, options_); }
   /// The inner solver of the reduced systems ("none" before the first solve).
   const char* inner_name() const { return levels_.finest->inner_name(); }

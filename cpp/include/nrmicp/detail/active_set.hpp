@@ -184,13 +184,8 @@ class ActiveSetSystem {
   static bool use_iterative(Inner inner, std::size_t levels, Eigen::Index n) {
     return levels > 0 && (inner == Inner::CG || (inner == Inner::Auto && n >= auto_krylov_min_n));
   }
-  /// Measured (hierarchy given, CPU ms of the whole solve, min of 5, direct → Krylov; one step
-  /// more, from the loose solves): obstacle_2d geometric n = 3,969: 14.3 → 4.0; obstacle_3d
-  /// n = 3,375: 30.5 → 3.9; convection–diffusion (BiCGSTAB) n = 3,969 / 9,025: 30.2 → 12.3,
-  /// 73.2 → 22.6; amg on P1 / P3 / tetrahedral P1 elements n = 8,065 / 4,513 / 3,375: 72 → 37,
-  /// 86 → 43, 85 → 29; from n = 10⁴ 2.4-10× (CG), 2.6-3.7× (BiCGSTAB). Below 10³ both take a
-  /// few ms (n = 961: 3.8 → 1.1) and the exact solve is the steadier one at a rounding floor
-  /// (tests/test_tolerance.py's degenerate LCP, n = 961: 2 finest steps against 5 and fallback sweeps).
+  /// The Krylov solve is faster from here on; below, the exact solve is the steadier one at a rounding
+  /// floor (docs/MEASUREMENTS.md, "`ActiveSetSystem::auto_krylov_min_n`").
   static constexpr Eigen::Index auto_krylov_min_n = 1000;
 
  private:
@@ -223,15 +218,15 @@ class ActiveSetSystem {
   }
 
   /// The LCP on A's own pattern (it holds the diagonal): K = A, the active-row values the
-  /// identity's. A copy in column order, no sorting (measured with perf, obstacle_2d n = 10⁶,
-  /// nested: the triplet path below was 17% of the solve).
+  /// identity's. A copy in column order, no sorting (the triplet path below is slow:
+  /// docs/MEASUREMENTS.md, "The LCP's K on A's own pattern").
   template <typename MatrixType>
   void use_pattern_of(const MatrixType& A) {
     K_ = A;
     K_.makeCompressed();
     active_values_.resize(0);  // the identity's: active_value() gives them without storage
     // A symmetric row-major A stores K's column order: K's inactive values are A's own (held by
-    // reference, as A is), not a copy (42 MB at n = 10⁶ on a 5-point grid).
+    // reference, as A is), not a copy.
     if constexpr (MatrixType::IsRowMajor) {
       if (A.isCompressed() && A.nonZeros() == K_.nonZeros() &&
           std::equal(K_.innerIndexPtr(), K_.innerIndexPtr() + K_.nonZeros(), A.innerIndexPtr()) &&

@@ -15,15 +15,9 @@
 // products and the Galerkin operators Pᵀ K P; the V-cycle is the same, a nonsymmetric
 // preconditioner then, and BiCGSTAB replaces CG.
 //
-// Why BiCGSTAB: measured against Eigen's GMRES(30) (unsupported/Eigen/IterativeSolvers, left-
-// preconditioned by this V-cycle, restarted until the true residual met the same target),
-// convection_diffusion_obstacle 2D, hierarchy amg, tol 1e-8, OPENBLAS_NUM_THREADS=1, same run
-// (benchmarks/newton_inner.py): n = 65,025: BiCGSTAB 28 iterations (56 V-cycles), 3 steps, 0.33
-// CPU s, 82 MB; GMRES 54 iterations (54 V-cycles), 4 steps, 0.41 s, 95 MB. n = 261,121: 37
-// (74 V-cycles), 5 steps, 1.82 s, 305 MB; GMRES 64, 5 steps, 1.91 s, 321 MB. As many V-cycles,
-// a little faster, no Krylov basis to store (31 vectors for GMRES(30): 250 MB at n = 10⁶), and
-// its residual is the true one, which the absolute target of solve() is about (GMRES's is the
-// preconditioned one). The hand-written CG stays for SPD K: its work vectors are kept across
+// Why BiCGSTAB rather than GMRES: no Krylov basis to store, and its residual is the true one, which
+// the absolute target of solve() is about (docs/MEASUREMENTS.md, "BiCGSTAB for a nonsymmetric K").
+// The hand-written CG stays for SPD K: its work vectors are kept across
 // solves (Eigen's solvers allocate theirs per solve).
 #pragma once
 
@@ -161,8 +155,8 @@ class MultigridKrylov {
   /// matrix on K's pattern holding A's values), on the patterns of this V-cycle's K_l, which stay
   /// as they are (the next setup updates them from the last K). The next setup frees them again.
   /// A_l and K_l have one pattern and the coarse levels need A_l only for nested iteration, before
-  /// the finest level's solve: not held during it, 74 MB less at 2D amg n = 10⁶, for one pass of
-  /// the Galerkin products a solve (docs/MEASUREMENTS.md).
+  /// the finest level's solve: not held during it, for one pass of the Galerkin products a solve
+  /// (docs/MEASUREMENTS.md).
   template <typename M>
   void restore_hierarchy(const M& A_values) {
     if (!lent_) return;
@@ -247,8 +241,8 @@ class MultigridKrylov {
 
   /// C += Pᵀ ΔK P, ΔK given by its changed entries (`in`); `out` gets C's changed entries. The
   /// terms are added to C's values in place; a touched position's value before the update is kept
-  /// in `out` and its change is the difference (a dense sum per position of C cost 8 bytes per
-  /// nonzero of K_1, as much as K_1's values). False when a term falls outside C's pattern (C then
+  /// in `out` and its change is the difference (no dense sum per position of C: docs/MEASUREMENTS.md,
+  /// memory). False when a term falls outside C's pattern (C then
   /// partly updated).
   bool add_galerkin_change(const RowMatrix& P, const std::vector<Change<StorageIndex>>& in, RowMatrix& C,
                            std::vector<Change<StorageIndex>>& out) {
@@ -281,11 +275,8 @@ class MultigridKrylov {
     return inside;
   }
 
-  /// Preconditioned CG; ‖b − Kz‖ ≤ stop.
-  ///
-  /// Measured (obstacle_2d, m = 1023, n = 1,046,529, h²-scaled, tol 1e-8, geometric hierarchy):
-  /// with the target taken as a bound on rtol ‖b‖ (min(target, rtol ‖b‖) = 1.6e-11 there) the
-  /// finest level took 12 + 8 + 6 CG iterations in its 3 steps, with the target itself 10 + 5 + 3.
+  /// Preconditioned CG; ‖b − Kz‖ ≤ stop, the target as given (no bound by rtol ‖b‖: it cost
+  /// iterations; docs/MEASUREMENTS.md, "The Krylov target taken as given").
   int cg(const Vector& b, Vector& z, double stop) const {
     const auto K = fine();
     Vector &r = cg_.r, &s = cg_.s, &p = cg_.p, &Kp = cg_.Kp;  // reused: no page faults per solve
@@ -313,7 +304,7 @@ class MultigridKrylov {
   /// Eigen's preconditioned BiCGSTAB (its residual is the unpreconditioned b − Kz, relative to
   /// ‖b‖, updated recursively as CG's is) until ‖b − Kz‖ ≤ stop. z is kept when the solve breaks
   /// down (a non-finite iterate). The convergence is Eigen's test on the recursive residual: the
-  /// true one has a rounding floor (about 10⁻⁸ at n = 10⁶, h²-scaled) that the Newton loop's
+  /// true one has a rounding floor (docs/MEASUREMENTS.md) that the Newton loop's
   /// target tol / 10 can lie below, where a check of the true residual would fail every step.
   int krylov(const Vector& b, Vector& z, double stop) const {
     const double bn = b.norm();
