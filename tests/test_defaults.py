@@ -130,6 +130,11 @@ def test_auto_takes_nrmgs_on_dominant_rows_and_newton_elsewhere():
     assert nrmicp.Solver(zero_diag).method == "newton"
     assert nrmicp.Solver(A, accelerate="anderson").method == "nrmgs"   # a stationary-only option
     assert nrmicp.Solver(A, method="nrmj").method == "nrmj"            # an explicit member stays
+    # a zeta Jacobian is newton's, whatever the matrix (Bai's would take nrmgs)
+    A, q, psi = bai_obstacle()
+    r = nrmicp.solve(A, q, zeta=lambda z: psi + 0.1 * np.sin(z),
+                     zeta_jacobian=lambda z: sp.diags(0.1 * np.cos(z), format="csr"))
+    assert r.method == "newton" and r.success
 
 
 def test_a_stationary_failure_names_newton_and_newton_then_solves_it():

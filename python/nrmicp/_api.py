@@ -360,8 +360,8 @@ def dominance_margin(A: sp.csr_matrix) -> float:
 
 def choose_method(A: sp.csr_matrix, options: dict) -> str:
     """What method="auto" takes for A (the rule of README "Which method for which problem"):
-    the member of any stationary-only option given, newton for a hierarchy list or a ζ Jacobian,
-    else nrmgs where A's rows are dominant by AUTO_MARGIN and newton elsewhere."""
+    the member of any stationary-only option given, newton for a hierarchy list (and, in
+    :func:`solve`, for a ``zeta_jacobian``), else nrmgs where A's rows are dominant by AUTO_MARGIN and newton elsewhere."""
     if any(options.get(k, v) is not None and options.get(k, v) != v for k, v in _STATIONARY_ONLY.items()):
         return "nrmgs"
     if isinstance(options.get("hierarchy"), (list, tuple)):
@@ -1077,6 +1077,8 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
         shifted LCP), with the same re-solve rule as for ``scale``.
     """
     t0 = time.perf_counter()
+    if zeta_jacobian is not None and isinstance(method, str) and method.lower() == "auto":
+        method = "newton"   # a ζ Jacobian is read by newton only (choose_method's rule, known here at the call)
     s = Solver(A, method=method, omega1=omega1, omega2=omega2, gamma=gamma, phi=phi, alpha=alpha, beta=beta,
                inner=inner, tol=tol, rtol=rtol, maxiter=maxiter, theta=theta, z_update=z_update, accelerate=accelerate,
                anderson_m=anderson_m, record_history=record_history, stall_iterations=stall_iterations,
