@@ -87,3 +87,12 @@ def test_units_table():
             assert r[3] == "ok / ok / ok" and r[5] == "same" and float(r[4]) < 1e-6, r
         if "ok" in r[3]:
             assert float(r[4]) < 1e-6 and r[5] == "same", r   # every success, in any unit, is one
+
+
+def test_qvi_outer_table():
+    # the thermoforming QVIs without a Jacobian (benchmarks/qvi_outer.py), on its smallest sizes
+    rows = table_rows(run("qvi_outer.py", "--achp", "63", "--thermo2d", "15"))
+    assert [r[0] for r in rows] == ["ACHP-style 1D", "thermoforming_2d", "thermoforming_2d κ=2 δ=1",
+                                    "thermoforming_2d κ=2 δ=1, hierarchy 'auto'"]
+    for r in rows:
+        assert r[5] == "CONVERGED" and float(r[7]) < 1e-8, r  # the numpy complementarity check

@@ -62,6 +62,8 @@ class Anderson {
 
   /// Forget the differences (after a rejected step); the last (x, f) pair is kept.
   void reset() { count_ = 0; head_ = 0; }
+  /// The differences the last step mixed (0: it was the plain step x + f).
+  int size() const { return count_; }
 
  private:
   int slot(int i) const { return (head_ + i) % m_; }

@@ -119,8 +119,9 @@ class NewtonTally {
     tally_.newton.fallback_sweeps += k;
     tally_.iterations += k;
   }
-  /// The history of the outer fixed point's Monitor (numbered by nit already), after the Newton steps' if any.
+  /// The history and counters of the outer fixed point's Monitor (numbered by nit already), after the Newton steps' if any.
   void take_history(const Result& from) {
+    for (const auto& [key, count] : from.counters) tally_.counters[key] += count;
     auto append = [](auto& to, const auto& v) { to.insert(to.end(), v.begin(), v.end()); };
     append(tally_.history_iteration, from.history_iteration);
     append(tally_.history_seconds, from.history_seconds);
@@ -206,6 +207,12 @@ struct NewtonTuning {
   /// Finest steps a user's start gets before the nested start takes over: the marches' time steps
   /// took at most 6 (docs/MEASUREMENTS.md, "Warm starts with a hierarchy").
   static constexpr int warm_steps = 6;
+  /// The outer fixed point on a callable ζ without its Jacobian (detail::OuterFixedPoint): Anderson's
+  /// memory on the outer map z ↦ S(ζ(z)) (docs/MEASUREMENTS.md, "The outer fixed point, accelerated").
+  static constexpr int outer_memory = 3;
+  /// Its inner obstacle solves stop at this fraction of the outer iterate's Res (inexact while the
+  /// outer map still moves; exact, to a settled set, once Res is near tol: the inner loop settles first).
+  static constexpr double outer_forcing = 0.1;
 };
 
 /// One solve: the strategies by ζ, and the statistics they gather over levels and outer steps.
@@ -290,7 +297,8 @@ class NewtonRun {
     const Vector z_start = z0 ? *z0 : Vector::Zero(n);
     Outer outer{*this, q, zeta, {}, Vector(n)};
     Iterate s;
-    OuterFixedPoint<Outer> step(outer, z_start, z0 != nullptr, s);
+    OuterFixedPoint<Outer> step(outer, z_start, z0 != nullptr, s, NewtonTuning::outer_memory,
+                                NewtonTuning::outer_forcing);
     Result out;
     static const Vector no_shift;
     Monitor monitor(o_, hooks_.callback, hooks_.poll, hooks_.progress, no_shift, out, n);
@@ -339,10 +347,10 @@ class NewtonRun {
     const Z& zeta;
     std::vector<char> set;  // the last inner solve's inactive set: the next one starts from it
     Vector w;
-    /// The inner obstacle problem, solved to a settled active set (its own tol: 0). Without z,
+    /// The inner obstacle problem, solved to Res < tol (0: to a settled active set). Without z,
     /// it starts at y = 0 (z = ψ): measured better than from z = 0.
-    Result obstacle(const Vector& psi, const Vector* z, bool first) {
-      Result inner = run.solve_obstacle(q, psi, z, first && run.nest_, 0.0, run.o_.maxiter - run.tally_.nit(), false, &set);
+    Result obstacle(const Vector& psi, const Vector* z, bool first, double tol) {
+      Result inner = run.solve_obstacle(q, psi, z, first && run.nest_, tol, run.o_.maxiter - run.tally_.nit(), false, &set);
       run.tally_.outer_step();
       return inner;
     }

@@ -4,18 +4,23 @@
 //
 // as a step of the family's loop (solver.hpp), so that the one Monitor (detail/stopping.hpp)
 // decides when it stops, keeps its history and best iterate and calls the callback. Each inner
-// solve is warm-started from z and from the last inner solve's active set. An outer step whose
-// Res fails the non-monotone test hands over to runs of the fallback member on the whole ICP from
-// the best iterate (SweepRuns, as a level's loop does: detail/globalization.hpp).
+// solve is warm-started from z and from the last inner solve's active set, and inexact: it stops
+// at `forcing` × Res(z) (0: to a settled active set). The outer map G(z) = S(ζ(z)) is accelerated
+// by Anderson (detail/anderson.hpp), safeguarded: a mixed iterate whose Res is not below Res(z) is
+// replaced by the plain G(z) and the memory cleared. A plain step whose Res fails the non-monotone
+// test hands over to runs of the fallback member on the whole ICP from the best iterate
+// (SweepRuns, as a level's loop does: detail/globalization.hpp).
 #pragma once
 
 #include "../result.hpp"
+#include "anderson.hpp"
 #include "globalization.hpp"
 #include "iterate.hpp"
 #include "stopping.hpp"
 
 #include <Eigen/Core>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <optional>
@@ -24,9 +29,10 @@
 namespace nrmicp::detail {
 
 /// `Run` (detail::NewtonRun) provides, each counted in its tally:
-///   Result obstacle(const Vector& psi, const Vector* z, bool first)
+///   Result obstacle(const Vector& psi, const Vector* z, bool first, double tol)
 ///                                                         the inner solve S(ψ) from z (null: from
-///                                                         z = ψ); the first one may start nested
+///                                                         z = ψ) to Res < tol (0: a settled active
+///                                                         set); the first one may start nested
 ///   double icp_residual(const Vector& v, Vector& zv)      Res of the ICP at v, ζ(v) in zv (NaN: ζ failed)
 ///   Result sweep(const Vector& z0, int sweeps)            a run of the fallback member
 ///   int sweeps_spent() const, int sweep_budget() const
@@ -36,9 +42,11 @@ class OuterFixedPoint {
   using Vector = Eigen::VectorXd;
 
   /// From z (`given`: z is the user's start; else the inner solve starts as the problem's own).
-  OuterFixedPoint(Run& run, Vector z, bool given, Iterate& s)
+  /// `memory`: Anderson's (0: the plain fixed point); `forcing`: the inner solves' (0: exact).
+  OuterFixedPoint(Run& run, Vector z, bool given, Iterate& s, int memory, double forcing)
       : run_(run), z_(std::move(z)), psi_(z_.size()), psi_new_(z_.size()), given_(given),
-        r_(run.icp_residual(z_, psi_)), test_(r_), best_z_(z_), best_r_(r_), runs_(run.sweep_budget()) {
+        r_(run.icp_residual(z_, psi_)), test_(r_), best_z_(z_), best_r_(r_), runs_(run.sweep_budget()),
+        aa_(std::max(memory, 1)), accelerate_(memory > 0), forcing_(forcing) {
     s.z = z_;
   }
 
@@ -47,10 +55,11 @@ class OuterFixedPoint {
     s.zeta_ok = !std::isnan(r_);
     return r_;
   }
-  /// One outer step, or a run of the fallback member when the step is not acceptable.
+  /// One outer step (accelerated, or plain), or a run of the fallback member when the step is not acceptable.
   void move_x(Iterate&) {
-    Result inner = run_.obstacle(psi_, given_ || !first_ ? &z_ : nullptr, first_);
+    Result inner = run_.obstacle(psi_, given_ || !first_ ? &z_ : nullptr, first_, forcing_ * r_);
     first_ = false;
+    if (accelerate_ && accelerated(inner.z)) return;
     const double r = run_.icp_residual(inner.z, psi_new_);
     if (std::isnan(r)) {  // ζ failed: the Monitor ends the solve at this iterate
       r_ = r;
@@ -68,9 +77,29 @@ class OuterFixedPoint {
   }
   void update_z(Iterate& s) { s.z = z_; }
   const StepEnd* end() const { return end_ ? &*end_ : nullptr; }
-  void report(Result&) const {}
+  /// Accelerated outer steps replaced by the plain one (Result::counters "anderson_rejections").
+  void report(Result& r) const { r.counters["anderson_rejections"] += rejections_; }
 
  private:
+  /// Anderson's mix of the outer steps so far with G(z) = `plain`, taken when its Res is below
+  /// Res(z); false (memory cleared) when it is not, or when there is nothing to mix yet.
+  bool accelerated(const Vector& plain) {
+    aa_.step(z_, plain - z_, mixed_);
+    if (aa_.size() == 0) return false;
+    const double r = run_.icp_residual(mixed_, psi_new_);
+    if (!(r < r_)) {  // no lower Res (or ζ failed there): the plain step, by the plain rules
+      aa_.reset();
+      ++rejections_;
+      return false;
+    }
+    z_.swap(mixed_);
+    psi_.swap(psi_new_);
+    r_ = r;
+    test_.push(r);
+    if (r_ < best_r_) { best_z_ = z_; best_r_ = r_; }
+    return true;
+  }
+
   void fall_back() {
     const int k = runs_.next(run_.sweeps_spent());
     if (!k) return give_up();
@@ -79,6 +108,7 @@ class OuterFixedPoint {
     z_ = sw.z;
     r_ = run_.icp_residual(z_, psi_);
     test_.reset(r_);
+    aa_.reset();  // the differences before the sweeps describe another stretch of the map
   }
   void give_up() { end_ = StepEnd{runs_.give_up(run_.sweeps_spent()), {}}; }
 
@@ -90,6 +120,11 @@ class OuterFixedPoint {
   Vector best_z_;
   double best_r_;
   SweepRuns runs_;
+  Anderson aa_;
+  Vector mixed_;  // Anderson's iterate
+  bool accelerate_;
+  double forcing_;
+  long long rejections_ = 0;
   std::optional<StepEnd> end_;
 };
 

@@ -1,0 +1,114 @@
+"""The Newton member's outer fixed point z -> S(zeta(z)) (a callable zeta, no zeta_jacobian) on QVIs:
+outer steps, linear solves, fallback sweeps, status, Res, CPU s (docs/MEASUREMENTS.md, "The outer
+fixed point, accelerated").
+
+Problems:
+- ``achp``: a 1D thermoforming QVI in the style of Alphonse, Christof, Hintermüller & Papadopoulos
+  (2024, Test 1). Membrane u on (0, 1), -u'' = f, u <= Phi0 + phi T, u = 0 at both ends; the mould's
+  temperature T solves the nonlinear Neumann problem k T - T'' = g(Psi0 + psi T - u), g a clipped
+  (nondifferentiable) heat-transfer law, by a few Newton iterations (scipy's banded solve) at every
+  evaluation of zeta. In z = -u the ICP is A z + q >= 0, z >= zeta(z) = -(Phi0 + phi T(-z)).
+- ``thermo2d``: the product's scene nrmicp.scenes.thermoforming_2d with its geometric hierarchy,
+  at its defaults and at kappa = 2, delta = 1 (a stronger, longer-range coupling), the latter also
+  with hierarchy 'auto' (the algebraic one from n = 4096).
+
+    OPENBLAS_NUM_THREADS=1 python benchmarks/qvi_outer.py
+    OPENBLAS_NUM_THREADS=1 python benchmarks/qvi_outer.py --achp 63 255 --thermo2d 31 63
+
+Run it against two builds with PYTHONPATH to compare them. Every answer is checked in numpy:
+err = ||min(A z + q, z - zeta(z))||_inf, measured independently of the solver's Res.
+"""
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+import scipy.linalg as sla
+
+import nrmicp
+from nrmicp import scenes
+from nrmicp.scenes._operators import grid_1d, neg_laplacian_1d
+
+
+def achp_problem(n: int, f: float = 25.0, k: float = 1.0, a: float = 0.6):
+    """(A, q, zeta) of the 1D thermoforming QVI on n interior nodes (z = -u)."""
+    h = 1.0 / (n + 1)
+    x = grid_1d(n)
+    A = neg_laplacian_1d(n)
+    q = np.full(n, f)
+    phi0 = 1.0 - 2.0 * np.maximum(np.abs(x - 0.5) - 0.25, 0.0)   # a plateau mould
+    phi = np.sin(np.pi * x)                                       # where the mould expands
+    psi0, psi = phi0, phi                                         # g's argument: the gap Phi(T) - u
+    # k T - T'' with Neumann ends, as a banded matrix (upper, diagonal, lower)
+    band = np.zeros((3, n))
+    band[0, 1:] = -1.0 / h**2
+    band[2, :-1] = -1.0 / h**2
+    band[1, :] = k + 2.0 / h**2
+    band[1, 0] = band[1, -1] = k + 1.0 / h**2
+
+    def g(s):
+        return a * np.clip(1.0 - s, 0.0, 1.0)
+
+    def dg(s):
+        return np.where((s > 0.0) & (s < 1.0), -a, 0.0)
+
+    state = {"T": np.zeros(n)}
+
+    def temperature(u):
+        """T solving k T - T'' = g(Psi0 + psi T - u) by semismooth Newton from the last T: g is
+        piecewise linear, so a step whose pieces repeat those it was taken on is exact."""
+        T = state["T"].copy()
+        pieces = None
+        for _ in range(30):
+            s = psi0 + psi * T - u
+            now = (s > 0.0).astype(np.int8) + (s >= 1.0)
+            if pieces is not None and np.array_equal(now, pieces):
+                break
+            pieces = now
+            J = band.copy()
+            J[1] -= dg(s) * psi
+            T = sla.solve_banded((1, 1), J, g(s) - dg(s) * psi * T)
+        state["T"] = T
+        return T
+
+    def zeta(z):
+        return -(phi0 + phi * temperature(-z))
+
+    return A, q, zeta
+
+
+def check(A, q, zeta, z):
+    """||min(A z + q, z - zeta(z))||_inf in numpy."""
+    return float(np.max(np.abs(np.minimum(A @ z + q, z - zeta(z)))))
+
+
+def run(label, n, A, q, zeta, **kw):
+    t0 = time.process_time()
+    r = nrmicp.solve(A, q, zeta, method="newton", tol=1e-8, **kw)
+    cpu = time.process_time() - t0
+    err = check(A, q, zeta, r.z)
+    print(f"| {label} | {n:,} | {r.outer_iterations} | {r.linear_solves} | {r.fallback_sweeps} | {r.status.name} | "
+          f"{r.residual:.1e} | {err:.1e} | {cpu:.2f} |", flush=True)
+    return r
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--achp", type=int, nargs="*", default=[63, 255, 1023, 4095], help="1D sizes N")
+    ap.add_argument("--thermo2d", type=int, nargs="*", default=[31, 63, 127], help="2D grid sides m (n = m^2)")
+    args = ap.parse_args(argv)
+    print("| problem | n | outer steps | linear solves | fallback sweeps | status | Res | numpy err | CPU s |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for n in args.achp:
+        run("ACHP-style 1D", n, *achp_problem(n))
+    strong = {"kappa": 2.0, "delta": 1.0}
+    for params, label, geometric in (({}, "thermoforming_2d", True), (strong, "thermoforming_2d κ=2 δ=1", True),
+                                     (strong, "thermoforming_2d κ=2 δ=1, hierarchy 'auto'", False)):
+        for m in args.thermo2d:
+            p = scenes.thermoforming_2d(m, exact=False, **params)
+            run(label, p.n, p.A, p.q, p.zeta, hierarchy=p.prolongations() if geometric else "auto")
+
+
+if __name__ == "__main__":
+    main()
