@@ -148,3 +148,18 @@ def test_a_stationary_failure_names_newton_and_newton_then_solves_it():
     A, q, psi = bai_obstacle()
     r = nrmicp.solve(A, q, zeta=psi, method="nrmgs", maxiter=2)
     assert not r.success and "method='newton'" not in r.message
+
+
+def test_a_stalled_outer_fixed_point_under_the_default_rule_says_so_and_the_advice_works():
+    # A known limit of the default rule: on sigma*A the outer fixed point on thermoforming's callable
+    # zeta stalls at n = 511 (it converges on A itself); the message says what to pass, and it works.
+    from nrmicp import scenes
+    P = scenes.thermoforming_1d(511, exact=False)
+    r = nrmicp.solve(P.A, P.q, P.zeta, maxiter=2000)
+    if r.success:   # the limit lifted: the default then must be right
+        assert np.linalg.norm(np.minimum(P.A @ r.z + P.q, r.z - P.zeta(r.z))) < 1e-6
+        return
+    assert "pass tol" in r.message
+    again = nrmicp.solve(P.A, P.q, P.zeta, tol=1e-8)
+    assert again.success
+    assert np.linalg.norm(np.minimum(P.A @ again.z + P.q, again.z - P.zeta(again.z))) < 1e-8

@@ -369,6 +369,17 @@ def choose_method(A: sp.csr_matrix, options: dict) -> str:
     return "nrmgs" if dominance_margin(A) >= AUTO_MARGIN else "newton"
 
 
+def _outer_hint(solver, measure) -> str:
+    """Advice for a newton solve on a callable ζ without Jacobian (the outer fixed point) that failed
+    under the default rule: on σA its steps can stall where on A itself they do not (a known limit,
+    docs/SPEC.md "The default stopping rule"); the paper's tol iterates on A."""
+    if solver.method != "newton" or solver.scale != "units" or measure.weights is None \
+            or measure.kind != ZetaKind.functor:
+        return ""
+    return ("; the default rule iterates on sigma*A, where the outer fixed point on a callable zeta can stall "
+            "(thermoforming 1D, n >= 511): pass tol (the paper's Res, e.g. tol=1e-8), which iterates on A itself")
+
+
 def _member_hint(A: sp.csr_matrix, method: str) -> str:
     """Advice for a stationary solve that did not converge, when newton is the member for this A."""
     if method == "newton" or choose_method(A, {}) != "newton":
@@ -686,7 +697,7 @@ class Solver:
             infeasible = measure.infeasibility()
             message += infeasible or self._omega2_hint
             if not infeasible and status in (Status.MAX_ITERATIONS, Status.STAGNATED):
-                message += _member_hint(self.A, self.method)
+                message += _member_hint(self.A, self.method) + _outer_hint(self, measure)
         extra = {}
         if self._dr is not None and self.scale != "units":
             extra["scaling"] = {"kind": self.scale, "refinements": rounds.refined,
