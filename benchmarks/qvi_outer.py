@@ -14,6 +14,7 @@ Problems:
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/qvi_outer.py
     OPENBLAS_NUM_THREADS=1 python benchmarks/qvi_outer.py --achp 63 255 --thermo2d 31 63
+    OPENBLAS_NUM_THREADS=1 python benchmarks/qvi_outer.py --achp 1023 4095 --thermo2d --tol default --messages
 
 Run it against two builds with PYTHONPATH to compare them. Every answer is checked in numpy:
 err = ||min(A z + q, z - zeta(z))||_inf, measured independently of the solver's Res.
@@ -83,13 +84,15 @@ def check(A, q, zeta, z):
     return float(np.max(np.abs(np.minimum(A @ z + q, z - zeta(z)))))
 
 
-def run(label, n, A, q, zeta, **kw):
+def run(label, n, A, q, zeta, tol=1e-8, messages=False, **kw):
     t0 = time.process_time()
-    r = nrmicp.solve(A, q, zeta, method="newton", tol=1e-8, **kw)
+    r = nrmicp.solve(A, q, zeta, method="newton", **({} if tol is None else {"tol": tol}), **kw)
     cpu = time.process_time() - t0
     err = check(A, q, zeta, r.z)
     print(f"| {label} | {n:,} | {r.outer_iterations} | {r.linear_solves} | {r.fallback_sweeps} | {r.status.name} | "
           f"{r.residual:.1e} | {err:.1e} | {cpu:.2f} |", flush=True)
+    if messages:
+        print(f"|   | {r.message} |", flush=True)
     return r
 
 
@@ -97,17 +100,20 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--achp", type=int, nargs="*", default=[63, 255, 1023, 4095], help="1D sizes N")
     ap.add_argument("--thermo2d", type=int, nargs="*", default=[31, 63, 127], help="2D grid sides m (n = m^2)")
+    ap.add_argument("--tol", default="1e-8", help="tol of every solve ('default': the default stopping rule)")
+    ap.add_argument("--messages", action="store_true", help="print each solve's message under its row")
     args = ap.parse_args(argv)
+    kw = {"tol": None if args.tol == "default" else float(args.tol), "messages": args.messages}
     print("| problem | n | outer steps | linear solves | fallback sweeps | status | Res | numpy err | CPU s |")
     print("|---|---|---|---|---|---|---|---|---|")
     for n in args.achp:
-        run("ACHP-style 1D", n, *achp_problem(n))
+        run("ACHP-style 1D", n, *achp_problem(n), **kw)
     strong = {"kappa": 2.0, "delta": 1.0}
     for params, label, geometric in (({}, "thermoforming_2d", True), (strong, "thermoforming_2d κ=2 δ=1", True),
                                      (strong, "thermoforming_2d κ=2 δ=1, hierarchy 'auto'", False)):
         for m in args.thermo2d:
             p = scenes.thermoforming_2d(m, exact=False, **params)
-            run(label, p.n, p.A, p.q, p.zeta, hierarchy=p.prolongations() if geometric else "auto")
+            run(label, p.n, p.A, p.q, p.zeta, hierarchy=p.prolongations() if geometric else "auto", **kw)
 
 
 if __name__ == "__main__":
