@@ -30,8 +30,8 @@ except ImportError as exc:  # the core package needs no MPI; this module does
                       f"(make mpideps installs them on Debian); {exc}") from exc
 
 from . import _core
-from ._api import (FLOOR_FACTOR, Affine, Result, Status, _checked, _choice, _criterion, _iteration_options,
-                   _scalar)
+from ._api import (Affine, Result, Status, _checked, _choice, _criterion, _iteration_options, _scalar,
+                   at_rounding_floor)
 from ._scaling import sigma_from_logs
 from ._inputs import as_constant, as_diagonal, as_vector
 from ._zeta import CheckedZeta
@@ -1022,14 +1022,7 @@ def solve(A, q, zeta=None, *, method: str = "newton", tol=None, rtol=None, maxit
     criterion = {"measure": "units" if units else "paper", "target": float(tol), "value": float(res)}
     w, g, zt = z.duplicate(), z.duplicate(), z.duplicate()
     if units:
-        if status in (Status.STAGNATED, Status.MAX_ITERATIONS) and math.isfinite(res):
-            zeta_z = zt.duplicate()
-            zf(z, zeta_z)
-            level = _rounding_level(Am, qv, z, zeta_z)
-            if res <= FLOOR_FACTOR * level:
-                status, message = Status.CONVERGED, (
-                    f"converged to the rounding level: Res_E(z) = {res:.3g} is within {FLOOR_FACTOR:g}x of what "
-                    f"double precision resolves ({level:.3g}), above the default target {tol:.3g}")
+        status, message = at_rounding_floor(status, message, res, tol, lambda: _rounding_level(Am, qv, z, zf(z, zt)))
         res = _icp_residual(A_user, q_user, zf, z, w, g, zt)   # the paper's Res, and w, in the user's units
     else:
         Am.multAdd(z, qv, w)
@@ -1059,7 +1052,8 @@ def _units_sigma(Am):
 
 
 def _target(Am, qv, zf, tol, rtol):
-    """The absolute target max(tol, rtol · Res(0)) of the problem the iteration runs on."""
+    """The absolute target of the problem the iteration runs on: the core's rule (Options::target)
+    on Res(0) = ‖min(q, −ζ(0))‖₂."""
     if not rtol > 0:
         return tol
     zero, zt = qv.duplicate(), qv.duplicate()
@@ -1067,8 +1061,9 @@ def _target(Am, qv, zf, tol, rtol):
     zf(zero, zt)
     m = qv.duplicate()
     m.setArray(np.minimum(qv.getArray(readonly=True), -zt.getArray(readonly=True)))
-    t = max(tol, rtol * m.norm())
-    return t if t > 0 else np.finfo(float).tiny
+    opts = _core.Options()
+    opts.tol, opts.rtol = tol, rtol
+    return opts.target(m.norm())
 
 
 def _message(status, res, tol, floor):
