@@ -29,6 +29,18 @@ def tridiag(m, sub, diag, sup):
     return sp.diags([np.full(m - 1, sub), np.full(m, diag), np.full(m - 1, sup)], [-1, 0, 1])
 
 
+def readme_membrane(m):
+    """The README's worked example on an m x m grid: (A = 5-point -Delta_h / h^2, q = 8, the
+    paraboloid obstacle psi)."""
+    h = 1.0 / (m + 1)
+    T = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(m, m))
+    A = ((sp.kron(sp.identity(m), T) + sp.kron(T, sp.identity(m))) / h**2).tocsr()
+    x = np.linspace(h, 1 - h, m)
+    X, Y = np.meshgrid(x, x)
+    psi = (0.3 - 2 * ((X - .5) ** 2 + (Y - .5) ** 2)).ravel()
+    return A, np.full(m * m, 8.0), psi
+
+
 @dataclass
 class Problem:
     """ICP(q, A, zeta) with its known solution z_star.  zeta is None for an LCP."""

@@ -10,6 +10,7 @@ import scipy.sparse.linalg as spla
 
 import nrmicp
 from nrmicp.scenes.bai import bai_matrix
+from problems import readme_membrane
 
 
 def pdas_obstacle(A, q, psi, maxit=200):
@@ -31,17 +32,8 @@ def pdas_obstacle(A, q, psi, maxit=200):
     raise AssertionError("reference PDAS did not settle")
 
 
-def laplacian_2d(m):
-    T = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(m, m))
-    return ((sp.kron(sp.identity(m), T) + sp.kron(T, sp.identity(m))) * (m + 1) ** 2).tocsr()
-
-
 def membrane(m=15):
-    h = 1.0 / (m + 1)
-    x = np.linspace(h, 1 - h, m)
-    X, Y = np.meshgrid(x, x)
-    psi = (0.3 - 2 * ((X - .5) ** 2 + (Y - .5) ** 2)).ravel()
-    return laplacian_2d(m), np.full(m * m, 8.0), psi
+    return readme_membrane(m)
 
 
 def bai_obstacle(m=8):

@@ -8,7 +8,7 @@ import scipy.sparse.linalg as spla
 
 import nrmicp
 from nrmicp import scenes
-from problems import make_problem
+from problems import make_problem, readme_membrane
 from reference_impl import reference_solve
 
 
@@ -233,17 +233,12 @@ def _final_line(caplog, **kw):
     """(result, last 'nrmicp' log line) of nrmicp.solve(**kw, verbose=1) on the README's membrane
     at m = 31 (its figures scale, the paths are the same)."""
     m = 31
-    h = 1 / (m + 1)
-    T = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(m, m))
-    A = ((sp.kron(sp.identity(m), T) + sp.kron(T, sp.identity(m))) / h**2).tocsr()
-    x = np.linspace(h, 1 - h, m)
-    X, Y = np.meshgrid(x, x)
-    psi = (0.3 - 2 * ((X - .5)**2 + (Y - .5)**2)).ravel()
+    A, q, psi = readme_membrane(m)
     zeta = {"psi": psi, "tanh": lambda z: psi + 0.1 * np.tanh(z),
             "affine": nrmicp.Affine(0.1 * sp.identity(m * m, format="csr"), psi)}[kw.pop("zeta")]
     jac = {"zeta_jacobian": lambda z: sp.diags(0.1 / np.cosh(z) ** 2)} if kw.pop("jacobian", False) else {}
     with caplog.at_level("INFO", logger="nrmicp"):
-        res = nrmicp.solve(A, np.full(m * m, 8.0), zeta, verbose=1, **jac, **kw)
+        res = nrmicp.solve(A, q, zeta, verbose=1, **jac, **kw)
     lines = [r.getMessage() for r in caplog.records if r.name == "nrmicp"]
     return res, lines[-1]
 

@@ -11,6 +11,7 @@ import scipy.sparse as sp
 
 import nrmicp
 from nrmicp import _newton, scenes
+from problems import readme_membrane
 
 KEYS = {"setup", "factorization", "iterations", "zeta", "spmv", "inner_solve", "total"}
 EPS = 1e-6  # seconds: the parts are sums of intervals of one clock, equal to their container up to rounding
@@ -18,13 +19,7 @@ EPS = 1e-6  # seconds: the parts are sums of intervals of one clock, equal to th
 
 def membrane(m):
     """The README's membrane (5-point −Δ_h, obstacle ψ, q = −8) on an m × m grid."""
-    h = 1 / (m + 1)
-    T = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(m, m))
-    A = ((sp.kron(sp.identity(m), T) + sp.kron(T, sp.identity(m))) / h**2).tocsr()
-    x = np.linspace(h, 1 - h, m)
-    X, Y = np.meshgrid(x, x)
-    psi = (0.3 - 2 * ((X - .5)**2 + (Y - .5)**2)).ravel()
-    return A, np.full(m * m, 8.0), psi
+    return readme_membrane(m)
 
 
 def check_sums(t, wall=None):
