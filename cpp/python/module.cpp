@@ -163,6 +163,12 @@ struct CallableJacobian {
 
 // ζ from the Python layer's (kind, c, B, fn): none, constant c, Affine(B, c) or a callable
 // (with its Jacobian when given).
+/// ζ with the upper bound `upper` (None: none).
+template <typename I>
+nrmicp::Zeta<I> with_upper(nrmicp::Zeta<I> zeta, const py::object& upper) {
+  return upper.is_none() ? zeta : zeta.with_upper(to_vector(upper.cast<py::array>(), "upper"));
+}
+
 template <typename I>
 nrmicp::Zeta<I> make_zeta(Eigen::Index n, nrmicp::ZetaKind kind, py::object zeta_c, py::object b_indptr,
                           py::object b_indices, py::object b_data, py::object zeta_fn,
@@ -280,12 +286,13 @@ class PyCore {
 
   py::dict solve(py::array q, nrmicp::ZetaKind zeta_kind, py::object zeta_c, py::object b_indptr,
                  py::object b_indices, py::object b_data, py::object zeta_fn, py::object z0, py::object callback,
-                 const SolveOptions& it, py::object zeta_jacobian, py::object progress) {
+                 const SolveOptions& it, py::object zeta_jacobian, py::object progress, py::object upper) {
     const Eigen::Index n = A_.A.rows();
     Eigen::VectorXd qv = to_vector(q, "q");
     std::optional<Eigen::VectorXd> z0v;
     if (!z0.is_none()) z0v = to_vector(z0.cast<py::array>(), "x0");
-    const auto zeta = make_zeta<I>(n, zeta_kind, zeta_c, b_indptr, b_indices, b_data, zeta_fn, zeta_jacobian);
+    const auto zeta =
+        with_upper(make_zeta<I>(n, zeta_kind, zeta_c, b_indptr, b_indices, b_data, zeta_fn, zeta_jacobian), upper);
     const auto cb = make_callback(callback);
     const auto report = make_progress(progress);
     nrmicp::Result r =
@@ -300,7 +307,8 @@ class PyCore {
   static void def_solve(Class& cls) {
     cls.def("solve", &PyCore::solve, py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("b_indptr"),
             py::arg("b_indices"), py::arg("b_data"), py::arg("zeta_fn"), py::arg("x0"), py::arg("callback"),
-            py::arg("options"), py::arg("zeta_jacobian") = py::none(), py::arg("progress") = py::none());
+            py::arg("options"), py::arg("zeta_jacobian") = py::none(), py::arg("progress") = py::none(),
+            py::arg("upper") = py::none());
     cls.def("setup_timings", &PyCore::setup_timings);
   }
 
@@ -369,10 +377,11 @@ class PyNewton : public PyCore<I, nrmicp::Newton<CsrMap<I>>> {
 
   // One Newton step from z (polish).
   py::dict polish(py::array q, nrmicp::ZetaKind zeta_kind, py::object zeta_c, py::object b_indptr,
-                  py::object b_indices, py::object b_data, py::object zeta_fn, py::array z, double tol) {
+                  py::object b_indices, py::object b_data, py::object zeta_fn, py::array z, double tol,
+                  py::object upper) {
     const Eigen::Index n = this->A_.A.rows();
     Eigen::VectorXd qv = to_vector(q, "q"), zv = to_vector(z, "z");
-    const auto zeta = make_zeta<I>(n, zeta_kind, zeta_c, b_indptr, b_indices, b_data, zeta_fn);
+    const auto zeta = with_upper(make_zeta<I>(n, zeta_kind, zeta_c, b_indptr, b_indices, b_data, zeta_fn), upper);
     nrmicp::Result r = without_gil([&] { return this->core_->polish(qv, zeta, zv, tol); });
     return result_dict(r, false);
   }
@@ -406,7 +415,8 @@ void bind_newton(py::module_& m, const char* name) {
            py::arg("indptr"), py::arg("indices"), py::arg("data"), py::arg("n"), py::arg("options"),
            py::arg("prolongations"), py::arg("coarse_operators") = py::list())
       .def("polish", &PyNewton<I>::polish, py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"),
-           py::arg("b_indptr"), py::arg("b_indices"), py::arg("b_data"), py::arg("zeta_fn"), py::arg("z"), py::arg("tol"))
+           py::arg("b_indptr"), py::arg("b_indices"), py::arg("b_data"), py::arg("zeta_fn"), py::arg("z"), py::arg("tol"),
+           py::arg("upper") = py::none())
       .def_property_readonly("levels", &PyNewton<I>::levels)
       .def_property_readonly("hierarchy", &PyNewton<I>::hierarchy,
                              "{'requested', 'used', 'reason'}: the levels given and used, why fewer ('' when none)")

@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike
 from . import _core
 from ._inputs import as_constant, as_csr, as_diagonal, as_float, as_vector
 from ._scaling import SCALINGS, ScaledCallable, equilibrate, scale_matrix, units_factor
-from . import _newton
+from . import _bounds, _newton
 from ._zeta import CheckedZeta
 from ._decoupled import Reduced, decoupled_rows
 from ._result import Result, wants_result
@@ -98,16 +98,19 @@ def backends(why: bool = False) -> Union[dict[str, bool], dict[str, str]]:
             for name, ok in have.items()}
 
 
-def residual(A: MatrixLike, q: ArrayLike, z: ArrayLike, zeta: ZetaLike = None) -> float:
+def residual(A: MatrixLike, q: ArrayLike, z: ArrayLike, zeta: ZetaLike = None, *, upper: Any = None) -> float:
     """Res(z) = ‖min(Az + q, z − ζ(z))‖₂, computed in numpy (independent of the C++ core); +inf when
-    Az + q overflows. The arguments are checked as :func:`solve` checks them (TypeError/ValueError
-    naming the argument)."""
+    Az + q overflows. With bounds (``upper``, or ζ with -inf entries): ‖mid(z − ζ, z − upper, Az + q)‖₂.
+    The arguments are checked as :func:`solve` checks them (TypeError/ValueError naming the argument)."""
     A = as_csr(A, "A")
     n = A.shape[0]
     qv, zv = as_vector(q, n, "q"), as_vector(z, n, "z")
     kind, c, B, fn = _make_zeta(zeta, n)
+    us = _make_upper(upper, n)
+    if us is not None:
+        _bounds.check(kind, c, us, "newton", None)
     with np.errstate(over="ignore", invalid="ignore"):
-        return _OriginalResidual(A, qv, kind, c, B, None if fn is None else CheckedZeta(fn, n))(zv)[1]
+        return _OriginalResidual(A, qv, kind, c, B, None if fn is None else CheckedZeta(fn, n), upper=us)(zv)[1]
 
 
 def _norm(m) -> float:
@@ -224,7 +227,23 @@ def _make_zeta(zeta, n):
         return ZetaKind.affine, as_constant(zeta.c, n, "zeta.c"), B, None
     if callable(zeta):
         return ZetaKind.functor, None, None, zeta
-    return ZetaKind.constant, as_constant(zeta, n, "zeta"), None, None
+    return ZetaKind.constant, _bounds.as_lower(zeta, n), None, None
+
+
+def _has_minus_inf(zeta) -> bool:
+    """A constant ζ (array or number) with a -inf entry: a bound only method 'newton' takes."""
+    if zeta is None or callable(zeta) or isinstance(zeta, Affine):
+        return False
+    try:
+        a = np.asarray(zeta)
+    except Exception:   # _make_zeta names what is wrong with it
+        return False
+    return a.dtype.kind == "f" and bool(np.any(a == -np.inf))
+
+
+def _make_upper(upper, n):
+    """``upper=`` checked -> None or a vector (+inf: no bound there)."""
+    return _bounds.as_upper(upper, n, implicit=isinstance(upper, Affine) or callable(upper))
 
 
 def _scale_choice(scale):
@@ -549,19 +568,22 @@ class Solver:
             return None
         return self._dr.copy(), self._dc.copy()
 
-    def solve(self, q: ArrayLike, zeta: ZetaLike = None, *, x0: Optional[ArrayLike] = None,
+    def solve(self, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = None, x0: Optional[ArrayLike] = None,
               callback: Optional[Callable[..., Any]] = None, zeta_jacobian: Optional[Callable[..., Any]] = None,
               **iteration_options: Any) -> Result:
-        """Solve ICP(q, A, ζ). See :func:`nrmicp.solve` for the arguments. ``timings`` count this
-        call (its ``total``: from entry to return); the constructor's are :attr:`setup_timings`."""
+        """Solve ICP(q, A, ζ), or with ``upper`` the mixed problem ζ ≤ z ≤ upper. See
+        :func:`nrmicp.solve` for the arguments. ``timings`` count this call (its ``total``: from entry
+        to return); the constructor's are :attr:`setup_timings`."""
         t0 = time.perf_counter()
-        res = self._solve(q, zeta, x0=x0, callback=callback, zeta_jacobian=zeta_jacobian, **iteration_options)
+        res = self._solve(q, zeta, upper=upper, x0=x0, callback=callback, zeta_jacobian=zeta_jacobian,
+                          **iteration_options)
         res.timings["total"] = time.perf_counter() - t0
         if iteration_options.get("verbose", self._defaults["verbose"]) > 0:   # checked by _solve
             _log_final(self.method, res, res.timings["total"])
         return res
 
-    def _solve(self, q, zeta=None, *, x0=None, callback=None, zeta_jacobian=None, **iteration_options) -> Result:
+    def _solve(self, q, zeta=None, *, upper=None, x0=None, callback=None, zeta_jacobian=None,
+               **iteration_options) -> Result:
         """:meth:`solve` without its final progress line and ``total`` (the inner solves of the
         decoupled rows and of the whole A)."""
         n = self.n
@@ -570,8 +592,18 @@ class Solver:
         qv = as_vector(q, n, "q")
         z0 = None if x0 is None else as_vector(x0, n, "x0")
         kind, c, B, fn = _make_zeta(zeta, n)
+        us = _make_upper(upper, n)
+        bounded = _bounds.is_bounded(c if kind == ZetaKind.constant else None, us)
+        if bounded:
+            _bounds.check(kind, c, us, self.method, zeta_jacobian)
         if callback is not None and not callable(callback):
             raise TypeError(f"callback must be callable, got {type(callback).__name__}")
+        if self._reduced is not None and bounded:   # the decoupled rows' closed form is the LCP's
+            built = self._whole_solver is None
+            res = self._whole()._solve(qv, c, upper=us, x0=z0, callback=callback, **iteration_options)
+            if built:
+                _charge_setup(res.timings, self._whole_solver._setup_timings)
+            return res
         if self._reduced is not None:
             zD = None
             if kind in (ZetaKind.none, ZetaKind.constant):
@@ -588,9 +620,11 @@ class Solver:
                 _charge_setup(res.timings, self._whole_solver._setup_timings)
             return res
         core_kw = _newton.jacobian_argument(zeta_jacobian, self, kind, self._dc)
+        if us is not None:
+            core_kw["upper"] = us if self._dr is None else us / self._dc
         checked = None if fn is None else CheckedZeta(fn, n)  # read-only input, checked output: one per solve
         problem, z0s = self._core_problem(qv, z0, kind, c, B, checked)
-        measure = _OriginalResidual(self.A, qv, kind, c, B, checked, self._units_weights() if units else None)
+        measure = _OriginalResidual(self.A, qv, kind, c, B, checked, self._units_weights() if units else None, us)
         # Res is re-measured in the original variables whenever that costs no call of a user ζ
         # (constant: the core iterated the shifted LCP; Affine), and always with scaling (then a
         # callable ζ is called once more per round): success is never declared on the strength of
@@ -602,7 +636,7 @@ class Solver:
         rounds = _Rounds(self, problem, it, callback, core_kw, measure if verify else None, z0)
         rounds.run(z0s, tol)
         polished = polish_core = None
-        if self.polish:
+        if self.polish and not bounded:   # (polish is the LCP's Newton step: _newton.polish)
             polished, polish_core = _newton.polish(self, problem, rounds.z, rounds.res, measure, self._dc)
             if polish_core is not None:
                 rounds.add_timings(polish_core["timings"])
@@ -631,6 +665,7 @@ class Solver:
                 "decoupled rows; returning the best iterate")
         else:
             r.message = f"{r.message}; Res(z) = {r.residual:.3g} with the decoupled rows"
+        r.active_mask = measure.active_mask(r.z)
         r.status, r.message, r.residual, r.criterion = _criterion_outcome(measure, r.z, r.residual, tol, r.status,
                                                                           r.message)
         if r.status != Status.CONVERGED:
@@ -709,6 +744,7 @@ class Solver:
         if self.method == "newton":
             extra.update(_newton.result_fields(rounds.best_d, self._hierarchy))
             message = _newton.with_jacobian_note(message, extra["path"], rounds.best_d["message"])
+        extra["active_mask"] = measure.active_mask(z)
         status, message, res, extra["criterion"] = _criterion_outcome(measure, z, res, tol, status, message)
         message = _newton.with_shortening(status, message, self._hierarchy)
         return Result(z=z, w=w, success=status == Status.CONVERGED, status=status, message=message,
@@ -721,13 +757,17 @@ class _OriginalResidual:
     """(w, Res(z)) in the original variables, in numpy: w = Az + q, g = z − ζ(z). With `weights`
     (d_r, d_c), the default rule's units-free Res_E = ‖min(d_r w, g / d_c)‖₂ (w itself unweighted)."""
 
-    def __init__(self, A, qv, kind, c, B, checked, weights=None):
+    def __init__(self, A, qv, kind, c, B, checked, weights=None, upper=None):
         self.A, self.qv, self.kind, self.c, self.B, self.checked = A, qv, kind, c, B, checked
-        self.weights = weights
+        self.weights, self.upper = weights, upper
+        self.bounded = _bounds.is_bounded(c if kind == ZetaKind.constant else None, upper)
         self._last = None   # (z, w, g) of the last call: the paper's Res of the returned z calls no ζ again
 
     def infeasibility(self) -> str:
-        """The message part naming a row that makes the problem evidently infeasible, or ""."""
+        """The message part naming a row that makes the problem evidently infeasible, or "" (always
+        for bounds: the rule is the LCP's)."""
+        if self.bounded:
+            return ""
         lcp = self.kind in (ZetaKind.none, ZetaKind.constant)
         return evident_infeasibility(self.A, self.qv, lcp, self.c if self.kind == ZetaKind.constant else None)
 
@@ -751,11 +791,16 @@ class _OriginalResidual:
         if not (np.all(np.isfinite(w)) and np.all(np.isfinite(z))):
             return w, math.inf   # an overflowing Az + q is no certificate: min(w, g) is blind to w = +inf
         if self.weights is None or not weighted:
-            return w, _norm(np.minimum(w, g))
+            return w, _norm(_bounds.residual_terms(z, w, g, self.upper))
         dr, dc = self.weights
         with np.errstate(over="ignore", invalid="ignore"):
-            r = _norm(np.minimum(dr * w, g / dc))
+            r = _norm(_bounds.residual_terms(z / dc, dr * w, g / dc, None if self.upper is None else self.upper / dc))
         return w, r if r == r else math.inf   # a factor beyond float range (inf · 0): no certificate
+
+    def active_mask(self, z):
+        """scipy's active_mask of z (_bounds.active_mask)."""
+        w, g = self._wg(z)
+        return _bounds.active_mask(z, w, g, self.upper)
 
     def rounding_level(self, z) -> float:
         """ε (‖d_r(|A||z| + |q|)‖₂ + ‖(|z| + |z − g|)/d_c‖₂): what double precision can resolve of
@@ -763,7 +808,8 @@ class _OriginalResidual:
         dr, dc = self.weights
         with np.errstate(over="ignore", invalid="ignore"):
             t = dr * (abs(self.A) @ np.abs(z) + np.abs(self.qv))
-            u = (np.abs(z) + np.abs(z - self._wg(z)[1])) / dc
+            zeta = np.abs(z - self._wg(z)[1])
+            u = (np.abs(z) + np.where(np.isfinite(zeta), zeta, 0.0)) / dc   # a -inf bound adds no rounding
         return float(np.finfo(float).eps * (_norm(t) + _norm(u)))
 
 
@@ -928,7 +974,8 @@ class _Rounds:
                 "residual": np.concatenate([h[2] for h in self.histories])}
 
 
-def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "auto", tol: Optional[float] = None,
+def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = None, method: str = "auto",
+          tol: Optional[float] = None,
           rtol: Optional[float] = None, maxiter: int = 10000, omega1: DiagonalLike = None, omega2: DiagonalLike = None, gamma: float = 1.0,
           phi: DiagonalLike = None, alpha: Optional[float] = None, beta: Optional[float] = None,
           theta: float = 1.0, z_update: str = "auto", inner: str = "auto", accelerate: Optional[str] = "none",
@@ -950,11 +997,18 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
     q : array_like, (n,)
     zeta : None, array_like, :class:`Affine` or callable
         ``None``: the LCP (ζ is never evaluated). An array ``c``: a constant obstacle, solved as
-        the shifted LCP in ``z − c``. ``Affine(B, c)``: ζ(z) = Bz + c, evaluated in C++. A
+        the shifted LCP in ``z − c``; it may hold ``-inf`` where z has no lower bound (free rows). ``Affine(B, c)``: ζ(z) = Bz + c, evaluated in C++. A
         callable ``zeta(z) -> ndarray``: called once per iteration with a read-only float64
         array (valid only during the call); exceptions it raises reach the caller unchanged.
         ζ returning an array of the wrong shape or dtype raises TypeError/ValueError; ζ
         returning NaN or Inf raises ValueError (the core's status ZETA_FAILED).
+    upper : None, float or array_like (n,), optional
+        An upper bound: solve the mixed complementarity problem ζ ≤ z ≤ upper (PATH's and PETSc's
+        convention): w = Az + q ≥ 0 where z = ζ, w ≤ 0 where z = upper, w = 0 strictly between.
+        ``+inf`` entries: no upper bound there; with ``zeta`` ``-inf`` too, the row is free (w = 0).
+        Res becomes ‖mid(z − ζ, z − upper, w)‖₂ (the paper's Res without ``upper``). Bounds need
+        ``zeta`` None or constant and method 'newton' ('auto' picks it); lower > upper anywhere is a
+        ValueError naming both. ``result.active_mask`` says where z is at a bound.
     method : str
         ``'auto'`` (default): ``'nrmgs'`` when every row of A is diagonally dominant by at least
         a quarter of its diagonal (Bai's shifted matrices, implicit time steps with a large mass
@@ -1082,7 +1136,9 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
     -------
     Result
         ``z``, ``w``, ``success``, ``status``, ``message``, ``nit``, ``residual``, ``history``,
-        ``timings``. A solve that does not converge says so in ``status`` and returns its best iterate.
+        ``timings``, ``active_mask`` (scipy's, as ``lsq_linear``'s: -1 where z is at its lower bound
+        ζ, i.e. z − ζ <= w; +1 at ``upper``; 0 between). A solve that does not converge says so in
+        ``status`` and returns its best iterate.
         Method 'newton' adds ``linear_solves`` (all levels), ``inner_iterations`` (CG or BiCGSTAB
         iterations of ``inner='cg'``, all levels; 0 for direct solves), ``fallback_sweeps``, ``outer_iterations``
         (callable ζ), ``level_steps`` and ``level_seconds`` (per level, finest first), ``path``
@@ -1095,13 +1151,14 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, method: str = "
         shifted LCP), with the same re-solve rule as for ``scale``.
     """
     t0 = time.perf_counter()
-    if zeta_jacobian is not None and isinstance(method, str) and method.lower() == "auto":
-        method = "newton"   # a ζ Jacobian is read by newton only (choose_method's rule, known here at the call)
+    if isinstance(method, str) and method.lower() == "auto" and (zeta_jacobian is not None or upper is not None
+                                                                  or _has_minus_inf(zeta)):
+        method = "newton"   # a ζ Jacobian and bounds are newton's only (choose_method's rule, known here at the call)
     s = Solver(A, method=method, omega1=omega1, omega2=omega2, gamma=gamma, phi=phi, alpha=alpha, beta=beta,
                inner=inner, tol=tol, rtol=rtol, maxiter=maxiter, theta=theta, z_update=z_update, accelerate=accelerate,
                anderson_m=anderson_m, record_history=record_history, stall_iterations=stall_iterations,
                scale=scale, verbose=verbose, hierarchy=hierarchy, polish=polish)
-    res = s.solve(q, zeta, x0=x0, callback=callback, zeta_jacobian=zeta_jacobian)
+    res = s.solve(q, zeta, upper=upper, x0=x0, callback=callback, zeta_jacobian=zeta_jacobian)
     _charge_setup(res.timings, s._setup_timings)   # the whole call: the set-up is part of it
     res.timings["total"] = time.perf_counter() - t0
     return res

@@ -147,8 +147,14 @@ def _is_canonical(M: sp.csr_matrix, name: str) -> bool:
     return _check_structure(M, name)[1]
 
 
-def as_vector(v, n: int, name: str) -> np.ndarray:
-    """A float64 C-contiguous copy-free view of v when possible, checked for length and finiteness."""
+#: What an infinite entry means where one is allowed: a bound that is not there (as_vector's `infinite`).
+_INFINITE_BOUND = {-1: ("-inf", "a lower bound: z is free below there"),
+                   1: ("+inf", "an upper bound: z has no upper bound there")}
+
+
+def as_vector(v, n: int, name: str, infinite: int = 0) -> np.ndarray:
+    """A float64 C-contiguous copy-free view of v when possible, checked for length and finiteness;
+    `infinite` = -1 (+1) lets -inf (+inf) entries through: a bound that is absent there."""
     if sp.issparse(v):
         raise TypeError(f"{name} must be a dense 1-D array, got a sparse matrix")
     try:
@@ -163,8 +169,11 @@ def as_vector(v, n: int, name: str) -> np.ndarray:
         raise TypeError(f"{name} is a masked array with masked entries: fill them (v.filled(...)) first")
     arr = np.ascontiguousarray(flat_vector(arr, n, name), dtype=np.float64)
     if not np.all(np.isfinite(arr)):
-        i = int(np.flatnonzero(~np.isfinite(arr))[0])
-        raise ValueError(f"{name} has a non-finite entry {arr[i]} at index {i}")
+        bad = ~np.isfinite(arr) if not infinite else ~(np.isfinite(arr) | (arr == infinite * np.inf))
+        if np.any(bad):
+            i = int(np.flatnonzero(bad)[0])
+            allowed = f" ({name} may hold {_INFINITE_BOUND[infinite][0]}, {_INFINITE_BOUND[infinite][1]})" if infinite else ""
+            raise ValueError(f"{name} has a non-finite entry {arr[i]} at index {i}{allowed}")
     return arr
 
 
@@ -190,18 +199,20 @@ def as_float(v) -> float:
         return math.inf if v > 0 else -math.inf
 
 
-def as_constant(value, n: int, name: str) -> np.ndarray:
+def as_constant(value, n: int, name: str, infinite: int = 0) -> np.ndarray:
     """A real scalar (broadcast to length n; a 0-d array counts as one) or a length-n vector
-    -> float64 vector, finite. Raises TypeError/ValueError naming `name`."""
+    -> float64 vector, finite (but for the infinity `infinite` lets through: as_vector). Raises
+    TypeError/ValueError naming `name`."""
     if np.isscalar(value) or (isinstance(value, np.ndarray) and value.ndim == 0):
         v = value[()] if isinstance(value, np.ndarray) else value
         if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
             raise TypeError(f"{name} must be a real number or a length-{n} vector, got {value!r}")
         f = as_float(v)
-        if not math.isfinite(f):
-            raise ValueError(f"{name} must be finite, got {value!r}")
+        if not (math.isfinite(f) or (infinite and f == infinite * math.inf)):
+            allowed = f" or {_INFINITE_BOUND[infinite][0]} ({_INFINITE_BOUND[infinite][1]})" if infinite else ""
+            raise ValueError(f"{name} must be finite{allowed}, got {value!r}")
         return np.full(n, f)
-    return as_vector(value, n, name)
+    return as_vector(value, n, name, infinite)
 
 
 def as_diagonal(v, n: int, name: str, *, positive: bool) -> np.ndarray | None:

@@ -245,7 +245,7 @@ class Newton {
     zeta.check(n);
     Options resolved = o;
     resolve_tolerance(resolved, q, zeta);
-    detail::NewtonRun<MatrixType> run(levels_, resolved, hooks, nest);
+    detail::NewtonRun<MatrixType> run(levels_, resolved, hooks, nest, zeta.upper());
     const auto t_iterations = std::chrono::steady_clock::now();
     Result r = [&] {
       switch (zeta.kind()) {

@@ -139,6 +139,9 @@ class Solver {
     if (q.size() != n) throw std::invalid_argument("Solver::solve: q has length " + std::to_string(q.size()) + ", expected n = " + std::to_string(n));
     if (z0 && z0->size() != n) throw std::invalid_argument("Solver::solve: x0 has length " + std::to_string(z0->size()) + ", expected n = " + std::to_string(n));
     zeta.check(n);
+    if (zeta.bounded())
+      throw std::invalid_argument("Solver: bounds (an upper bound, or a lower bound with -inf entries) are solved by the "
+                                  "Newton member (nrmicp::Newton); the modulus members here have no box form");
     resolve_tolerance(o, q, zeta);
     Result r;
     if (zeta.kind() == ZetaKind::Constant) {

@@ -9,9 +9,11 @@
 #include "detail/residual.hpp"
 #include "options.hpp"
 
+#include <algorithm>
 #include <functional>
 #include <limits>
 #include <stdexcept>
+#include <string>
 
 namespace nrmicp {
 
@@ -53,6 +55,15 @@ class Zeta {
     Zeta t(ZetaKind::Functor); t.f_ = std::move(f); t.j_ = std::move(jacobian); return t;
   }
 
+  /// This ζ as the lower bound of z with the upper bound `u` (+∞ entries: no bound there; an empty
+  /// u: none). Bounds — an upper one, or a constant ζ with −∞ entries (z free below there) — make the
+  /// mixed complementarity problem: w ≥ 0 where z = ζ, w ≤ 0 where z = u, w = 0 between (PATH's).
+  /// The Newton member solves it, for ζ none or constant (check()); the modulus members refuse it.
+  Zeta with_upper(Vector u) const { Zeta t = *this; t.upper_ = std::move(u); return t; }
+  const Vector& upper() const { return upper_; }
+  /// An upper bound, or a constant ζ with an infinite entry.
+  bool bounded() const { return upper_.size() > 0 || (kind_ == ZetaKind::Constant && !c_.allFinite()); }
+
   ZetaKind kind() const { return kind_; }
   const Vector& c() const { return c_; }
   const RowMatrix& B() const { return B_; }
@@ -69,6 +80,18 @@ class Zeta {
     if (kind_ == ZetaKind::Affine && B_.rows() != n)
       throw std::invalid_argument("Zeta: B has " + std::to_string(B_.rows()) + " rows, expected n = " + std::to_string(n));
     if (kind_ == ZetaKind::Functor && !f_) throw std::invalid_argument("Zeta: empty functor");
+    if (bounded()) check_bounds(n);
+  }
+
+  /// Mid(z − ζ, z − u, w) at z = 0, with w = q: the residual of the bounded problem at 0.
+  double bounded_residual_at_zero(const Vector& q) const {
+    Vector m(q.size());
+    for (Eigen::Index i = 0; i < q.size(); ++i) {
+      const double l = kind_ == ZetaKind::Constant ? c_[i] : 0.0;
+      const double u = upper_.size() ? upper_[i] : std::numeric_limits<double>::infinity();
+      m[i] = std::min(-l, std::max(-u, q[i]));
+    }
+    return detail::stable_norm(m);
   }
 
   /// out = ζ(z). Returns false when ζ failed or produced non-finite values.
@@ -87,7 +110,24 @@ class Zeta {
 
  private:
   explicit Zeta(ZetaKind k) : kind_(k) {}
+  void check_bounds(Eigen::Index n) const {
+    if (kind_ != ZetaKind::None && kind_ != ZetaKind::Constant)
+      throw std::invalid_argument("Zeta: bounds (an upper bound, or a lower bound with -inf entries) need zeta none or "
+                                  "constant");
+    if (upper_.size() && upper_.size() != n)
+      throw std::invalid_argument("Zeta: upper has length " + std::to_string(upper_.size()) + ", expected n = " +
+                                  std::to_string(n));
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const double l = kind_ == ZetaKind::Constant ? c_[i] : 0.0;
+      const double u = upper_.size() ? upper_[i] : std::numeric_limits<double>::infinity();
+      if (!(l <= u) || l == std::numeric_limits<double>::infinity() || u == -std::numeric_limits<double>::infinity())
+        throw std::invalid_argument("Zeta: the bounds need -inf <= lower <= upper <= inf, lower < inf, upper > -inf; at "
+                                    "index " + std::to_string(i) + " lower = " + std::to_string(l) + ", upper = " +
+                                    std::to_string(u));
+    }
+  }
   ZetaKind kind_;
+  Vector upper_;
   Vector c_;
   RowMatrix B_;
   Functor f_;
@@ -98,6 +138,7 @@ class Zeta {
 /// NaN when ζ(0) failed.
 template <typename StorageIndex>
 double residual_at_zero(const Eigen::VectorXd& q, const Zeta<StorageIndex>& zeta) {
+  if (zeta.bounded()) return zeta.bounded_residual_at_zero(q);
   Eigen::VectorXd zeta0;
   if (!zeta.eval(Eigen::VectorXd::Zero(q.size()), zeta0)) return std::numeric_limits<double>::quiet_NaN();
   return detail::residual_of(q, -zeta0);

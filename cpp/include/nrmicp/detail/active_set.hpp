@@ -13,6 +13,7 @@
 
 #include "../inner_solver.hpp"
 #include "../options.hpp"
+#include "box.hpp"
 #include "multigrid.hpp"
 
 #include <Eigen/SparseCore>
@@ -117,7 +118,8 @@ class ActiveSetSystem {
       analyze();
   }
 
-  /// Puts the values of the active set into K (inactive[i] != 0: i ∈ ℐ) and factorizes.
+  /// Puts the values of the active set into K (inactive[i] == kInactive: i ∈ ℐ; any other state,
+  /// at a bound, is an active row) and factorizes.
   /// False when K is singular.
   bool factorize(const std::vector<char>& inactive) {
     const StorageIndex* outer = K_.outerIndexPtr();
@@ -129,10 +131,11 @@ class ActiveSetSystem {
     changes_.clear();
     for (Eigen::Index j = 0; j < K_.cols(); ++j)
       for (StorageIndex p = outer[j]; p < outer[j + 1]; ++p) {
-        const bool row_inactive = inactive[row[p]];
-        // LCP: z_𝒜 = 0, so the active columns of the inactive rows are dropped (symmetry).
-        const double value =
-            row_inactive ? ((lcp_ && !inactive[j]) ? 0.0 : inactive_value_ptr_[p]) : active_value(p, row[p], j);
+        const bool row_inactive = inactive_state(inactive[row[p]]);
+        // LCP: z_𝒜 is known (its bounds), so the active columns of the inactive rows are dropped
+        // (symmetry) and their part goes to the right-hand side (NewtonStep::solve).
+        const double value = row_inactive ? ((lcp_ && !inactive_state(inactive[j])) ? 0.0 : inactive_value_ptr_[p])
+                                          : active_value(p, row[p], j);
         if (record && value != v[p]) {
           changes_.push_back({row[p], static_cast<StorageIndex>(j), value - v[p]});
           record = changes_.size() <= most;
@@ -159,7 +162,7 @@ class ActiveSetSystem {
     if (!krylov_) { solver_.solve(b, z); return 0; }
     if (lcp_)
       for (Eigen::Index i = 0; i < z.size(); ++i)
-        if (!inactive_[i]) z[i] = b[i];
+        if (!inactive_state(inactive_[i])) z[i] = b[i];
     const int k = krylov_->solve(b, z, target);
     if (k <= krylov_->max_iterations()) return k;
     direct_solve(b, z);

@@ -18,6 +18,7 @@
 #pragma once
 
 #include "../result.hpp"
+#include "box.hpp"
 #include "iterate.hpp"
 #include "stopping.hpp"
 
@@ -54,7 +55,10 @@ class NonMonotone {
 inline std::uint64_t hash_set(const std::vector<char>& inactive) {
   std::uint64_t h = 1469598103934665603ull;
   for (std::size_t i = 0; i < inactive.size(); ++i)
-    if (inactive[i]) { h ^= static_cast<std::uint64_t>(i) + 1; h *= 1099511628211ull; }
+    if (inactive[i]) {  // inactive or at the upper bound (told apart in the lowest bit)
+      h ^= 2 * (static_cast<std::uint64_t>(i) + 1) + (inactive[i] == kAtUpper);
+      h *= 1099511628211ull;
+    }
   return h;
 }
 
@@ -273,7 +277,7 @@ class Globalized {
   // the next steps peel that excess one layer at a time; half the step lands near the true set
   // (docs/MEASUREMENTS.md, kOvershootGrowth).
   bool overshoots() const {
-    const auto active = static_cast<std::size_t>(std::count(inactive_.begin(), inactive_.end(), 0));
+    const auto active = inactive_.size() - static_cast<std::size_t>(std::count(inactive_.begin(), inactive_.end(), kInactive));
     return active > 0 && static_cast<double>(plain_.trial_active_count()) > kOvershootGrowth * static_cast<double>(active);
   }
   // Res before a step that did not halve it, and after it, are within kFloorFactor of the rounding

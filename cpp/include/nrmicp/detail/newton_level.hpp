@@ -7,6 +7,7 @@
 #include "../solver.hpp"
 #include "../zeta.hpp"
 #include "active_set.hpp"
+#include "box.hpp"
 #include "residual.hpp"
 #include "timer.hpp"
 
@@ -25,14 +26,16 @@ namespace nrmicp::detail {
 /// max(lower(i, y), −(q_i + Σ_{j≠i} a_ij y_j) / a_ii), the rows in order, then in reverse; rows with
 /// a_ii ≤ 0 are left. lower(i, y) = ζ_i(y) with y as it stands (0 for an LCP). A: row-major (a
 /// matrix or a Map); y: a vector or a Map (updated in place).
+/// `upper` (optional): y_i ≤ upper(i) too (a Box's).
 template <typename RowMajorMatrix, typename Q, typename Y, typename Lower>
-void projected_gauss_seidel(const RowMajorMatrix& A, const Q& q, Y& y, int sweeps, Lower lower) {
+void projected_gauss_seidel(const RowMajorMatrix& A, const Q& q, Y& y, int sweeps, Lower lower,
+                            const Box* upper = nullptr) {
   static_assert(RowMajorMatrix::IsRowMajor, "projected_gauss_seidel reads rows");
   auto relax = [&](Eigen::Index i) {
     double s = q[i], d = 0;
     for (typename RowMajorMatrix::InnerIterator it(A, i); it; ++it)
       if (it.index() == i) d = it.value(); else s += it.value() * y[it.index()];
-    if (d > 0) y[i] = std::max(lower(i, y), -s / d);
+    if (d > 0) y[i] = upper ? std::min(upper->upper(i), std::max(lower(i, y), -s / d)) : std::max(lower(i, y), -s / d);
   };
   for (int k = 0; k < sweeps; ++k) {
     for (Eigen::Index i = 0; i < A.rows(); ++i) relax(i);
@@ -40,10 +43,13 @@ void projected_gauss_seidel(const RowMajorMatrix& A, const Q& q, Y& y, int sweep
   }
 }
 
-/// The sweeps on LCP(q, A): y kept ≥ 0.
+/// The sweeps on LCP(q, A): y kept ≥ 0; with a (nonempty) box, lo ≤ y ≤ hi.
 template <typename RowMajorMatrix, typename Q, typename Y>
-void projected_gauss_seidel(const RowMajorMatrix& A, const Q& q, Y& y, int sweeps) {
-  projected_gauss_seidel(A, q, y, sweeps, [](Eigen::Index, const Y&) { return 0.0; });
+void projected_gauss_seidel(const RowMajorMatrix& A, const Q& q, Y& y, int sweeps, const Box* box = nullptr) {
+  if (box && !box->empty())
+    projected_gauss_seidel(A, q, y, sweeps, [box](Eigen::Index i, const Y&) { return box->lower(i); }, box);
+  else
+    projected_gauss_seidel(A, q, y, sweeps, [](Eigen::Index, const Y&) { return 0.0; });
 }
 
 /// One level: its matrix, the weights Ω1/Ω2 of the active-set test, the reduced LCP system
@@ -122,6 +128,14 @@ class NewtonLevel {
     return residual_of(w, g);
   }
 
+  /// Res of the box problem (detail/box.hpp) at y; w = Ay + q.
+  double evaluate(const Vector& y, const Vector& q, const Box& box, Vector& w) const {
+    ScopedTimer t(timings().spmv);
+    w.noalias() = A_ * y;
+    w += q;
+    return box.residual(w, y);
+  }
+
   /// Res of the ICP at v (ζ(v) in zv, Av + q in wv) for any ζ: NaN only when ζ failed; +inf for
   /// a runaway v (non-finite, never handed to ζ) or an Av + q that overflowed.
   double icp_residual(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector& v, Vector& zv,
@@ -169,28 +183,29 @@ class NewtonLevel {
   /// American put (n_space = 1600, warm start x0 = the previous time step, hierarchy None, where
   /// the far field is z = ψ, w = 0 exactly): 9.09 steps per time step with ties active, 1.49
   /// with ties inactive (the same as a plain scipy active-set loop with this rule).
-  void active_set(const Vector& w, const Vector& g, std::vector<char>& inactive) const {
+  /// With a (nonempty) box, g = y and each row has one of three states (Box::state).
+  void active_set(const Vector& w, const Vector& g, std::vector<char>& inactive, const Box* box = nullptr) const {
     inactive.resize(static_cast<std::size_t>(w.size()));
-    for (Eigen::Index i = 0; i < w.size(); ++i) inactive[i] = is_inactive(w, g, i);
+    for (Eigen::Index i = 0; i < w.size(); ++i) inactive[i] = state(w, g, i, box);
   }
-  /// Whether (w, g)'s inactive set is `inactive`, without storing it.
-  bool has_active_set(const Vector& w, const Vector& g, const std::vector<char>& inactive) const {
+  /// Whether (w, g)'s active set is `inactive`, without storing it.
+  bool has_active_set(const Vector& w, const Vector& g, const std::vector<char>& inactive, const Box* box = nullptr) const {
     for (Eigen::Index i = 0; i < w.size(); ++i)
-      if (static_cast<bool>(inactive[i]) != is_inactive(w, g, i)) return false;
+      if (inactive[i] != state(w, g, i, box)) return false;
     return true;
   }
   /// The number of active points of (w, g) (the complement of active_set's), without storing the set.
-  std::size_t active_count(const Vector& w, const Vector& g) const {
+  std::size_t active_count(const Vector& w, const Vector& g, const Box* box = nullptr) const {
     std::size_t k = 0;
-    for (Eigen::Index i = 0; i < w.size(); ++i) k += !is_inactive(w, g, i);
+    for (Eigen::Index i = 0; i < w.size(); ++i) k += !inactive_state(state(w, g, i, box));
     return k;
   }
 
   /// `sweeps` symmetric projected Gauss–Seidel sweeps on LCP(q, A) from y (the free function of
   /// that name); a column-major A (no row access) is not swept at all.
-  void projected_gauss_seidel(const Vector& q, Vector& y, int sweeps) const {
+  void projected_gauss_seidel(const Vector& q, Vector& y, int sweeps, const Box* box = nullptr) const {
     ScopedTimer t(timings().spmv);  // a sweep is a product with A (as the AOR types' one-pass sweep)
-    if constexpr (MatrixType::IsRowMajor) detail::projected_gauss_seidel(A_, q, y, sweeps);
+    if constexpr (MatrixType::IsRowMajor) detail::projected_gauss_seidel(A_, q, y, sweeps, box);
   }
   /// The same on ICP(q, A, ζ) with ζ(z) = Bz + c, from z: z_i ≥ (Bz)_i + c_i.
   void projected_gauss_seidel(const Vector& q, const RowMatrix& B, const Vector& c, Vector& z, int sweeps) const {
@@ -235,9 +250,33 @@ class NewtonLevel {
     using Z = Zeta<StorageIndex>;
     return sweep(q, B ? Z::affine(*B, *c) : Z::none(), z0, sweeps, tol);
   }
+  /// The fallback on a box problem: up to `sweeps` symmetric projected Gauss–Seidel sweeps from y0
+  /// (the modulus members have no box: SPEC, "Bounds"); the best iterate. A column-major A has none.
+  Result sweep(const Vector& q, const Box& box, const Vector& y0, int sweeps, double tol) {
+    Result r;
+    r.z = y0;
+    Vector y = y0, w;
+    r.residual = evaluate(y, q, box, w);
+    r.status = Status::MaxIterations;
+    if constexpr (!MatrixType::IsRowMajor) {
+      r.message = "its fallback (projected Gauss-Seidel sweeps) needs a row-major matrix";
+      return r;
+    }
+    for (int k = 1; k <= sweeps && !(r.residual < tol); ++k) {
+      projected_gauss_seidel(q, y, 1, &box);
+      const double res = evaluate(y, q, box, w);
+      r.iterations = k;
+      if (res < r.residual) { r.residual = res; r.z = y; r.nit = k; }
+    }
+    if (r.residual < tol) r.status = Status::Converged;
+    return r;
+  }
 
  private:
-  bool is_inactive(const Vector& w, const Vector& g, Eigen::Index i) const { return (g[i] - ratio_[i] * w[i]) >= 0; }
+  char state(const Vector& w, const Vector& g, Eigen::Index i, const Box* box) const {
+    if (box) return box->state(g[i], w[i], ratio_[i], i);
+    return (g[i] - ratio_[i] * w[i]) >= 0 ? kInactive : kAtLower;
+  }
   /// The fallback's sweeps' phases into this level's record (its set-up, a lazy factorization, as factorization).
   void absorb(const Timings& f) const {
     timings().factorization += f.factorization;

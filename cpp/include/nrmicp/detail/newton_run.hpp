@@ -13,6 +13,7 @@
 #include "../result.hpp"
 #include "../zeta.hpp"
 #include "active_set.hpp"
+#include "box.hpp"
 #include "globalization.hpp"
 #include "multigrid.hpp"
 #include "newton_level.hpp"
@@ -72,13 +73,41 @@ LevelOutcome newton_loop(Plain& plain, const NewtonControl& ctl, const Eigen::Ve
 
 /// The (shifted) LCP (B null) or the affine ICP ζ(z) = Bz + c on `level`, with the reduced system
 /// `K` (analysed for this problem), from z.
+/// `box` (B null): the LCP's bounds lo ≤ z ≤ hi (null or empty: z ≥ 0).
 template <typename MatrixType>
 LevelOutcome newton_loop(NewtonLevel<MatrixType>& level, ActiveSetSystem<typename MatrixType::StorageIndex>& K,
                          const Eigen::VectorXd& q, const typename NewtonLevel<MatrixType>::RowMatrix* B,
-                         const Eigen::VectorXd* c, const Eigen::VectorXd& z, const NewtonControl& ctl) {
-  NewtonStep<MatrixType, FixedLinearization<MatrixType>> plain(level, {level, K, q, B, c}, z);
+                         const Eigen::VectorXd* c, const Eigen::VectorXd& z, const NewtonControl& ctl,
+                         const Box* box = nullptr) {
+  NewtonStep<MatrixType, FixedLinearization<MatrixType>> plain(
+      level, {level, K, q, B, c, box && !box->empty() ? box : nullptr}, z);
   return newton_loop(plain, ctl, z);
 }
+
+/// The bounds ψ ≤ z ≤ u of an obstacle problem (ψ empty: 0; u empty: +∞; either may be infinite
+/// in places) as a box in y = z − s (detail/box.hpp): s = ψ where ψ is finite, else u where u is,
+/// else 0. Without infinite ψ and without u this is the plain shift y = z − ψ, y ≥ 0 (an empty box).
+struct ShiftedBounds {
+  Eigen::VectorXd s;  ///< the shift (empty: 0)
+  Box box;
+
+  ShiftedBounds(const Eigen::VectorXd& psi, const Eigen::VectorXd& upper) {
+    constexpr double inf = std::numeric_limits<double>::infinity();
+    const bool free_below = psi.size() && !psi.allFinite();
+    if (!free_below && upper.size() == 0) { s = psi; return; }
+    const Eigen::Index n = std::max(psi.size(), upper.size());
+    s.resize(n);
+    if (free_below) box.lo = Eigen::VectorXd::Zero(n);
+    if (upper.size()) box.hi.resize(n);
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const double l = psi.size() ? psi[i] : 0.0, u = upper.size() ? upper[i] : inf;
+      s[i] = std::isfinite(l) ? l : std::isfinite(u) ? u : 0.0;
+      if (free_below && !std::isfinite(l)) box.lo[i] = -inf;
+      if (upper.size()) box.hi[i] = u - s[i];
+    }
+  }
+  bool shifted() const { return s.size() > 0; }
+};
 
 /// The levels of nested iteration (built by nrmicp::Newton): the finest on A, the coarser ones on
 /// the Galerkin operators of `hierarchy`.
@@ -224,8 +253,10 @@ class NewtonRun {
   using Z = Zeta<StorageIndex>;
 
   /// `nest`: start from the nested coarse-to-fine solution (solve_obstacle may try the user's z0 first).
-  NewtonRun(const NewtonLevels<MatrixType>& levels, const Options& o, const Hooks& hooks, bool nest)
-      : levels_(levels), o_(o), hooks_(hooks), nest_(nest), tally_(levels.A, levels.count()) {
+  /// `upper`: the upper bounds of z (empty: none; solve_obstacle only).
+  NewtonRun(const NewtonLevels<MatrixType>& levels, const Options& o, const Hooks& hooks, bool nest,
+            const Vector& upper = Vector())
+      : levels_(levels), o_(o), hooks_(hooks), nest_(nest), upper_(upper), tally_(levels.A, levels.count()) {
     record_into(&tally_.timings());
   }
   ~NewtonRun() { record_into(nullptr); }
@@ -236,17 +267,22 @@ class NewtonRun {
   /// (no shifted copy of q, no vector of zeros: two n-vectors of the finest level's peak memory).
   /// `nest`: start from the nested solution. `report`: this is the problem being solved (history,
   /// callback), not an inner one. `set` (optional): the inactive set to start from, replaced by the final one.
+  /// `upper` (optional, NewtonRun's): z ≤ upper too; ψ and upper may be −∞ resp. +∞ in places
+  /// (ShiftedBounds: the box problem in y).
   Result solve_obstacle(const Vector& q, const Vector& psi, const Vector* z0, bool nest, double tol = -1,
                         int maxiter = -1, bool report = true, std::vector<char>* set = nullptr) {
-    const bool shifted = psi.size() > 0;
+    const ShiftedBounds bounds(psi, upper_);
+    const Box& box = bounds.box;
+    const bool shifted = bounds.shifted();
     Vector shifted_q;
     if (shifted) {
       ScopedTimer t(tally_.timings().spmv);
       shifted_q = q;
-      shifted_q.noalias() += levels_.A * psi;
+      shifted_q.noalias() += levels_.A * bounds.s;
     }
     const Vector& q_shift = shifted ? shifted_q : q;
-    Vector y0 = !z0 ? Vector::Zero(q.size()) : shifted ? Vector((*z0 - psi).cwiseMax(0.0)) : Vector(z0->cwiseMax(0.0));
+    Vector y0 = !z0 ? Vector::Zero(q.size()) : shifted ? Vector(*z0 - bounds.s) : Vector(*z0);
+    box.project(y0);
     const bool nested = nest && !levels_.coarse.empty();
     const double level_tol = tol >= 0 ? tol : o_.tol;
     int budget = maxiter >= 0 ? maxiter : o_.maxiter;
@@ -256,22 +292,23 @@ class NewtonRun {
     // whose active set is far off although its Res is small (another problem's solution: it peels),
     // after warm_steps (docs/MEASUREMENTS.md, "Warm starts with a hierarchy").
     std::optional<LevelOutcome> tried;
-    if (nested && report && z0 && !z0->isZero(0.0) && closer_than_cold(q_shift, y0)) {
+    const Vector& s = bounds.s;
+    if (nested && report && z0 && !z0->isZero(0.0) && closer_than_cold(q_shift, y0, box)) {
       const auto t0 = std::chrono::steady_clock::now();
-      tried = finest_lcp(q_shift, y0, guess_control(psi, level_tol, std::min(budget, NewtonTuning::warm_steps), true));
+      tried = finest_lcp(q_shift, y0, guess_control(s, level_tol, std::min(budget, NewtonTuning::warm_steps), true), box);
       if (tried->status != Status::MaxIterations || budget <= NewtonTuning::warm_steps)
-        return finish_obstacle(*tried, *tried, psi, q, t0);
+        return finish_obstacle(*tried, *tried, s, q, t0);
       tally_.absorb(*tried, 0, ScopedTimer::seconds_since(t0));
       budget -= tried->steps;
     }
-    if (nested) y0 = nested_start(q_shift);
+    if (nested) y0 = nested_start(q_shift, box);
     const auto t0 = std::chrono::steady_clock::now();
-    const auto control = nested ? guess_control(psi, level_tol, budget, report) : finest_control(psi, level_tol, budget, report);
-    const auto out = set && !set->empty() ? from_set(q_shift, y0, *set, control) : finest_lcp(q_shift, y0, control);
+    const auto control = nested ? guess_control(s, level_tol, budget, report) : finest_control(s, level_tol, budget, report);
+    const auto out = set && !set->empty() ? from_set(q_shift, y0, *set, control, box) : finest_lcp(q_shift, y0, control, box);
     if (set && !out.inactive.empty()) *set = out.inactive;
     // maxiter spent on both: the warm try's iterate when the nested run ended no better
     const bool keep_try = tried && out.status != Status::Converged && tried->residual < out.residual;
-    return finish_obstacle(out, keep_try ? *tried : out, psi, q, t0);
+    return finish_obstacle(out, keep_try ? *tried : out, s, q, t0);
   }
 
   /// ζ(z) = Bz + c: Newton on the full system, from the obstacle problem with ψ = ζ(z0) (or
@@ -394,38 +431,45 @@ class NewtonRun {
   }
 
   /// Res(y) < warm_start_fraction × Res(0) on LCP(q_shift, A): y is a guess worth more than a cold start.
-  bool closer_than_cold(const Vector& q_shift, const Vector& y) {
+  bool closer_than_cold(const Vector& q_shift, const Vector& y, const Box& box) {
     ScopedTimer t(tally_.timings().spmv);
     Vector w = q_shift;
     w.noalias() += levels_.A * y;
-    return residual_of(w, y) < NewtonTuning::warm_start_fraction * stable_norm(q_shift.cwiseMin(0.0));
+    const double cold = box.empty() ? stable_norm(q_shift.cwiseMin(0.0)) : box.residual(q_shift, Vector::Zero(y.size()));
+    return box.residual(w, y) < NewtonTuning::warm_start_fraction * cold;
   }
 
-  LevelOutcome finest_lcp(const Vector& q_shift, const Vector& y0, const NewtonControl& control) {
-    return newton_loop(*levels_.finest, levels_.finest->lcp_system(), q_shift, nullptr, nullptr, y0, control);
+  LevelOutcome finest_lcp(const Vector& q_shift, const Vector& y0, const NewtonControl& control, const Box& box) {
+    return newton_loop(*levels_.finest, levels_.finest->lcp_system(), q_shift, nullptr, nullptr, y0, control, &box);
   }
   /// From the inactive set `set` of the last inner solve: a guess, tried without fallback; when its
   /// steps are rejected (on impulse_control(101) they were, every outer step: Res 3.2, stagnated),
   /// the loop is rerun from y0 on y0's own active set, as without a guess.
-  LevelOutcome from_set(const Vector& q_shift, const Vector& y0, const std::vector<char>& set, NewtonControl control) {
+  LevelOutcome from_set(const Vector& q_shift, const Vector& y0, const std::vector<char>& set, NewtonControl control,
+                        const Box& box) {
     auto guess = control;
     guess.start_set = set;
     guess.sweep_budget = 0;
-    auto tried = finest_lcp(q_shift, y0, guess);
+    auto tried = finest_lcp(q_shift, y0, guess, box);
     if (tried.settled || tried.status != Status::Stagnated || tried.steps >= control.solve.maxiter) return tried;
     tally_.absorb(tried, 0, 0.0);
     control.solve.maxiter -= tried.steps;
-    return finest_lcp(q_shift, y0, control);
+    return finest_lcp(q_shift, y0, control, box);
   }
 
   /// Nested start for LCP(q_shift, A) in y ≥ 0: Newton on each coarse level to a settled active
   /// set, coarse to fine, each solution prolongated and projected onto y ≥ 0.
-  Vector nested_start(const Vector& q_shift) {
+  Vector nested_start(const Vector& q_shift, const Box& box) {
     levels_.finest->restore_hierarchy();  // the coarse levels solve on the A_l its V-cycle freed
     const std::size_t L = levels_.coarse.size();
     std::vector<Vector> qs(L + 1);
+    std::vector<Box> boxes(L + 1);  // empty for the LCP
     qs[0] = q_shift;
-    for (std::size_t l = 0; l < L; ++l) qs[l + 1] = levels_.hierarchy[l].R * qs[l];
+    boxes[0] = box;
+    for (std::size_t l = 0; l < L; ++l) {
+      qs[l + 1] = levels_.hierarchy[l].R * qs[l];
+      boxes[l + 1] = boxes[l].coarse(levels_.hierarchy[l].P);
+    }
     Vector y = Vector::Zero(L ? levels_.coarse.back()->size() : q_shift.size());
     NewtonControl c;
     c.solve.maxiter = NewtonTuning::coarse_maxiter;
@@ -435,9 +479,10 @@ class NewtonRun {
     for (std::size_t l = L; l >= 1; --l) {
       const auto t0 = std::chrono::steady_clock::now();
       auto& level = *levels_.coarse[l - 1];
-      const auto out = newton_loop(level, level.lcp_system(), qs[l], nullptr, nullptr, y, c);
+      const auto out = newton_loop(level, level.lcp_system(), qs[l], nullptr, nullptr, y, c, &boxes[l]);
       tally_.absorb(out, static_cast<int>(l), ScopedTimer::seconds_since(t0));
-      y = (levels_.hierarchy[l - 1].P * out.z).cwiseMax(0.0);
+      y = levels_.hierarchy[l - 1].P * out.z;
+      boxes[l - 1].project(y);
       level.release();
     }
     return y;
@@ -466,6 +511,7 @@ class NewtonRun {
   const Options& o_;
   const Hooks& hooks_;
   const bool nest_;
+  const Vector& upper_;
   NewtonTally<MatrixType> tally_;
 };
 

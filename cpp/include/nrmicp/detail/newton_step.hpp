@@ -41,20 +41,43 @@ struct FixedLinearization {
   const Vector& q;
   const typename Level::RowMatrix* B;
   const Vector* c;
+  const Box* box = nullptr;  ///< the LCP's bounds lo ≤ z ≤ hi (detail/box.hpp; B null); null: z ≥ 0
 
   /// Res of v; Av + q in w, v − ζ(v) in g unless g_is_z (ζ(v) itself is not kept).
-  double evaluate(const Vector& v, Vector& w, Vector& g, Vector&) const { return level.evaluate(v, q, B, c, w, g); }
+  double evaluate(const Vector& v, Vector& w, Vector& g, Vector&) const {
+    return box ? level.evaluate(v, q, *box, w) : level.evaluate(v, q, B, c, w, g);
+  }
   /// The LCP: g = z − ζ(z) is z itself, not stored (two n-vectors a level).
   bool g_is_z() const { return B == nullptr; }
   bool linearize(const Vector&, const Vector&) { return true; }  // nothing changes
   System& system() { return K; }
-  double c_at(Eigen::Index i) const { return c ? (*c)[i] : 0.0; }
-  Result sweep(const Vector& z0, int sweeps, double tol) { return level.sweep(q, B, c, z0, sweeps, tol); }
-  /// Projected sweeps: on the LCP (B null) they keep z ≥ 0, on the affine ICP z ≥ Bz + c.
+  /// The step's right-hand side: −q on the inactive rows, the bound (c, 0, or the box's) on the
+  /// active ones; K has no active columns on the LCP's inactive rows, so a nonzero bound's part
+  /// A_ℐ𝒜 z_𝒜 moves to their right-hand side (the box's upper bounds).
+  void rhs(const std::vector<char>& set, Vector& b) const {
+    bool bounded = false;
+    for (Eigen::Index i = 0; i < b.size(); ++i) {
+      const char s = set[i];
+      b[i] = inactive_state(s) ? -q[i] : box ? box->bound(s, i) : c ? (*c)[i] : 0.0;
+      bounded = bounded || (box && !inactive_state(s) && b[i] != 0);
+    }
+    if (!bounded) return;
+    Vector t = Vector::Zero(b.size());
+    for (Eigen::Index i = 0; i < b.size(); ++i)
+      if (!inactive_state(set[i])) t[i] = b[i];
+    ScopedTimer timer(level.timings().spmv);
+    const Vector At = level.matrix() * t;
+    for (Eigen::Index i = 0; i < b.size(); ++i)
+      if (inactive_state(set[i])) b[i] -= At[i];
+  }
+  Result sweep(const Vector& z0, int sweeps, double tol) {
+    return box ? level.sweep(q, *box, z0, sweeps, tol) : level.sweep(q, B, c, z0, sweeps, tol);
+  }
+  /// Projected sweeps: on the LCP (B null) they keep z ≥ 0 (lo ≤ z ≤ hi), on the affine ICP z ≥ Bz + c.
   bool smoothable() const { return true; }
   void smooth(Vector& z, int sweeps) const {
     if (B) level.projected_gauss_seidel(q, *B, *c, z, sweeps);
-    else level.projected_gauss_seidel(q, z, sweeps);
+    else level.projected_gauss_seidel(q, z, sweeps, box);
   }
 };
 
@@ -92,7 +115,10 @@ struct JacobianLinearization {
     return true;
   }
   System& system() { return *K; }
-  double c_at(Eigen::Index i) const { return c[i]; }
+  void rhs(const std::vector<char>& set, Vector& b) const {
+    for (Eigen::Index i = 0; i < b.size(); ++i) b[i] = inactive_state(set[i]) ? -q[i] : c[i];
+  }
+  const Box* box = nullptr;  // (no bounds on this path)
   Result sweep(const Vector& z0, int sweeps, double tol) { return level.sweep(q, zeta, z0, sweeps, tol); }
   bool smoothable() const { return false; }
   void smooth(Vector&, int) const {}
@@ -123,7 +149,7 @@ class NewtonStep {
   long long inner_iterations() const { return inner_iterations_; }
 
   /// The inactive set ℐ = {x ≥ 0} of z.
-  void active_set(std::vector<char>& inactive) const { level_.active_set(w_, g(), inactive); }
+  void active_set(std::vector<char>& inactive) const { level_.active_set(w_, g(), inactive, lin_.box); }
   /// x ← x of z up to the factor γ/(2Ω1) (what the Monitor reads); ‖Δx‖∞ (∞ when x was empty).
   double modulus(Vector& x) const { return level_.modulus(w_, g(), x); }
   /// ζ's linearization at z; false when ζ's Jacobian failed.
@@ -139,7 +165,7 @@ class NewtonStep {
   /// at `forcing` × Res(z) if that is larger (inexact Newton; NewtonControl::forcing).
   double solve(const std::vector<char>& inactive, double tol, double forcing = 0) {
     Vector& rhs = w_new_;  // w⁺ is written after the solve: its storage holds the right-hand side
-    for (Eigen::Index i = 0; i < size(); ++i) rhs[i] = inactive[i] ? -lin_.q[i] : lin_.c_at(i);
+    lin_.rhs(inactive, rhs);
     z_new_ = z_;
     {
       ScopedTimer t(level_.timings().inner_solve);
@@ -160,13 +186,13 @@ class NewtonStep {
   bool smooth(int sweeps) {
     if (sweeps <= 0 || !lin_.smoothable()) return false;
     const Vector& g = lin_.g_is_z() ? z_new_ : g_new_;
-    level_.active_set(w_new_, g, before_);
+    level_.active_set(w_new_, g, before_, lin_.box);
     const bool guarded = !lin_.g_is_z();
     const double r_plain = r_new_;
     unswept_ = z_new_;
     lin_.smooth(z_new_, sweeps);
     r_new_ = lin_.evaluate(z_new_, w_new_, g_new_, zeta_new_);
-    const bool moved = !level_.has_active_set(w_new_, g, before_);
+    const bool moved = !level_.has_active_set(w_new_, g, before_, lin_.box);
     // (on the LCP a rise within twice Res is rounding's: the golden master's 2D obstacle with a
     // callable ζ at tol 1e-10 took 37 outer Newton steps instead of 18 when such sweeps were dropped)
     if (guarded ? !(r_new_ < r_plain) : !moved && !(r_new_ <= 2 * r_plain)) {
@@ -181,7 +207,9 @@ class NewtonStep {
   /// Res of the trial z⁺.
   double trial_residual() const { return r_new_; }
   /// The number of active points of the trial iterate z⁺ (after solve).
-  std::size_t trial_active_count() const { return level_.active_count(w_new_, lin_.g_is_z() ? z_new_ : g_new_); }
+  std::size_t trial_active_count() const {
+    return level_.active_count(w_new_, lin_.g_is_z() ? z_new_ : g_new_, lin_.box);
+  }
   /// The trial iterate z⁺ moved back to z + alpha (z⁺ − z); its Res.
   double damp(double alpha) {
     z_new_ = z_ + alpha * (z_new_ - z_);

@@ -1,0 +1,75 @@
+"""Bounds: ``upper`` and the lower bound ζ's -inf entries (the mixed complementarity problem,
+PATH's and PETSc's convention). The rules of what a bounded problem may be, its residual and the
+``active_mask`` of a result live here once; the algorithm is the Newton member's (C++,
+detail/box.hpp)."""
+from __future__ import annotations
+
+import numpy as np
+
+from . import _core
+from ._inputs import as_constant
+
+ZetaKind = _core.ZetaKind
+
+
+def as_upper(upper, n: int, implicit: bool):
+    """``upper=`` -> None (no upper bound) or a float64 vector that may hold +inf (no bound there).
+    An `implicit` upper bound (Affine, callable) is refused naming ``upper``."""
+    if upper is None:
+        return None
+    if implicit:
+        raise TypeError("upper must be a constant (a number or a length-n vector, +inf where z has no upper "
+                        "bound); an implicit upper bound (Affine or callable) is not supported")
+    u = as_constant(upper, n, "upper", infinite=1)
+    return None if np.all(u == np.inf) else u
+
+
+def as_lower(zeta, n: int) -> np.ndarray:
+    """A constant ζ that may hold -inf (z free below there) -> float64 vector."""
+    return as_constant(zeta, n, "zeta", infinite=-1)
+
+
+def is_bounded(c, upper) -> bool:
+    """An upper bound, or a constant lower bound c with a -inf entry: the mixed problem."""
+    return upper is not None or (c is not None and not np.all(np.isfinite(c)))
+
+
+def check(kind, c, upper, method: str, jacobian) -> None:
+    """Refuses what bounds cannot go with, naming the argument: lower > upper (both named, the first
+    index), a ζ that is not none or constant, a method other than 'newton', a zeta_jacobian."""
+    if upper is not None:
+        lower = np.zeros_like(upper) if c is None or kind != ZetaKind.constant else c
+        bad = lower > upper
+        if kind in (ZetaKind.none, ZetaKind.constant) and np.any(bad):
+            i = int(np.flatnonzero(bad)[0])
+            raise ValueError(f"the lower bound exceeds upper at index {i}: zeta[{i}] = {lower[i]:g} > upper[{i}] = "
+                             f"{upper[i]:g} (no z lies between them)")
+    if kind not in (ZetaKind.none, ZetaKind.constant):
+        raise ValueError("upper (an upper bound) needs zeta None or a constant lower bound; an implicit lower bound "
+                         "(Affine or callable) with an upper bound is not supported")
+    if method != "newton":
+        raise ValueError(f"bounds (upper, or zeta with -inf entries) are solved by method 'newton'; method {method!r} "
+                         "has no box form (create the Solver with method='newton', or leave method='auto' in "
+                         "nrmicp.solve)")
+    if jacobian is not None:
+        raise ValueError("zeta_jacobian is for a callable zeta; with bounds zeta is None or a constant")
+
+
+def residual_terms(z, w, g, upper):
+    """mid(z − ζ, z − u, w) = min(g, max(z − u, w)) componentwise (g = z − ζ): the paper's min(w, g)
+    when there is no upper bound."""
+    if upper is None:
+        return np.minimum(w, g)
+    with np.errstate(invalid="ignore"):
+        return np.minimum(g, np.maximum(z - upper, w))
+
+
+def active_mask(z, w, g, upper) -> np.ndarray:
+    """scipy's ``active_mask`` (as in ``lsq_linear``): -1 where z is at its lower bound ζ (g = z − ζ
+    <= w), +1 at its upper bound (z − u >= w), 0 strictly between (w = 0 at a solution)."""
+    mask = np.zeros(len(z), dtype=np.int8)
+    with np.errstate(invalid="ignore"):
+        if upper is not None:
+            mask[z - upper >= w] = 1
+        mask[(g <= w) & (mask == 0)] = -1
+    return mask
