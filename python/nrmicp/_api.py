@@ -600,7 +600,7 @@ class Solver:
             raise TypeError(f"callback must be callable, got {type(callback).__name__}")
         if self._reduced is not None and bounded:   # the decoupled rows' closed form is the LCP's
             built = self._whole_solver is None
-            res = self._whole()._solve(qv, c, upper=us, x0=z0, callback=callback, **iteration_options)
+            res = self._whole()._solve(qv, zeta, upper=us, x0=z0, callback=callback, **iteration_options)
             if built:
                 _charge_setup(res.timings, self._whole_solver._setup_timings)
             return res
@@ -1007,8 +1007,9 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
         convention): w = Az + q ≥ 0 where z = ζ, w ≤ 0 where z = upper, w = 0 strictly between.
         ``+inf`` entries: no upper bound there; with ``zeta`` ``-inf`` too, the row is free (w = 0).
         Res becomes ‖mid(z − ζ, z − upper, w)‖₂ (the paper's Res without ``upper``). Bounds need
-        ``zeta`` None or constant and method 'newton' ('auto' picks it); lower > upper anywhere is a
-        ValueError naming both. ``result.active_mask`` says where z is at a bound.
+        method 'newton' ('auto' picks it); an Affine or callable ζ with ``upper`` is solved by the
+        outer fixed point (no ``zeta_jacobian``); lower > upper anywhere is a ValueError naming
+        both. ``result.active_mask`` says where z is at a bound.
     method : str
         ``'auto'`` (default): ``'nrmgs'`` when every row of A is diagonally dominant by at least
         a quarter of its diagonal (Bai's shifted matrices, implicit time steps with a large mass

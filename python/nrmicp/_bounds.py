@@ -31,12 +31,13 @@ def as_lower(zeta, n: int) -> np.ndarray:
 
 def is_bounded(c, upper) -> bool:
     """An upper bound, or a constant lower bound c with a -inf entry: the mixed problem."""
-    return upper is not None or (c is not None and not np.all(np.isfinite(c)))
+    return upper is not None or (c is not None and bool(np.any(c == -np.inf)))
 
 
 def check(kind, c, upper, method: str, jacobian) -> None:
     """Refuses what bounds cannot go with, naming the argument: lower > upper (both named, the first
-    index), a ζ that is not none or constant, a method other than 'newton', a zeta_jacobian."""
+    index; a constant ζ), a method other than 'newton', a zeta_jacobian. An Affine or callable ζ
+    with ``upper`` is solved by the outer fixed point (its inner problems take the box)."""
     if upper is not None:
         lower = np.zeros_like(upper) if c is None or kind != ZetaKind.constant else c
         bad = lower > upper
@@ -44,15 +45,13 @@ def check(kind, c, upper, method: str, jacobian) -> None:
             i = int(np.flatnonzero(bad)[0])
             raise ValueError(f"the lower bound exceeds upper at index {i}: zeta[{i}] = {lower[i]:g} > upper[{i}] = "
                              f"{upper[i]:g} (no z lies between them)")
-    if kind not in (ZetaKind.none, ZetaKind.constant):
-        raise ValueError("upper (an upper bound) needs zeta None or a constant lower bound; an implicit lower bound "
-                         "(Affine or callable) with an upper bound is not supported")
     if method != "newton":
         raise ValueError(f"bounds (upper, or zeta with -inf entries) are solved by method 'newton'; method {method!r} "
                          "has no box form (create the Solver with method='newton', or leave method='auto' in "
                          "nrmicp.solve)")
     if jacobian is not None:
-        raise ValueError("zeta_jacobian is for a callable zeta; with bounds zeta is None or a constant")
+        raise ValueError("zeta_jacobian with upper is not supported: the semismooth Newton step on the whole ICP has "
+                         "no box; leave zeta_jacobian out (the outer fixed point then solves it)")
 
 
 def residual_terms(z, w, g, upper):

@@ -251,7 +251,8 @@ class Newton {
       switch (zeta.kind()) {
         case ZetaKind::None: return run.solve_obstacle(q, Vector(), z0, nest);  // ψ = 0
         case ZetaKind::Constant: return run.solve_obstacle(q, zeta.c(), z0, nest);
-        case ZetaKind::Affine: return run.solve_affine(q, zeta, z0);
+        case ZetaKind::Affine:  // with an upper bound: the outer fixed point (its inner solves take the box)
+          return zeta.upper().size() ? run.solve_outer_fixed_point(q, zeta, z0) : run.solve_affine(q, zeta, z0);
         case ZetaKind::Functor: break;
       }
       return zeta.has_jacobian() ? run.solve_semismooth(q, zeta, z0) : run.solve_outer_fixed_point(q, zeta, z0);

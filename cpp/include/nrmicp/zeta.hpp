@@ -6,7 +6,7 @@
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
 
-#include "detail/residual.hpp"
+#include "detail/box.hpp"
 #include "options.hpp"
 
 #include <algorithm>
@@ -61,8 +61,10 @@ class Zeta {
   /// The Newton member solves it, for ζ none or constant (check()); the modulus members refuse it.
   Zeta with_upper(Vector u) const { Zeta t = *this; t.upper_ = std::move(u); return t; }
   const Vector& upper() const { return upper_; }
-  /// An upper bound, or a constant ζ with an infinite entry.
-  bool bounded() const { return upper_.size() > 0 || (kind_ == ZetaKind::Constant && !c_.allFinite()); }
+  /// An upper bound, or a constant ζ with a −∞ entry.
+  bool bounded() const {
+    return upper_.size() > 0 || (kind_ == ZetaKind::Constant && (c_.array() == -std::numeric_limits<double>::infinity()).any());
+  }
 
   ZetaKind kind() const { return kind_; }
   const Vector& c() const { return c_; }
@@ -83,17 +85,6 @@ class Zeta {
     if (bounded()) check_bounds(n);
   }
 
-  /// Mid(z − ζ, z − u, w) at z = 0, with w = q: the residual of the bounded problem at 0.
-  double bounded_residual_at_zero(const Vector& q) const {
-    Vector m(q.size());
-    for (Eigen::Index i = 0; i < q.size(); ++i) {
-      const double l = kind_ == ZetaKind::Constant ? c_[i] : 0.0;
-      const double u = upper_.size() ? upper_[i] : std::numeric_limits<double>::infinity();
-      m[i] = std::min(-l, std::max(-u, q[i]));
-    }
-    return detail::stable_norm(m);
-  }
-
   /// out = ζ(z). Returns false when ζ failed or produced non-finite values.
   bool eval(const Vector& z, Vector& out) const {
     switch (kind_) {
@@ -111,14 +102,14 @@ class Zeta {
  private:
   explicit Zeta(ZetaKind k) : kind_(k) {}
   void check_bounds(Eigen::Index n) const {
-    if (kind_ != ZetaKind::None && kind_ != ZetaKind::Constant)
-      throw std::invalid_argument("Zeta: bounds (an upper bound, or a lower bound with -inf entries) need zeta none or "
-                                  "constant");
+    if (kind_ == ZetaKind::Functor && j_)
+      throw std::invalid_argument("Zeta: an upper bound with a Jacobian of zeta is not supported (the semismooth Newton "
+                                  "step has no box); leave the Jacobian out");
     if (upper_.size() && upper_.size() != n)
       throw std::invalid_argument("Zeta: upper has length " + std::to_string(upper_.size()) + ", expected n = " +
                                   std::to_string(n));
     for (Eigen::Index i = 0; i < n; ++i) {
-      const double l = kind_ == ZetaKind::Constant ? c_[i] : 0.0;
+      const double l = kind_ == ZetaKind::Constant ? c_[i] : kind_ == ZetaKind::None ? 0.0 : -std::numeric_limits<double>::infinity();
       const double u = upper_.size() ? upper_[i] : std::numeric_limits<double>::infinity();
       if (!(l <= u) || l == std::numeric_limits<double>::infinity() || u == -std::numeric_limits<double>::infinity())
         throw std::invalid_argument("Zeta: the bounds need -inf <= lower <= upper <= inf, lower < inf, upper > -inf; at "
@@ -134,14 +125,14 @@ class Zeta {
   Jacobian j_;
 };
 
-/// Res at z = 0, ‖min(q, −ζ(0))‖₂: the reference of the relative tolerance (Options::rtol);
+/// Res at z = 0, ‖min(q, −ζ(0))‖₂ (bounded: bounded_residual): the reference of the relative tolerance (Options::rtol);
 /// NaN when ζ(0) failed.
 template <typename StorageIndex>
 double residual_at_zero(const Eigen::VectorXd& q, const Zeta<StorageIndex>& zeta) {
-  if (zeta.bounded()) return zeta.bounded_residual_at_zero(q);
   Eigen::VectorXd zeta0;
-  if (!zeta.eval(Eigen::VectorXd::Zero(q.size()), zeta0)) return std::numeric_limits<double>::quiet_NaN();
-  return detail::residual_of(q, -zeta0);
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(q.size());
+  if (!zeta.eval(zero, zeta0)) return std::numeric_limits<double>::quiet_NaN();
+  return detail::bounded_residual(q, -zeta0, zero, zeta.upper());  // with bounds: ‖mid(−ζ(0), −u, q)‖
 }
 
 /// `o` with its relative tolerance resolved for this problem: tol = target(Res(0)), rtol = 0.

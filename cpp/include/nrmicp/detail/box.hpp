@@ -13,9 +13,18 @@
 #include <Eigen/SparseCore>
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 
 namespace nrmicp::detail {
+
+/// Res = ‖mid(z − ζ, z − u, w)‖₂ = ‖min(g, max(z − u, w))‖₂ (g = z − ζ(z)) of an ICP with the upper
+/// bound u (empty: none, the paper's Res).
+inline double bounded_residual(const Eigen::VectorXd& w, const Eigen::VectorXd& g, const Eigen::VectorXd& z,
+                               const Eigen::VectorXd& upper) {
+  if (upper.size() == 0) return residual_of(w, g);
+  return stable_norm(g.cwiseMin((z - upper).cwiseMax(w)));
+}
 
 /// A row's state in an active set: at its lower bound, inactive (w = 0), at its upper bound.
 enum : char { kAtLower = 0, kInactive = 1, kAtUpper = 2 };
@@ -50,24 +59,60 @@ struct Box {
     for (Eigen::Index i = 0; i < y.size(); ++i) y[i] = clamp(i, y[i]);
   }
 
-  /// The box of the next coarser level (y_fine ≈ P y_coarse): a coarse row is bounded where any
-  /// fine row it reaches is (lo: the largest, hi: the smallest), free where all of them are, so a
-  /// row free on the finest level stays free on every level. The nested start is projected onto the
-  /// finest box, so a coarse box needs only to make a good start, not to be exact.
+  /// The box of the next coarser level (y_fine ≈ P y_coarse): a coarse row is bounded below where
+  /// any fine row it reaches is, free where all of them are (so a row free on the finest level
+  /// stays free on every level); its upper bound is that of the fine row it weighs most (P's largest
+  /// entry in its column: the coarse point itself under classical AMG and grid interpolation). A
+  /// coarse box makes a start, not a constraint of the fine problem: it needs to be near, not safe.
   template <typename RowMatrix>
   Box coarse(const RowMatrix& P) const {
     if (empty()) return {};
     constexpr double inf = std::numeric_limits<double>::infinity();
     Box c;
     if (lo.size()) c.lo = Vector::Constant(P.cols(), -inf);
-    if (hi.size()) c.hi = Vector::Constant(P.cols(), inf);
+    Vector weight;
+    if (hi.size()) { c.hi = Vector::Constant(P.cols(), inf); weight = Vector::Zero(P.cols()); }
     for (Eigen::Index i = 0; i < P.rows(); ++i)
       for (typename RowMatrix::InnerIterator it(P, i); it; ++it) {
         if (it.value() == 0) continue;
-        if (lo.size()) c.lo[it.index()] = std::max(c.lo[it.index()], lo[i]);
-        if (hi.size()) c.hi[it.index()] = std::min(c.hi[it.index()], hi[i]);
+        const Eigen::Index j = it.index();
+        if (lo.size()) c.lo[j] = std::max(c.lo[j], lo[i]);
+        if (hi.size() && std::isfinite(hi[i]) && std::abs(it.value()) > weight[j]) {
+          weight[j] = std::abs(it.value());
+          c.hi[j] = hi[i];
+        }
       }
     return c;
+  }
+
+  /// The nested start on this (finer) level from the coarse solution yc of the box `cb`: each row
+  /// keeps its prolongated distance to the nearer of its bounds, y = lo + P(yc − lo_c) or
+  /// y = hi − P(hi_c − yc), then the box's projection. Where the coarse solution lies on a bound the
+  /// fine start lies on the fine bound exactly, as y = P yc does for the LCP's 0; a bound that is not
+  /// constant (an upper one in y) would otherwise be interpolated and the contact start inside it.
+  template <typename RowMatrix>
+  Vector prolongate(const RowMatrix& P, const Box& cb, const Vector& yc) const {
+    Vector y = P * yc;
+    if (!empty()) {
+      constexpr double inf = std::numeric_limits<double>::infinity();
+      const Vector below = cb.lo.size() ? Vector(P * (yc - lower_vector(cb, yc.size()))) : y;
+      const Vector above = cb.hi.size() ? Vector(P * (cb.hi - yc).cwiseMin(std::numeric_limits<double>::max())) : Vector();
+      for (Eigen::Index i = 0; i < y.size(); ++i) {
+        const double s = std::isfinite(lower(i)) ? below[i] : inf;
+        const double t = above.size() && std::isfinite(upper(i)) ? above[i] : inf;
+        if (t < s) y[i] = upper(i) - t;
+        else if (s < inf) y[i] = lower(i) + s;
+      }
+    }
+    project(y);
+    return y;
+  }
+
+ private:
+  /// lo of `b` with its −∞ entries as 0 (their rows are free: the distance to them is not used).
+  static Vector lower_vector(const Box& b, Eigen::Index n) {
+    if (!b.lo.size()) return Vector::Zero(n);
+    return b.lo.unaryExpr([](double v) { return std::isfinite(v) ? v : 0.0; });
   }
 };
 

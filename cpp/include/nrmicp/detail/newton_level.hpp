@@ -138,15 +138,16 @@ class NewtonLevel {
 
   /// Res of the ICP at v (ζ(v) in zv, Av + q in wv) for any ζ: NaN only when ζ failed; +inf for
   /// a runaway v (non-finite, never handed to ζ) or an Av + q that overflowed.
+  /// With the upper bound `upper` (empty: none), the bounded Res (bounded_residual).
   double icp_residual(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector& v, Vector& zv,
-                      Vector& wv) const {
+                      Vector& wv, const Vector& upper = Vector()) const {
     constexpr double inf = std::numeric_limits<double>::infinity();
     if (!v.allFinite()) return inf;
     if (!eval_zeta(zeta, v, zv)) return std::numeric_limits<double>::quiet_NaN();
     ScopedTimer t(timings().spmv);
     wv.noalias() = A_ * v;
     wv += q;
-    const double r = residual_of(wv, v - zv);
+    const double r = bounded_residual(wv, v - zv, v, upper);
     return std::isnan(r) ? inf : r;
   }
 

@@ -383,16 +383,25 @@ class NewtonRun {
     const Vector& q;
     const Z& zeta;
     std::vector<char> set;  // the last inner solve's inactive set: the next one starts from it
-    Vector w;
+    Vector w, capped;
     /// The inner obstacle problem, solved to Res < tol (0: to a settled active set). Without z,
     /// it starts at y = 0 (z = ψ): measured better than from z = 0.
+    /// With an upper bound u the inner problem is min(ψ, u) ≤ z ≤ u (ζ(z) above u has no z between).
     Result obstacle(const Vector& psi, const Vector* z, bool first, double tol) {
-      Result inner = run.solve_obstacle(q, psi, z, first && run.nest_, tol, run.o_.maxiter - run.tally_.nit(), false, &set);
+      const Vector& lower = run.upper_.size() ? (capped = psi.cwiseMin(run.upper_)) : psi;
+      Result inner = run.solve_obstacle(q, lower, z, first && run.nest_, tol, run.o_.maxiter - run.tally_.nit(), false, &set);
       run.tally_.outer_step();
       return inner;
     }
-    double icp_residual(const Vector& v, Vector& zv) { return run.levels_.finest->icp_residual(q, zeta, v, zv, w); }
+    double icp_residual(const Vector& v, Vector& zv) { return run.levels_.finest->icp_residual(q, zeta, v, zv, w, run.upper_); }
+    /// (none with an upper bound: the fallback member has no box; the outer loop then ends at its best iterate)
     Result sweep(const Vector& z0, int sweeps) {
+      if (run.upper_.size()) {
+        Result none;
+        none.z = z0;
+        none.residual = std::numeric_limits<double>::infinity();
+        return none;
+      }
       const Result sw = run.levels_.finest->sweep(q, zeta, z0, sweeps, run.o_.tol);
       run.tally_.sweeps(sw.iterations);
       return sw;
@@ -481,8 +490,7 @@ class NewtonRun {
       auto& level = *levels_.coarse[l - 1];
       const auto out = newton_loop(level, level.lcp_system(), qs[l], nullptr, nullptr, y, c, &boxes[l]);
       tally_.absorb(out, static_cast<int>(l), ScopedTimer::seconds_since(t0));
-      y = levels_.hierarchy[l - 1].P * out.z;
-      boxes[l - 1].project(y);
+      y = boxes[l - 1].prolongate(levels_.hierarchy[l - 1].P, boxes[l], out.z);
       level.release();
     }
     return y;
