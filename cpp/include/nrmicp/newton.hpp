@@ -8,7 +8,9 @@
 // 𝒜 = {x < 0} (z − ζ = 0), i.e. x ≥ 0 ⇔ (z − ζ)/Ω1 ≥ w/Ω2 (ties: NewtonLevel::active_set):
 //   (Az + q)_ℐ = 0,   (z − ζ(z))_𝒜 = 0            (detail/active_set.hpp)
 // and x⁺ is recovered by the start formula x = γ/2 (Ω1⁻¹ g − Ω2⁻¹ w). For an LCP this is the
-// primal–dual active-set method; on each piece F is affine, so the step is exact there.
+// primal–dual active-set method; on each piece F is affine, so the step is exact there. With
+// bounds (Zeta::with_upper, or a constant ζ with −∞ entries) the obstacle path solves the box
+// problem ζ ≤ z ≤ u, each row at its lower bound, at its upper one or inactive (detail/box.hpp).
 //
 // The structure: the step runs in the family's loop (detail::loop, solver.hpp) with the family's
 // stopping Monitor, like every member's step.
