@@ -207,3 +207,115 @@ def reference_solve(A, q, zeta=None, *, method, z_update, gamma, omega1=None, om
     return ReferenceResult(z=z_out, nit=k, converged=converged,
                            residuals=np.array(residuals), x_iterates=x_iterates,
                            z_iterates=z_iterates)
+
+
+# ---- bounds: lower <= z <= upper (the mixed complementarity problem, PATH's convention) ------
+
+
+@dataclass
+class BoxReferenceResult:
+    z: np.ndarray
+    state: np.ndarray        # per row: -1 at lower, +1 at upper, 0 between (w = 0)
+    steps: int               # active-set (Newton) steps taken
+    pgs_sweeps: int          # projected Gauss-Seidel sweeps of the safeguard (0: none needed)
+
+
+def box_residual(A, q, z, lower, upper):
+    """Res(z) = || mid(z - lower, z - upper, Az + q) ||_2 = || min(z - l, max(z - u, w)) ||_2 (l <= u),
+    in numpy; infinite bounds are bounds that are not there (lower None: 0, upper None: +inf)."""
+    w = sp.csr_matrix(A) @ z + q
+    lower, upper = _bounds(len(z), lower, upper)
+    with np.errstate(invalid="ignore"):
+        return float(np.linalg.norm(np.minimum(z - lower, np.maximum(z - upper, w))))
+
+
+def _bounds(n, lower, upper):
+    """(lower, upper) as float64 vectors of length n (None: 0 below, +inf above; numbers broadcast)."""
+    lower = np.zeros(n) if lower is None else np.broadcast_to(np.asarray(lower, dtype=np.float64), (n,)).copy()
+    upper = np.full(n, np.inf) if upper is None else np.broadcast_to(np.asarray(upper, dtype=np.float64), (n,)).copy()
+    return lower, upper
+
+
+def _box_state(z, w, d, lower, upper, fixed):
+    """The primal-dual active set at (z, w): x = z - w / a_ii below lower -> -1, above upper -> +1,
+    else 0; rows with lower = upper are always at their (one) value."""
+    x = z - w / d
+    state = np.where(x < lower, -1, np.where(x > upper, 1, 0)).astype(np.int8)
+    state[fixed] = -1
+    return state
+
+
+def _box_solve(A, q, state, lower, upper):
+    """z with z = lower on state -1, z = upper on +1, and (Az + q)_I = 0 on the rest I (an exact
+    sparse solve of A_II)."""
+    z = np.where(state < 0, lower, np.where(state > 0, upper, 0.0))
+    inactive = np.flatnonzero(state == 0)
+    if inactive.size:
+        active = np.flatnonzero(state != 0)
+        rhs = -q[inactive] - A[inactive][:, active] @ z[active]
+        z[inactive] = np.atleast_1d(spla.spsolve(sp.csc_matrix(A[inactive][:, inactive]), rhs))
+    return z
+
+
+def _projected_gauss_seidel(A, q, z, lower, upper, sweeps):
+    """`sweeps` sweeps of projected Gauss-Seidel on the box (converges for A symmetric positive
+    definite: it is coordinate descent on the box QP)."""
+    A = sp.csr_matrix(A)
+    d = A.diagonal()
+    for _ in range(sweeps):
+        for i in range(A.shape[0]):
+            lo, hi = A.indptr[i], A.indptr[i + 1]
+            wi = A.data[lo:hi] @ z[A.indices[lo:hi]] + q[i]
+            z[i] = min(upper[i], max(lower[i], z[i] - wi / d[i]))
+    return z
+
+
+def reference_box_solve(A, q, lower=None, upper=None, *, z0=None, maxsteps=200, pgs_sweeps=50):
+    """The box problem lower <= z <= upper, w = Az + q >= 0 at lower, <= 0 at upper, = 0 between,
+    by the primal-dual active-set (semismooth Newton) method with exact sparse solves.
+
+    Each step takes the active set of the current (z, w) (_box_state) and solves for the z it
+    fixes (_box_solve); the method ends when the set repeats its predecessor. It converges in
+    finitely many steps for an M-matrix (Hintermueller, Ito & Kunisch 2002). For other symmetric
+    positive definite A the steps may cycle: a repeated older set is the cycle check, and then
+    `pgs_sweeps` projected Gauss-Seidel sweeps (convergent there) move z before the steps go on.
+    The result is checked against the conditions before it is returned (AssertionError if not).
+    """
+    A = sp.csr_matrix(A, dtype=np.float64)
+    n = A.shape[0]
+    q = np.asarray(q, dtype=np.float64)
+    lower, upper = _bounds(n, lower, upper)
+    assert np.all(lower <= upper)
+    d = A.diagonal()
+    assert np.all(d > 0), "the reference needs a positive diagonal"
+    fixed = lower == upper
+    z = np.clip(np.zeros(n) if z0 is None else np.asarray(z0, dtype=np.float64), lower, upper)
+    seen, sweeps = set(), 0
+    state = _box_state(z, A @ z + q, d, lower, upper, fixed)
+    for step in range(1, maxsteps + 1):
+        z = _box_solve(A, q, state, lower, upper)
+        new = _box_state(z, A @ z + q, d, lower, upper, fixed)
+        if np.array_equal(new, state):
+            _check_box_solution(A, q, z, lower, upper)
+            return BoxReferenceResult(z=z, state=state, steps=step, pgs_sweeps=sweeps)
+        seen.add(state.tobytes())
+        if new.tobytes() in seen:   # a cycle: the safeguard moves z, then the steps go on from there
+            z = _projected_gauss_seidel(A, q, np.clip(z, lower, upper), lower, upper, pgs_sweeps)
+            sweeps += pgs_sweeps
+            new = _box_state(z, A @ z + q, d, lower, upper, fixed)
+            seen.clear()
+        state = new
+    raise AssertionError(f"the reference active-set method did not end in {maxsteps} steps")
+
+
+def _check_box_solution(A, q, z, lower, upper):
+    """The conditions at the reference's answer (relative to the data's size)."""
+    w = A @ z + q
+    scale = abs(A) @ np.abs(z) + np.abs(q) + 1.0
+    tol = 1e-9 * scale
+    assert np.all(z >= lower) and np.all(z <= upper)
+    at_lower, at_upper = z == lower, z == upper
+    between = ~(at_lower | at_upper)
+    assert np.all(np.abs(w[between]) <= tol[between])
+    assert np.all(w[at_lower & ~at_upper] >= -tol[at_lower & ~at_upper])
+    assert np.all(w[at_upper & ~at_lower] <= tol[at_upper & ~at_lower])

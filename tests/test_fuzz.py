@@ -1,11 +1,13 @@
 """Fuzz: random problems and options through the Python API (magnitudes 1e-300…1e300, NaN/Inf
-inputs, every method including 'newton' with its hierarchy=, polish= and zeta_jacobian=), against
-an oracle that does not trust the library:
+inputs, every method including 'newton' with its hierarchy=, polish=, zeta_jacobian= and bounds —
+upper= and -inf in zeta), against an oracle that does not trust the library:
 
 - no crash and no hang (every solve is bounded by maxiter);
 - success=True only when Res(z), recomputed here in numpy from the original data and the test's
-  own ζ, is below tol (up to rounding in computing Res itself);
-- z finite for finite input; the caller's arrays unmodified;
+  own ζ (with bounds: ‖mid(z − lower, z − upper, w)‖₂), is below tol (up to rounding in computing
+  Res itself);
+- z finite for finite input, and within the bounds (up to an ulp of them); the caller's arrays
+  unmodified;
 - corrupt input -> TypeError/ValueError whose message names the corrupted argument (a raising
   zeta_jacobian: its own exception, unchanged).
 
@@ -51,6 +53,9 @@ CORRUPTIONS = [
     ("hierarchy", "list of strings"), ("hierarchy", "for a stationary method"),
     ("zeta_jacobian", "wrong shape"), ("zeta_jacobian", "returns a string"), ("zeta_jacobian", "not callable"),
     ("zeta_jacobian", "raises"), ("zeta_jacobian", "for a stationary method"),
+    ("upper", "nan"), ("upper", "-inf"), ("upper", "wrong length"), ("upper", "below lower"), ("upper", "complex"),
+    ("upper", "callable"), ("upper", "for a stationary method"), ("upper", "with an affine zeta"),
+    ("zeta", "+inf lower with upper"), ("zeta_jacobian", "with bounds"),
 ]
 
 #: The exception a raising zeta_jacobian throws: it must reach the caller unchanged.
@@ -93,8 +98,11 @@ JACOBIAN_FORMATS = ["csr", "dia", "coo", "csc", "dense"]
 WRONG_JACOBIANS = {"negated": -1.0, "10x": 10.0, "zero": 0.0}
 HIERARCHIES = [None, "auto", "amg", "list", "dense list"]
 #: Every (method, ζ kind, hierarchy) the valid cases run; the hierarchy is 'newton''s argument.
+#: Bounds (issue 36), the Newton member's only: 'upper' (ζ None, an upper bound) and 'box' (a constant
+#: ζ with -inf entries for rows free below, and an upper bound or none): random_bounds.
+BOUNDED_KINDS = ["upper", "box"]
 COMBOS = ([(m, z, None) for m in STATIONARY for z in ZETA_KINDS]
-          + [("newton", z, h) for z in ZETA_KINDS for h in HIERARCHIES])
+          + [("newton", z, h) for z in ZETA_KINDS + BOUNDED_KINDS for h in HIERARCHIES])
 
 _LONG_RUN = int(os.environ.get("NRMICP_FUZZ_EXAMPLES", "0"))
 #: Examples per valid combination and per corruption in CI (deterministic); the long run spreads
@@ -110,7 +118,7 @@ def _fuzz_settings(per_test):
 
 #: What the fuzz slice reached in this session (checked by test_fuzz_coverage).
 REACHED = {"combos": collections.Counter(), "drawn": collections.Counter(), "rejected": collections.Counter(),
-           "gave_up": collections.Counter(),
+           "gave_up": collections.Counter(), "bounded": collections.Counter(),
            "converged": collections.Counter(), "n_converged": collections.defaultdict(list)}
 
 
@@ -191,7 +199,31 @@ def build_case(seed, method, zkind, hierarchy=None, corrupt=None):
             wrong = np.random.default_rng([seed, 37])   # issue 37's draw, a stream of its own
             if not corrupt and wrong.uniform() < 0.3:
                 jacobian = str(wrong.choice(list(WRONG_JACOBIANS)))
-    return dict(A=A, q=q, zkind=zkind, c=c, B=B, x0=x0, opts=opts, corrupt=corrupt, rng=rng, jacobian=jacobian)
+    upper = None
+    if zkind in BOUNDED_KINDS:   # bounds (issue 36), from a stream of their own
+        c, upper = random_bounds(np.random.default_rng([seed, 36]), n, c if zkind == "box" else None)
+    return dict(A=A, q=q, zkind=zkind, c=c, B=B, x0=x0, opts=opts, corrupt=corrupt, rng=rng, jacobian=jacobian,
+                upper=upper)
+
+
+def random_bounds(rng, n, c):
+    """(the constant ζ c, with -inf entries for rows free below; upper): upper None, a number or a
+    vector (+inf entries: no upper bound there; rows with upper = lower: fixed), never below c.
+    c None: ζ None (lower 0) and an upper bound."""
+    if c is not None:
+        c = np.where(rng.uniform(size=n) < rng.uniform(0.05, 0.6), -np.inf, c)
+    lower = np.zeros(n) if c is None else c
+    finite = np.where(np.isfinite(lower), lower, rng.uniform(-1, 1, n))
+    how = str(rng.choice(["none", "number", "vector", "vector"] if c is not None else ["number", "vector", "vector"]))
+    if how == "none":
+        return c, None
+    if how == "number":
+        return c, float(np.max(finite) + rng.uniform(0, 1)) if rng.uniform() < 0.8 else np.inf
+    upper = finite + rng.uniform(0, 2, n) * rng.choice([0.1, 1.0, 10.0])
+    upper[rng.uniform(size=n) < rng.uniform(0, 0.5)] = np.inf
+    fixed = (rng.uniform(size=n) < 0.1) & np.isfinite(lower)
+    upper[fixed] = lower[fixed]
+    return c, upper
 
 
 def corrupt_case(seed, corrupt):
@@ -199,13 +231,16 @@ def corrupt_case(seed, corrupt):
     method', one it does not), then corrupted."""
     rng = np.random.default_rng(seed)
     name, how = corrupt
-    if name in ("hierarchy", "zeta_jacobian"):
+    if name in ("hierarchy", "zeta_jacobian", "upper") or how == "+inf lower with upper":
         method = str(rng.choice(STATIONARY)) if how == "for a stationary method" else "newton"
     elif name in ("omega1", "phi"):
         method = str(rng.choice(["nrm", "nrmgs", "nrmj", "nrmsor", "nrmaor"]))
     else:
         method = str(rng.choice(METHODS))
     zkind = str(rng.choice(["callable", "callable_f32"] if name == "zeta_jacobian" else ZETA_KINDS))
+    if name == "upper" or how in ("with bounds", "+inf lower with upper"):   # bounds go with ζ none or constant only
+        zkind = "affine" if how == "with an affine zeta" else "constant" if name != "upper" else str(
+            rng.choice(["none", "constant"]))
     hierarchy = str(rng.choice(["list", "list"] + ([] if name == "zeta_jacobian" else ["amg"])))
     case = build_case(int(rng.integers(2**32)), method, zkind, hierarchy if method == "newton" else None, corrupt)
     if name == "zeta_jacobian":
@@ -242,8 +277,10 @@ def make_zeta(zkind, c, B):
     """(zeta to pass, the test's own ζ for the oracle)."""
     if zkind == "none":
         return None, lambda z: np.zeros_like(z)
-    if zkind == "constant":
+    if zkind in ("constant", "box"):
         return c, lambda z: c
+    if zkind == "upper":
+        return None, lambda z: np.zeros_like(z)
     if zkind == "affine":
         return nrmicp.Affine(B, c), lambda z: B @ z + c
     if zkind == "callable":
@@ -297,7 +334,9 @@ def apply_corruption(case, zeta):
         zeta = {"wrong length": np.ones(n + 1), "nan constant": np.full(n, np.nan), "inf constant": np.full(n, np.inf),
                 "returns None": lambda z: None, "returns strings": lambda z: ["0.5"] * n,
                 "returns complex": lambda z: z + 1j, "returns wrong shape": lambda z: np.zeros((n, 2)),
-                "writes into z": _writes_into_z}[how]
+                "writes into z": _writes_into_z, "+inf lower with upper": np.r_[np.inf, case["c"][1:]]}[how]
+        if how == "+inf lower with upper":
+            case["upper"] = np.full(n, 2.0)
     elif name == "zeta.B":
         B = case["B"].copy() if case["B"].nnz else sp.csr_matrix(np.eye(n))
         B.indices[0] = n + 7
@@ -320,6 +359,15 @@ def apply_corruption(case, zeta):
         opts["polish"] = "yes"
     elif name == "hierarchy":
         opts["hierarchy"] = _bad_hierarchy(how, n, case["rng"])
+    elif name == "upper":
+        lower = case["c"] if case["zkind"] == "constant" else np.zeros(n)
+        ok = lower + 1.0
+        case["upper"] = {"nan": np.r_[ok[:-1], np.nan], "-inf": np.r_[-np.inf, ok[1:]], "wrong length": np.ones(n + 1),
+                         "below lower": ok - 2.0, "complex": ok + 0j, "callable": lambda z: ok,
+                         "for a stationary method": ok, "with an affine zeta": ok}[how]
+    elif how == "with bounds":   # a zeta_jacobian with ζ constant and an upper bound
+        case["upper"] = case["c"] + 1.0
+        case["jacobian"] = zeta_jacobian
     elif name == "zeta_jacobian":
         case["jacobian"] = {"wrong shape": lambda z: sp.eye(n + 1, format="csr"),
                             "returns a string": lambda z: "J", "not callable": sp.eye(n, format="csr"),
@@ -354,16 +402,37 @@ def _writes_into_z(z):
     return np.zeros_like(z)
 
 
-def oracle_residual(A, q, z, zeta_ref):
-    """Res(z) from the original data in numpy, and a bound on the rounding in computing it."""
+def oracle_residual(A, q, z, zeta_ref, upper=None):
+    """Res(z) from the original data in numpy, and a bound on the rounding in computing it. With
+    `upper` (a number or a vector, +inf: none), Res = ‖mid(z − ζ, z − upper, w)‖₂ = ‖min(z − ζ,
+    max(z − upper, w))‖₂; a -inf in ζ is a row free below (z − ζ = +inf)."""
     Ad = A.toarray()
     with np.errstate(over="ignore", invalid="ignore"):  # an overflowing Az + q is Res = inf
         w = Ad @ z + q
         zz = zeta_ref(z)
         g = z - zz
-        res = stable_norm(np.minimum(w, g))
-        slack = 64 * EPS * stable_norm(np.abs(Ad) @ np.abs(z) + np.abs(q) + np.abs(z) + np.abs(zz))
+        res = stable_norm(np.minimum(w, g) if upper is None else np.minimum(g, np.maximum(z - upper, w)))
+        slack = 64 * EPS * stable_norm(np.abs(Ad) @ np.abs(z) + np.abs(q) + np.abs(z) + finite_abs(zz) + finite_abs(upper))
     return res, slack
+
+
+def finite_abs(v):
+    """|v| where v is finite, 0 elsewhere (an infinite bound adds no rounding); None: 0."""
+    if v is None:
+        return 0.0
+    v = np.asarray(v, dtype=float)
+    return np.where(np.isfinite(v), np.abs(v), 0.0)
+
+
+def assert_in_bounds(z, lower, upper, res):
+    """lower <= z <= upper up to Res(z) (a row outside its box by d has a term of Res at least d in
+    size: a loose tol lets an iterate outside through, as the LCP's z >= 0) and two ulps of the
+    larger finite bound of a row (the core solves in z − lower:
+    test_bounds.test_a_row_at_its_upper_bound_is_the_bound_exactly)."""
+    lower, upper = np.broadcast_to(lower, z.shape), np.broadcast_to(np.inf if upper is None else upper, z.shape)
+    allowed = 2 * np.spacing(np.maximum(finite_abs(lower), finite_abs(upper))) + res * (1 + 1e-12)
+    assert np.all(z >= lower - allowed), np.max(lower - z)
+    assert np.all(z <= upper + allowed), np.max(z - upper)
 
 
 def stable_norm(v):
@@ -389,12 +458,13 @@ def check_case(case):
     jac = jacobian_in(case["jacobian"]) if isinstance(case["jacobian"], str) else case["jacobian"]  # a format
     hier = opts.get("hierarchy")
     hier = list(hier) if isinstance(hier, (list, tuple)) else []
-    watched = [A, q, x0, case["B"], case["c"], *(opts.get(k) for k in ("omega1", "omega2", "phi")), *hier]
+    upper = case.get("upper")
+    watched = [A, q, x0, case["B"], case["c"], upper, *(opts.get(k) for k in ("omega1", "omega2", "phi")), *hier]
     before = snapshot(*watched)
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            res = nrmicp.solve(A, q, zeta, x0=x0, zeta_jacobian=jac, **opts)
+            res = nrmicp.solve(A, q, zeta, upper=upper, x0=x0, zeta_jacobian=jac, **opts)
         # the Jacobian's format is nrmicp's business (DIA warned once per Newton step)
         assert not [w for w in caught if "zeta_jacobian" in str(w.message)]
     except JacobianError:
@@ -420,7 +490,11 @@ def check_case(case):
     assert isinstance(res.status, nrmicp.Status)
     event(f"valid input: {res.status.name}")
     assert np.all(np.isfinite(res.z)), res.message
-    true_res, slack = oracle_residual(A, q, res.z, zeta_ref)
+    true_res, slack = oracle_residual(A, q, res.z, zeta_ref, None if upper is None else np.asarray(upper, float))
+    bounded = case["zkind"] in BOUNDED_KINDS
+    if bounded:
+        assert_in_bounds(res.z, case["c"] if case["zkind"] == "box" else 0.0, upper, true_res + slack)
+        assert res.active_mask.dtype == np.int8 and res.active_mask.shape == res.z.shape
     if np.isfinite(res.residual) and np.isfinite(true_res):  # the reported Res is the returned z's
         assert abs(res.residual - true_res) <= slack + 1e-10 * true_res, (res.residual, true_res, res.message)
     if opts["method"] == "newton":   # the Jacobian given up (and only a wrong one), and said so
@@ -431,6 +505,8 @@ def check_case(case):
         assert true_res < opts["tol"] + slack, (res.residual, true_res, opts["tol"], res.message)
         if case["corrupt"] is None:
             REACHED["converged"][opts["method"]] += 1
+            REACHED["bounded"]["converged"] += bounded
+            REACHED["bounded"]["n >= 100"] += bounded and A.shape[0] >= 100
             REACHED["n_converged"][opts["method"]].append(A.shape[0])
     return res
 
@@ -458,6 +534,8 @@ def test_fuzz_corrupt(corrupt, seed):
 #: largest n among them.
 MIN_CONVERGED = {m: 10 for m in STATIONARY} | {"newton": 80}
 MIN_LARGEST_N = 100
+#: Oracle-checked converged solves with bounds (upper, or -inf in zeta), and those with n >= 100.
+MIN_BOUNDED = {"converged": 15, "n >= 100": 5}
 
 
 def test_fuzz_coverage():
@@ -475,6 +553,8 @@ def test_fuzz_coverage():
     for method, k in MIN_CONVERGED.items():
         assert REACHED["converged"][method] >= k, (method, dict(REACHED["converged"]))
         assert max(REACHED["n_converged"][method]) >= MIN_LARGEST_N, (method, REACHED["n_converged"][method])
+    for what, k in MIN_BOUNDED.items():
+        assert REACHED["bounded"][what] >= k, dict(REACHED["bounded"])
 
 
 #: (method, ζ kind, hierarchy, seed) of cases the random long run found failing, kept in CI.
