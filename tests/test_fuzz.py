@@ -54,7 +54,7 @@ CORRUPTIONS = [
     ("zeta_jacobian", "wrong shape"), ("zeta_jacobian", "returns a string"), ("zeta_jacobian", "not callable"),
     ("zeta_jacobian", "raises"), ("zeta_jacobian", "for a stationary method"),
     ("upper", "nan"), ("upper", "-inf"), ("upper", "wrong length"), ("upper", "below lower"), ("upper", "complex"),
-    ("upper", "callable"), ("upper", "for a stationary method"), ("upper", "with an affine zeta"),
+    ("upper", "callable"), ("upper", "for a stationary method"),
     ("zeta", "+inf lower with upper"), ("zeta_jacobian", "with bounds"),
 ]
 
@@ -239,7 +239,7 @@ def corrupt_case(seed, corrupt):
         method = str(rng.choice(METHODS))
     zkind = str(rng.choice(["callable", "callable_f32"] if name == "zeta_jacobian" else ZETA_KINDS))
     if name == "upper" or how in ("with bounds", "+inf lower with upper"):   # bounds go with ζ none or constant only
-        zkind = "affine" if how == "with an affine zeta" else "constant" if name != "upper" else str(
+        zkind = "constant" if name != "upper" else str(
             rng.choice(["none", "constant"]))
     hierarchy = str(rng.choice(["list", "list"] + ([] if name == "zeta_jacobian" else ["amg"])))
     case = build_case(int(rng.integers(2**32)), method, zkind, hierarchy if method == "newton" else None, corrupt)
