@@ -108,7 +108,7 @@ def residual(A: MatrixLike, q: ArrayLike, z: ArrayLike, zeta: ZetaLike = None, *
     kind, c, B, fn = _make_zeta(zeta, n)
     us = _make_upper(upper, n)
     if us is not None:
-        _bounds.check(kind, c, us, "newton", None)
+        _bounds.check(kind, c, us, None)
     with np.errstate(over="ignore", invalid="ignore"):
         return _OriginalResidual(A, qv, kind, c, B, None if fn is None else CheckedZeta(fn, n), upper=us)(zv)[1]
 
@@ -228,17 +228,6 @@ def _make_zeta(zeta, n):
     if callable(zeta):
         return ZetaKind.functor, None, None, zeta
     return ZetaKind.constant, _bounds.as_lower(zeta, n), None, None
-
-
-def _has_minus_inf(zeta) -> bool:
-    """A constant ζ (array or number) with a -inf entry: a bound only method 'newton' takes."""
-    if zeta is None or callable(zeta) or isinstance(zeta, Affine):
-        return False
-    try:
-        a = np.asarray(zeta)
-    except Exception:   # _make_zeta names what is wrong with it
-        return False
-    return a.dtype.kind == "f" and bool(np.any(a == -np.inf))
 
 
 def _make_upper(upper, n):
@@ -595,7 +584,7 @@ class Solver:
         us = _make_upper(upper, n)
         bounded = _bounds.is_bounded(c if kind == ZetaKind.constant else None, us)
         if bounded:
-            _bounds.check(kind, c, us, self.method, zeta_jacobian)
+            _bounds.check(kind, c, us, zeta_jacobian)
         if callback is not None and not callable(callback):
             raise TypeError(f"callback must be callable, got {type(callback).__name__}")
         if self._reduced is not None and bounded:   # the decoupled rows' closed form is the LCP's
@@ -1007,8 +996,9 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
         convention): w = Az + q ≥ 0 where z = ζ, w ≤ 0 where z = upper, w = 0 strictly between.
         ``+inf`` entries: no upper bound there; with ``zeta`` ``-inf`` too, the row is free (w = 0).
         Res becomes ‖mid(z − ζ, z − upper, w)‖₂ (the paper's Res without ``upper``). Bounds need
-        ``zeta`` None or constant and method 'newton' ('auto' picks it); lower > upper anywhere is a
-        ValueError naming both. ``result.active_mask`` says where z is at a bound.
+        ``zeta`` None or constant; every method takes them (the stationary members iterate their box
+        form, which converges where the LCP form does; 'auto' chooses as without bounds); lower > upper
+        anywhere is a ValueError naming both. ``result.active_mask`` says where z is at a bound.
     method : str
         ``'auto'`` (default): ``'nrmgs'`` when every row of A is diagonally dominant by at least
         a quarter of its diagonal (Bai's shifted matrices, implicit time steps with a large mass
@@ -1151,9 +1141,10 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
         shifted LCP), with the same re-solve rule as for ``scale``.
     """
     t0 = time.perf_counter()
-    if isinstance(method, str) and method.lower() == "auto" and (zeta_jacobian is not None or upper is not None
-                                                                  or _has_minus_inf(zeta)):
-        method = "newton"   # a ζ Jacobian and bounds are newton's only (choose_method's rule, known here at the call)
+    if isinstance(method, str) and method.lower() == "auto" and zeta_jacobian is not None:
+        method = "newton"   # a ζ Jacobian is newton's only (choose_method's rule, known here at the call)
+    # Bounds take choose_method's rule as they are: nrmgs's box form contracts as its LCP form does
+    # (m(x) is 1-Lipschitz as |x| is, detail/modulus.hpp), so a row-dominant A needs as few sweeps.
     s = Solver(A, method=method, omega1=omega1, omega2=omega2, gamma=gamma, phi=phi, alpha=alpha, beta=beta,
                inner=inner, tol=tol, rtol=rtol, maxiter=maxiter, theta=theta, z_update=z_update, accelerate=accelerate,
                anderson_m=anderson_m, record_history=record_history, stall_iterations=stall_iterations,

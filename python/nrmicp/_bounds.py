@@ -1,7 +1,8 @@
 """Bounds: ``upper`` and the lower bound ζ's -inf entries (the mixed complementarity problem,
 PATH's and PETSc's convention). The rules of what a bounded problem may be, its residual and the
-``active_mask`` of a result live here once; the algorithm is the Newton member's (C++,
-detail/box.hpp)."""
+``active_mask`` of a result live here once; the algorithms are in C++: the Newton member's
+(detail/box.hpp) and every stationary member's box form, m(x) = 2 mid(lo', x, hi') − x in place of
+|x| (detail/modulus.hpp)."""
 from __future__ import annotations
 
 import numpy as np
@@ -34,9 +35,11 @@ def is_bounded(c, upper) -> bool:
     return upper is not None or (c is not None and not np.all(np.isfinite(c)))
 
 
-def check(kind, c, upper, method: str, jacobian) -> None:
+def check(kind, c, upper, jacobian) -> None:
     """Refuses what bounds cannot go with, naming the argument: lower > upper (both named, the first
-    index), a ζ that is not none or constant, a method other than 'newton', a zeta_jacobian."""
+    index), a ζ that is not none or constant, a zeta_jacobian. Every method takes bounds: each
+    stationary member's box form converges where its LCP form does (m is 1-Lipschitz as |·| is:
+    detail/modulus.hpp)."""
     if upper is not None:
         lower = np.zeros_like(upper) if c is None or kind != ZetaKind.constant else c
         bad = lower > upper
@@ -47,10 +50,6 @@ def check(kind, c, upper, method: str, jacobian) -> None:
     if kind not in (ZetaKind.none, ZetaKind.constant):
         raise ValueError("upper (an upper bound) needs zeta None or a constant lower bound; an implicit lower bound "
                          "(Affine or callable) with an upper bound is not supported")
-    if method != "newton":
-        raise ValueError(f"bounds (upper, or zeta with -inf entries) are solved by method 'newton'; method {method!r} "
-                         "has no box form (create the Solver with method='newton', or leave method='auto' in "
-                         "nrmicp.solve)")
     if jacobian is not None:
         raise ValueError("zeta_jacobian is for a callable zeta; with bounds zeta is None or a constant")
 
