@@ -101,6 +101,8 @@ def test_complex_vectors_are_type_errors(arg):
 @given(n=st.integers(1, 8), where=st.sampled_from(["A", "q", "x0", "zeta", "zeta.B", "zeta.c", "omega1", "phi"]),
        bad=st.sampled_from([np.nan, np.inf, -np.inf]), seed=st.integers(0, 1000), i=st.integers(0, 100))
 def test_nonfinite_input_names_the_argument(n, where, bad, seed, i):
+    if where == "zeta" and bad == -np.inf:
+        return   # a valid lower bound: z free below there, for every method (tests/test_bounds_family.py)
     rng = np.random.default_rng(seed)
     A = bai_like(n, rng)
     q = rng.uniform(-1, 1, n)

@@ -54,7 +54,7 @@ CORRUPTIONS = [
     ("zeta_jacobian", "wrong shape"), ("zeta_jacobian", "returns a string"), ("zeta_jacobian", "not callable"),
     ("zeta_jacobian", "raises"), ("zeta_jacobian", "for a stationary method"),
     ("upper", "nan"), ("upper", "-inf"), ("upper", "wrong length"), ("upper", "below lower"), ("upper", "complex"),
-    ("upper", "callable"), ("upper", "for a stationary method"),
+    ("upper", "callable"), ("upper", "with an implicit zeta on a stationary method"),
     ("zeta", "+inf lower with upper"), ("zeta_jacobian", "with bounds"),
 ]
 
@@ -227,19 +227,20 @@ def random_bounds(rng, n, c):
 
 
 def corrupt_case(seed, corrupt):
-    """A valid case of a method the corrupted argument belongs to (or, for '... for a stationary
+    """A valid case of a method the corrupted argument belongs to (or, for '... on a stationary
     method', one it does not), then corrupted."""
     rng = np.random.default_rng(seed)
     name, how = corrupt
     if name in ("hierarchy", "zeta_jacobian", "upper") or how == "+inf lower with upper":
-        method = str(rng.choice(STATIONARY)) if how == "for a stationary method" else "newton"
+        stationary = how in ("for a stationary method", "with an implicit zeta on a stationary method")
+        method = str(rng.choice(STATIONARY)) if stationary else "newton"
     elif name in ("omega1", "phi"):
         method = str(rng.choice(["nrm", "nrmgs", "nrmj", "nrmsor", "nrmaor"]))
     else:
         method = str(rng.choice(METHODS))
     zkind = str(rng.choice(["callable", "callable_f32"] if name == "zeta_jacobian" else ZETA_KINDS))
     if name == "upper" or how in ("with bounds", "+inf lower with upper"):   # bounds go with ζ none or constant only
-        zkind = "constant" if name != "upper" else str(
+        zkind = "constant" if name != "upper" else "affine" if how == "with an implicit zeta on a stationary method" else str(
             rng.choice(["none", "constant"]))
     hierarchy = str(rng.choice(["list", "list"] + ([] if name == "zeta_jacobian" else ["amg"])))
     case = build_case(int(rng.integers(2**32)), method, zkind, hierarchy if method == "newton" else None, corrupt)
@@ -364,7 +365,7 @@ def apply_corruption(case, zeta):
         ok = lower + 1.0
         case["upper"] = {"nan": np.r_[ok[:-1], np.nan], "-inf": np.r_[-np.inf, ok[1:]], "wrong length": np.ones(n + 1),
                          "below lower": ok - 2.0, "complex": ok + 0j, "callable": lambda z: ok,
-                         "for a stationary method": ok, "with an affine zeta": ok}[how]
+                         "with an implicit zeta on a stationary method": ok}[how]
     elif how == "with bounds":   # a zeta_jacobian with ζ constant and an upper bound
         case["upper"] = case["c"] + 1.0
         case["jacobian"] = zeta_jacobian

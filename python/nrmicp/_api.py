@@ -230,17 +230,6 @@ def _make_zeta(zeta, n):
     return ZetaKind.constant, _bounds.as_lower(zeta, n), None, None
 
 
-def _has_minus_inf(zeta) -> bool:
-    """A constant ζ (array or number) with a -inf entry: a bound only method 'newton' takes."""
-    if zeta is None or callable(zeta) or isinstance(zeta, Affine):
-        return False
-    try:
-        a = np.asarray(zeta)
-    except Exception:   # _make_zeta names what is wrong with it
-        return False
-    return a.dtype.kind == "f" and bool(np.any(a == -np.inf))
-
-
 def _make_upper(upper, n):
     """``upper=`` checked -> None or a vector (+inf: no bound there)."""
     return _bounds.as_upper(upper, n, implicit=isinstance(upper, Affine) or callable(upper))
@@ -1007,9 +996,11 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
         convention): w = Az + q ≥ 0 where z = ζ, w ≤ 0 where z = upper, w = 0 strictly between.
         ``+inf`` entries: no upper bound there; with ``zeta`` ``-inf`` too, the row is free (w = 0).
         Res becomes ‖mid(z − ζ, z − upper, w)‖₂ (the paper's Res without ``upper``). Bounds need
-        method 'newton' ('auto' picks it); an Affine or callable ζ with ``upper`` is solved by the
-        outer fixed point (no ``zeta_jacobian``); lower > upper anywhere is a ValueError naming
-        both. ``result.active_mask`` says where z is at a bound.
+        ``zeta`` None or constant for every method (the stationary members iterate their box form,
+        which converges where the LCP form does; 'auto' chooses as without bounds); an Affine or
+        callable ζ with ``upper``: method 'newton' (the outer fixed point, no ``zeta_jacobian``;
+        'auto' picks it); lower > upper anywhere is a ValueError naming both.
+        ``result.active_mask`` says where z is at a bound.
     method : str
         ``'auto'`` (default): ``'nrmgs'`` when every row of A is diagonally dominant by at least
         a quarter of its diagonal (Bai's shifted matrices, implicit time steps with a large mass
@@ -1152,9 +1143,11 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
         shifted LCP), with the same re-solve rule as for ``scale``.
     """
     t0 = time.perf_counter()
-    if isinstance(method, str) and method.lower() == "auto" and (zeta_jacobian is not None or upper is not None
-                                                                  or _has_minus_inf(zeta)):
-        method = "newton"   # a ζ Jacobian and bounds are newton's only (choose_method's rule, known here at the call)
+    if isinstance(method, str) and method.lower() == "auto" and (
+            zeta_jacobian is not None or (upper is not None and (callable(zeta) or isinstance(zeta, Affine)))):
+        method = "newton"   # a ζ Jacobian, and an implicit ζ with upper, are newton's only (known here at the call)
+    # Bounds take choose_method's rule as they are: nrmgs's box form contracts as its LCP form does
+    # (m(x) is 1-Lipschitz as |x| is, detail/modulus.hpp), so a row-dominant A needs as few sweeps.
     s = Solver(A, method=method, omega1=omega1, omega2=omega2, gamma=gamma, phi=phi, alpha=alpha, beta=beta,
                inner=inner, tol=tol, rtol=rtol, maxiter=maxiter, theta=theta, z_update=z_update, accelerate=accelerate,
                anderson_m=anderson_m, record_history=record_history, stall_iterations=stall_iterations,

@@ -1,7 +1,8 @@
 """Bounds: ``upper`` and the lower bound ζ's -inf entries (the mixed complementarity problem,
 PATH's and PETSc's convention). The rules of what a bounded problem may be, its residual and the
-``active_mask`` of a result live here once; the algorithm is the Newton member's (C++,
-detail/box.hpp)."""
+``active_mask`` of a result live here once; the algorithms are in C++: the Newton member's
+(detail/box.hpp) and every stationary member's box form, m(x) = 2 mid(lo', x, hi') − x in place of
+|x| (detail/modulus.hpp)."""
 from __future__ import annotations
 
 import numpy as np
@@ -36,8 +37,10 @@ def is_bounded(c, upper) -> bool:
 
 def check(kind, c, upper, method: str, jacobian) -> None:
     """Refuses what bounds cannot go with, naming the argument: lower > upper (both named, the first
-    index; a constant ζ), a method other than 'newton', a zeta_jacobian. An Affine or callable ζ
-    with ``upper`` is solved by the outer fixed point (its inner problems take the box)."""
+    index; a constant ζ), an Affine or callable ζ with ``upper`` on a method other than 'newton' (the
+    outer fixed point solves it; its inner problems take the box), a zeta_jacobian. Every method
+    takes bounds with ζ None or constant: each stationary member's box form converges where its LCP
+    form does (m is 1-Lipschitz as |·| is: detail/modulus.hpp)."""
     if upper is not None:
         lower = np.zeros_like(upper) if c is None or kind != ZetaKind.constant else c
         bad = lower > upper
@@ -45,10 +48,9 @@ def check(kind, c, upper, method: str, jacobian) -> None:
             i = int(np.flatnonzero(bad)[0])
             raise ValueError(f"the lower bound exceeds upper at index {i}: zeta[{i}] = {lower[i]:g} > upper[{i}] = "
                              f"{upper[i]:g} (no z lies between them)")
-    if method != "newton":
-        raise ValueError(f"bounds (upper, or zeta with -inf entries) are solved by method 'newton'; method {method!r} "
-                         "has no box form (create the Solver with method='newton', or leave method='auto' in "
-                         "nrmicp.solve)")
+    if kind not in (ZetaKind.none, ZetaKind.constant) and method != "newton":
+        raise ValueError(f"an Affine or callable zeta with upper is solved by method 'newton' (the outer fixed point); "
+                         f"method {method!r} takes bounds with zeta None or constant only")
     if jacobian is not None:
         raise ValueError("zeta_jacobian with upper is not supported: the semismooth Newton step on the whole ICP has "
                          "no box; leave zeta_jacobian out (the outer fixed point then solves it)")

@@ -4,6 +4,8 @@
 //
 // which is the paper's Lm x⁽ᵏ⁺¹⁾ = (N + φ)Ω1 x⁽ᵏ⁾ + (Ω2 − AΩ1)|x⁽ᵏ⁾| − γAζ(z⁽ᵏ⁾) − γq with
 // N = M − A rearranged (no cancellation of large terms). See docs/SPEC.md.
+// Bounds lower ≤ z ≤ upper (ζ none or constant): the same iteration on the box problem in
+// y = z − s with m(x) = 2 mid(lo', x, hi') − x in place of |x| (detail/modulus.hpp).
 //
 // The loop (detail::loop below, shared by Solver and the Newton member, newton.hpp) is
 //
@@ -139,12 +141,15 @@ class Solver {
     if (q.size() != n) throw std::invalid_argument("Solver::solve: q has length " + std::to_string(q.size()) + ", expected n = " + std::to_string(n));
     if (z0 && z0->size() != n) throw std::invalid_argument("Solver::solve: x0 has length " + std::to_string(z0->size()) + ", expected n = " + std::to_string(n));
     zeta.check(n);
-    if (zeta.bounded())
-      throw std::invalid_argument("Solver: bounds (an upper bound, or a lower bound with -inf entries) are solved by the "
-                                  "Newton member (nrmicp::Newton); the modulus members here have no box form");
     resolve_tolerance(o, q, zeta);
     Result r;
-    if (zeta.kind() == ZetaKind::Constant) {
+    if (zeta.bounded()) {
+      if (zeta.kind() == ZetaKind::Affine || zeta.kind() == ZetaKind::Functor)
+        throw std::invalid_argument("Solver: an affine or functor zeta with an upper bound is solved by the Newton member "
+                                    "(nrmicp::Newton, its outer fixed point); the modulus members take bounds with zeta "
+                                    "none or constant");
+      r = solve_box(q, zeta, z0, {callback, poll, progress}, o);
+    } else if (zeta.kind() == ZetaKind::Constant) {
       // ζ ≡ c: LCP(q + Ac, A) in y = z − c. Res and w are the same in both variables.
       Vector q_shift = q;
       q_shift.noalias() += A_ * zeta.c();
@@ -169,10 +174,25 @@ class Solver {
   }
 
   using Hooks = detail::Hooks;
+
+  // Bounds (ζ none or constant lower, upper): the box problem in y = z − s, q' = q + As, started
+  // from y0 = z0 − s as the constant obstacle's LCP is; m(x) replaces |x| (detail/modulus.hpp).
+  Result solve_box(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0, const Hooks& hooks,
+                   const Options& o) const {
+    const detail::BoxModulus box(zeta.kind() == ZetaKind::Constant ? zeta.c() : Vector(), zeta.upper(),
+                                 params_.omega1, params_.gamma);
+    Vector q_shift = q;
+    q_shift.noalias() += A_ * box.s;
+    const Vector y0 = z0 ? Vector(*z0 - box.s) : Vector(-box.s);
+    Result r = iterate(q_shift, Zeta<StorageIndex>::none(), &y0, hooks, o, box.s, &box);
+    r.z = detail::unshift(r.z, box.s, zeta.upper().size() ? box.box.hi : Vector(), zeta.upper());
+    return r;
+  }
+
   // One solve of ICP(q, A, ζ) by Method 3.1. `shift` is the constant obstacle (only to report
-  // z to the callback), or empty.
+  // z to the callback), or empty; `box` the box problem's modulus (ζ is then none), or null.
   Result iterate(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0, const Hooks& hooks,
-                 const Options& o, const Vector& shift) const {
+                 const Options& o, const Vector& shift, const detail::BoxModulus* box = nullptr) const {
     const ZUpdate zu = resolve_z_update(o.z_update, options_.method, options_.omega2.size() > 0,
                                         zeta.kind() != ZetaKind::None);
     Result res;
@@ -183,6 +203,7 @@ class Solver {
       res.timings.setup += a_factorization_ - before;          // a lazy set-up, before the loop
     }
     detail::Context<MatrixType> ctx(A_, q, zeta, params_, zu, a_solver_, res.timings);
+    ctx.box = box;
     detail::Monitor monitor(o, hooks.callback, hooks.poll, hooks.progress, shift, res, A_.rows());
     detail::Iterate s;
     if (!ctx.start(z0, s)) {

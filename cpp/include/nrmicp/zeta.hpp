@@ -58,7 +58,9 @@ class Zeta {
   /// This ζ as the lower bound of z with the upper bound `u` (+∞ entries: no bound there; an empty
   /// u: none). Bounds — an upper one, or a constant ζ with −∞ entries (z free below there) — make the
   /// mixed complementarity problem: w ≥ 0 where z = ζ, w ≤ 0 where z = u, w = 0 between (PATH's).
-  /// The Newton member solves it, for ζ none or constant (check()); the modulus members refuse it.
+  /// Every member solves it for ζ none or constant: the Newton member, and the modulus members in
+  /// their box form (detail/modulus.hpp); an affine or functor ζ with u only the Newton member (its
+  /// outer fixed point, without a Jacobian: check()).
   Zeta with_upper(Vector u) const { Zeta t = *this; t.upper_ = std::move(u); return t; }
   const Vector& upper() const { return upper_; }
   /// An upper bound, or a constant ζ with a −∞ entry.

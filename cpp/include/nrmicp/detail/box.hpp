@@ -26,6 +26,17 @@ inline double bounded_residual(const Eigen::VectorXd& w, const Eigen::VectorXd& 
   return stable_norm(g.cwiseMin((z - upper).cwiseMax(w)));
 }
 
+/// z = y + s of the box problem in y = z − s (hi: its upper bounds, empty for none), a row on its
+/// upper bound exactly `upper` ((u − s) + s may miss u by an ulp).
+inline Eigen::VectorXd unshift(const Eigen::VectorXd& y, const Eigen::VectorXd& s, const Eigen::VectorXd& hi,
+                               const Eigen::VectorXd& upper) {
+  Eigen::VectorXd z = y + s;
+  if (hi.size())
+    for (Eigen::Index i = 0; i < z.size(); ++i)
+      if (y[i] == hi[i]) z[i] = upper[i];
+  return z;
+}
+
 /// A row's state in an active set: at its lower bound, inactive (w = 0), at its upper bound.
 enum : char { kAtLower = 0, kInactive = 1, kAtUpper = 2 };
 inline bool inactive_state(char s) { return s == kInactive; }
@@ -35,6 +46,13 @@ struct Box {
   Vector lo, hi;  ///< empty: 0 resp. +∞ on every row
 
   bool empty() const { return lo.size() == 0 && hi.size() == 0; }
+  /// This box with both vectors of length n (0 and +∞ where they were empty).
+  Box full(Eigen::Index n) const {
+    Box b;
+    b.lo = lo.size() ? lo : Vector::Zero(n);
+    b.hi = hi.size() ? hi : Vector::Constant(n, std::numeric_limits<double>::infinity());
+    return b;
+  }
   double lower(Eigen::Index i) const { return lo.size() ? lo[i] : 0.0; }
   double upper(Eigen::Index i) const { return hi.size() ? hi[i] : std::numeric_limits<double>::infinity(); }
   double clamp(Eigen::Index i, double v) const { return std::min(upper(i), std::max(lower(i), v)); }
@@ -113,6 +131,35 @@ struct Box {
   static Vector lower_vector(const Box& b, Eigen::Index n) {
     if (!b.lo.size()) return Vector::Zero(n);
     return b.lo.unaryExpr([](double v) { return std::isfinite(v) ? v : 0.0; });
+  }
+};
+
+/// The bounds ψ ≤ z ≤ u of an obstacle problem (ψ empty: 0; u empty: +∞; either may be infinite
+/// in places) as a box in y = z − s (detail/box.hpp): s = ψ where ψ is finite, else u where u is,
+/// else 0. Without infinite ψ and without u this is the plain shift y = z − ψ, y ≥ 0 (an empty box).
+struct ShiftedBounds {
+  Eigen::VectorXd s;  ///< the shift (empty: 0)
+  Box box;
+
+  ShiftedBounds(const Eigen::VectorXd& psi, const Eigen::VectorXd& upper) {
+    constexpr double inf = std::numeric_limits<double>::infinity();
+    const bool free_below = psi.size() && !psi.allFinite();
+    if (!free_below && upper.size() == 0) { s = psi; return; }
+    const Eigen::Index n = std::max(psi.size(), upper.size());
+    s.resize(n);
+    if (free_below) box.lo = Eigen::VectorXd::Zero(n);
+    if (upper.size()) box.hi.resize(n);
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const double l = psi.size() ? psi[i] : 0.0, u = upper.size() ? upper[i] : inf;
+      s[i] = std::isfinite(l) ? l : std::isfinite(u) ? u : 0.0;
+      if (free_below && !std::isfinite(l)) box.lo[i] = -inf;
+      if (upper.size()) box.hi[i] = u - s[i];
+    }
+  }
+  bool shifted() const { return s.size() > 0; }
+  /// z = y + s (unshift).
+  Eigen::VectorXd unshift(const Eigen::VectorXd& y, const Eigen::VectorXd& upper) const {
+    return detail::unshift(y, s, box.hi, upper);
   }
 };
 

@@ -1,5 +1,6 @@
 // nrmicp — what every step of Method 3.1 shares: the iterate (x, z, ζ(z)) and the problem it
 // iterates on, with the operations all steps use (products, ζ, the z-update, Res, the start).
+// With bounds the problem is the box problem in y = z − s and m(x) replaces |x| (detail/modulus.hpp).
 #pragma once
 
 #include "../inner_solver.hpp"
@@ -7,6 +8,7 @@
 #include "../result.hpp"
 #include "../splitting.hpp"
 #include "../zeta.hpp"
+#include "modulus.hpp"
 #include "residual.hpp"
 #include "timer.hpp"
 
@@ -48,6 +50,7 @@ class Context {
   double start_residual = std::numeric_limits<double>::infinity();  ///< Res(z0), set by start()
   const ZUpdate zu;  ///< Explicit or Solve (never Auto)
   Timings& tm;
+  const BoxModulus* box = nullptr;  ///< the box of a bounded problem (ζ is then none), or null: the LCP's |x|
 
   Eigen::Index n() const { return A.rows(); }
   bool lcp() const { return zeta.kind() == ZetaKind::None; }
@@ -70,18 +73,18 @@ class Context {
     if (!ok && zeta.kind() != ZetaKind::Functor) s.finite = false;
     else s.zeta_ok = ok;
   }
-  /// out = ζ-part + Ω1(|x| + x)/γ (no ζ-part when null): the explicit z-update, and ẑ.
+  /// out = ζ-part + Ω1(m(x) + x)/γ (no ζ-part when null): the explicit z-update, and ẑ.
   void from_modulus(const Vector* zeta_part, const Vector& x, Vector& out) const {
-    const Vector& om1 = p.omega1;
-    const double gamma = p.gamma;
-    const Eigen::Index n = x.size();
-    if (zeta_part) {
-      for (Eigen::Index i = 0; i < n; ++i) out[i] = (*zeta_part)[i] + om1[i] * (std::abs(x[i]) + x[i]) / gamma;
-    } else {
-      for (Eigen::Index i = 0; i < n; ++i) out[i] = om1[i] * (std::abs(x[i]) + x[i]) / gamma;
-    }
+    with_modulus(box, [&](const auto& m) { from_modulus(m, zeta_part, x, out); });
   }
-  /// z from x: explicit z = ζ(z⁽ᵏ⁻¹⁾) + Ω1(|x| + x)/γ, or the paper's A z = Ω2(|x| − x)/γ − q.
+  /// out = m(x) (the two-sweep step's second sweep).
+  void modulus(const Vector& x, Vector& out) const {
+    out.resize(x.size());
+    with_modulus(box, [&](const auto& m) {
+      for (Eigen::Index i = 0; i < x.size(); ++i) out[i] = m.value(i, x[i]);
+    });
+  }
+  /// z from x: explicit z = ζ(z⁽ᵏ⁻¹⁾) + Ω1(m(x) + x)/γ, or the paper's A z = Ω2(m(x) − x)/γ − q.
   void z_update(Iterate& s) {
     if (zu == ZUpdate::Explicit) {
       from_modulus(lcp() ? nullptr : &s.zeta_prev, s.x, s.z);
@@ -89,7 +92,9 @@ class Context {
     }
     const Vector& om2 = p.omega2;
     work_.resize(n());
-    for (Eigen::Index i = 0; i < n(); ++i) work_[i] = om2[i] * (std::abs(s.x[i]) - s.x[i]) / p.gamma - q[i];
+    with_modulus(box, [&](const auto& m) {
+      for (Eigen::Index i = 0; i < n(); ++i) work_[i] = om2[i] * m.minus(i, s.x[i]) / p.gamma - q[i];
+    });
     ScopedTimer t(tm.inner_solve);
     a_solver_.solve(work_, s.z);
   }
@@ -98,13 +103,16 @@ class Context {
     if (!lcp()) s.zeta_prev.swap(s.zeta_z);
     z_update(s);
   }
-  /// Res(z) = ‖min(Az + q, z − ζ(z))‖₂ of s.z from Az (ζ(z) in s.zeta_z for an ICP).
+  /// Res(z) = ‖min(Az + q, z − ζ(z))‖₂ of s.z from Az (ζ(z) in s.zeta_z for an ICP; a box's
+  /// ‖mid(z − lo, z − hi, Az + q)‖₂ with bounds).
   double residual(const Vector& Az, const Iterate& s) {
     ResidualSum res;
     if (!lcp()) {
       for (Eigen::Index i = 0; i < n(); ++i) res.add(Az[i] + q[i], s.z[i] - s.zeta_z[i]);
     } else {
-      for (Eigen::Index i = 0; i < n(); ++i) res.add(Az[i] + q[i], s.z[i]);
+      with_modulus(box, [&](const auto& m) {
+        for (Eigen::Index i = 0; i < n(); ++i) m.add(res, i, Az[i] + q[i], s.z[i]);
+      });
     }
     return residual_norm(res, s);
   }
@@ -114,11 +122,13 @@ class Context {
     if (sum.plain_is_accurate()) return std::sqrt(sum.sum);
     Vector Az(n());
     spmv(s.z, Az);
+    if (box) return box->box.residual(Az + q, s.z);
     work_.resize(n());
     for (Eigen::Index i = 0; i < n(); ++i) work_[i] = std::min(Az[i] + q[i], lcp() ? s.z[i] : s.z[i] - s.zeta_z[i]);
     return stable_norm(work_);
   }
-  /// x⁽⁰⁾ = γ/2 (Ω1⁻¹(z0 − ζ(z0)) − Ω2⁻¹(Az0 + q)) and z⁽⁰⁾ from it; false when ζ(z0) failed
+  /// x⁽⁰⁾ = γ/2 (Ω1⁻¹(z0 − ζ(z0)) − Ω2⁻¹(Az0 + q)) (the inverse of x ↦ (z, w), with or without a
+  /// box) and z⁽⁰⁾ from it; false when ζ(z0) failed
   /// (then s.z = z0). Res(z0) goes to start_residual (a candidate for the best iterate).
   bool start(const Vector* z0, Iterate& s) {
     s.zeta_z = Vector::Zero(n());
@@ -132,7 +142,7 @@ class Context {
     Vector Az(n());
     spmv(zs, Az);
     Az += q;
-    start_residual = stable_norm(Az.cwiseMin(zs - s.zeta_prev));
+    start_residual = box ? box->box.residual(Az, zs) : stable_norm(Az.cwiseMin(zs - s.zeta_prev));
     if (std::isnan(start_residual)) start_residual = std::numeric_limits<double>::infinity();
     s.x = p.gamma / 2 * ((zs - s.zeta_prev).cwiseQuotient(p.omega1) - Az.cwiseQuotient(p.omega2));
     s.z.resize(n());
@@ -141,6 +151,18 @@ class Context {
   }
 
  private:
+  template <typename Modulus>
+  void from_modulus(const Modulus& m, const Vector* zeta_part, const Vector& x, Vector& out) const {
+    const Vector& om1 = p.omega1;
+    const double gamma = p.gamma;
+    const Eigen::Index n = x.size();
+    if (zeta_part) {
+      for (Eigen::Index i = 0; i < n; ++i) out[i] = (*zeta_part)[i] + m.in_box(i, om1[i] * m.plus(i, x[i]) / gamma);
+    } else {
+      for (Eigen::Index i = 0; i < n; ++i) out[i] = m.in_box(i, om1[i] * m.plus(i, x[i]) / gamma);
+    }
+  }
+
   const InnerSolver<StorageIndex>& a_solver_;
   Vector work_;
 };

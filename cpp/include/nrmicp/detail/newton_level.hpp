@@ -251,26 +251,11 @@ class NewtonLevel {
     using Z = Zeta<StorageIndex>;
     return sweep(q, B ? Z::affine(*B, *c) : Z::none(), z0, sweeps, tol);
   }
-  /// The fallback on a box problem: up to `sweeps` symmetric projected Gauss–Seidel sweeps from y0
-  /// (the modulus members have no box: SPEC, "Bounds"); the best iterate. A column-major A has none.
+  /// The fallback on a box problem (y ∈ [lo, hi]): the fallback member's box form (detail/modulus.hpp).
   Result sweep(const Vector& q, const Box& box, const Vector& y0, int sweeps, double tol) {
-    Result r;
-    r.z = y0;
-    Vector y = y0, w;
-    r.residual = evaluate(y, q, box, w);
-    r.status = Status::MaxIterations;
-    if constexpr (!MatrixType::IsRowMajor) {
-      r.message = "its fallback (projected Gauss-Seidel sweeps) needs a row-major matrix";
-      return r;
-    }
-    for (int k = 1; k <= sweeps && !(r.residual < tol); ++k) {
-      projected_gauss_seidel(q, y, 1, &box);
-      const double res = evaluate(y, q, box, w);
-      r.iterations = k;
-      if (res < r.residual) { r.residual = res; r.z = y; r.nit = k; }
-    }
-    if (r.residual < tol) r.status = Status::Converged;
-    return r;
+    using Z = Zeta<StorageIndex>;
+    const Z lower = box.lo.size() ? Z::constant(box.lo) : Z::none();
+    return sweep(q, box.hi.size() ? lower.with_upper(box.hi) : lower, y0, sweeps, tol);
   }
 
  private:

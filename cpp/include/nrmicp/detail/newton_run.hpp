@@ -84,39 +84,6 @@ LevelOutcome newton_loop(NewtonLevel<MatrixType>& level, ActiveSetSystem<typenam
   return newton_loop(plain, ctl, z);
 }
 
-/// The bounds ψ ≤ z ≤ u of an obstacle problem (ψ empty: 0; u empty: +∞; either may be infinite
-/// in places) as a box in y = z − s (detail/box.hpp): s = ψ where ψ is finite, else u where u is,
-/// else 0. Without infinite ψ and without u this is the plain shift y = z − ψ, y ≥ 0 (an empty box).
-struct ShiftedBounds {
-  Eigen::VectorXd s;  ///< the shift (empty: 0)
-  Box box;
-
-  ShiftedBounds(const Eigen::VectorXd& psi, const Eigen::VectorXd& upper) {
-    constexpr double inf = std::numeric_limits<double>::infinity();
-    const bool free_below = psi.size() && !psi.allFinite();
-    if (!free_below && upper.size() == 0) { s = psi; return; }
-    const Eigen::Index n = std::max(psi.size(), upper.size());
-    s.resize(n);
-    if (free_below) box.lo = Eigen::VectorXd::Zero(n);
-    if (upper.size()) box.hi.resize(n);
-    for (Eigen::Index i = 0; i < n; ++i) {
-      const double l = psi.size() ? psi[i] : 0.0, u = upper.size() ? upper[i] : inf;
-      s[i] = std::isfinite(l) ? l : std::isfinite(u) ? u : 0.0;
-      if (free_below && !std::isfinite(l)) box.lo[i] = -inf;
-      if (upper.size()) box.hi[i] = u - s[i];
-    }
-  }
-  bool shifted() const { return s.size() > 0; }
-  /// z = y + s, a row on its upper bound exactly `upper` ((u − s) + s may miss u by an ulp).
-  Eigen::VectorXd unshift(const Eigen::VectorXd& y, const Eigen::VectorXd& upper) const {
-    Eigen::VectorXd z = y + s;
-    if (box.hi.size())
-      for (Eigen::Index i = 0; i < z.size(); ++i)
-        if (y[i] == box.hi[i]) z[i] = upper[i];
-    return z;
-  }
-};
-
 /// The levels of nested iteration (built by nrmicp::Newton): the finest on A, the coarser ones on
 /// the Galerkin operators of `hierarchy`.
 template <typename MatrixType>

@@ -22,6 +22,8 @@ struct ResidualSum {
     const double m = std::min(w, g);
     sum += m * m;
   }
+  /// A term already formed (a box problem's mid(y − lo, y − hi, w): detail/modulus.hpp).
+  void add_term(double m) { sum += m * m; }
   /// The plain sum is exact up to rounding: it did not overflow, and it is large enough that
   /// squares lost to underflow (each < 2^-1022) cannot matter (n · 2^-1074 ≪ 2^-800).
   bool plain_is_accurate() const { return sum >= 0x1p-800 && sum <= DBL_MAX; }

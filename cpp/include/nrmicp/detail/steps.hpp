@@ -4,6 +4,8 @@
 //   SplittingStep  any splitting: rhs = Ω2(|x| − x) − γ(A ẑ + q), x += Lm⁻¹ rhs (Lm factorized,
 //                  triangular or diagonal)
 //   TwoSweepStep   the two-sweep baseline: SplittingStep's rhs minus N2(|x⁽ᵏ⁾| − |x⁽ᵏ⁻¹⁾|), relaxed by θ
+// With bounds, m(x) replaces |x| throughout (detail/modulus.hpp): the passes over A are templates
+// over the modulus, chosen once per pass by with_modulus (the LCP's code is unchanged).
 #pragma once
 
 #include "../splitting.hpp"
@@ -53,9 +55,11 @@ class SweepStep : public StepBase {
     ResidualSum res;
     {
       ScopedTimer t(ctx_.tm.spmv);  // the sweep is the product with A (and the triangular solve)
-      res = aor_sweep(ctx_.A, s.z, lcp ? nullptr : &s.zeta_z, lcp ? nullptr : &zhat_, ctx_.q, p.omega1,
-                      omega1_is_identity_, p.omega2, inverse_diagonal_, lower_scale_, p.gamma, s.x, z_next_, dx_,
-                      s.step);
+      res = with_modulus(ctx_.box, [&](const auto& m) {
+        return aor_sweep(m, ctx_.A, s.z, lcp ? nullptr : &s.zeta_z, lcp ? nullptr : &zhat_, ctx_.q, p.omega1,
+                         omega1_is_identity_, p.omega2, inverse_diagonal_, lower_scale_, p.gamma, s.x, z_next_, dx_,
+                         s.step);
+      });
     }
     return ctx_.residual_norm(res, s);
   }
@@ -72,7 +76,7 @@ class SweepStep : public StepBase {
   Vector z_next_, dx_, zhat_;
 };
 
-/// One step of Method 3.1 with any splitting: rhs = Ω2(|x| − x) − γ(A ẑ + q), x += Lm⁻¹ rhs.
+/// One step of Method 3.1 with any splitting: rhs = Ω2(m(x) − x) − γ(A ẑ + q), x += Lm⁻¹ rhs.
 /// For an LCP with the explicit z-update on a row-major A, evaluate computes the product, Res
 /// and rhs in one pass (ẑ = z there): the iteration is memory-bound.
 template <typename MatrixType>
@@ -103,6 +107,10 @@ class SplittingStep : public StepBase {
 
  protected:
   double evaluate_fused(const Iterate& s) {
+    return with_modulus(ctx_.box, [&](const auto& m) { return evaluate_fused(m, s); });
+  }
+  template <typename Modulus>
+  double evaluate_fused(const Modulus& m, const Iterate& s) {
     if constexpr (MatrixType::IsRowMajor) {
       const Vector &q = ctx_.q, &om2 = ctx_.p.omega2, &x = s.x, &z = s.z;
       const double gamma = ctx_.p.gamma;
@@ -113,15 +121,15 @@ class SplittingStep : public StepBase {
           double a = 0;
           for (typename MatrixType::InnerIterator it(ctx_.A, i); it; ++it) a += it.value() * z[it.index()];
           const double wi = a + q[i];
-          res.add(wi, z[i]);
-          rhs_[i] = om2[i] * (std::abs(x[i]) - x[i]) - gamma * wi;
+          m.add(res, i, wi, z[i]);
+          rhs_[i] = om2[i] * m.minus(i, x[i]) - gamma * wi;
         }
       }
       return ctx_.residual_norm(res, s);
     }
     return std::numeric_limits<double>::quiet_NaN();  // unreachable: fused_ needs row-major
   }
-  // rhs = Ω2(|x| − x) − γ(A ẑ + q); ẑ = z (Az known) for an LCP with the explicit update.
+  // rhs = Ω2(m(x) − x) − γ(A ẑ + q); ẑ = z (Az known) for an LCP with the explicit update.
   void make_rhs(Iterate& s) {
     if (fused_) return;
     const Vector* Azh = &Az_;
@@ -133,7 +141,9 @@ class SplittingStep : public StepBase {
     }
     const Vector &q = ctx_.q, &om2 = ctx_.p.omega2, &x = s.x;
     const double gamma = ctx_.p.gamma;
-    for (Eigen::Index i = 0; i < ctx_.n(); ++i) rhs_[i] = om2[i] * (std::abs(x[i]) - x[i]) - gamma * ((*Azh)[i] + q[i]);
+    with_modulus(ctx_.box, [&](const auto& m) {
+      for (Eigen::Index i = 0; i < ctx_.n(); ++i) rhs_[i] = om2[i] * m.minus(i, x[i]) - gamma * ((*Azh)[i] + q[i]);
+    });
   }
   void solve_left() {
     ScopedTimer t(ctx_.tm.inner_solve);
@@ -159,7 +169,7 @@ class SplittingStep : public StepBase {
 };
 
 /// The two-sweep modulus method (Wu–Li form): SplittingStep with M1, whose rhs also takes
-/// −N2(|x⁽ᵏ⁾| − |x⁽ᵏ⁻¹⁾|), relaxed by θ.
+/// −N2(m(x⁽ᵏ⁾) − m(x⁽ᵏ⁻¹⁾)), relaxed by θ.
 template <typename MatrixType>
 class TwoSweepStep : public SplittingStep<MatrixType> {
   using Base = SplittingStep<MatrixType>;
@@ -167,12 +177,14 @@ class TwoSweepStep : public SplittingStep<MatrixType> {
  public:
   TwoSweepStep(Context<MatrixType>& ctx, const Splitting<typename Base::StorageIndex>& sp, double theta,
                const Iterate& s)
-      : Base(ctx, sp), theta_(theta), absx_prev_(s.x.cwiseAbs()) {}
+      : Base(ctx, sp), theta_(theta) {
+    ctx.modulus(s.x, absx_prev_);
+  }
 
   void move_x(Iterate& s) {
     this->make_rhs(s);
     {
-      absx_ = s.x.cwiseAbs();
+      this->ctx_.modulus(s.x, absx_);
       ScopedTimer t(this->ctx_.tm.spmv);
       this->rhs_.noalias() -= this->sp_.n2() * (absx_ - absx_prev_);
       absx_prev_.swap(absx_);
@@ -183,7 +195,7 @@ class TwoSweepStep : public SplittingStep<MatrixType> {
 
  private:
   const double theta_;
-  Eigen::VectorXd absx_prev_, absx_;
+  Eigen::VectorXd absx_prev_, absx_;  // m(x⁽ᵏ⁻¹⁾), m(x⁽ᵏ⁾): |x| for the LCP
 };
 
 }  // namespace nrmicp::detail
