@@ -61,7 +61,7 @@ def test_other_matrices_table():
 
 @pytest.mark.parametrize("scene", ["convection_2d", "convection_3d"])
 def test_newton_inner_table(scene):
-    # README "Newton's inner solve": direct and Krylov inner solves reach the same Res target
+    # docs/MEASUREMENTS.md "Newton's inner solve": direct and Krylov inner solves reach the same Res target
     lines = [json.loads(ln) for ln in run("newton_inner.py", "--scene", scene, "--m", "15", "--inner",
                                           "umfpack", "cg").splitlines() if ln.startswith("{")]
     assert [ln["inner"] for ln in lines] == ["umfpack", "bicgstab"]
