@@ -96,3 +96,20 @@ def test_qvi_outer_table():
                                     "thermoforming_2d κ=2 δ=1, hierarchy 'auto'"]
     for r in rows:
         assert r[5] == "CONVERGED" and float(r[7]) < 1e-8, r  # the numpy complementarity check
+
+
+def test_bounds_table():
+    # README "Bounds": the command, on its quick sizes (n <= 3,969) with the PIQP peer (vinewtonrsls needs
+    # petsc4py's interpreter, --petsc-python); every solver meets the target, the box scenes converge
+    text = run("bounds.py", "--quick", "--scenes", "membrane", "contact_p2", "--peers", "piqp")
+    scaling, peers, contact = (table_rows(part) for part in text.split("\n\n")[1:6:2])
+    assert [(r[0], r[1]) for r in scaling] == [("membrane", "961"), ("membrane", "3,969"), ("contact_p2", "272"),
+                                              ("contact_p2", "1,056")]
+    for r in scaling:
+        assert re.match(r"\d+$", r[2]) and float(r[5]) < 1e-8, r        # converged: no status in brackets
+    assert [r[0] for r in peers] == ["membrane", "contact_p2"]
+    for r in peers:
+        assert all(re.match(r"[\d.]+ s, \d+ (st|it)$", c) for c in r[2:4]) and r[4].endswith("x"), r
+    assert [r[1] for r in contact] == ["272", "1,056"]
+    for r in contact:
+        assert all(re.match(r"[\d.]+ s, \d+ st$", r[k]) for k in (2, 3, 5, 7)) and r[4].endswith("x"), r

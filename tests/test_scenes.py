@@ -14,7 +14,7 @@ import nrmicp.scenes as scenes
 
 
 def recompute(problem, z):
-    """(w, g, Res) from the scene's data alone."""
+    """(w, g, Res) from the scene's data alone; Res = ‖mid(g, z − upper, w)‖₂ for a box scene."""
     z = np.asarray(z, dtype=float)
     zeta = problem.zeta
     if zeta is None:
@@ -27,6 +27,8 @@ def recompute(problem, z):
         zz = problem.zeta_at(z)
     w = problem.A @ z + problem.q
     g = z - zz
+    if problem.upper is not None:
+        return w, g, float(np.linalg.norm(np.minimum(g, np.maximum(z - problem.upper, w))))
     return w, g, float(np.linalg.norm(np.minimum(w, g)))
 
 
@@ -200,8 +202,9 @@ def test_american_put_price_matches_binomial_tree():
 def test_registry_builds_every_scene_with_its_sizes_grid_parameter(name):
     P = scenes.build(name, "tiny")
     m = scenes.parameter(name, "tiny")
-    expected = {"obstacle_3d": m**3, "american_put": m - 1, "p_matrix_cycling": 4 * m}
-    if name.startswith("bai_") or name in ("obstacle_2d", "thermoforming_2d", "convection_obstacle"):
+    expected = {"obstacle_3d": m**3, "american_put": m - 1, "p_matrix_cycling": 4 * m, "game_put": m - 1,
+                "elastic_contact_p1": 2 * 2**m * (2 ** (m + 1) + 1), "elastic_contact_p2": 2 * 2 ** (m + 1) * (2 ** (m + 2) + 1)}
+    if name.startswith("bai_") or name in ("obstacle_2d", "thermoforming_2d", "convection_obstacle", "two_sided_2d"):
         assert P.n == m * m
     elif name in expected:
         assert P.n == expected[name]

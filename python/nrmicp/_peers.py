@@ -34,15 +34,20 @@ def installed(name: str):
 
 
 def shifted_lcp(problem):
-    """(A csr, q', c) with y = z − c solving LCP(q', A), or None when ζ is not constant."""
+    """(A csr, q', c) with y = z − c solving LCP(q', A), or None when ζ is not constant or the
+    scene is a box problem (an upper bound, or ζ with -inf: free unknowns)."""
     A = sp.csr_matrix(problem.A, dtype=float)
     q = np.asarray(problem.q, dtype=float)
     zeta = problem.zeta
+    if getattr(problem, "upper", None) is not None:
+        return None
     if zeta is None:
         return A, q, np.zeros(A.shape[0])
     if callable(zeta) or hasattr(zeta, "B"):
         return None
     c = np.broadcast_to(np.asarray(zeta, dtype=float), q.shape).copy()
+    if not np.all(np.isfinite(c)):
+        return None
     return A, q + A @ c, c
 
 
@@ -50,7 +55,8 @@ def applicable(peer: str, problem) -> str:
     """'' when ``peer`` can solve ``problem``, else why not."""
     lcp = shifted_lcp(problem)
     if lcp is None:
-        return "ζ is not constant (not an LCP)"
+        box = getattr(problem, "upper", None) is not None or isinstance(problem.zeta, np.ndarray)
+        return "bounds or free unknowns (a box problem, not an LCP)" if box else "ζ is not constant (not an LCP)"
     if peer in QP_SOLVERS:
         A = lcp[0]
         if abs(A - A.T).max() > 1e-14 * abs(A).max():

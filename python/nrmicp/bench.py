@@ -83,7 +83,9 @@ from ._cli import int_at_least, positive_float
 DEFAULT_SCENES = ("bai_sym_lcp", "bai_nonsym_lcp", "bai_sym_icp", "bai_nonsym_icp",
                   "obstacle_2d", "thermoforming_2d", "impulse_control", "american_put")
 #: Further scenes that may be named with --scenes.
-EXTRA_SCENES = ("bai_sym_affine", "obstacle_1d", "thermoforming_1d", "obstacle_3d", "convection_obstacle")
+#: The box scenes among them (an upper bound or free unknowns) are run by method newton only.
+EXTRA_SCENES = ("bai_sym_affine", "obstacle_1d", "thermoforming_1d", "obstacle_3d", "convection_obstacle",
+                "two_sided_1d", "two_sided_2d", "elastic_contact_p1", "elastic_contact_p2", "game_put")
 SCENES = DEFAULT_SCENES + EXTRA_SCENES
 
 #: Default methods: nrmaor and nrmsor with their default parameters (α = β = 1) are nrmgs.
@@ -115,6 +117,11 @@ _LABELS = {
     "thermoforming_2d": "thermoforming 2D (nonlocal QVI)",
     "impulse_control": "impulse control (QVI, Lipschitz 1)",
     "american_put": "American put, one step (shifted LCP)",
+    "two_sided_1d": "two-sided membrane 1D (box)",
+    "two_sided_2d": "two-sided membrane 2D (box)",
+    "elastic_contact_p1": "elastic contact, P1 (free unknowns)",
+    "elastic_contact_p2": "elastic contact, P2 (free unknowns)",
+    "game_put": "game put, one step (box)",
 }
 
 
@@ -272,11 +279,20 @@ def is_peer(method: str) -> bool:
     return method in PEERS
 
 
+def is_box(problem) -> bool:
+    """A scene with an upper bound or free unknowns (ζ with -inf): method newton's only."""
+    zeta = problem.zeta
+    free = isinstance(zeta, np.ndarray) and not np.all(np.isfinite(zeta))
+    return getattr(problem, "upper", None) is not None or free
+
+
 def _run_nrmicp(problem, method, z_update_used, maxiter):
     """solve(tol, history) for an nrmicp case: the outcome dict run_case records."""
     import nrmicp
 
     base, kw = split_method(method)
+    if getattr(problem, "upper", None) is not None:
+        kw = dict(kw, upper=problem.upper)
 
     def solve(tol, history=False):
         res = nrmicp.solve(problem.A, problem.q, problem.zeta, method=base, tol=tol, maxiter=maxiter,
@@ -691,6 +707,11 @@ def _legend(Line2D, seen_methods, seen_z, scene_results, y):
     return handles
 
 
+def _res_label(problem) -> str:
+    """The y label of a Res axis: PATH's mid for a box scene, the paper's min otherwise."""
+    return "Res = ‖mid(z−ζ, z−u, Az+q)‖₂" if is_box(problem) else "Res = ‖min(Az+q, z−ζ(z))‖₂"
+
+
 def plot_work_precision(scene_results, path, *, y="residual", tols=(), dpi=110):
     """One panel per scene: x = seconds (log), y = Res or max|z − z*| (log)."""
     plt = _pyplot()
@@ -719,7 +740,7 @@ def plot_work_precision(scene_results, path, *, y="residual", tols=(), dpi=110):
         ax.grid(True, which="major", alpha=0.3)
         ax.set_title(f"{scene_label(scene)}\nn = {problem.n}", fontsize=9)
         ax.set_xlabel("seconds per solve (incl. set-up)", fontsize=8)
-        ax.set_ylabel("Res = ‖min(Az+q, z−ζ(z))‖₂" if y == "residual" else "max |z − z_exact|", fontsize=8)
+        ax.set_ylabel(_res_label(problem) if y == "residual" else "max |z − z_exact|", fontsize=8)
         ax.tick_params(labelsize=7)
     for ax in list(axes.flat)[len(names):]:
         ax.set_visible(False)
@@ -757,7 +778,7 @@ def plot_history(problem, scene, cases, floor, path, tol, dpi=110):
             ax.axhline(floor, color="k", lw=0.9, linestyle=":", label="rounding level eps·‖|A||z*|+|q|‖₂")
         ax.axhline(tol, color="0.5", lw=0.8, linestyle="-.", label=f"tol = {tol:.0e}")
         ax.grid(True, which="major", alpha=0.3)
-        ax.set_ylabel("Res = ‖min(Az+q, z−ζ(z))‖₂")
+        ax.set_ylabel(_res_label(problem))
     a1.set_xscale("symlog", linthresh=10, linscale=0.5)
     a1.set_xlim(left=0)
     a1.yaxis.set_minor_formatter(NullFormatter())
@@ -915,9 +936,13 @@ def _sweep(sel, args) -> dict:
     peers, notes = resolve_peers(sel.peers, problems)
     for note in notes:
         print(note, flush=True)
-    plan = {s: [(m, z) for m in sel.methods
+    plan = {s: [(m, z) for m in sel.methods if m == "newton" or not is_box(problems[s])
                 for z in (sel.z_updates if split_method(m)[0] != "newton" else sel.z_updates[:1])]
             + [(p, "") for p in peers[s]] for s in sel.scenes}
+    boxes = [s for s in sel.scenes if is_box(problems[s])]
+    if boxes and any(m != "newton" for m in sel.methods):
+        print(f"only newton runs on the box scenes {', '.join(boxes)} (the other members have no box form)",
+              flush=True)
     n_cases = sum(len(v) for v in plan.values())
     progress = Progress(n_cases * (len(sel.tols) + 1) * args.repeat, enabled=not args.no_progress)
     scene_results = {}

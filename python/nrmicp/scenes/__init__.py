@@ -35,7 +35,21 @@ Scenes (one module per family):
                           ``prolongations()`` are the mesh hierarchy's interpolation
 :func:`contact_disk_p1`   P1 elements on a Delaunay mesh of scattered points, no grid and
                           no mesh hierarchy (numpy/scipy only)
+:func:`two_sided_membrane_1d`
+                          string between two plates, a box problem lower ≤ z ≤ upper;
+                          closed-form solution
+:func:`two_sided_membrane_2d`
+                          membrane between two plates on the unit square, both touched
+:func:`elastic_contact`   plane-strain elastic block on a rigid floor (Signorini), vector
+                          P1/P2 (scikit-fem): a few bounded unknowns, all others free
+:func:`game_put`          one step of a game (Israeli) put: exercise payoff below,
+                          cancellation payoff above; :func:`game_put_price` marches
 =======================  ==========================================================
+
+Box scenes carry ``Problem.upper`` (an upper bound, +inf where none) and/or a constant ζ with
+-inf entries (free unknowns); ``Problem.solve`` and ``Problem.residual`` take them into account
+(PATH's convention, ``nrmicp.solve(..., upper=)``), and :func:`solve_exact_box` is their
+policy-iteration reference.
 
 ``z_exact`` is the exact solution *of the discrete problem* (what an iterative solver
 should converge to), computed by construction or by a direct policy-iteration solver
@@ -79,6 +93,13 @@ __all__ = [
     "fe_obstacle",
     "contact_disk_p1",
     "solve_exact_obstacle",
+    "solve_exact_box",
+    "two_sided_membrane_1d",
+    "two_sided_membrane_2d",
+    "elastic_contact",
+    "game_put",
+    "game_put_price",
+    "binomial_game_put",
     "evaluate_zeta",
     "NAMES",
     "SIZES",
@@ -140,6 +161,10 @@ class Problem:
         Nodes per axis (x first, the fastest in the ordering) when the unknowns are the
         interior nodes of a uniform tensor grid; None otherwise. :meth:`prolongations`
         builds the geometric hierarchy from it.
+    upper : ndarray or None
+        An upper bound (+inf where there is none): the scene is the mixed complementarity
+        problem ζ ≤ z ≤ upper (``nrmicp.solve``'s ``upper=``; ζ a constant that may hold -inf,
+        where z is free below). None: the ICP above.
     """
 
     name: str
@@ -154,6 +179,7 @@ class Problem:
     lipschitz: Optional[float] = None
     solver_options: dict = field(default_factory=dict)
     grid: Optional[tuple] = None
+    upper: Optional[np.ndarray] = None
 
     @property
     def n(self) -> int:
@@ -170,9 +196,13 @@ class Problem:
         return self.A @ z + self.q, z - self.zeta_at(z)
 
     def residual(self, z: np.ndarray) -> float:
-        """Res(z) = ‖min(A z + q, z − ζ(z))‖₂, the paper's criterion (computed in numpy)."""
+        """Res(z) = ‖min(A z + q, z − ζ(z))‖₂, the paper's criterion (computed in numpy); with
+        ``upper``, ‖mid(z − ζ, z − upper, A z + q)‖₂ (PATH's, which is the paper's without it)."""
         w, g = self.parts(z)
-        return float(np.linalg.norm(np.minimum(w, g)))
+        if self.upper is None:
+            return float(np.linalg.norm(np.minimum(w, g)))
+        with np.errstate(invalid="ignore"):   # z − ζ = +inf where ζ = −inf: min picks the other term
+            return float(np.linalg.norm(np.minimum(g, np.maximum(np.asarray(z) - self.upper, w))))
 
     def prolongations(self):
         """The scene's geometric hierarchy for ``hierarchy=`` (nested iteration), or None.
@@ -192,13 +222,15 @@ class Problem:
         return grid_prolongations(self.grid) or None
 
     def solve(self, **options):
-        """``nrmicp.solve(self.A, self.q, self.zeta, **self.solver_options, **options)``."""
+        """``nrmicp.solve(self.A, self.q, self.zeta, **self.solver_options, **options)``, with
+        ``upper=self.upper`` when the scene has an upper bound."""
         import nrmicp
 
-        return nrmicp.solve(self.A, self.q, self.zeta, **{**self.solver_options, **options})
+        bounds = {} if self.upper is None else {"upper": self.upper}
+        return nrmicp.solve(self.A, self.q, self.zeta, **bounds, **{**self.solver_options, **options})
 
 
-from ._exact import solve_exact_obstacle  # noqa: E402
+from ._exact import solve_exact_box, solve_exact_obstacle  # noqa: E402
 from .bai import bai  # noqa: E402
 from .obstacle import obstacle_1d, obstacle_2d, obstacle_3d  # noqa: E402
 from .convection import convection_diffusion_obstacle  # noqa: E402
@@ -208,5 +240,8 @@ from .impulse import impulse_control  # noqa: E402
 from .american import american_put, american_put_price, binomial_american_put  # noqa: E402
 from .finite_elements import fe_obstacle  # noqa: E402  (scikit-fem is imported when a scene is built)
 from .unstructured import contact_disk_p1  # noqa: E402
+from .two_sided import two_sided_membrane_1d, two_sided_membrane_2d  # noqa: E402
+from .elastic_contact import elastic_contact  # noqa: E402  (scikit-fem is imported when a scene is built)
+from .game import binomial_game_put, game_put, game_put_price  # noqa: E402
 
 from ._registry import NAMES, SIZES, build, catalog, parameter, scaled_lcp  # noqa: E402
