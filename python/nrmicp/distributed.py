@@ -965,7 +965,7 @@ def _prepare(A, q, zeta, x0, comm, method, tol, maxiter, omega1, omega2, gamma, 
 
 def solve(A, q, zeta=None, *, method: str = "newton", tol=None, rtol=None, maxiter: int = 10000,
           omega1=None, omega2=None, gamma: float = 1.0, alpha=None, beta=None, hierarchy="amg",
-          x0=None, polish: bool = False, comm=None) -> Result:
+          x0=None, polish: bool = False, comm=None, upper=None) -> Result:
     """Solve ICP(q, A, ζ) on all ranks of A's communicator (call it on every rank).
 
     A: petsc4py Mat (AIJ, square, same row and column layout) or this rank's scipy.sparse row
@@ -981,6 +981,9 @@ def solve(A, q, zeta=None, *, method: str = "newton", tol=None, rtol=None, maxit
     Returns a :class:`nrmicp.Result` on every rank, with ``z`` and ``w`` as PETSc Vecs
     (:func:`gather` copies one to rank 0). A failure on any rank raises on every rank.
     """
+    if upper is not None:   # bounds arrive with the one Newton driver's PETSc engine (issue 35), not as a second copy here
+        raise NotImplementedError("upper: bounds are not available in nrmicp.distributed yet; solve them with "
+                                  "nrmicp.solve(..., upper=...) on one machine")
     comm = comm or (A.getComm() if isinstance(A, PETSc.Mat) else PETSc.COMM_WORLD)
     t_start = time.perf_counter()
     it, units = _criterion({"tol": tol, "rtol": rtol})
