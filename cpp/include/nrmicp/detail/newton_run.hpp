@@ -15,12 +15,12 @@
 #include "active_set.hpp"
 #include "box.hpp"
 #include "globalization.hpp"
-#include "matrix_free.hpp"
 #include "multigrid.hpp"
 #include "newton_level.hpp"
 #include "newton_step.hpp"
 #include "outer_fixed_point.hpp"
 #include "residual.hpp"
+#include "semismooth.hpp"
 #include "stopping.hpp"
 #include "timer.hpp"
 
@@ -389,9 +389,8 @@ class NewtonRun {
       if (use) inactive = outer_set_;
       return use;
     };
-    lin.project = [this, &q, &zeta](Vector& z) {
-      Vector zeta_z(z.size());
-      if (!outer_mode_ || !levels_.finest->eval_zeta(zeta, z, zeta_z)) return;
+    lin.project = [this, &q](Vector& z, const Vector& zeta_z) {
+      if (!outer_mode_) return;
       if (outer_step(q, zeta_z, z)) z = outer_z_;
       else outer_mode_ = false;
     };

@@ -8,7 +8,7 @@
 //                          reduced system every step, analysed once
 //   SemismoothLinearization  a callable ζ with its Jacobian J: B = J(z), c = ζ(z) − Jz, a new
 //                          system each step (semismooth Newton on the whole ICP), sparse or
-//                          matrix-free (detail/matrix_free.hpp)
+//                          matrix-free (detail/semismooth.hpp)
 // The step only steps: the acceptance test, cycles, the fallback and the ends are the
 // globalization's (detail::Globalized, detail/globalization.hpp).
 #pragma once
