@@ -89,6 +89,18 @@ def test_units_table():
             assert float(r[4]) < 1e-6 and r[5] == "same", r   # every success, in any unit, is one
 
 
+def test_qvi_operator_table():
+    # the QVIs with zeta' as a LinearOperator against the outer fixed point (benchmarks/qvi_operator.py)
+    rows = table_rows(run("qvi_operator.py", "--achp", "63", "--thermo2d", "15", "--sin", "15"))
+    assert [r[0] for r in rows] == [f"{p}, {how}" for p in ("ACHP 1D", "thermoforming_2d κ=2 δ=1", "ψ + 0.2 sin z")
+                                    for how in ("zeta' operator", "outer fixed point")]
+    for with_j, without in zip(rows[::2], rows[1::2]):
+        assert 1 <= int(with_j[2]) <= 6 and int(with_j[5]) > 0, with_j   # Newton steps, FGMRES iterations
+        for r in (with_j, without):
+            assert r[8] == "CONVERGED" and float(r[10]) < 1e-8, r  # the numpy complementarity check
+        assert float(without[12]) < 1e-8, without  # the two answers agree
+
+
 def test_qvi_outer_table():
     # the thermoforming QVIs without a Jacobian (benchmarks/qvi_outer.py), on its smallest sizes
     rows = table_rows(run("qvi_outer.py", "--achp", "63", "--thermo2d", "15"))

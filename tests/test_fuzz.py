@@ -29,6 +29,7 @@ import warnings
 import numpy as np
 import pytest
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
@@ -56,6 +57,8 @@ CORRUPTIONS = [
     ("upper", "nan"), ("upper", "-inf"), ("upper", "wrong length"), ("upper", "below lower"), ("upper", "complex"),
     ("upper", "callable"), ("upper", "with an implicit zeta on a stationary method"),
     ("zeta", "+inf lower with upper"), ("zeta_jacobian", "with bounds"),
+    ("zeta_jacobian", "operator of wrong shape"), ("zeta_jacobian", "complex operator"),
+    ("zeta_jacobian", "matvec of wrong length"), ("zeta_jacobian", "matvec returns nan"),
 ]
 
 #: The exception a raising zeta_jacobian throws: it must reach the caller unchanged.
@@ -91,8 +94,9 @@ def random_matrix(rng, n, kind, scale):
 STATIONARY = [m for m in METHODS if m != "newton"]
 ZETA_KINDS = ["none", "constant", "affine", "callable", "callable_f32", "callable_column"]
 CALLABLES = ("callable", "callable_f32", "callable_column")
-#: The formats a valid zeta_jacobian returns J in (sp.diags' DIA warned at every Newton step).
-JACOBIAN_FORMATS = ["csr", "dia", "coo", "csc", "dense"]
+#: The formats a valid zeta_jacobian returns J in (sp.diags' DIA warned at every Newton step;
+#: 'operator': a scipy LinearOperator, the matrix-free Newton step).
+JACOBIAN_FORMATS = ["csr", "dia", "coo", "csc", "dense", "operator"]
 #: Wrong Jacobians of those callables (valid input: a solve may give them up for the outer fixed
 #: point, path 'newton+outer', and must say so; a success is still checked by the oracle).
 WRONG_JACOBIANS = {"negated": -1.0, "10x": 10.0, "zero": 0.0}
@@ -303,6 +307,8 @@ def jacobian_in(fmt):
     """zeta_jacobian returning J in the format `fmt` ('dense': a numpy array), or a wrong J (WRONG_JACOBIANS)."""
     if fmt in WRONG_JACOBIANS:
         return lambda z: WRONG_JACOBIANS[fmt] * zeta_jacobian(z)
+    if fmt == "operator":
+        return lambda z: spla.aslinearoperator(zeta_jacobian(z))
     return lambda z: zeta_jacobian(z).toarray() if fmt == "dense" else zeta_jacobian(z).asformat(fmt)
 
 
@@ -370,9 +376,14 @@ def apply_corruption(case, zeta):
         case["upper"] = case["c"] + 1.0
         case["jacobian"] = zeta_jacobian
     elif name == "zeta_jacobian":
+        operator = spla.LinearOperator
         case["jacobian"] = {"wrong shape": lambda z: sp.eye(n + 1, format="csr"),
                             "returns a string": lambda z: "J", "not callable": sp.eye(n, format="csr"),
-                            "raises": _raising_jacobian, "for a stationary method": zeta_jacobian}[how]
+                            "raises": _raising_jacobian, "for a stationary method": zeta_jacobian,
+                            "operator of wrong shape": lambda z: spla.aslinearoperator(sp.eye(n + 1)),
+                            "complex operator": lambda z: operator((n, n), matvec=lambda v: (1 + 1j) * v, dtype=complex),
+                            "matvec of wrong length": lambda z: operator((n, n), matvec=lambda v: np.zeros(n + 1), dtype=float),
+                            "matvec returns nan": lambda z: operator((n, n), matvec=lambda v: np.full(n, np.nan), dtype=float)}[how]
     return zeta
 
 
@@ -446,7 +457,9 @@ def stable_norm(v):
 
 #: Corruptions seen only when the library calls the corrupted callable (a Newton solve that stops
 #: before its first step never asks for the Jacobian): corrupt_case makes the solve take steps.
-LAZY = {("zeta_jacobian", "wrong shape"), ("zeta_jacobian", "returns a string"), ("zeta_jacobian", "raises")}
+LAZY = {("zeta_jacobian", "wrong shape"), ("zeta_jacobian", "returns a string"), ("zeta_jacobian", "raises"),
+        ("zeta_jacobian", "operator of wrong shape"), ("zeta_jacobian", "complex operator"),
+        ("zeta_jacobian", "matvec of wrong length"), ("zeta_jacobian", "matvec returns nan")}
 
 
 def check_case(case):

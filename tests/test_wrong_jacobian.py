@@ -106,7 +106,8 @@ def test_the_exact_jacobian_of_a_nonlocal_zeta_is_not_flagged(m):
     problem = averaging_problem(m)
     res = solve(problem, "exact", hierarchy=None, tol=1e-10)
     assert res.success and res.path == "newton" and FLAG not in res.message
-    assert res.outer_iterations == 0
+    # a Newton step or two, each followed by one outer step (the outer fixed point alone takes 8-9)
+    assert res.outer_iterations <= 3
     assert complementarity(*problem[:3], res.z) < 1e-10
 
 

@@ -110,8 +110,10 @@ auto without_gil(F&& f) -> decltype(f()) {
 struct CallableZeta {
   py::object checked, fn;
   std::shared_ptr<py::array_t<double>> zbuf;
+  bool finite = false;  // a non-finite result goes to output() too, which raises (zeta_jacobian's products)
 
-  CallableZeta(py::object z) : checked(z), fn(z.attr("fn")), zbuf(std::make_shared<py::array_t<double>>()) {}
+  CallableZeta(py::object z, bool finite = false)
+      : checked(z), fn(z.attr("fn")), zbuf(std::make_shared<py::array_t<double>>()), finite(finite) {}
 
   bool operator()(const double* z, double* out, Eigen::Index n) {
     py::gil_scoped_acquire gil;
@@ -132,7 +134,11 @@ struct CallableZeta {
     }
     if (!is_vector<double>(r, n)) r = checked.attr("output")(r);
     std::memcpy(out, py::array(r).data(), sizeof(double) * n);
-    return true;  // finiteness is checked by the core (status ZetaFailed)
+    if (finite && !Eigen::Map<const Eigen::VectorXd>(out, n).allFinite()) {
+      checked.attr("output")(r);  // raises, naming the call
+      return false;
+    }
+    return true;  // ζ's finiteness is checked by the core (status ZetaFailed)
   }
 
   template <typename T>
@@ -143,20 +149,38 @@ struct CallableZeta {
   }
 };
 
-// ∂ζ given by a Python callable returning canonical CSR arrays (indptr, indices, data) with the
-// index type I (the Python layer converts the user's matrix); called with the GIL taken.
+// ∂ζ given by a Python callable (_newton.jacobian_argument's wrapper) returning either canonical
+// CSR arrays (indptr, indices, data) with the index type I (the Python layer converts the user's
+// matrix), or, for a linear operator, its checked product (_newton.JacobianProduct: fn and output,
+// as a CheckedZeta), applied with the GIL taken only around each call on a buffer reused within
+// the step. The Python objects live in `state`, owned by the Zeta (destroyed with the GIL held);
+// the core's copies of the product hold only the shared pointer.
 template <typename I>
 struct CallableJacobian {
-  py::object fn;
-  bool operator()(const Eigen::VectorXd& z, typename nrmicp::Zeta<I>::RowMatrix& J) {
+  struct State {
+    py::object fn;
+    std::optional<CallableZeta> product;  // of the last call (replaced with the GIL taken)
+  };
+  std::shared_ptr<State> state;
+
+  explicit CallableJacobian(py::object fn) : state(std::make_shared<State>()) { state->fn = std::move(fn); }
+
+  bool operator()(const Eigen::VectorXd& z, typename nrmicp::Zeta<I>::Derivative& d) {
     py::gil_scoped_acquire gil;
-    const py::tuple t = fn(py::array_t<double>(z.size(), z.data())).template cast<py::tuple>();
+    const py::object r = state->fn(py::array_t<double>(z.size(), z.data()));
+    if (!py::isinstance<py::tuple>(r)) {
+      state->product.emplace(r, true);
+      d.product = [s = state](const double* v, double* out, Eigen::Index n) { return (*s->product)(v, out, n); };
+      return true;
+    }
+    d.product = nullptr;
+    const py::tuple t = r.cast<py::tuple>();
     const py::array ip = t[0].cast<py::array>(), ix = t[1].cast<py::array>(), dv = t[2].cast<py::array>();
     const Eigen::Index n = z.size();
     if (ip.shape(0) != n + 1) throw py::value_error("zeta_jacobian(z) must return an n-by-n matrix");
     copy_csr(CsrMap<I>(n, n, dv.shape(0), checked_data<I>(ip, "zeta_jacobian.indptr"),
                        checked_data<I>(ix, "zeta_jacobian.indices"), checked_data<double>(dv, "zeta_jacobian.data")),
-             J);
+             d.matrix);
     return true;
   }
 };
@@ -186,8 +210,8 @@ nrmicp::Zeta<I> make_zeta(Eigen::Index n, nrmicp::ZetaKind kind, py::object zeta
       return Z::affine(owned, to_vector(zeta_c.cast<py::array>(), "zeta.c"));
     }
     case nrmicp::ZetaKind::Functor: {
-      typename Z::Jacobian jac;
-      if (!jacobian_fn.is_none()) jac = CallableJacobian<I>{jacobian_fn};
+      typename Z::Differential jac;
+      if (!jacobian_fn.is_none()) jac = CallableJacobian<I>(jacobian_fn);
       return Z::functor(CallableZeta(zeta_fn), jac);
     }
   }

@@ -1115,9 +1115,12 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
         raises a :class:`nrmicp.HierarchyWarning` at set-up and shows in ``result.hierarchy``.
     zeta_jacobian : callable, optional
         Method 'newton' with a callable ζ: ``zeta_jacobian(z)`` returns a generalized Jacobian of ζ
-        at z as an (n, n) sparse matrix; then Newton works on the whole ICP (a semismooth Newton
-        method: for a max-type ζ, policy iteration). Without it, a callable ζ is handled by an
-        outer fixed point ζ(z_k) -> obstacle problem, each solved by warm-started Newton.
+        at z as an (n, n) sparse matrix or 2-D array, or as a linear operator (a
+        ``scipy.sparse.linalg.LinearOperator``, or anything with ``shape`` and ``matvec`` that
+        ``aslinearoperator`` takes: a dense ζ' known by its products, solved matrix-free by FGMRES);
+        then Newton works on the whole ICP (a semismooth Newton method: for a max-type ζ, policy
+        iteration), each step's active set placed by an outer step. Without it, a callable ζ is
+        handled by an outer fixed point ζ(z_k) -> obstacle problem, each solved by warm-started Newton.
     polish : bool
         After the method stops, take Newton steps from its answer on its active set (at most 3)
         and keep them if they lower Res (``result.polished``); typically the first one drops Res

@@ -10,6 +10,7 @@ import numpy as np
 from . import _core
 from ._hierarchy import HierarchyWarning, amg_levels_why, resolve_hierarchy
 from ._inputs import _warn
+from ._zeta import CheckedZeta
 
 #: hierarchy="auto" builds the AMG hierarchy (pyamg) for method "newton" from this many unknowns
 #: on, and starts cold below, where AMG's set-up outweighs the steps it saves (docs/MEASUREMENTS.md).
@@ -201,20 +202,81 @@ def check_jacobian(zeta_jacobian, method, kind) -> bool:
     return True
 
 
+class JacobianProduct(CheckedZeta):
+    """The product v ↦ J v of a ``zeta_jacobian(z)`` returned as a linear operator, for one solve (its
+    ``fn`` is the current Newton step's): the core calls ``fn`` on its own read-only buffer, as it
+    calls a CheckedZeta's, and hands a result that is not a finite float64 vector of length n to
+    :meth:`output`, which converts it or raises naming zeta_jacobian."""
+
+    what = "zeta_jacobian(z).matvec(v)"
+
+    def wrap(self, matvec, dc=None):
+        """matvec as ``fn``: in the scaled variables when dc is given (D_c⁻¹ J D_c v), and its
+        ValueErrors named (a LinearOperator's reshape of a result of the wrong length raises one), but
+        for a write into the read-only v, which the core names itself."""
+        def fn(v):
+            try:
+                y = matvec(v if dc is None else v * dc)
+            except ValueError as exc:
+                if self.read_only_message(exc) is not None:
+                    raise
+                raise ValueError(f"{self.what} failed: {exc}") from exc
+            return y if dc is None else self.output(y) / dc
+        return fn
+
+    def output(self, r) -> np.ndarray:
+        arr = super().output(r)
+        bad = np.flatnonzero(~np.isfinite(arr))
+        if bad.size:
+            raise ValueError(f"{self.what} returned a non-finite value {arr[bad[0]]} at index {int(bad[0])}")
+        return arr
+
+
+def is_matrix(J) -> bool:
+    """Whether a zeta_jacobian's return value takes the sparse path (a matrix, dense or sparse); anything
+    else is read as a linear operator."""
+    import scipy.sparse as sp
+    return sp.issparse(J) or isinstance(J, np.ndarray) or hasattr(J, "__array__")
+
+
+def as_operator(J, n: int):
+    """J as a real scipy LinearOperator of shape (n, n) (scipy's aslinearoperator: a LinearOperator,
+    or anything with shape and matvec); TypeError/ValueError naming zeta_jacobian otherwise."""
+    from scipy.sparse.linalg import aslinearoperator
+    try:
+        op = aslinearoperator(J)
+    except (TypeError, ValueError, AttributeError):
+        raise TypeError("zeta_jacobian(z) must return a scipy.sparse matrix, a 2-D numpy array or a linear operator "
+                        f"(scipy.sparse.linalg.LinearOperator, or anything with shape and matvec), got "
+                        f"{type(J).__name__}") from None
+    if tuple(op.shape) != (n, n):
+        raise ValueError(f"zeta_jacobian(z) must return an ({n}, {n}) operator, got shape {tuple(op.shape)}")
+    dtype = np.dtype(op.dtype) if op.dtype is not None else np.dtype(np.float64)
+    if dtype.kind not in "fiub":
+        raise TypeError(f"zeta_jacobian(z) must return a real operator, got dtype {dtype}")
+    return op
+
+
 def jacobian_argument(zeta_jacobian, solver, kind, dc) -> dict:
-    """The core's ``zeta_jacobian`` keyword: a wrapper returning canonical CSR arrays with the
-    core's index type (in the scaled variables y = D_c⁻¹ z: J' = D_c⁻¹ J(D_c y) D_c)."""
+    """The core's ``zeta_jacobian`` keyword: a wrapper returning, for a matrix, canonical CSR arrays
+    with the core's index type, for a linear operator its JacobianProduct (in the scaled variables
+    y = D_c⁻¹ z: J' = D_c⁻¹ J(D_c y) D_c)."""
     if not check_jacobian(zeta_jacobian, solver.method, kind):
         return {}
     import scipy.sparse as sp
     from ._inputs import as_csr
 
     n, idx = solver.n, solver._index_dtype
+    product = JacobianProduct(None, n)   # one per solve: its dtype warning once
 
     def jac(y):
         z = y * dc if dc is not None else y
+        J = zeta_jacobian(z)
+        if not is_matrix(J):
+            product.fn = product.wrap(as_operator(J, n).matvec, dc)
+            return product
         # silent: J is copied every step anyway (index type, scaling); sp.diags' DIA is no mistake
-        J = as_csr(zeta_jacobian(z), "zeta_jacobian(z)", warn=False)
+        J = as_csr(J, "zeta_jacobian(z)", warn=False)
         if J.shape != (n, n):
             raise ValueError(f"zeta_jacobian(z) must return an ({n}, {n}) matrix, got shape {J.shape}")
         if dc is not None:

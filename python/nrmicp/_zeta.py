@@ -26,6 +26,9 @@ def read_only_copy(z) -> np.ndarray:
 class CheckedZeta:
     """ζ for one solve. ``warned``: a dtype conversion was already reported in this solve."""
 
+    #: How messages name the call.
+    what = "zeta(z)"
+
     def __init__(self, fn, n: int):
         self.fn = fn
         self.n = n
@@ -41,14 +44,14 @@ class CheckedZeta:
             raise ValueError(msg) from exc
         return self.output(r)
 
-    @staticmethod
-    def read_only_message(exc) -> str | None:
+    def read_only_message(self, exc) -> str | None:
         """The message naming zeta for numpy's bare 'assignment destination is read-only', else None
         (every other exception of ζ reaches the caller unchanged)."""
         if str(exc) not in _NUMPY_READ_ONLY:
             return None
-        return ("zeta(z) tried to modify its input z, which is read-only (nrmicp reuses it); "
-                f"compute on a copy (z = z.copy()) or return a new array ({exc})")
+        arg = self.what[self.what.rindex("(") + 1:-1]
+        return (f"{self.what} tried to modify its input {arg}, which is read-only (nrmicp reuses it); "
+                f"compute on a copy ({arg} = {arg}.copy()) or return a new array ({exc})")
 
     def output(self, r) -> np.ndarray:
         """ζ's return value as a C-contiguous float64 vector of length n (shapes as every vector input:
@@ -57,19 +60,19 @@ class CheckedZeta:
         n = self.n
         expected = f"a real floating-point array of shape ({n},)"
         if r is None or isinstance(r, (str, bytes)):
-            raise TypeError(f"zeta(z) must return {expected}, got {type(r).__name__}")
+            raise TypeError(f"{self.what} must return {expected}, got {type(r).__name__}")
         try:
             arr = np.asarray(r)
         except Exception:  # ragged lists and the like
-            raise TypeError(f"zeta(z) must return {expected}, got {type(r).__name__}") from None
+            raise TypeError(f"{self.what} must return {expected}, got {type(r).__name__}") from None
         if arr.dtype.kind not in "fiu":
-            raise TypeError(f"zeta(z) returned {'an array' if isinstance(r, np.ndarray) else type(r).__name__} "
+            raise TypeError(f"{self.what} returned {'an array' if isinstance(r, np.ndarray) else type(r).__name__} "
                             f"of dtype {arr.dtype}; expected {expected}")
-        arr = flat_vector(arr, n, "zeta(z)'s return value")
+        arr = flat_vector(arr, n, f"{self.what}'s return value")
         if arr.dtype != np.float64 or not arr.dtype.isnative:
             if not self.warned:
                 self.warned = True
-                warnings.warn(f"zeta(z) returned dtype {arr.dtype}; converting it to float64 at every call "
-                              "(a float32 zeta also limits the accuracy Res can reach): return float64",
+                warnings.warn(f"{self.what} returned dtype {arr.dtype}; converting it to float64 at every call "
+                              "(a float32 result also limits the accuracy Res can reach): return float64",
                               ConversionWarning, stacklevel=2)
         return np.ascontiguousarray(arr, dtype=np.float64)

@@ -38,6 +38,22 @@ class Zeta {
   using Functor = std::function<bool(const double* z, double* out, Eigen::Index n)>;
   /// Writes a generalized Jacobian ∂ζ(z) (n-by-n) to J. Returns false when it cannot.
   using Jacobian = std::function<bool(const Vector& z, RowMatrix& J)>;
+  /// The product of a matrix-free ∂ζ(z) at one z: writes ∂ζ(z)·v to out (both of length n).
+  /// Returns false when it cannot.
+  using Product = std::function<bool(const double* v, double* out, Eigen::Index n)>;
+  /// A matrix-free Jacobian: ∂ζ at z as its product, called once per Newton step (the "linearize at
+  /// z" call); the Product it returns is applied any number of times until the next call, and not
+  /// after it. An empty Product: ∂ζ(z) cannot be had.
+  using JacobianProduct = std::function<Product(const Vector& z)>;
+  /// ∂ζ at one z as a Jacobian delivers it: the sparse matrix, or (matrix-free) only its product.
+  struct Derivative {
+    RowMatrix matrix;  ///< ∂ζ(z), n-by-n, when product is empty
+    Product product;   ///< v ↦ ∂ζ(z)·v, for a matrix-free Jacobian
+    bool matrix_free() const { return static_cast<bool>(product); }
+  };
+  /// A Jacobian that delivers either form, decided per call (the Python binding's: zeta_jacobian(z)
+  /// returns a sparse matrix or a linear operator). Returns false when it cannot.
+  using Differential = std::function<bool(const Vector& z, Derivative& d)>;
 
   /// ζ ≡ 0: the linear complementarity problem.
   static Zeta none() { return Zeta(ZetaKind::None); }
@@ -50,8 +66,22 @@ class Zeta {
     Zeta t(ZetaKind::Affine); t.B_ = B; t.c_ = std::move(c); return t;   // one copy (SparseMatrix cannot move)
   }
   /// ζ given by a functor (e.g. a Python callable), optionally with its Jacobian (used by the
-  /// Newton member for a semismooth Newton method on the whole ICP).
+  /// Newton member for a semismooth Newton method on the whole ICP): a sparse ∂ζ(z) gives each step
+  /// a sparse reduced system; a matrix-free one (JacobianProduct) a Krylov solve of the same system
+  /// (detail/matrix_free.hpp); a Differential either, per call.
   static Zeta functor(Functor f, Jacobian jacobian = {}) {
+    Differential d;
+    if (jacobian)
+      d = [j = std::move(jacobian)](const Vector& z, Derivative& out) { out.product = nullptr; return j(z, out.matrix); };
+    return functor(std::move(f), std::move(d));
+  }
+  static Zeta functor(Functor f, JacobianProduct jacobian) {
+    Differential d;
+    if (jacobian)
+      d = [j = std::move(jacobian)](const Vector& z, Derivative& out) { out.product = j(z); return out.matrix_free(); };
+    return functor(std::move(f), std::move(d));
+  }
+  static Zeta functor(Functor f, Differential jacobian) {
     Zeta t(ZetaKind::Functor); t.f_ = std::move(f); t.j_ = std::move(jacobian); return t;
   }
 
@@ -72,9 +102,10 @@ class Zeta {
   const Vector& c() const { return c_; }
   const RowMatrix& B() const { return B_; }
   bool has_jacobian() const { return static_cast<bool>(j_); }
-  /// J = ∂ζ(z) (functor with a Jacobian only); false when it failed or has the wrong shape.
-  bool jacobian(const Vector& z, RowMatrix& J) const {
-    return j_(z, J) && J.rows() == z.size() && J.cols() == z.size();
+  /// ∂ζ(z) in the form the Jacobian delivers it (functor with a Jacobian only); false when it
+  /// failed or a matrix has the wrong shape.
+  bool derivative(const Vector& z, Derivative& d) const {
+    return j_(z, d) && (d.matrix_free() || (d.matrix.rows() == z.size() && d.matrix.cols() == z.size()));
   }
 
   /// Checks the sizes against n; throws std::invalid_argument naming the mismatch.
@@ -124,7 +155,7 @@ class Zeta {
   Vector c_;
   RowMatrix B_;
   Functor f_;
-  Jacobian j_;
+  Differential j_;
 };
 
 /// Res at z = 0, ‖min(q, −ζ(0))‖₂ (bounded: bounded_residual): the reference of the relative tolerance (Options::rtol);

@@ -91,16 +91,33 @@ inline constexpr double kSlowStep = 0.5;
 /// of the fuzz test did; docs/MEASUREMENTS.md, "A Jacobian that does not deliver"). The solve then goes on without it.
 inline constexpr int kPoorSlowSteps = 3;
 inline constexpr int kPoorGrowthSteps = 2;
+/// A Jacobian that misses ζ's difference quotient along the last move by more than this fraction
+/// (Plain::jacobian_miss) is not ζ's derivative: negated misses by 1, ten times too large 0.9, zero 1.
+inline constexpr double kJacobianMiss = 0.5;
+/// With outer steps (NewtonControl::outer_steps) a step is slow when it does not reduce Res by this
+/// factor, on any active set (no peeling excuses it): with ζ's derivative the steps reduced it 100–10⁴-
+/// fold, the outer map alone about 4-fold on thermoforming (docs/MEASUREMENTS.md, "Matrix-free Newton steps").
+inline constexpr double kOuterSlowStep = 0.1;
 
 class JacobianCheck {
  public:
+  /// `outer`: the steps are placed by outer steps (NewtonControl::outer_steps).
+  explicit JacobianCheck(bool outer = false) : outer_(outer) {}
+  bool outer() const { return outer_; }
+  /// Whether an accepted step from Res r_old to r is slow (kSlowStep; kOuterSlowStep with outer steps).
+  bool slow(double r, double r_old) const { return !(r < (outer_ ? kOuterSlowStep : kSlowStep) * r_old); }
   /// An accepted step: `slow` (above the rounding level) on the same active set as the step before.
-  void accepted(bool same_set, bool slow) { slow_ = same_set && slow ? slow_ + 1 : 0; }
+  void accepted(bool same_set, bool slow) { slow_ = (same_set || outer_) && slow ? slow_ + 1 : 0; }
   /// A step rejected by the acceptance test (Res grew beyond the non-monotone reference, or is not finite).
-  void rejected(bool same_set) { grew_ += same_set; }
+  void rejected(bool same_set) { grew_ += same_set || outer_; }
   bool poor() const { return slow_ >= kPoorSlowSteps || grew_ >= kPoorGrowthSteps; }
   /// Why (the start of the solve's message).
   std::string message() const {
+    if (outer_)
+      return slow_ >= kPoorSlowSteps
+                 ? "zeta_jacobian looks wrong: " + std::to_string(slow_) + " Newton steps in a row each reduced Res by "
+                   "less than a factor " + to_text(1 / kOuterSlowStep) + " (with the derivative of zeta they converge superlinearly)"
+                 : "zeta_jacobian looks wrong: " + std::to_string(grew_) + " of its Newton steps made Res grow";
     return slow_ >= kPoorSlowSteps
                ? "zeta_jacobian looks wrong: " + std::to_string(slow_) + " Newton steps in a row on one active set each "
                  "reduced Res by less than a factor " + to_text(1 / kSlowStep) + " (with the derivative of zeta one step solves a settled set)"
@@ -108,6 +125,7 @@ class JacobianCheck {
   }
 
  private:
+  bool outer_;
   int slow_ = 0, grew_ = 0;
 };
 
@@ -169,6 +187,16 @@ struct NewtonControl {
   double first_forcing = 0;
   double repeat_trust = std::numeric_limits<double>::infinity();
   int sweep_budget = 0;       ///< fallback sweeps allowed in all (0: no fallback)
+  /// Non-null: the loop is solve_semismooth's, and *outer_steps says whether outer steps place its
+  /// steps (each step's active set is then its outer step's, an outer step follows it and its
+  /// fallback is one). While they do, no step is exempt from the acceptance test (else the first
+  /// after a start or a fallback is: a start is not a Newton iterate) and JacobianCheck judges the
+  /// steps on any set by kOuterSlowStep. When it finds them poor, the Jacobian is given up if it misses
+  /// ζ's difference quotient by more than kJacobianMiss; else the problem, not the Jacobian, defeated
+  /// the outer steps (a matrix that is no M-matrix, in the fuzz test): they end (*outer_steps = false,
+  /// as NewtonRun sets it when an outer step does not solve its obstacle problem) and the loop goes
+  /// on from the best iterate with the plain steps (x ≥ 0 at z), as from a start.
+  bool* outer_steps = nullptr;
   Callback callback;  ///< finest level only; called with z = y + shift
   Poll poll;
   Progress progress;  ///< finest level only: the verbose report (solve.verbose seconds apart)
@@ -192,7 +220,7 @@ class Globalized {
 
   Globalized(Plain& plain, const NewtonControl& ctl, Iterate& s)
       : plain_(plain), ctl_(ctl), test_(plain.residual()), best_z_(plain.z()), best_r_(plain.residual()),
-        start_r_(plain.residual()), runs_(ctl.sweep_budget) {
+        start_r_(plain.residual()), exempt_(!outer()), runs_(ctl.sweep_budget), jacobian_(outer()) {
     s.z = plain.z();
   }
 
@@ -204,10 +232,18 @@ class Globalized {
   /// A Newton step, or the fallback, or the end.
   void move_x(Iterate&) {
     if (still_ || at_floor_) return settle();
-    if (jacobian_.poor()) return give_up_jacobian();
+    if (jacobian_.outer() && !outer()) plain_steps();
+    if (jacobian_.poor() && !jacobian_.outer()) return give_up_jacobian();
     if (plain_.steps() >= ctl_.solve.maxiter) return stop(Status::MaxIterations);
     if (!plain_.linearize()) return stop(Status::ZetaFailed);
-    if (!newton()) jacobian_.poor() ? give_up_jacobian() : fall_back();
+    if constexpr (!Plain::set_fixes_step)
+      if (jacobian_.outer() && jacobian_.poor()) {  // the Jacobian at z, against ζ's difference quotient
+        miss_ = plain_.jacobian_miss();
+        if (miss_ > kJacobianMiss) return give_up_jacobian();
+        plain_steps();
+        if (!plain_.linearize()) return stop(Status::ZetaFailed);
+      }
+    if (!newton()) jacobian_.poor() && !jacobian_.outer() ? give_up_jacobian() : fall_back();  // (outer: judged next move)
   }
   void update_z(Iterate& s) { s.z = plain_.z(); }
   const StepEnd* end() const { return end_ ? &*end_ : nullptr; }
@@ -263,8 +299,23 @@ class Globalized {
     accept(r, h, still);
     const bool slow = !(r < ctl_.solve.tol) && !(r < kSlowStep * r_old) && !still_;
     if (slow) at_floor_ = at_rounding_level(std::max(r, r_old));
-    if constexpr (!Plain::set_fixes_step) jacobian_.accepted(same_set, slow && !at_floor_);
+    if constexpr (!Plain::set_fixes_step) {
+      bool judged = !(r < ctl_.solve.tol) && jacobian_.slow(r, r_old) && !still_ && !at_floor_;
+      if (judged && !slow) judged = !at_rounding_level(std::max(r, r_old));  // (slow: at_floor_ says it)
+      jacobian_.accepted(same_set, judged);
+    }
     return true;
+  }
+  // Outer steps place the steps (NewtonControl::outer_steps).
+  bool outer() const { return ctl_.outer_steps && *ctl_.outer_steps; }
+  // The outer steps end: the plain steps go on from the best iterate, as from a start.
+  void plain_steps() {
+    if (ctl_.outer_steps) *ctl_.outer_steps = false;
+    jacobian_ = JacobianCheck();
+    const double r = plain_.restart(best_z_);
+    test_.reset(r);
+    have_last_ = false;
+    exempt_ = !outer();
   }
   // What a repeated set is solved to (a tenth of it: NewtonStep::solve): tol, or where a repeat is
   // trusted below repeat_trust × Res(start), that.
@@ -310,7 +361,7 @@ class Globalized {
     sweeps_ += fr.iterations;
     seen_.clear();
     have_last_ = false;
-    exempt_ = true;
+    exempt_ = !outer();
     if (!(fr.residual < best_r_)) return give_up();
     const double r = plain_.restart(fr.z);
     test_.reset(r);
@@ -319,7 +370,10 @@ class Globalized {
   void give_up() { stop(runs_.give_up(sweeps_)); }
   void give_up_jacobian() {
     jacobian_poor_ = true;
-    end_ = StepEnd{Status::Stagnated, jacobian_.message()};
+    std::string why = jacobian_.message();
+    if (jacobian_.outer())
+      why += ", and zeta_jacobian(z) v misses zeta's difference quotient along the last step v by " + to_text(100 * miss_) + "%";
+    end_ = StepEnd{Status::Stagnated, why};
   }
   // The active set repeated, z stood still, or a step at the rounding level did not reduce Res.
   void settle() {
@@ -339,13 +393,15 @@ class Globalized {
   std::vector<char> inactive_, last_inactive_;
   std::unordered_set<std::uint64_t> seen_;
   std::uint64_t last_set_ = 0;
-  bool have_last_ = false, exempt_ = true, still_ = false, settled_ = false, at_floor_ = false;
+  bool exempt_;
+  bool have_last_ = false, still_ = false, settled_ = false, at_floor_ = false;
   bool loose_ = false;  // the last step was solved to a forcing: a repeat of its set may be solved again (repeat_trust)
   bool moved_set_ = false;  // the sweeps after the last step changed its active set: a repeat of it is solved again
   double floor_ = 0;  // the rounding level of Res (computed when a stop at it is considered)
   SweepRuns runs_;
   int sweeps_ = 0;
   JacobianCheck jacobian_;
+  double miss_ = 0;  // the Jacobian's miss of ζ's difference quotient (the outer steps' check)
   bool jacobian_poor_ = false;
   std::optional<StepEnd> end_;
 };

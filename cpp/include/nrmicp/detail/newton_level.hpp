@@ -151,6 +151,14 @@ class NewtonLevel {
     return std::isnan(r) ? inf : r;
   }
 
+  /// Res of the ICP at v with ζ(v) = zv given: ‖min(Av + q, v − zv)‖.
+  double icp_residual_with(const Vector& q, const Vector& v, const Vector& zv) const {
+    ScopedTimer t(timings().spmv);
+    Vector w = q;
+    w.noalias() += A_ * v;
+    return residual_of(w, v - zv);
+  }
+
   /// The rounding level of Res at z: ε (‖|A||z| + |q|‖₂ + ‖|z| + |ζ(z)|‖₂), the size of the rounding
   /// error in w = Az + q and g = z − ζ(z) (ζ(z) = z − g), below which no step brings Res.
   double rounding_level(const Vector& z, const Vector& q, const Vector& g) const {

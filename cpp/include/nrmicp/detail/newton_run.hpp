@@ -20,6 +20,7 @@
 #include "newton_step.hpp"
 #include "outer_fixed_point.hpp"
 #include "residual.hpp"
+#include "semismooth.hpp"
 #include "stopping.hpp"
 #include "timer.hpp"
 
@@ -118,6 +119,8 @@ class NewtonTally {
   void outer_step() { ++tally_.newton.outer_iterations; }
   /// The solve left Newton with ζ's Jacobian for the outer fixed point (path "newton+outer").
   void switch_to_outer() { outer_after_newton_ = true; }
+  /// A count of Result::counters.
+  void count(const std::string& key, long long k) { tally_.counters[key] += k; }
   /// Sweeps of the fallback member outside a level's loop (the outer fixed point's).
   void sweeps(int k) {
     tally_.newton.fallback_sweeps += k;
@@ -217,6 +220,10 @@ struct NewtonTuning {
   /// Its inner obstacle solves stop at this fraction of the outer iterate's Res (inexact while the
   /// outer map still moves; exact, to a settled set, once Res is near tol: the inner loop settles first).
   static constexpr double outer_forcing = 0.1;
+  /// The semismooth loop's outer steps (solve_semismooth) are used while their obstacle solve's Res is
+  /// below this fraction of the ICP's Res where it started (else the obstacle problem was not solved:
+  /// an LCP of a matrix that is no P-matrix, from the fuzz test).
+  static constexpr double outer_trust = 0.1;
 };
 
 /// One solve: the strategies by ζ, and the statistics they gather over levels and outer steps.
@@ -322,24 +329,69 @@ class NewtonRun {
   }
 
   /// A callable ζ with its Jacobian J: semismooth Newton on the whole ICP, each step the affine
-  /// step of the linearization ζ(z) + J(v − z) (detail::JacobianLinearization); Res is the
-  /// ICP's. Start as for an affine ζ. Newton steps and fallback sweeps of the start count
-  /// against maxiter.
+  /// step of the linearization ζ(z) + J(v − z) (detail::SemismoothLinearization) on the active set
+  /// of z's outer step, followed by an outer step from its result; Res is the ICP's. Start as for
+  /// an affine ζ. Newton steps and fallback sweeps of the start count against maxiter.
+  ///
+  /// The outer steps z ↦ S(ζ(z)) (obstacle solves, nested at the start, then warm: no peeling) place
+  /// the free boundary; the Newton step corrects the coupling through ζ. A Newton step on a set it
+  /// picks itself (x ≥ 0 at z) peels the free boundary a layer a step, with Res h⁻²-large between
+  /// (docs/MEASUREMENTS.md, "Matrix-free Newton steps"): its error is small, its Res is not, and the
+  /// outer step after it brings Res down to the error's level. A step whose Res does not fall gives
+  /// way to the outer step from the best iterate (the fallback; NewtonControl::outer_steps).
   Result solve_semismooth(const Vector& q, const Z& zeta, const Vector* z0) {
-    using Step = NewtonStep<MatrixType, JacobianLinearization<MatrixType>>;
+    using Step = NewtonStep<MatrixType, SemismoothLinearization<MatrixType>>;
     const Eigen::Index n = q.size();
     Vector psi(n);
     const Vector z_start = z0 ? *z0 : Vector::Zero(n);
     if (!levels_.finest->eval_zeta(zeta, z_start, psi)) return tally_.zeta_failed(z_start, q);
-    Vector start = (z0 && !nest_) ? *z0 : solve_inner_obstacle(q, psi, z0);
+    outer_z_.resize(0);
+    outer_set_.clear();
+    outer_ok_ = outer_mode_ = true;
+    step_set_.clear();
+    if (!(z0 && !nest_)) outer_solve(q, psi, z0, nest_, std::min(start_maxiter, o_.maxiter));
+    const Vector start = (z0 && !nest_) ? *z0 : outer_z_;
     const auto t0 = std::chrono::steady_clock::now();
-    Step plain(*levels_.finest, {*levels_.finest, q, zeta, {}, {}, {}}, start);
+    SemismoothRecord record;
+    SemismoothLinearization<MatrixType> lin(*levels_.finest, q, zeta, record);
+    // A step's set is its outer step's, unless that repeats the last step's set: on it the step would
+    // return to the same z⁺ (exactly so for an affine ζ), a cycle when the set is wrong (a matrix that is
+    // no M-matrix, from the fuzz test); the test x ≥ 0 at z picks that step's set instead.
+    lin.predict = [this, &q](const Vector& z, const Vector& zeta_z, std::vector<char>& inactive) {
+      if (outer_mode_ && !is_outer(z) && !outer_step(q, zeta_z, z)) outer_mode_ = false;
+      const bool use = outer_mode_ && outer_set_ != step_set_;
+      step_set_ = use ? outer_set_ : std::vector<char>();
+      if (use) inactive = outer_set_;
+      return use;
+    };
+    lin.project = [this, &q](Vector& z, const Vector& zeta_z) {
+      if (!outer_mode_) return;
+      if (outer_step(q, zeta_z, z)) z = outer_z_;
+      else outer_mode_ = false;
+    };
+    // the fallback from z: its outer step, where outer steps solve their obstacle problems, else sweeps
+    lin.fallback = [this, &q, &zeta](const Vector& z, int sweeps, double tol) {
+      Vector zeta_z(z.size()), w;
+      if (!outer_ok_ || !levels_.finest->eval_zeta(zeta, z, zeta_z) || !outer_step(q, zeta_z, z))
+        return levels_.finest->sweep(q, zeta, z, sweeps, tol);
+      Result r;
+      r.iterations = 1;
+      r.z = outer_z_;
+      r.residual = levels_.finest->icp_residual(q, zeta, r.z, zeta_z, w);
+      return r;
+    };
+    Step plain(*levels_.finest, std::move(lin), start);
     if (std::isnan(plain.residual())) return tally_.zeta_failed(z_start, q);
     static const Vector no_shift;
     auto control = finest_control(no_shift, o_.tol, o_.maxiter - tally_.nit(), true);
     control.sweep_budget = o_.maxiter - tally_.fallback_sweeps();
+    control.outer_steps = &outer_mode_;
     const auto out = newton_loop(plain, control, start);
     tally_.absorb(out, 0, ScopedTimer::seconds_since(t0));
+    if (record.iterations) {
+      tally_.count("matrix_free_iterations", record.iterations);
+      tally_.count("matrix_free_preconditioner_iterations", record.preconditioner);
+    }
     if (!out.jacobian_poor) return tally_.finish(out, out.z, q);
     // the Jacobian does not deliver (detail::JacobianCheck): the path without it, from the best iterate
     tally_.switch_to_outer();
@@ -351,6 +403,33 @@ class NewtonRun {
  private:
   /// The start of an affine or semismooth solve: at most this many Newton steps of the obstacle problem.
   static constexpr int start_maxiter = 100;
+
+  /// The obstacle problem's solution S(ψ) from z (null: zeros, nested when `nest`), from the active
+  /// set of the last one, to a settled set; kept with its inactive set (outer_z_, outer_set_): the
+  /// semismooth loop's outer steps.
+  /// Returns its Res (of the obstacle problem).
+  double outer_solve(const Vector& q, const Vector& psi, const Vector* z, bool nest, int maxiter) {
+    Result inner = solve_obstacle(q, psi, z, nest, 0.0, maxiter, false, &outer_set_);
+    outer_z_.swap(inner.z);
+    return inner.residual;
+  }
+  /// An outer step of the semismooth loop from z, with ψ = ζ(z) given: S(ψ) into outer_z_. Whether
+  /// it solved its obstacle problem, to NewtonTuning::outer_trust × Res(z) (an LCP of a matrix that
+  /// is no P-matrix may not be solved): outer_ok_.
+  bool outer_step(const Vector& q, const Vector& psi, const Vector& z) {
+    const double res_z = levels_.finest->icp_residual_with(q, z, psi);
+    tally_.outer_step();
+    const double res_obstacle = outer_solve(q, psi, &z, false, std::max(1, o_.maxiter - tally_.nit()));
+    outer_ok_ = !(res_obstacle > NewtonTuning::outer_trust * res_z);
+    return outer_ok_;
+  }
+  /// z is the last outer step's solution (its active set is outer_set_).
+  bool is_outer(const Vector& z) const { return outer_z_.size() == z.size() && outer_z_ == z; }
+  Vector outer_z_;               // the last outer step's solution (semismooth loop)
+  std::vector<char> outer_set_;  // its inactive set (the next one starts from it)
+  bool outer_ok_ = true;         // the last outer step solved its obstacle problem (the fallback may take one)
+  bool outer_mode_ = true;       // outer steps place the Newton steps' sets (NewtonControl::outer_steps)
+  std::vector<char> step_set_;   // the last Newton step's set, when its outer step's (empty: the test x ≥ 0's)
 
   /// The outer fixed point's view of this run (the interface of detail::OuterFixedPoint).
   struct Outer {

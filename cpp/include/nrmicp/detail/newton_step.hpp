@@ -6,8 +6,9 @@
 // (a policy type):
 //   FixedLinearization     the (shifted) LCP (B = 0, c = 0) or an affine ζ = Bz + c: the same
 //                          reduced system every step, analysed once
-//   JacobianLinearization  a callable ζ with its Jacobian J: B = J(z), c = ζ(z) − Jz, a new
-//                          system each step (semismooth Newton on the whole ICP)
+//   SemismoothLinearization  a callable ζ with its Jacobian J: B = J(z), c = ζ(z) − Jz, a new
+//                          system each step (semismooth Newton on the whole ICP), sparse or
+//                          matrix-free (detail/semismooth.hpp)
 // The step only steps: the acceptance test, cycles, the fallback and the ends are the
 // globalization's (detail::Globalized, detail/globalization.hpp).
 #pragma once
@@ -22,6 +23,7 @@
 
 #include <algorithm>
 #include <memory>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -81,48 +83,12 @@ struct FixedLinearization {
   }
 };
 
-/// A callable ζ with its Jacobian: linearized at each step's z.
-template <typename MatrixType>
-struct JacobianLinearization {
-  using Level = NewtonLevel<MatrixType>;
-  using Vector = Eigen::VectorXd;
-  using System = ActiveSetSystem<typename MatrixType::StorageIndex>;
-  static constexpr bool set_fixes_step = false;
-
-  Level& level;
-  const Vector& q;
-  const Zeta<typename MatrixType::StorageIndex>& zeta;
-  typename Level::RowMatrix J;
-  Vector c;
-  std::unique_ptr<System> K;
-
-  bool g_is_z() const { return false; }
-  /// Res of the ICP at v; Av + q in w, v − ζ(v) in g, ζ(v) in zv. NaN when ζ failed.
-  double evaluate(const Vector& v, Vector& w, Vector& g, Vector& zv) const {
-    const double r = level.icp_residual(q, zeta, v, zv, w);
-    if (!std::isnan(r)) g = v - zv;
-    return r;
-  }
-  /// B = J(z), c = ζ(z) − Jz and a new system on their pattern; false when the Jacobian failed.
-  /// The Jacobian counts as ζ's time; the new system's analysis as this step's factorization.
-  bool linearize(const Vector& z, const Vector& zeta_z) {
-    {
-      ScopedTimer t(level.timings().zeta);
-      if (!zeta.jacobian(z, J)) return false;
-    }
-    c = zeta_z - J * z;
-    K = level.affine_system(J, &Timings::factorization);
-    return true;
-  }
-  System& system() { return *K; }
-  void rhs(const std::vector<char>& set, Vector& b) const {
-    for (Eigen::Index i = 0; i < b.size(); ++i) b[i] = inactive_state(set[i]) ? -q[i] : c[i];
-  }
-  const Box* box = nullptr;  // (no bounds on this path)
-  Result sweep(const Vector& z0, int sweeps, double tol) { return level.sweep(q, zeta, z0, sweeps, tol); }
-  bool smoothable() const { return false; }
-  void smooth(Vector&, int) const {}
-};
+/// Whether a linearization picks the active set of a step itself: predict_set(z, ζ(z), inactive)
+/// (false: the test x ≥ 0 on z decides, as for every other policy).
+template <typename L, typename = void>
+struct predicts_set : std::false_type {};
+template <typename L>
+struct predicts_set<L, std::void_t<decltype(&L::predict_set)>> : std::true_type {};
 
 /// The current iterate z (with w = Az + q, g = z − ζ(z), ζ(z), Res) and a trial step from it.
 template <typename MatrixType, typename Linearization>
@@ -148,12 +114,19 @@ class NewtonStep {
   int solves() const { return solves_; }
   long long inner_iterations() const { return inner_iterations_; }
 
-  /// The inactive set ℐ = {x ≥ 0} of z.
-  void active_set(std::vector<char>& inactive) const { level_.active_set(w_, g(), inactive, lin_.box); }
+  /// The inactive set ℐ = {x ≥ 0} of z, or the one the linearization predicts for z (a policy with
+  /// predict_set: SemismoothLinearization's outer step).
+  void active_set(std::vector<char>& inactive) {
+    if constexpr (predicts_set<Linearization>::value)
+      if (lin_.predict_set(z_, zeta_z_, inactive)) return;
+    level_.active_set(w_, g(), inactive, lin_.box);
+  }
   /// x ← x of z up to the factor γ/(2Ω1) (what the Monitor reads); ‖Δx‖∞ (∞ when x was empty).
   double modulus(Vector& x) const { return level_.modulus(w_, g(), x); }
   /// ζ's linearization at z; false when ζ's Jacobian failed.
   bool linearize() { return lin_.linearize(z_, zeta_z_); }
+  /// How far ζ's Jacobian at z misses ζ's difference quotient (SemismoothLinearization::jacobian_miss).
+  double jacobian_miss() { return lin_.jacobian_miss(z_, zeta_z_); }
   /// The reduced system of the piece `inactive`; false when it is singular.
   bool factorize(const std::vector<char>& inactive) {
     ScopedTimer t(level_.timings().factorization);  // direct: numeric factorization; cg: the V-cycle's update

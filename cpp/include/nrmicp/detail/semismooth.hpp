@@ -1,0 +1,155 @@
+// nrmicp — the Newton step's policy for a callable ζ with its Jacobian (NewtonStep's linearization;
+// detail/newton_step.hpp): semismooth Newton on the whole ICP, linearized at each step's z. A sparse
+// ∂ζ(z) gives the step's sparse system (detail/active_set.hpp), a matrix-free one its Krylov solve
+// (detail/matrix_free.hpp). NewtonRun::solve_semismooth gives it its outer steps: the active set of a
+// step (predict), the outer step after it (project) and the fallback (docs/SPEC.md, the Newton member).
+#pragma once
+
+#include "../result.hpp"
+#include "../zeta.hpp"
+#include "active_set.hpp"
+#include "box.hpp"
+#include "matrix_free.hpp"
+#include "newton_level.hpp"
+#include "residual.hpp"
+#include "timer.hpp"
+
+#include <Eigen/SparseCore>
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <limits>
+#include <memory>
+#include <vector>
+
+namespace nrmicp::detail {
+
+/// A callable ζ with its Jacobian, linearized at each step's z (NewtonStep's policy): a sparse
+/// ∂ζ(z) = B gives the affine step of ζ(z) + B(v − z) on the union pattern of A, I and B (a new
+/// ActiveSetSystem each step: semismooth Newton on the whole ICP); a matrix-free one the same step
+/// by MatrixFreeSystem. The form is the Jacobian's, per call (Zeta::Derivative).
+template <typename MatrixType>
+struct SemismoothLinearization {
+  using Level = NewtonLevel<MatrixType>;
+  using Vector = Eigen::VectorXd;
+  using StorageIndex = typename MatrixType::StorageIndex;
+  using Sparse = ActiveSetSystem<StorageIndex>;
+  static constexpr bool set_fixes_step = false;
+
+  /// The reduced system of this step, of either form (the interface NewtonStep uses).
+  struct System {
+    std::unique_ptr<Sparse> sparse;
+    MatrixFreeSystem<MatrixType> matrix_free;
+    bool is_matrix_free = false;
+    bool factorize(const std::vector<char>& inactive) {
+      return is_matrix_free ? matrix_free.factorize(inactive) : sparse->factorize(inactive);
+    }
+    int solve(const Vector& b, Vector& z, double target) {
+      return is_matrix_free ? matrix_free.solve(b, z, target) : sparse->solve(b, z, target);
+    }
+    bool iterative() const { return is_matrix_free || sparse->iterative(); }
+  };
+
+  /// `record`: where the linearizations record (outlives this).
+  SemismoothLinearization(Level& level, const Vector& q, const Zeta<StorageIndex>& zeta, SemismoothRecord& record)
+      : level(level), q(q), zeta(zeta), record(record), K{nullptr, MatrixFreeSystem<MatrixType>(level, record)} {}
+
+  Level& level;
+  const Vector& q;
+  const Zeta<StorageIndex>& zeta;
+  SemismoothRecord& record;
+  typename Zeta<StorageIndex>::Derivative J;
+  Vector c;        ///< the active rows' right-hand side: ζ(z) − Jz (sparse, for z⁺), ζ(z) − z = −g (matrix-free, for d)
+  Vector minus_w;  ///< matrix-free: the inactive rows' right-hand side −w = −(Az + q)
+  System K;
+  const Box* box = nullptr;  // (no bounds on this path)
+  Vector z_last, move;       ///< the last linearization's z, and the move to it from the one before
+
+  bool g_is_z() const { return false; }
+  /// Res of the ICP at v; Av + q in w, v − ζ(v) in g, ζ(v) in zv. NaN when ζ failed. v and ζ(v) are
+  /// kept while outer steps are taken (the one after a step starts from ψ = ζ(z⁺): one call of ζ less).
+  double evaluate(const Vector& v, Vector& w, Vector& g, Vector& zv) const {
+    const double r = level.icp_residual(q, zeta, v, zv, w);
+    if (!std::isnan(r)) g = v - zv;
+    if (project && !std::isnan(r)) { evaluated = v; evaluated_zeta = zv; }
+    return r;
+  }
+  /// ∂ζ(z) and the step's system for it; false when the Jacobian failed. The Jacobian counts as ζ's
+  /// time; a sparse system's analysis as this step's factorization.
+  bool linearize(const Vector& z, const Vector& zeta_z) {
+    if (z_last.size() == z.size() && z_last != z) move = z - z_last;
+    z_last = z;
+    {
+      ScopedTimer t(level.timings().zeta);
+      if (!zeta.derivative(z, J)) return false;
+    }
+    K.is_matrix_free = J.matrix_free();
+    if (K.is_matrix_free) {
+      {
+        ScopedTimer t(level.timings().spmv);
+        minus_w.noalias() = level.matrix() * z;
+      }
+      minus_w = -(minus_w + q);
+      c = zeta_z - z;  // −g
+      K.matrix_free.linearize(std::move(J.product), stable_norm(minus_w.cwiseMax(c)));  // Res = ‖min(w, g)‖ = ‖max(−w, −g)‖
+      K.sparse.reset();
+      return true;
+    }
+    c = zeta_z - J.matrix * z;
+    K.sparse = level.affine_system(J.matrix, &Timings::factorization);
+    return true;
+  }
+  System& system() { return K; }
+
+  /// How far J = ∂ζ(z) (the last linearization, at z) misses ζ's difference quotient along the loop's
+  /// last move d, (ζ(z + εd) − ζ(z))/ε with εd 10⁻⁴ of z's size: ‖quotient − Jd‖ / max(‖quotient‖, ‖Jd‖);
+  /// 0 when both vanish, NaN when ζ or the product failed. A relative step of 10⁻⁴: rounding (a float32
+  /// ζ's included) and curvature are far below kJacobianMiss there. One call of ζ and one product.
+  double jacobian_miss(const Vector& z, const Vector& zeta_z) {
+    const Eigen::Index n = z.size();
+    const Vector d = move.size() == n && move.squaredNorm() > 0 ? move : Vector::Ones(n);
+    const double eps = kDifferenceStep * (z.norm() > 0 ? z.norm() : 1.0) / d.norm();
+    Vector moved(n), jd;
+    if (!level.eval_zeta(zeta, z + eps * d, moved)) return std::numeric_limits<double>::quiet_NaN();
+    if (K.is_matrix_free) {
+      if (!K.matrix_free.product(d, jd)) return std::numeric_limits<double>::quiet_NaN();
+    } else {
+      jd = J.matrix * d;
+    }
+    const Vector quotient = (moved - zeta_z) / eps;
+    const double scale = std::max(quotient.norm(), jd.norm());
+    return scale > 0 ? (quotient - jd).norm() / scale : 0.0;
+  }
+  static constexpr double kDifferenceStep = 1e-4;
+
+  /// The step's right-hand side: for z⁺ (sparse: −q on ℐ, c on 𝒜), or for the correction d = z⁺ − z
+  /// (matrix-free: −w on ℐ, −g on 𝒜).
+  void rhs(const std::vector<char>& set, Vector& b) const {
+    for (Eigen::Index i = 0; i < b.size(); ++i)
+      b[i] = inactive_state(set[i]) ? (K.is_matrix_free ? minus_w[i] : -q[i]) : c[i];
+  }
+  /// The active set of the step from z: the one of the outer step S(ζ(z)) when `predict` is given
+  /// (NewtonRun::solve_semismooth); false: the test x ≥ 0 on z decides.
+  bool predict_set(const Vector& z, const Vector& zeta_z, std::vector<char>& inactive) {
+    return predict && predict(z, zeta_z, inactive);
+  }
+  /// The fallback from z0: `fallback` when given (NewtonRun: the outer step from z0), else sweeps of
+  /// the fallback member.
+  Result sweep(const Vector& z0, int sweeps, double tol) {
+    return fallback ? fallback(z0, sweeps, tol) : level.sweep(q, zeta, z0, sweeps, tol);
+  }
+  std::function<bool(const Vector&, const Vector&, std::vector<char>&)> predict;  ///< (z, ζ(z), inactive set)
+  std::function<void(Vector&, const Vector&)> project;  ///< (z, ζ(z)): z ← S(ζ(z)), the outer step after a Newton step (or z kept)
+  std::function<Result(const Vector&, int, double)> fallback;  ///< (z0, sweeps, tol) → the fallback's best iterate
+  /// After a Newton step: the outer step from its result (`project`), kept when it lowers Res (NewtonStep::smooth).
+  bool smoothable() const { return static_cast<bool>(project); }
+  void smooth(Vector& z, int) const {
+    if (evaluated.size() == z.size() && evaluated == z) return project(z, evaluated_zeta);
+    Vector zeta_z(z.size());
+    if (level.eval_zeta(zeta, z, zeta_z)) project(z, zeta_z);
+  }
+  mutable Vector evaluated, evaluated_zeta;  ///< the last evaluate()'s v and ζ(v) (with outer steps)
+};
+
+}  // namespace nrmicp::detail
