@@ -77,29 +77,21 @@ struct Box {
     for (Eigen::Index i = 0; i < y.size(); ++i) y[i] = clamp(i, y[i]);
   }
 
-  /// The box of the next coarser level (y_fine ≈ P y_coarse): a coarse row is bounded below where
-  /// any fine row it reaches is, free where all of them are (so a row free on the finest level
-  /// stays free on every level); its upper bound is that of the fine row it weighs most (P's largest
-  /// entry in its column: the coarse point itself under classical AMG and grid interpolation). A
-  /// coarse box makes a start, not a constraint of the fine problem: it needs to be near, not safe.
+  /// The box of the next coarser level (y_fine ≈ P y_coarse): a coarse row is bounded (below, above)
+  /// where any fine row it reaches is, free where all of them are (so a row free on the finest level
+  /// stays free on every level), and takes the bound of the bounded fine row it weighs most (P's
+  /// largest entry in its column: the coarse point itself under classical AMG and grid interpolation).
+  /// A coarse box makes a start, not a constraint of the fine problem: it needs to be near, not safe
+  /// (the smallest bound around tightened it level by level: docs/MEASUREMENTS.md, "Bounds: nested
+  /// iteration on the two-sided membrane").
   template <typename RowMatrix>
   Box coarse(const RowMatrix& P) const {
     if (empty()) return {};
     constexpr double inf = std::numeric_limits<double>::infinity();
     Box c;
-    if (lo.size()) c.lo = Vector::Constant(P.cols(), -inf);
-    Vector weight;
-    if (hi.size()) { c.hi = Vector::Constant(P.cols(), inf); weight = Vector::Zero(P.cols()); }
-    for (Eigen::Index i = 0; i < P.rows(); ++i)
-      for (typename RowMatrix::InnerIterator it(P, i); it; ++it) {
-        if (it.value() == 0) continue;
-        const Eigen::Index j = it.index();
-        if (lo.size()) c.lo[j] = std::max(c.lo[j], lo[i]);
-        if (hi.size() && std::isfinite(hi[i]) && std::abs(it.value()) > weight[j]) {
-          weight[j] = std::abs(it.value());
-          c.hi[j] = hi[i];
-        }
-      }
+    if (lo.size()) c.lo = inject(P, lo, -inf);
+    if (hi.size()) c.hi = inject(P, hi, inf);
+    if (c.hi.size()) c.hi = c.hi.cwiseMax(c.lo.size() ? c.lo : Vector::Zero(P.cols()));  // two rows' bounds may cross
     return c;
   }
 
@@ -127,6 +119,19 @@ struct Box {
   }
 
  private:
+  /// Per column j of P, the finite bound b_i of the row i with the largest |P_ij| (`none` where no
+  /// row of the column is bounded).
+  template <typename RowMatrix>
+  static Vector inject(const RowMatrix& P, const Vector& b, double none) {
+    Vector c = Vector::Constant(P.cols(), none), weight = Vector::Zero(P.cols());
+    for (Eigen::Index i = 0; i < P.rows(); ++i)
+      for (typename RowMatrix::InnerIterator it(P, i); it; ++it)
+        if (it.value() != 0 && std::isfinite(b[i]) && std::abs(it.value()) > weight[it.index()]) {
+          weight[it.index()] = std::abs(it.value());
+          c[it.index()] = b[i];
+        }
+    return c;
+  }
   /// lo of `b` with its −∞ entries as 0 (their rows are free: the distance to them is not used).
   static Vector lower_vector(const Box& b, Eigen::Index n) {
     if (!b.lo.size()) return Vector::Zero(n);
@@ -141,10 +146,20 @@ struct ShiftedBounds {
   Eigen::VectorXd s;  ///< the shift (empty: 0)
   Box box;
 
-  ShiftedBounds(const Eigen::VectorXd& psi, const Eigen::VectorXd& upper) {
+  /// `shift` false (the Newton member's choice): a problem with bounds is not shifted at all, its box
+  /// is ψ ≤ z ≤ u itself. A shift by ψ where ψ is finite and by 0 on the free rows makes y jump
+  /// between them (elastic contact: the bounded normal displacements next to free ones), a rough y
+  /// the coarse levels cannot represent (docs/MEASUREMENTS.md, "Box problems"). The modulus members
+  /// keep the shift (their lo' = γ lo/(2Ω1) is then 0 or −∞: detail/modulus.hpp).
+  ShiftedBounds(const Eigen::VectorXd& psi, const Eigen::VectorXd& upper, bool shift = true) {
     constexpr double inf = std::numeric_limits<double>::infinity();
-    const bool free_below = psi.size() && !psi.allFinite();
+    const bool free_below = psi.size() && (psi.array() == -inf).any();
     if (!free_below && upper.size() == 0) { s = psi; return; }
+    if (!shift) {
+      box.lo = psi;
+      box.hi = upper;
+      return;
+    }
     const Eigen::Index n = std::max(psi.size(), upper.size());
     s.resize(n);
     if (free_below) box.lo = Eigen::VectorXd::Zero(n);

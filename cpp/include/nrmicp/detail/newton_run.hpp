@@ -253,7 +253,7 @@ class NewtonRun {
   /// (ShiftedBounds: the box problem in y).
   Result solve_obstacle(const Vector& q, const Vector& psi, const Vector* z0, bool nest, double tol = -1,
                         int maxiter = -1, bool report = true, std::vector<char>* set = nullptr) {
-    const ShiftedBounds bounds(psi, upper_);
+    const ShiftedBounds bounds(psi, upper_, false);
     const Box& box = bounds.box;
     const bool shifted = bounds.shifted();
     Vector shifted_q;
