@@ -153,7 +153,8 @@ def child_piqp(path):
         tried.append((eps, res, cpu))
         if res < target:
             break
-    return dict(status="converged" if res < target else str(status), cpu=cpu, eps=eps, res=res,
+    missed = f"target not met: Res {res:.1e} at eps {eps:.0e}, {getattr(status, 'name', status)}"
+    return dict(status="converged" if res < target else missed, cpu=cpu, eps=eps, res=res,
                 iterations=int(s.result.info.iter), tuning_cpu=sum(t[2] for t in tried), tried=tried)
 
 
@@ -162,11 +163,10 @@ def child_petsc(path):
     import petsc4py
 
     petsc4py.init([])
+    import scipy.sparse as sp
     from petsc4py import PETSc
 
     d = np.load(path)
-    import scipy.sparse as sp
-
     A = sp.csr_matrix((d["data"], d["indices"], d["indptr"]), shape=(len(d["q"]),) * 2)
     q, lower, upper, target = d["q"], d["lower"], d["upper"], float(d["target"])
     M = PETSc.Mat().createAIJ(size=A.shape, csr=(A.indptr.astype(PETSc.IntType), A.indices.astype(PETSc.IntType),
@@ -205,7 +205,8 @@ def child_petsc(path):
         tried.append((atol, res, cpu, snes.getIterationNumber()))
         if res < target:
             break
-    return dict(status="converged" if res < target else f"reason {snes.getConvergedReason()}", cpu=cpu, res=res,
+    missed = f"target not met: Res {res:.1e}, reason {snes.getConvergedReason()}"
+    return dict(status="converged" if res < target else missed, cpu=cpu, res=res,
                 iterations=snes.getIterationNumber(), ksp_iterations=snes.getLinearSolveIterations(), atol=atol,
                 tuning_cpu=sum(t[2] for t in tried), tried=tried)
 
@@ -297,8 +298,9 @@ def main():
 
 
 def print_tables(scaling, contact, compared, peer_names):
-    print(f"# bounds, load {os.getloadavg()[0]:.1f}, OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}"
-          f"; CPU seconds of the call, building the problem excluded\n")
+    threads = os.environ.get("OPENBLAS_NUM_THREADS", "unset")
+    print(f"# bounds, load {os.getloadavg()[0]:.1f}, OPENBLAS_NUM_THREADS={threads}; CPU seconds of the call, "
+          "building the problem excluded\n")
     print("| scene | n | finest steps | steps per level (finest first) | CPU s | Res / Res(0) | CG it / solves |")
     print("|---|---|---|---|---|---|---|")
     for r in scaling:

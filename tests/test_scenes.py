@@ -203,7 +203,8 @@ def test_registry_builds_every_scene_with_its_sizes_grid_parameter(name):
     P = scenes.build(name, "tiny")
     m = scenes.parameter(name, "tiny")
     expected = {"obstacle_3d": m**3, "american_put": m - 1, "p_matrix_cycling": 4 * m, "game_put": m - 1,
-                "elastic_contact_p1": 2 * 2**m * (2 ** (m + 1) + 1), "elastic_contact_p2": 2 * 2 ** (m + 1) * (2 ** (m + 2) + 1)}
+                "elastic_contact_p1": 2 * 2**m * (2 ** (m + 1) + 1),
+                "elastic_contact_p2": 2 * 2 ** (m + 1) * (2 ** (m + 2) + 1)}   # P2 at r has P1's n at r + 1
     if name.startswith("bai_") or name in ("obstacle_2d", "thermoforming_2d", "convection_obstacle", "two_sided_2d"):
         assert P.n == m * m
     elif name in expected:

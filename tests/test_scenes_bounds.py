@@ -93,8 +93,11 @@ def test_two_sided_membrane_1d_converges_at_second_order_to_the_closed_form():
         assert np.abs(res.z - ref).max() < 1e-10
         hs.append(P.reference["h"])
         errs.append(np.abs(res.z - P.reference["u_exact"]).max())
-        x, (a, b), (c, d) = P.reference["x"], P.reference["contact_upper"], P.reference["contact_lower"]
-        inside = lambda lo, hi: (x > lo + P.reference["h"]) & (x < hi - P.reference["h"])  # noqa: E731
+        x, h = P.reference["x"], P.reference["h"]
+        (a, b), (c, d) = P.reference["contact_upper"], P.reference["contact_lower"]
+
+        def inside(lo, hi):   # the nodes more than h inside an interval of the closed form
+            return (x > lo + h) & (x < hi - h)
         assert np.all(res.active_mask[inside(a, b)] == 1) and np.all(res.active_mask[inside(c, d)] == -1)
         assert np.all(res.active_mask[inside(0, a) | inside(b, c) | inside(d, 1)] == 0)
     order = np.polyfit(np.log(hs), np.log(errs), 1)[0]
@@ -173,7 +176,8 @@ def test_elastic_contact_mesh_hierarchy_interpolates_each_component_exactly(elem
         # fields that vanish on the pushed top edge (y = 1), each component its own: linear ones for
         # both elements, a quadratic one (x(1 − y)) for P2
         for k, fx, fy in [(1, 1.0, 2.0)] + ([(2, 1.0, 0.0)] if element == "P2" else []):
-            field = lambda ref: (1.0 - ref["y"]) * np.where(ref["component"] == 0, fx, fy) * ref["x"] ** (k - 1)  # noqa: E731
+            def field(ref):
+                return (1.0 - ref["y"]) * np.where(ref["component"] == 0, fx, fy) * ref["x"] ** (k - 1)
             assert np.abs(Pl @ field(c) - field(f)).max() < 1e-12
 
 
