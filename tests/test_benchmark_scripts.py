@@ -78,7 +78,7 @@ def test_time_stepping_table():
 
 
 def test_units_table():
-    # README "What you get back": the units table's command, on its quick sizes (n <= 2,000)
+    # docs/MEASUREMENTS.md "The default rule in three units": its command, on its quick sizes (n <= 2,000)
     text = run("units.py", "--quick")
     rows = table_rows(text.split("\n\n")[0])
     assert {r[0] for r in rows} >= {"README membrane", "Bai (mu = 4)"}

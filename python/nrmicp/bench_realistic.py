@@ -1,11 +1,12 @@
 """The default ``nrmicp bench``: what each digit costs on realistic problems at realistic sizes.
 
-    nrmicp bench [--scenes obstacle_2d,obstacle_3d,thermoforming_2d,american_put] [--budget 30]
+    nrmicp bench [--scenes obstacle_2d,obstacle_3d,thermoforming_2d,two_sided_2d,american_put] [--budget 30]
                  [--small] [--out bench-out]
 
 Scenes (nrmicp.scenes): the 2D membrane obstacle at n = 261,121 (m = 511), the 3D obstacle at
 n = 103,823 (m = 47), thermoforming 2D (a quasi-variational inequality, ζ a Python callable) at
-n = 16,129 (m = 127), and the American put march (n_space = 3200, 100 Crank–Nicolson steps with
+n = 16,129 (m = 127), the two-sided membrane (a box problem: two obstacles, n = 261,121; the
+stationary curves run their box form, PSOR and the QP solver the LCP only), and the American put march (n_space = 3200, 100 Crank–Nicolson steps with
 Rannacher start-up: 102 LCPs with one matrix): the scene registry's size "realistic"
 (nrmicp.scenes.SIZES). ``--small`` takes its "tiny" sizes, what a test can afford.
 
@@ -40,6 +41,7 @@ SCENES = {
     "obstacle_2d": "2D obstacle, n = {n:,}",
     "obstacle_3d": "3D obstacle, n = {n:,}",
     "thermoforming_2d": "thermoforming 2D (QVI), n = {n:,}",
+    "two_sided_2d": "two-sided membrane (box), n = {n:,}",
     "american_put": "American put march, n = {n:,}, 102 LCPs",
 }
 #: Registry sizes (nrmicp.scenes.SIZES): the README's, and --small's for tests.
@@ -91,8 +93,8 @@ def _solve_curve(problem, options, budget):
         if points[-1][0] > budget:
             raise StopIteration
 
-    nrmicp.solve(problem.A, problem.q, problem.zeta, tol=TARGET, maxiter=10**6, callback=callback,
-                 **{**problem.solver_options, **options})
+    nrmicp.solve(problem.A, problem.q, problem.zeta, upper=getattr(problem, "upper", None), tol=TARGET,
+                 maxiter=10**6, callback=callback, **{**problem.solver_options, **options})
     return points  # the iterates (not the returned best one: a solve cut by the budget may return its start)
 
 
@@ -211,10 +213,10 @@ def run(scenes=tuple(SCENES), curves=tuple(CURVES), budget=30.0, small=False, pr
             if curve == "qp":
                 solver = _qp_solver()
                 sym = abs(problem.A - problem.A.T).max() == 0
-                if solver is None or not sym or callable(problem.zeta):
+                if solver is None or not sym or callable(problem.zeta) or getattr(problem, "upper", None) is not None:
                     continue
-            if curve == "psor" and callable(problem.zeta):
-                continue
+            if curve == "psor" and (callable(problem.zeta) or getattr(problem, "upper", None) is not None):
+                continue   # (the peers solve the LCP only)
             t0 = time.perf_counter()
             if scene == "american_put":
                 pts = _march_curve(problem, curve, small)
