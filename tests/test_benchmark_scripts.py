@@ -111,7 +111,7 @@ def test_qvi_outer_table():
 
 
 def test_bounds_table():
-    # README "Bounds": the command, on its quick sizes (n <= 3,969) with the PIQP peer (vinewtonrsls needs
+    # README "Bounds and free unknowns": the command, on its quick sizes (n <= 3,969) with the PIQP peer (vinewtonrsls needs
     # petsc4py's interpreter, --petsc-python); every solver meets the target, the box scenes converge
     text = run("bounds.py", "--quick", "--scenes", "membrane", "contact_p2", "--peers", "piqp")
     scaling, peers, contact = (table_rows(part) for part in text.split("\n\n")[1:6:2])

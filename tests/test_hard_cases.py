@@ -395,7 +395,7 @@ EXPECTED_STATUS = {
     "lipschitz-0.5":           "CCCSCCCCC",
     "lipschitz-0.9":           "CCCSCCCCC",
     "lipschitz-1.5":           "CCCSCCCCC",
-    "lipschitz-3.0":           "SCSSSSSSS",
+    "lipschitz-3.0":           "SCSSSSSMS",
     "nonsmooth-zeta":          "CCCSCCCCC",
     "near-singular":           "CCCCCCCCC",
     "not-P-no-solution":       "SSSSSSSSS",  # nrm: z runs away along (1, 1) with Res constant (was M)

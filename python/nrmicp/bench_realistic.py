@@ -314,7 +314,10 @@ def plot(results, path, dpi=100):
         lo, hi = ax.get_xlim()
         ax.set_xlim(lo, hi * 12)  # room for the labels
         ylo, yhi = ax.get_ylim()
-        heights = _spread([np.log10(e[2]) for e in ends], 0.09 * (np.log10(yhi) - np.log10(ylo)))
+        span = np.log10(yhi) - np.log10(ylo)
+        heights = np.asarray(_spread([np.log10(e[2]) for e in ends], 0.09 * span), dtype=float)
+        if len(heights):   # labels spread above the top would run into the title
+            heights -= max(0.0, heights.max() - (np.log10(yhi) - 0.05 * span))
         for (curve, x, y), hy in zip(ends, heights):
             ax.annotate(curve_label(curve, scene), (x, y), xytext=(x * 1.25, 10 ** hy), fontsize=9,
                         color=COLOURS.get(curve, "k"), va="center",
