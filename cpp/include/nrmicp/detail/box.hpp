@@ -1,10 +1,11 @@
-// nrmicp — bounds in the Newton member's obstacle problem, solved in y = z − s (s: the finite
-// lower bound where there is one, else the finite upper one, else 0):
-//   lo ≤ y ≤ hi,  lo_i ∈ {0, −∞},  hi_i ∈ [0, +∞]           (a row with −∞ and +∞ is free)
-// with PATH's conditions: w = Ay + q' ≥ 0 where y = lo, ≤ 0 where y = hi, = 0 strictly between, and
+// nrmicp — bounds: the box problem
+//   lo ≤ y ≤ hi   (lo_i may be −∞, hi_i +∞; a row with both is free)
+// with PATH's conditions: w = Ay + q ≥ 0 where y = lo, ≤ 0 where y = hi, = 0 strictly between, and
 // Res = ‖mid(y − lo, y − hi, w)‖₂ = ‖min(y − lo, max(y − hi, w))‖₂ (the paper's Res without hi).
-// The LCP (y ≥ 0) is the Box with no vectors and costs nothing; a row's place in an active set is
-// one of three states, the inactive one (w = 0) being the LCP's `true`.
+// The Newton member solves it in z itself (y = z); the modulus members in y = z − s, s the finite
+// lower bound where there is one, else the finite upper one, else 0, so that lo_i ∈ {0, −∞}
+// (ShiftedBounds; detail/modulus.hpp). The LCP (y ≥ 0) is the Box with no vectors and costs nothing;
+// a row's place in an active set is one of three states, the inactive one (w = 0) the LCP's `true`.
 #pragma once
 
 #include "residual.hpp"
