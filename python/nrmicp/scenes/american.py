@@ -185,13 +185,9 @@ def american_put_price(S0: float, K: float = 100.0, r: float = 0.05, sigma: floa
                    "seconds": seconds, "success": ok}
 
 
-def binomial_american_put(S0: float, K: float = 100.0, r: float = 0.05, sigma: float = 0.2,
-                          T: float = 1.0, steps: int = 20000) -> float:
-    """American put by the Cox–Ross–Rubinstein binomial tree (vectorized over each level).
-
-    Independent of the PDE: an O(steps²) reference whose error decays like O(1/steps)
-    (with an even/odd oscillation; average ``steps`` and ``steps + 1`` to damp it).
-    """
+def crr_lattice(S0: float, r: float, sigma: float, T: float, steps: int) -> tuple:
+    """The Cox–Ross–Rubinstein tree of `steps` steps: (u, discounted up and down probabilities, the
+    prices at expiry S0 u^(2j − steps), j up-moves out of `steps`)."""
     dt = T / steps
     u = np.exp(sigma * np.sqrt(dt))
     d = 1.0 / u
@@ -199,8 +195,17 @@ def binomial_american_put(S0: float, K: float = 100.0, r: float = 0.05, sigma: f
     p = (np.exp(r * dt) - d) / (u - d)
     if not 0 < p < 1:
         raise ValueError(f"CRR probability {p} outside (0, 1): increase steps")
-    pu, pd = disc * p, disc * (1.0 - p)
-    S = S0 * u ** (2.0 * np.arange(steps + 1) - steps)   # j up-moves out of `steps`
+    return u, disc * p, disc * (1.0 - p), S0 * u ** (2.0 * np.arange(steps + 1) - steps)
+
+
+def binomial_american_put(S0: float, K: float = 100.0, r: float = 0.05, sigma: float = 0.2,
+                          T: float = 1.0, steps: int = 20000) -> float:
+    """American put by the Cox–Ross–Rubinstein binomial tree (vectorized over each level).
+
+    Independent of the PDE: an O(steps²) reference whose error decays like O(1/steps)
+    (with an even/odd oscillation; average ``steps`` and ``steps + 1`` to damp it).
+    """
+    u, pu, pd, S = crr_lattice(S0, r, sigma, T, steps)
     V = np.maximum(K - S, 0.0)
     for k in range(steps - 1, -1, -1):
         S = S[: k + 1] * u                              # S_{k,j} = S_{k+1,j} / d

@@ -25,7 +25,7 @@ import numpy as np
 
 from . import Problem
 from ._exact import solve_exact_box
-from .american import _March, _nested_first_step
+from .american import _March, _nested_first_step, crr_lattice
 
 __all__ = ["game_put", "game_put_price", "binomial_game_put"]
 
@@ -127,15 +127,7 @@ def binomial_game_put(S0: float, K: float = 100.0, r: float = 0.05, sigma: float
     strike only, so the tree converges smoothly (O(1/steps)) only when K is one of its nodes, i.e.
     ln(K/S0)/(σ√(T/steps)) is an integer; elsewhere it jumps by ~1e-2 between step counts."""
     _check_penalty(penalty)
-    dt = T / steps
-    u = np.exp(sigma * np.sqrt(dt))
-    d = 1.0 / u
-    disc = np.exp(-r * dt)
-    p = (np.exp(r * dt) - d) / (u - d)
-    if not 0 < p < 1:
-        raise ValueError(f"CRR probability {p} outside (0, 1): increase steps")
-    pu, pd = disc * p, disc * (1.0 - p)
-    S = S0 * u ** (2.0 * np.arange(steps + 1) - steps)
+    u, pu, pd, S = crr_lattice(S0, r, sigma, T, steps)
     V = np.maximum(K - S, 0.0)
     for k in range(steps - 1, -1, -1):
         S = S[: k + 1] * u
