@@ -151,6 +151,18 @@ def american_put_price(S0: float, K: float = 100.0, r: float = 0.05, sigma: floa
     ``S``, the values ``V``, per-step ``nit`` and ``residual`` (nrmicp only), ``seconds``
     and whether every step converged (``success``).
     """
+    if method == "exact":
+        run = lambda m: _exact_march(m, lambda q, v: solve_exact_obstacle(m.A, q, m.payoff, z0=v))  # noqa: E731
+    else:   # set up for the rule the march solves by
+        run = lambda m: _solver_march(m, method, m.payoff, None, dict(solver_options, tol=tol),  # noqa: E731
+                                      tol=tol, maxiter=maxiter)
+    return _march_price(S0, K, r, sigma, T, S_max, n_space, n_time, rannacher, full_output, run)
+
+
+def _march_price(S0, K, r, sigma, T, S_max, n_space, n_time, rannacher, full_output, run):
+    """A put's price by the march (the American and the game put's): the grid (S_max defaults to
+    4·max(K, S0)), ``run(march)`` -> (last values, per-step nit, per-step Res, every step converged),
+    the price read off a cubic spline at S0; with ``full_output`` also the info dict."""
     from scipy.interpolate import CubicSpline
 
     if S_max is None:
@@ -159,23 +171,7 @@ def american_put_price(S0: float, K: float = 100.0, r: float = 0.05, sigma: floa
         raise ValueError(f"need 0 < S0 < S_max, got S0={S0}, S_max={S_max}")
     m = _March(S_max, K, r, sigma, T, n_space, n_time, rannacher)
     t0 = time.perf_counter()
-    v = m.payoff.copy()
-    nits, ress, ok = [], [], True
-    if method == "exact":
-        for kind in m.steps():
-            v = solve_exact_obstacle(m.A, m.q(kind, v), m.payoff, z0=v)
-    else:
-        import nrmicp
-
-        solver_options = dict(solver_options, tol=tol)   # set up for the rule the march solves by
-        solver = nrmicp.Solver(m.A, method=method, **solver_options)
-        first = _nested_first_step(solver, m.A, method, solver_options)
-        for step, kind in enumerate(m.steps()):
-            res = (first if step == 0 else solver).solve(m.q(kind, v), zeta=m.payoff, x0=v, tol=tol, maxiter=maxiter)
-            v = np.asarray(res.z, dtype=float).copy()
-            nits.append(res.nit)
-            ress.append(res.residual)
-            ok = ok and bool(res.success)
+    v, nits, ress, ok = run(m)
     seconds = time.perf_counter() - t0
     V = m.full(v)
     price = float(CubicSpline(m.S, V)(S0))
@@ -183,6 +179,31 @@ def american_put_price(S0: float, K: float = 100.0, r: float = 0.05, sigma: floa
         return price
     return price, {"S": m.S, "V": V, "nit": np.array(nits), "residual": np.array(ress),
                    "seconds": seconds, "success": ok}
+
+
+def _exact_march(m, step):
+    """The march by the reference solver: v ← step(q_k, v) from the payoff."""
+    v = m.payoff.copy()
+    for kind in m.steps():
+        v = step(m.q(kind, v), v)
+    return v, [], [], True
+
+
+def _solver_march(m, method, lower, upper, setup_options, **solve_options):
+    """The march with one nrmicp Solver (the first step from the nested start: _nested_first_step),
+    lower ≤ v ≤ upper (None: no upper bound): (last values, per-step nit, per-step Res, all converged)."""
+    import nrmicp
+
+    solver = nrmicp.Solver(m.A, method=method, **setup_options)
+    first = _nested_first_step(solver, m.A, method, setup_options)
+    v, nits, ress, ok = lower.copy(), [], [], True
+    for step, kind in enumerate(m.steps()):
+        res = (first if step == 0 else solver).solve(m.q(kind, v), zeta=lower, upper=upper, x0=v, **solve_options)
+        v = np.asarray(res.z, dtype=float).copy()
+        nits.append(res.nit)
+        ress.append(res.residual)
+        ok = ok and bool(res.success)
+    return v, nits, ress, ok
 
 
 def crr_lattice(S0: float, r: float, sigma: float, T: float, steps: int) -> tuple:

@@ -19,13 +19,11 @@ leaves out.
 """
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from . import Problem
 from ._exact import solve_exact_box
-from .american import _March, _nested_first_step, crr_lattice
+from .american import _exact_march, _March, _march_price, _solver_march, crr_lattice
 
 __all__ = ["game_put", "game_put_price", "binomial_game_put"]
 
@@ -77,47 +75,17 @@ def game_put_price(S0: float, K: float = 100.0, r: float = 0.05, sigma: float = 
     With ``full_output``, ``(price, info)``: the grid ``S``, values ``V``, per-step ``nit``/``residual``
     (nrmicp only), ``seconds``, ``success`` (every step converged).
     """
-    from scipy.interpolate import CubicSpline
-
     _check_penalty(penalty)
     if method not in ("newton", "exact"):
         raise ValueError(f"method must be 'newton' or 'exact', got {method!r}")
-    if S_max is None:
-        S_max = 4.0 * max(K, S0)
-    if not 0 < S0 < S_max:
-        raise ValueError(f"need 0 < S0 < S_max, got S0={S0}, S_max={S_max}")
-    m = _March(S_max, K, r, sigma, T, n_space, n_time, rannacher)
-    t0 = time.perf_counter()
-    lower, upper = m.payoff, m.payoff + penalty
-    v, nits, ress, ok = lower.copy(), [], [], True
-    if method == "exact":
-        for kind in m.steps():
-            v = solve_exact_box(m.A, m.q(kind, v), lower, upper, z0=v)
-    else:
-        v, nits, ress, ok = _newton_march(m, lower, upper, tol, solver_options)
-    seconds = time.perf_counter() - t0
-    V = m.full(v)
-    price = float(CubicSpline(m.S, V)(S0))
-    if not full_output:
-        return price
-    return price, {"S": m.S, "V": V, "nit": np.array(nits), "residual": np.array(ress), "seconds": seconds,
-                   "success": ok}
 
+    def run(m):
+        lower, upper = m.payoff, m.payoff + penalty
+        if method == "exact":
+            return _exact_march(m, lambda q, v: solve_exact_box(m.A, q, lower, upper, z0=v))
+        return _solver_march(m, "newton", lower, upper, solver_options, tol=tol)
 
-def _newton_march(m, lower, upper, tol, solver_options):
-    """The march with one Solver: (last values, per-step nit, per-step Res, all converged)."""
-    import nrmicp
-
-    solver = nrmicp.Solver(m.A, method="newton", **solver_options)
-    first = _nested_first_step(solver, m.A, "newton", solver_options)
-    v, nits, ress, ok = lower.copy(), [], [], True
-    for step, kind in enumerate(m.steps()):
-        res = (first if step == 0 else solver).solve(m.q(kind, v), zeta=lower, upper=upper, x0=v, tol=tol)
-        v = np.asarray(res.z, dtype=float).copy()
-        nits.append(res.nit)
-        ress.append(res.residual)
-        ok = ok and bool(res.success)
-    return v, nits, ress, ok
+    return _march_price(S0, K, r, sigma, T, S_max, n_space, n_time, rannacher, full_output, run)
 
 
 def binomial_game_put(S0: float, K: float = 100.0, r: float = 0.05, sigma: float = 0.2, T: float = 1.0,
