@@ -587,23 +587,17 @@ class Solver:
             _bounds.check(kind, c, us, self.method, zeta_jacobian)
         if callback is not None and not callable(callback):
             raise TypeError(f"callback must be callable, got {type(callback).__name__}")
-        if self._reduced is not None and bounded:   # the decoupled rows' closed form is the LCP's
-            built = self._whole_solver is None
-            res = self._whole()._solve(qv, zeta, upper=us, x0=z0, callback=callback, **iteration_options)
-            if built:
-                _charge_setup(res.timings, self._whole_solver._setup_timings)
-            return res
         if self._reduced is not None:
             zD = None
-            if kind in (ZetaKind.none, ZetaKind.constant):
+            if kind in (ZetaKind.none, ZetaKind.constant) and not bounded:   # (the closed form is the LCP's)
                 _newton.check_jacobian(zeta_jacobian, self.method, kind)
                 zD = self._reduced.z_decoupled(qv, c)
             if zD is not None:
                 return self._solve_reduced(qv, c, zD, z0, callback, it, checked_opts, units)
-            # a coupling ζ (or a z_D that overflows): the whole A; ζ as checked here (B converted once)
+            # bounds, a coupling ζ (or a z_D that overflows): the whole A; ζ as checked here (B converted once)
             whole_zeta = Affine(B, c) if kind == ZetaKind.affine else zeta
             built = self._whole_solver is None
-            res = self._whole()._solve(qv, whole_zeta, x0=z0, callback=callback, zeta_jacobian=zeta_jacobian,
+            res = self._whole()._solve(qv, whole_zeta, upper=us, x0=z0, callback=callback, zeta_jacobian=zeta_jacobian,
                                        **iteration_options)
             if built:   # its set-up happened in this call
                 _charge_setup(res.timings, self._whole_solver._setup_timings)

@@ -65,12 +65,9 @@ struct Box {
   }
   /// The value an active row holds: its bound.
   double bound(char s, Eigen::Index i) const { return s == kAtUpper ? upper(i) : lower(i); }
-  /// Res = ‖mid(y − lo, y − hi, w)‖₂, without overflow or underflow.
+  /// Res = ‖mid(y − lo, y − hi, w)‖₂, without overflow or underflow (bounded_residual with g = y − lo).
   double residual(const Vector& w, const Vector& y) const {
-    if (empty()) return residual_of(w, y);
-    Vector m(y.size());
-    for (Eigen::Index i = 0; i < y.size(); ++i) m[i] = std::min(y[i] - lower(i), std::max(y[i] - upper(i), w[i]));
-    return stable_norm(m);
+    return lo.size() ? bounded_residual(w, y - lo, y, hi) : bounded_residual(w, y, y, hi);
   }
   /// y projected onto the box, in place.
   void project(Vector& y) const {
@@ -173,10 +170,6 @@ struct ShiftedBounds {
     }
   }
   bool shifted() const { return s.size() > 0; }
-  /// z = y + s (unshift).
-  Eigen::VectorXd unshift(const Eigen::VectorXd& y, const Eigen::VectorXd& upper) const {
-    return detail::unshift(y, s, box.hi, upper);
-  }
 };
 
 }  // namespace nrmicp::detail

@@ -38,8 +38,7 @@ inline constexpr double kMatrixFreeMaxForcing = 0.1;
 /// The preconditioner's iterative solve (the LCP system with a hierarchy: CG + V-cycle) stops at this
 /// fraction of its right-hand side (FGMRES takes a preconditioner that changes with each application).
 /// Tight: each FGMRES iteration costs a product with J, a user's call (a PDE solve on thermoforming),
-/// while a CG iteration costs a V-cycle; 10⁻¹ → 10⁻³ took thermoforming_2d at n = 2.6·10⁵ from 21 to
-/// 11 FGMRES iterations, 3.2 → 2.6 s (docs/MEASUREMENTS.md, "Matrix-free Newton steps").
+/// while a CG iteration costs a V-cycle (docs/MEASUREMENTS.md, "Matrix-free Newton steps").
 inline constexpr double kPreconditionerTolerance = 1e-3;
 
 /// What the matrix-free solves of one semismooth loop did (Result::counters "matrix_free_iterations",

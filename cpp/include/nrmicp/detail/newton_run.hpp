@@ -279,7 +279,7 @@ class NewtonRun {
       const auto t0 = std::chrono::steady_clock::now();
       tried = finest_lcp(q_shift, y0, guess_control(s, level_tol, std::min(budget, NewtonTuning::warm_steps), true), box);
       if (tried->status != Status::MaxIterations || budget <= NewtonTuning::warm_steps)
-        return finish_obstacle(*tried, *tried, bounds, q, t0);
+        return finish_obstacle(*tried, *tried, bounds.s, q, t0);
       tally_.absorb(*tried, 0, ScopedTimer::seconds_since(t0));
       budget -= tried->steps;
     }
@@ -290,7 +290,7 @@ class NewtonRun {
     if (set && !out.inactive.empty()) *set = out.inactive;
     // maxiter spent on both: the warm try's iterate when the nested run ended no better
     const bool keep_try = tried && out.status != Status::Converged && tried->residual < out.residual;
-    return finish_obstacle(out, keep_try ? *tried : out, bounds, q, t0);
+    return finish_obstacle(out, keep_try ? *tried : out, bounds.s, q, t0);
   }
 
   /// ζ(z) = Bz + c: Newton on the full system, from the obstacle problem with ψ = ζ(z0) (or
@@ -477,10 +477,10 @@ class NewtonRun {
 
   /// The obstacle problem's result from the finest level's `answer` (z = y + ψ), after the loop `run`
   /// (from t0) is tallied.
-  Result finish_obstacle(const LevelOutcome& run, const LevelOutcome& answer, const ShiftedBounds& bounds,
-                         const Vector& q, std::chrono::steady_clock::time_point t0) {
+  Result finish_obstacle(const LevelOutcome& run, const LevelOutcome& answer, const Vector& s, const Vector& q,
+                         std::chrono::steady_clock::time_point t0) {
     tally_.absorb(run, 0, ScopedTimer::seconds_since(t0));
-    return bounds.shifted() ? tally_.finish(answer, bounds.unshift(answer.z, upper_), q) : tally_.finish(answer, answer.z, q);
+    return s.size() > 0 ? tally_.finish(answer, answer.z + s, q) : tally_.finish(answer, answer.z, q);
   }
 
   /// The control of a finest-level loop from a guessed start (nested or the user's): the sets of its
