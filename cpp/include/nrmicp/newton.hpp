@@ -79,7 +79,7 @@ class Newton {
  public:
   using StorageIndex = typename MatrixType::StorageIndex;
   using Vector = Eigen::VectorXd;
-  using RowMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, StorageIndex>;
+  using RowMatrix = typename detail::Engine<MatrixType>::Coarse;  ///< P, its coarse operators
   using Callback = detail::Callback;
   using Poll = detail::Poll;
   using Progress = detail::Progress;
@@ -196,18 +196,19 @@ class Newton {
   void build_hierarchy(std::vector<RowMatrix> prolongations, std::vector<RowMatrix> coarse) {
     // Eigen 3.4's SparseMatrix has no move constructor: std::move copies it. The matrices are
     // swapped into place and the vector reserved (its growth would copy every level so far).
+    using detail::galerkin;
+    using detail::transpose;
     auto& hierarchy = levels_.hierarchy;
     hierarchy.reserve(prolongations.size());
     for (std::size_t l = 0; l < prolongations.size(); ++l) {
       const RowMatrix* finer_A = hierarchy.empty() ? nullptr : &hierarchy.back().A;
-      detail::Level<StorageIndex>& level = hierarchy.emplace_back();
+      typename detail::Engine<MatrixType>::Level& level = hierarchy.emplace_back();
       level.P.swap(prolongations[l]);
-      level.R = level.P.transpose();
+      level.R = transpose(level.P);
       if (!coarse.empty()) {
         level.A.swap(coarse[l]);
       } else {
-        RowMatrix A = detail::product(level.R, finer_A ? detail::product(*finer_A, level.P)
-                                                       : detail::product(levels_.A, level.P));
+        RowMatrix A = finer_A ? galerkin(level.R, *finer_A, level.P) : galerkin(level.R, levels_.A, level.P);
         level.A.swap(A);
       }
       report_.reason = nonpositive_diagonal(level.A, static_cast<int>(l) + 1);
@@ -222,7 +223,7 @@ class Newton {
     co.inner = options_.inner;
     for (auto& level : hierarchy)
       levels_.coarse.push_back(std::make_unique<detail::NewtonLevel<RowMatrix>>(level.A, co));
-    detail::Hierarchy<StorageIndex> below{hierarchy.data(), hierarchy.size()};
+    typename detail::Engine<MatrixType>::Hierarchy below{hierarchy.data(), hierarchy.size()};
     levels_.finest->use_hierarchy(below, true);  // the finest level frees the A_l while it solves
     for (auto& level : levels_.coarse) level->use_hierarchy(below = below.below());
   }
@@ -246,7 +247,7 @@ class Newton {
     if (z0 && z0->size() != n) throw std::invalid_argument("Newton::solve: x0 has length " + std::to_string(z0->size()) + ", expected n = " + std::to_string(n));
     zeta.check(n);
     Options resolved = o;
-    resolve_tolerance(resolved, q, zeta);
+    resolve_tolerance(resolved, q, zeta, levels_.finest->comm());
     detail::NewtonRun<MatrixType> run(levels_, resolved, hooks, nest, zeta.upper());
     const auto t_iterations = std::chrono::steady_clock::now();
     Result r = [&] {
@@ -254,10 +255,14 @@ class Newton {
         case ZetaKind::None: return run.solve_obstacle(q, Vector(), z0, nest);  // ψ = 0
         case ZetaKind::Constant: return run.solve_obstacle(q, zeta.c(), z0, nest);
         case ZetaKind::Affine:  // with an upper bound: the outer fixed point (its inner solves take the box)
-          return zeta.upper().size() ? run.solve_outer_fixed_point(q, zeta, z0) : run.solve_affine(q, zeta, z0);
+          if (zeta.upper().size()) return run.solve_outer_fixed_point(q, zeta, z0);
+          if constexpr (detail::Engine<MatrixType>::serial) return run.solve_affine(q, zeta, z0);
+          throw std::invalid_argument("Newton: an affine zeta (its full system) is not available on this engine");
         case ZetaKind::Functor: break;
       }
-      return zeta.has_jacobian() ? run.solve_semismooth(q, zeta, z0) : run.solve_outer_fixed_point(q, zeta, z0);
+      if (!zeta.has_jacobian()) return run.solve_outer_fixed_point(q, zeta, z0);
+      if constexpr (detail::Engine<MatrixType>::serial) return run.solve_semismooth(q, zeta, z0);
+      throw std::invalid_argument("Newton: zeta's Jacobian (semismooth Newton on the ICP) is not available on this engine");
     }();
     // all levels, nested start included; the set-up done on the way (the reduced systems' analyses,
     // the hierarchy's operators formed again) is setup's, not the loop's

@@ -161,17 +161,19 @@ class Zeta {
 /// Res at z = 0, ‖min(q, −ζ(0))‖₂ (bounded: bounded_residual): the reference of the relative tolerance (Options::rtol);
 /// NaN when ζ(0) failed.
 template <typename StorageIndex>
-double residual_at_zero(const Eigen::VectorXd& q, const Zeta<StorageIndex>& zeta) {
+double residual_at_zero(const Eigen::VectorXd& q, const Zeta<StorageIndex>& zeta,
+                        const detail::Comm& comm = detail::serial_comm()) {
   Eigen::VectorXd zeta0;
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(q.size());
-  if (!zeta.eval(zero, zeta0)) return std::numeric_limits<double>::quiet_NaN();
-  return detail::bounded_residual(q, -zeta0, zero, zeta.upper());  // with bounds: ‖mid(−ζ(0), −u, q)‖
+  if (!comm.all(zeta.eval(zero, zeta0))) return std::numeric_limits<double>::quiet_NaN();
+  return detail::bounded_residual(q, -zeta0, zero, zeta.upper(), comm);  // with bounds: ‖mid(−ζ(0), −u, q)‖
 }
 
 /// `o` with its relative tolerance resolved for this problem: tol = target(Res(0)), rtol = 0.
 template <typename StorageIndex>
-void resolve_tolerance(Options& o, const Eigen::VectorXd& q, const Zeta<StorageIndex>& zeta) {
-  if (o.rtol > 0) o.tol = o.target(residual_at_zero(q, zeta));
+void resolve_tolerance(Options& o, const Eigen::VectorXd& q, const Zeta<StorageIndex>& zeta,
+                       const detail::Comm& comm = detail::serial_comm()) {
+  if (o.rtol > 0) o.tol = o.target(residual_at_zero(q, zeta, comm));
   o.rtol = 0;
 }
 

@@ -8,6 +8,8 @@
 // a row's place in an active set is one of three states, the inactive one (w = 0) the LCP's `true`.
 #pragma once
 
+#include "comm.hpp"
+#include "engine.hpp"
 #include "residual.hpp"
 
 #include <Eigen/Core>
@@ -21,10 +23,11 @@ namespace nrmicp::detail {
 
 /// Res = ‖mid(z − ζ, z − u, w)‖₂ = ‖min(g, max(z − u, w))‖₂ (g = z − ζ(z)) of an ICP with the upper
 /// bound u (empty: none, the paper's Res).
+/// `comm`: the processes that own the other rows (detail/comm.hpp).
 inline double bounded_residual(const Eigen::VectorXd& w, const Eigen::VectorXd& g, const Eigen::VectorXd& z,
-                               const Eigen::VectorXd& upper) {
-  if (upper.size() == 0) return residual_of(w, g);
-  return stable_norm(g.cwiseMin((z - upper).cwiseMax(w)));
+                               const Eigen::VectorXd& upper, const Comm& comm = serial_comm()) {
+  if (upper.size() == 0) return comm.stable_norm(w.cwiseMin(g));
+  return comm.stable_norm(g.cwiseMin((z - upper).cwiseMax(w)));
 }
 
 /// z = y + s of the box problem in y = z − s (hi: its upper bounds, empty for none), a row on its
@@ -36,6 +39,21 @@ inline Eigen::VectorXd unshift(const Eigen::VectorXd& y, const Eigen::VectorXd& 
     for (Eigen::Index i = 0; i < z.size(); ++i)
       if (y[i] == hi[i]) z[i] = upper[i];
   return z;
+}
+
+/// Per column j of P, the finite bound b_i of the row i with the largest |P_ij|, the first such row
+/// on a tie (`none` where no row of the column is bounded): the engine's injection of bounds (Box::coarse).
+template <typename Derived>
+Eigen::VectorXd inject_bounds(const Eigen::SparseMatrixBase<Derived>& P, const Eigen::VectorXd& b, double none) {
+  static_assert(Derived::IsRowMajor, "inject_bounds reads P's rows");
+  Eigen::VectorXd c = Eigen::VectorXd::Constant(P.cols(), none), weight = Eigen::VectorXd::Zero(P.cols());
+  for (Eigen::Index i = 0; i < P.rows(); ++i)
+    for (typename Derived::InnerIterator it(P.derived(), i); it; ++it)
+      if (it.value() != 0 && std::isfinite(b[i]) && std::abs(it.value()) > weight[it.index()]) {
+        weight[it.index()] = std::abs(it.value());
+        c[it.index()] = b[i];
+      }
+  return c;
 }
 
 /// A row's state in an active set: at its lower bound, inactive (w = 0), at its upper bound.
@@ -66,8 +84,8 @@ struct Box {
   /// The value an active row holds: its bound.
   double bound(char s, Eigen::Index i) const { return s == kAtUpper ? upper(i) : lower(i); }
   /// Res = ‖mid(y − lo, y − hi, w)‖₂, without overflow or underflow (bounded_residual with g = y − lo).
-  double residual(const Vector& w, const Vector& y) const {
-    return lo.size() ? bounded_residual(w, y - lo, y, hi) : bounded_residual(w, y, y, hi);
+  double residual(const Vector& w, const Vector& y, const Comm& comm = serial_comm()) const {
+    return lo.size() ? bounded_residual(w, y - lo, y, hi, comm) : bounded_residual(w, y, y, hi, comm);
   }
   /// y projected onto the box, in place.
   void project(Vector& y) const {
@@ -87,8 +105,8 @@ struct Box {
     if (empty()) return {};
     constexpr double inf = std::numeric_limits<double>::infinity();
     Box c;
-    if (lo.size()) c.lo = inject(P, lo, -inf);
-    if (hi.size()) c.hi = inject(P, hi, inf);
+    if (lo.size()) c.lo = inject_bounds(P, lo, -inf);
+    if (hi.size()) c.hi = inject_bounds(P, hi, inf);
     if (c.hi.size()) c.hi = c.hi.cwiseMax(c.lo.size() ? c.lo : Vector::Zero(P.cols()));  // two rows' bounds may cross
     return c;
   }
@@ -100,11 +118,13 @@ struct Box {
   /// constant (an upper one in y) would otherwise be interpolated and the contact start inside it.
   template <typename RowMatrix>
   Vector prolongate(const RowMatrix& P, const Box& cb, const Vector& yc) const {
-    Vector y = P * yc;
+    Vector y;
+    multiply(P, yc, y);
     if (!empty()) {
       constexpr double inf = std::numeric_limits<double>::infinity();
-      const Vector below = cb.lo.size() ? Vector(P * (yc - lower_vector(cb, yc.size()))) : y;
-      const Vector above = cb.hi.size() ? Vector(P * (cb.hi - yc).cwiseMin(std::numeric_limits<double>::max())) : Vector();
+      Vector below = y, above;
+      if (cb.lo.size()) multiply(P, Vector(yc - lower_vector(cb, yc.size())), below);
+      if (cb.hi.size()) multiply(P, Vector((cb.hi - yc).cwiseMin(std::numeric_limits<double>::max())), above);
       for (Eigen::Index i = 0; i < y.size(); ++i) {
         const double s = std::isfinite(lower(i)) ? below[i] : inf;
         const double t = above.size() && std::isfinite(upper(i)) ? above[i] : inf;
@@ -117,19 +137,6 @@ struct Box {
   }
 
  private:
-  /// Per column j of P, the finite bound b_i of the row i with the largest |P_ij| (`none` where no
-  /// row of the column is bounded).
-  template <typename RowMatrix>
-  static Vector inject(const RowMatrix& P, const Vector& b, double none) {
-    Vector c = Vector::Constant(P.cols(), none), weight = Vector::Zero(P.cols());
-    for (Eigen::Index i = 0; i < P.rows(); ++i)
-      for (typename RowMatrix::InnerIterator it(P, i); it; ++it)
-        if (it.value() != 0 && std::isfinite(b[i]) && std::abs(it.value()) > weight[it.index()]) {
-          weight[it.index()] = std::abs(it.value());
-          c[it.index()] = b[i];
-        }
-    return c;
-  }
   /// lo of `b` with its −∞ entries as 0 (their rows are free: the distance to them is not used).
   static Vector lower_vector(const Box& b, Eigen::Index n) {
     if (!b.lo.size()) return Vector::Zero(n);

@@ -51,17 +51,6 @@ class NonMonotone {
   std::vector<double> recent_;
 };
 
-/// FNV-1a hash of an active set (to detect cycles).
-inline std::uint64_t hash_set(const std::vector<char>& inactive) {
-  std::uint64_t h = 1469598103934665603ull;
-  for (std::size_t i = 0; i < inactive.size(); ++i)
-    if (inactive[i]) {  // inactive or at the upper bound (told apart in the lowest bit)
-      h ^= 2 * (static_cast<std::uint64_t>(i) + 1) + (inactive[i] == kAtUpper);
-      h *= 1099511628211ull;
-    }
-  return h;
-}
-
 /// How close to its rounding level Res counts as there (a step on the right piece lands within
 /// a few times the level; one on a wrong piece leaves Res orders of magnitude above it).
 inline constexpr double kFloorFactor = 100;
@@ -267,7 +256,7 @@ class Globalized {
     std::uint64_t h = 0;
     bool repeat = false;
     if constexpr (Plain::set_fixes_step) {
-      h = hash_set(inactive_);
+      h = plain_.fingerprint(inactive_);
       repeat = have_last_ && h == last_set_;
       // a repeat settles, unless its z was solved loosely and Res is not below repeat_trust × its
       // start's, or z is not the solve of any set (sweeps changed its active set): then the set
@@ -290,7 +279,7 @@ class Globalized {
       moved_set_ = plain_.smooth(kSmoothingSweeps) || damped;
       r = plain_.trial_residual();
     }
-    const bool same_set = have_last_ && inactive_ == last_inactive_;
+    const bool same_set = have_last_ && plain_.same_set(inactive_, last_inactive_);
     if (!(std::isfinite(r) && (exempt_ || test_.acceptable(r)))) {
       if constexpr (!Plain::set_fixes_step) jacobian_.rejected(same_set);
       return false;
@@ -328,7 +317,7 @@ class Globalized {
   // the next steps peel that excess one layer at a time; half the step lands near the true set
   // (docs/MEASUREMENTS.md, kOvershootGrowth).
   bool overshoots() const {
-    const auto active = inactive_.size() - static_cast<std::size_t>(std::count(inactive_.begin(), inactive_.end(), kInactive));
+    const std::size_t active = plain_.active_count(inactive_);
     return active > 0 && static_cast<double>(plain_.trial_active_count()) > kOvershootGrowth * static_cast<double>(active);
   }
   // Res before a step that did not halve it, and after it, are within kFloorFactor of the rounding

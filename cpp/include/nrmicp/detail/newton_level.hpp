@@ -8,6 +8,7 @@
 #include "../zeta.hpp"
 #include "active_set.hpp"
 #include "box.hpp"
+#include "engine.hpp"
 #include "residual.hpp"
 #include "timer.hpp"
 
@@ -15,12 +16,28 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <memory>
 #include <optional>
 #include <vector>
 
 namespace nrmicp::detail {
+
+/// The fingerprint of an active set's rows from global index `offset` on (to detect cycles): a sum
+/// mod 2⁶⁴ of a mix (splitmix64's finalizer) of each row not inactive, its index and whether it is at
+/// its upper bound, so that processes that own parts of the set add their fingerprints.
+inline std::uint64_t hash_rows(const std::vector<char>& inactive, std::uint64_t offset) {
+  std::uint64_t h = 0;
+  for (std::size_t i = 0; i < inactive.size(); ++i)
+    if (inactive[i]) {  // inactive or at the upper bound (told apart in the lowest bit)
+      std::uint64_t x = 2 * (offset + i + 1) + (inactive[i] == kAtUpper);
+      x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
+      x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
+      h += x ^ (x >> 31);
+    }
+  return h;
+}
 
 /// `sweeps` symmetric projected Gauss–Seidel sweeps on ICP(q, A, ζ) from y: y_i ←
 /// max(lower(i, y), −(q_i + Σ_{j≠i} a_ij y_j) / a_ii), the rows in order, then in reverse; rows with
@@ -52,6 +69,14 @@ void projected_gauss_seidel(const RowMajorMatrix& A, const Q& q, Y& y, int sweep
     projected_gauss_seidel(A, q, y, sweeps, [](Eigen::Index, const Y&) { return 0.0; });
 }
 
+/// The engine's sweeps (engine.hpp) of an Eigen matrix: a row-major one sweeps its rows; a
+/// column-major one (no row access) is not swept.
+template <typename Derived>
+void sweep_rows(const Eigen::SparseMatrixBase<Derived>& A, const Eigen::VectorXd& q, Eigen::VectorXd& y, int sweeps,
+                const Box* box) {
+  if constexpr (Derived::IsRowMajor) projected_gauss_seidel(A.derived(), q, y, sweeps, box);
+}
+
 /// One level: its matrix, the weights Ω1/Ω2 of the active-set test, the reduced LCP system
 /// (analysed on first use, then only refactorized) and the fallback member (nrm, Ω2 as Newton's).
 template <typename MatrixType>
@@ -59,11 +84,11 @@ class NewtonLevel {
  public:
   using StorageIndex = typename MatrixType::StorageIndex;
   using Vector = Eigen::VectorXd;
-  using RowMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, StorageIndex>;
-  using System = ActiveSetSystem<StorageIndex>;
+  using RowMatrix = typename Engine<MatrixType>::Coarse;
+  using System = typename Engine<MatrixType>::System;
 
   /// `options` gives Ω1, Ω2 (empty: I and diag(A)) and the inner solver.
-  NewtonLevel(const MatrixType& A, const Options& options) : A_(A), options_(options) {
+  NewtonLevel(const MatrixType& A, const Options& options) : A_(A), comm_(comm_of(A)), options_(options) {
     options_.method = Method::Newton;
     const Parameters p = resolve_parameters(A, options_);  // Ω2: diag(A), or the row maximum where a_ii ≤ 0
     ratio_ = p.omega1.cwiseQuotient(p.omega2);
@@ -73,13 +98,21 @@ class NewtonLevel {
   /// Krylov inner solve; they must outlive this level.
   /// `borrow`: this level's LCP system frees their operators A_l while it solves (the finest
   /// level's; restore_hierarchy forms them again before the coarse levels or another system need them).
-  void use_hierarchy(Hierarchy<StorageIndex> below, bool borrow = false) {
+  void use_hierarchy(typename Engine<MatrixType>::Hierarchy below, bool borrow = false) {
     below_ = below;
     borrow_ = borrow;
   }
 
   const MatrixType& matrix() const { return A_; }
+  /// The rows this process owns (every row, serially).
   Eigen::Index size() const { return A_.rows(); }
+  /// The reductions over every process (detail/comm.hpp).
+  const Comm& comm() const { return comm_; }
+  /// out = A v, timed.
+  void apply(const Vector& v, Vector& out) const {
+    ScopedTimer t(timings().spmv);
+    multiply(A_, v, out);
+  }
 
   /// Where this level's work is timed (a solve's Result::timings, set by NewtonRun for its
   /// duration; nullptr: a scratch record nobody reads).
@@ -120,20 +153,20 @@ class NewtonLevel {
   /// Res of z; w = Az + q and g = z − ζ(z) (ζ = Bz + c; when B is null ζ = 0, g = z is not written).
   double evaluate(const Vector& z, const Vector& q, const RowMatrix* B, const Vector* c, Vector& w, Vector& g) const {
     ScopedTimer t(timings().spmv);  // the products with A and B
-    w.noalias() = A_ * z;
+    multiply(A_, z, w);
     w += q;
-    if (!B) return residual_of(w, z);
-    g.noalias() = -(*B * z);
-    g += z - *c;
-    return residual_of(w, g);
+    if (!B) return comm_.stable_norm(w.cwiseMin(z));
+    multiply(*B, z, g);
+    g = (z - *c) - g;
+    return comm_.stable_norm(w.cwiseMin(g));
   }
 
   /// Res of the box problem (detail/box.hpp) at y; w = Ay + q.
   double evaluate(const Vector& y, const Vector& q, const Box& box, Vector& w) const {
     ScopedTimer t(timings().spmv);
-    w.noalias() = A_ * y;
+    multiply(A_, y, w);
     w += q;
-    return box.residual(w, y);
+    return box.residual(w, y, comm_);
   }
 
   /// Res of the ICP at v (ζ(v) in zv, Av + q in wv) for any ζ: NaN only when ζ failed; +inf for
@@ -142,12 +175,12 @@ class NewtonLevel {
   double icp_residual(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector& v, Vector& zv,
                       Vector& wv, const Vector& upper = Vector()) const {
     constexpr double inf = std::numeric_limits<double>::infinity();
-    if (!v.allFinite()) return inf;
-    if (!eval_zeta(zeta, v, zv)) return std::numeric_limits<double>::quiet_NaN();
+    if (!comm_.all(v.allFinite())) return inf;
+    if (!comm_.all(eval_zeta(zeta, v, zv))) return std::numeric_limits<double>::quiet_NaN();
     ScopedTimer t(timings().spmv);
-    wv.noalias() = A_ * v;
+    multiply(A_, v, wv);
     wv += q;
-    const double r = bounded_residual(wv, v - zv, v, upper);
+    const double r = bounded_residual(wv, v - zv, v, upper, comm_);
     return std::isnan(r) ? inf : r;
   }
 
@@ -155,8 +188,8 @@ class NewtonLevel {
   double icp_residual_with(const Vector& q, const Vector& v, const Vector& zv) const {
     ScopedTimer t(timings().spmv);
     Vector w = q;
-    w.noalias() += A_ * v;
-    return residual_of(w, v - zv);
+    multiply_add(A_, v, w);
+    return comm_.stable_norm(w.cwiseMin(v - zv));
   }
 
   /// The rounding level of Res at z: ε (‖|A||z| + |q|‖₂ + ‖|z| + |ζ(z)|‖₂), the size of the rounding
@@ -164,9 +197,9 @@ class NewtonLevel {
   double rounding_level(const Vector& z, const Vector& q, const Vector& g) const {
     ScopedTimer timer(timings().spmv);
     Vector t = q.cwiseAbs();
-    t.noalias() += A_.cwiseAbs() * z.cwiseAbs();
+    abs_multiply_add(A_, z.cwiseAbs(), t);
     constexpr double eps = std::numeric_limits<double>::epsilon();
-    return eps * (stable_norm(t) + stable_norm(z.cwiseAbs() + (z - g).cwiseAbs()));
+    return eps * (comm_.stable_norm(t) + comm_.stable_norm(z.cwiseAbs() + (z - g).cwiseAbs()));
   }
 
   /// x ← Ω1 (g/Ω1 − w/Ω2) = g − (Ω1/Ω2) w, the modulus vector up to the factor γ/(2Ω1), in place
@@ -174,7 +207,7 @@ class NewtonLevel {
   double modulus(const Vector& w, const Vector& g, Vector& x) const {
     if (x.size() != w.size()) {
       x = g - ratio_.cwiseProduct(w);
-      return std::numeric_limits<double>::infinity();
+      return comm_.max(std::numeric_limits<double>::infinity());  // (every process takes part)
     }
     double step = 0;
     for (Eigen::Index i = 0; i < x.size(); ++i) {
@@ -183,7 +216,7 @@ class NewtonLevel {
       if (d > step || std::isnan(d)) step = d;  // a NaN stays (as in lpNorm)
       x[i] = xi;
     }
-    return step;
+    return comm_.max(step);
   }
 
   /// The inactive set ℐ = {x ≥ 0} = {g/Ω1 − w/Ω2 ≥ 0}. A tie x = 0 (z = ζ and w = 0) counts as
@@ -199,22 +232,34 @@ class NewtonLevel {
   }
   /// Whether (w, g)'s active set is `inactive`, without storing it.
   bool has_active_set(const Vector& w, const Vector& g, const std::vector<char>& inactive, const Box* box = nullptr) const {
-    for (Eigen::Index i = 0; i < w.size(); ++i)
-      if (inactive[i] != state(w, g, i, box)) return false;
-    return true;
+    bool same = true;
+    for (Eigen::Index i = 0; i < w.size() && same; ++i) same = inactive[i] == state(w, g, i, box);
+    return comm_.all(same);
   }
   /// The number of active points of (w, g) (the complement of active_set's), without storing the set.
   std::size_t active_count(const Vector& w, const Vector& g, const Box* box = nullptr) const {
     std::size_t k = 0;
     for (Eigen::Index i = 0; i < w.size(); ++i) k += !inactive_state(state(w, g, i, box));
-    return k;
+    return static_cast<std::size_t>(comm_.sum(static_cast<double>(k)));
+  }
+  /// The number of active points of `inactive` (every process's).
+  std::size_t active_count(const std::vector<char>& inactive) const {
+    const auto k = static_cast<double>(inactive.size()) - std::count(inactive.begin(), inactive.end(), kInactive);
+    return static_cast<std::size_t>(comm_.sum(k));
+  }
+  /// Whether two active sets are the same on every process.
+  bool same_set(const std::vector<char>& a, const std::vector<char>& b) const { return comm_.all(a == b); }
+  /// A fingerprint of an active set (to detect cycles): a sum over its rows not inactive of a
+  /// mix of the global row index and the state, so that processes add their parts.
+  std::uint64_t fingerprint(const std::vector<char>& inactive) const {
+    return comm_.sum(hash_rows(inactive, static_cast<std::uint64_t>(row_offset(A_))));
   }
 
   /// `sweeps` symmetric projected Gauss–Seidel sweeps on LCP(q, A) from y (the free function of
   /// that name); a column-major A (no row access) is not swept at all.
   void projected_gauss_seidel(const Vector& q, Vector& y, int sweeps, const Box* box = nullptr) const {
     ScopedTimer t(timings().spmv);  // a sweep is a product with A (as the AOR types' one-pass sweep)
-    if constexpr (MatrixType::IsRowMajor) detail::projected_gauss_seidel(A_, q, y, sweeps, box);
+    sweep_rows(A_, q, y, sweeps, box);
   }
   /// The same on ICP(q, A, ζ) with ζ(z) = Bz + c, from z: z_i ≥ (Bz)_i + c_i.
   void projected_gauss_seidel(const Vector& q, const RowMatrix& B, const Vector& c, Vector& z, int sweeps) const {
@@ -280,6 +325,7 @@ class NewtonLevel {
   }
 
   const MatrixType& A_;
+  const Comm& comm_;
   Vector ratio_;  // Ω1/Ω2: x ≥ 0 ⇔ g − (Ω1/Ω2) w ≥ 0
   Options options_;  // the level's inner solver, Ω1, Ω2 as given (resolved when needed, not held as n-vectors)
 
@@ -296,9 +342,9 @@ class NewtonLevel {
     return f;
   }
   std::unique_ptr<System> lcp_system_;
-  Hierarchy<StorageIndex> below_;
+  typename Engine<MatrixType>::Hierarchy below_;
   bool borrow_ = false;
-  std::optional<Solver<MatrixType>> fallback_;
+  std::optional<typename Engine<MatrixType>::Fallback> fallback_;
   Timings* tm_ = nullptr;
   mutable Timings unrecorded_;
 };

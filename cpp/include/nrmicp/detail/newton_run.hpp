@@ -59,6 +59,7 @@ LevelOutcome newton_loop(Plain& plain, const NewtonControl& ctl, const Eigen::Ve
   LevelOutcome o;
   Monitor monitor(mo, ctl.callback, ctl.poll, ctl.progress, ctl.shift ? *ctl.shift : no_shift, o, plain.size());
   Iterate s;
+  monitor.reduce_with(plain.comm());
   Globalized<Plain> step(plain, ctl, s);
   loop(step, s, monitor);
   monitor.finish(z_start);
@@ -92,7 +93,7 @@ struct NewtonLevels {
   using StorageIndex = typename MatrixType::StorageIndex;
   using RowMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, StorageIndex>;
   const MatrixType& A;
-  std::vector<Level<StorageIndex>> hierarchy;  ///< below the finest: P, R = Pᵀ, A = R A_finer P
+  std::vector<typename Engine<MatrixType>::Level> hierarchy;  ///< below the finest: P, R = Pᵀ, A = R A_finer P
   std::unique_ptr<NewtonLevel<MatrixType>> finest;
   std::vector<std::unique_ptr<NewtonLevel<RowMatrix>>> coarse;  ///< coarse[l] on hierarchy[l].A
   int count() const { return 1 + static_cast<int>(coarse.size()); }
@@ -165,7 +166,8 @@ class NewtonTally {
     r.z = z;
     {
       ScopedTimer t(r.timings.spmv);
-      r.w = A_ * z + q;
+      multiply(A_, z, r.w);
+      r.w += q;
     }
     r.residual = residual;
     r.status = status;
@@ -260,7 +262,7 @@ class NewtonRun {
     if (shifted) {
       ScopedTimer t(tally_.timings().spmv);
       shifted_q = q;
-      shifted_q.noalias() += levels_.A * bounds.s;
+      multiply_add(levels_.A, bounds.s, shifted_q);
     }
     const Vector& q_shift = shifted ? shifted_q : q;
     Vector y0 = !z0 ? Vector::Zero(q.size()) : shifted ? Vector(*z0 - bounds.s) : Vector(*z0);
@@ -275,7 +277,7 @@ class NewtonRun {
     // after warm_steps (docs/MEASUREMENTS.md, "Warm starts with a hierarchy").
     std::optional<LevelOutcome> tried;
     const Vector& s = bounds.s;
-    if (nested && report && z0 && !z0->isZero(0.0) && closer_than_cold(q_shift, y0, box)) {
+    if (nested && report && z0 && !comm().all(z0->isZero(0.0)) && closer_than_cold(q_shift, y0, box)) {
       const auto t0 = std::chrono::steady_clock::now();
       tried = finest_lcp(q_shift, y0, guess_control(s, level_tol, std::min(budget, NewtonTuning::warm_steps), true), box);
       if (tried->status != Status::MaxIterations || budget <= NewtonTuning::warm_steps)
@@ -322,6 +324,7 @@ class NewtonRun {
     static const Vector no_shift;
     Monitor monitor(o_, hooks_.callback, hooks_.poll, hooks_.progress, no_shift, out, n);
     monitor.number_by(tally_.nit_counter());
+    monitor.reduce_with(comm());
     loop(step, s, monitor);
     monitor.finish(z_start);
     tally_.take_history(out);
@@ -464,6 +467,8 @@ class NewtonRun {
     int sweep_budget() const { return run.o_.maxiter; }
   };
 
+  /// The reductions over every process (the finest level's engine).
+  const Comm& comm() const { return levels_.finest->comm(); }
   /// Every level records its work into this solve's timings (nullptr: into none).
   void record_into(Timings* tm) const {
     levels_.finest->record_into(tm);
@@ -497,9 +502,10 @@ class NewtonRun {
   bool closer_than_cold(const Vector& q_shift, const Vector& y, const Box& box) {
     ScopedTimer t(tally_.timings().spmv);
     Vector w = q_shift;
-    w.noalias() += levels_.A * y;
-    const double cold = box.empty() ? stable_norm(q_shift.cwiseMin(0.0)) : box.residual(q_shift, Vector::Zero(y.size()));
-    return box.residual(w, y) < NewtonTuning::warm_start_fraction * cold;
+    multiply_add(levels_.A, y, w);
+    const double cold = box.empty() ? comm().stable_norm(q_shift.cwiseMin(0.0))
+                                    : box.residual(q_shift, Vector::Zero(y.size()), comm());
+    return box.residual(w, y, comm()) < NewtonTuning::warm_start_fraction * cold;
   }
 
   LevelOutcome finest_lcp(const Vector& q_shift, const Vector& y0, const NewtonControl& control, const Box& box) {
@@ -530,7 +536,7 @@ class NewtonRun {
     qs[0] = q_shift;
     boxes[0] = box;
     for (std::size_t l = 0; l < L; ++l) {
-      qs[l + 1] = levels_.hierarchy[l].R * qs[l];
+      multiply(levels_.hierarchy[l].R, qs[l], qs[l + 1]);
       boxes[l + 1] = boxes[l].coarse(levels_.hierarchy[l].P);
     }
     Vector y = Vector::Zero(L ? levels_.coarse.back()->size() : q_shift.size());

@@ -68,7 +68,8 @@ struct FixedLinearization {
     for (Eigen::Index i = 0; i < b.size(); ++i)
       if (!inactive_state(set[i])) t[i] = b[i];
     ScopedTimer timer(level.timings().spmv);
-    const Vector At = level.matrix() * t;
+    Vector At(b.size());
+    multiply(level.matrix(), t, At);
     for (Eigen::Index i = 0; i < b.size(); ++i)
       if (inactive_state(set[i])) b[i] -= At[i];
   }
@@ -194,8 +195,14 @@ class NewtonStep {
   double rounding_level() const { return level_.rounding_level(z_, lin_.q, g()); }
   /// The trial z⁺ did not move beyond rounding (only ties g ≈ w ≈ 0 changed sides).
   bool trial_still() const {
-    return (z_new_ - z_).template lpNorm<Eigen::Infinity>() <= 1e-14 * z_new_.template lpNorm<Eigen::Infinity>();
+    const Comm& comm = level_.comm();
+    return comm.inf_norm(z_new_ - z_) <= 1e-14 * comm.inf_norm(z_new_);
   }
+  /// The active sets' bookkeeping over every process (NewtonLevel's).
+  std::uint64_t fingerprint(const std::vector<char>& inactive) const { return level_.fingerprint(inactive); }
+  bool same_set(const std::vector<char>& a, const std::vector<char>& b) const { return level_.same_set(a, b); }
+  std::size_t active_count(const std::vector<char>& inactive) const { return level_.active_count(inactive); }
+  const Comm& comm() const { return level_.comm(); }
   /// z ← the trial iterate.
   void accept() {
     z_.swap(z_new_); w_.swap(w_new_); g_.swap(g_new_); zeta_z_.swap(zeta_new_);

@@ -5,6 +5,7 @@
 
 #include "../options.hpp"
 #include "../result.hpp"
+#include "comm.hpp"
 #include "iterate.hpp"
 #include "timer.hpp"
 
@@ -73,7 +74,7 @@ class Monitor {
     const std::optional<Status> end = verdict(r);
     // The callback sees every iterate that has a Res (those of the history), the last one too;
     // asking to stop at an iterate that ends the solve anyway does not change why it ended.
-    const bool asked = callback_ && call_back(k, improved ? best_z_ : s.z, r);
+    const bool asked = callback_ && !comm_->all(!call_back(k, improved ? best_z_ : s.z, r));
     if (end) return finish_with(*end, k);
     if (asked) return finish_with(Status::CallbackStop, k);
     if (poll_ && ScopedTimer::seconds_since(last_poll_) > 0.05) {
@@ -94,6 +95,9 @@ class Monitor {
   /// best iterate's number): the outer fixed point numbers them by the Newton steps taken, as
   /// its nit counts them.
   void number_by(const int* count) { count_ = count; }
+  /// The processes that own the other rows of s.x and s.z (detail/comm.hpp; serial by default):
+  /// the norms the rules read are theirs together, and a callback that asks to stop on one stops all.
+  void reduce_with(const Comm& comm) { comm_ = &comm; }
 
   /// The step ended the solve after its last iterate was looked at (the loop's step.end()).
   void end(const StepEnd& e) {
@@ -164,7 +168,7 @@ class Monitor {
   // The best iterate is kept by swapping buffers, not copying. The rounding floor: Res does not
   // improve while the steps are at rounding level (tol below what floating point reaches).
   bool track_best(int k, double r, Iterate& s) {
-    if (k == 0) x_scale_ = s.x.lpNorm<Eigen::Infinity>();
+    if (k == 0) x_scale_ = comm_->inf_norm(s.x);
     if (r < best_) {
       best_ = r;
       best_k_ = k;
@@ -178,7 +182,7 @@ class Monitor {
     if (r != last_r_) ++since_best_;  // iterations on a plateau of bit-identical Res do not count
     last_r_ = r;
     if (k > 0) {
-      const double xnorm = s.x.lpNorm<Eigen::Infinity>();
+      const double xnorm = comm_->inf_norm(s.x);
       track_x(k, xnorm);
       floor_count_ = (s.step <= 1e-8 * (xnorm > 0 ? xnorm : 1.0)) ? floor_count_ + 1 : 0;
     }
@@ -208,7 +212,7 @@ class Monitor {
       same_ = 0;
       return;
     }
-    const double znorm = s.z.lpNorm<Eigen::Infinity>();
+    const double znorm = comm_->inf_norm(s.z);
     if (same_++ == 0) {
       x_still_ = z_grows_ = true;
     } else {
@@ -280,6 +284,7 @@ class Monitor {
   bool out_of_reach_ = false, x_runaway_ = false;
   int x_ref_k_ = -1;
   const int* count_ = nullptr;
+  const Comm* comm_ = &serial_comm();
   double x_scale_ = 0, x_ref_ = 0;
   double last_r_ = std::numeric_limits<double>::quiet_NaN();
   double win_min_ = std::numeric_limits<double>::infinity(), win_max_ = -win_min_, prev_win_min_ = win_min_;

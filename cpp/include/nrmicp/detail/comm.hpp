@@ -1,0 +1,51 @@
+// nrmicp — the global reductions of the Newton driver: the one thing a distributed engine changes in
+// its decisions (AMGCL's MPI solvers are the serial ones with an inner-product policy; this is that
+// policy). Vectors hold the rows a process owns; a norm, a maximum, a count or an active-set
+// fingerprint is reduced over every process here. The serial Comm reduces nothing: one process owns
+// every row, and its calls cost a virtual call a Newton step (nothing per row).
+#pragma once
+
+#include <Eigen/Core>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+
+namespace nrmicp::detail {
+
+class Comm {
+ public:
+  virtual ~Comm() = default;
+  /// In place over every process: the sums resp. maxima of v[0..n).
+  virtual void sum(double*, int) const {}
+  virtual void max(double*, int) const {}
+  virtual void sum(std::uint64_t*, int) const {}
+  virtual int size() const { return 1; }
+
+  double sum(double v) const { sum(&v, 1); return v; }
+  double max(double v) const { max(&v, 1); return v; }
+  std::uint64_t sum(std::uint64_t v) const { sum(&v, 1); return v; }
+  /// Whether b holds on every process.
+  bool all(bool b) const { return !(max(b ? 0.0 : 1.0) > 0); }
+  /// ‖v‖∞ over every process (a NaN stays NaN, as in lpNorm).
+  template <typename Derived>
+  double inf_norm(const Eigen::MatrixBase<Derived>& v) const {
+    return max(v.size() ? v.template lpNorm<Eigen::Infinity>() : 0.0);
+  }
+  /// ‖m‖₂ over every process without overflow or underflow: scaled by the largest |mᵢ| anywhere.
+  /// m may be an expression (read twice, never formed).
+  template <typename Derived>
+  double stable_norm(const Eigen::MatrixBase<Derived>& m) const {
+    const double scale = max(m.size() ? m.cwiseAbs().maxCoeff() : 0.0);
+    if (!(scale > 0) || !std::isfinite(scale)) return std::sqrt(sum(m.size() ? m.squaredNorm() : 0.0));
+    return scale * std::sqrt(sum(m.size() ? (m / scale).squaredNorm() : 0.0));
+  }
+};
+
+/// The one process that owns every row.
+inline const Comm& serial_comm() {
+  static const Comm c;
+  return c;
+}
+
+}  // namespace nrmicp::detail

@@ -1,0 +1,82 @@
+// nrmicp — the engine of the Newton driver: what a level needs of its matrix, as free operations
+// overloaded by the matrix type (AMGCL's backend shape). The driver (newton_level.hpp,
+// newton_step.hpp, globalization.hpp, newton_run.hpp, newton.hpp) is written once against them;
+// this file is the Eigen/SuiteSparse engine, cpp/include/nrmicp/petsc/engine.hpp the PETSc one.
+//   comm_of(A)                     the global reductions (detail/comm.hpp)
+//   row_offset(A)                  the global index of the first row this process owns
+//   multiply(A, v, out)            out = A v (this process's rows); multiply_add: out += A v
+//   abs_multiply_add(A, v, out)    out += |A| v
+//   sweep_rows(A, q, y, k, box)    k symmetric projected Gauss–Seidel sweeps on the rows owned
+//   galerkin(P, A), transpose(P)   the coarse operator PᵀAP and R = Pᵀ of a hierarchy level
+//   inject_bounds(P, b, none)      a coarse level's bounds (box.hpp)
+//   Engine<M>::System, ::Fallback  the reduced step's solve and the fallback member of a level
+#pragma once
+
+#include "comm.hpp"
+#include "sparse_product.hpp"
+
+#include <Eigen/SparseCore>
+
+namespace nrmicp {
+template <typename MatrixType>
+class Solver;
+}  // namespace nrmicp
+
+namespace nrmicp::detail {
+
+template <typename StorageIndex>
+class ActiveSetSystem;
+template <typename StorageIndex>
+struct Level;
+template <typename StorageIndex>
+struct Hierarchy;
+
+/// The serial engine's matrices: Eigen sparse matrices (and Maps of them), every row owned.
+template <typename Derived>
+const Comm& comm_of(const Eigen::SparseMatrixBase<Derived>&) {
+  return serial_comm();
+}
+template <typename Derived>
+Eigen::Index row_offset(const Eigen::SparseMatrixBase<Derived>&) {
+  return 0;
+}
+template <typename Derived>
+void multiply(const Eigen::SparseMatrixBase<Derived>& A, const Eigen::VectorXd& v, Eigen::VectorXd& out) {
+  out.noalias() = A.derived() * v;
+}
+template <typename Derived>
+void multiply_add(const Eigen::SparseMatrixBase<Derived>& A, const Eigen::VectorXd& v, Eigen::VectorXd& out) {
+  out.noalias() += A.derived() * v;
+}
+template <typename Derived, typename V>
+void abs_multiply_add(const Eigen::SparseMatrixBase<Derived>& A, const V& v, Eigen::VectorXd& out) {
+  out.noalias() += A.derived().cwiseAbs() * v;
+}
+template <typename StorageIndex>
+Eigen::SparseMatrix<double, Eigen::RowMajor, StorageIndex> transpose(
+    const Eigen::SparseMatrix<double, Eigen::RowMajor, StorageIndex>& P) {
+  return P.transpose();
+}
+/// PᵀAP with R = Pᵀ given (the level holds it).
+template <typename StorageIndex, typename MatrixType>
+Eigen::SparseMatrix<double, Eigen::RowMajor, StorageIndex> galerkin(
+    const Eigen::SparseMatrix<double, Eigen::RowMajor, StorageIndex>& R, const MatrixType& A,
+    const Eigen::SparseMatrix<double, Eigen::RowMajor, StorageIndex>& P) {
+  return product(R, product(A, P));
+}
+
+/// The types a level of the Newton driver takes from its engine: the matrices of its hierarchy
+/// (`Coarse`: P, R, the coarse operators, an affine ζ's B) and the reduced step's `System`.
+template <typename MatrixType>
+struct Engine {
+  using StorageIndex = typename MatrixType::StorageIndex;
+  using Coarse = Eigen::SparseMatrix<double, Eigen::RowMajor, StorageIndex>;
+  using System = ActiveSetSystem<StorageIndex>;
+  using Level = detail::Level<StorageIndex>;          ///< P, R = Pᵀ and the coarse operator (multigrid.hpp)
+  using Hierarchy = detail::Hierarchy<StorageIndex>;  ///< the levels below one
+  using Fallback = Solver<MatrixType>;                ///< the fallback member (nrm) of a level
+  /// Whether the engine has every ζ strategy (an affine ζ's full system, ζ's Jacobian).
+  static constexpr bool serial = true;
+};
+
+}  // namespace nrmicp::detail
