@@ -3,7 +3,8 @@
 #   make test   install what is missing, build, run ctest, pytest and the MPI tests (mpitest)
 PY      ?= python3
 BUILD   ?= build
-APT_PKGS = libeigen3-dev libsuitesparse-dev libopenblas0-pthread doctest-dev
+# PETSc, MPI and pkg-config too: `install` then builds nrmicp._petsc (the Newton member on PETSc)
+APT_PKGS = libeigen3-dev libsuitesparse-dev libopenblas0-pthread doctest-dev pkg-config $(MPI_APT)
 PIP_PKGS = "numpy>=1.23" "scipy>=1.9" "pyamg>=5.0" "pybind11>=2.12" "scikit-build-core>=0.8" "matplotlib>=3.5" \
            "pytest>=7" "hypothesis>=6" "piqp>=0.4" "scikit-fem>=8" ninja "cmake>=3.18"
 SUDO    := $(shell [ "$$(id -u)" = 0 ] || echo sudo)

@@ -375,12 +375,98 @@ def case_units():
                                           1e-6 * r.residual + 1e-15 * np.linalg.norm(abs(s * A) @ abs(z) + abs(s * pb.q)))}
     return out
 
+
+def _pmat(P, lo, hi, clo, chi):
+    """P's fine rows lo:hi as this rank's block, its columns laid out as the coarse rows clo:chi."""
+    B = sp.csr_matrix(P[lo:hi])
+    B.sort_indices()
+    return PETSc.Mat().createAIJ(size=((hi - lo, P.shape[0]), (chi - clo, P.shape[1])),
+                                 csr=(B.indptr.astype(PETSc.IntType), B.indices.astype(PETSc.IntType), B.data),
+                                 comm=COMM)
+
+
+def engine_problems():
+    """(name, A, q, serial zeta, this rank's zeta kind/c/fn, upper or None, prolongations or None)."""
+    from nrmicp.scenes.two_sided import two_sided_membrane_2d as two_sided_2d
+    out = []
+    pb = obstacle_2d(63, exact=False)
+    out.append(("obstacle_2d cold", pb.A, pb.q, pb.zeta, pb.zeta, None, None))
+    out.append(("obstacle_2d nested", pb.A, pb.q, pb.zeta, pb.zeta, None, pb.prolongations()))
+    cd = convection_diffusion_obstacle(31, exact=False)
+    out.append(("convection nested", cd.A, cd.q, cd.zeta, cd.zeta, None, cd.prolongations()))
+    ts = two_sided_2d(31)
+    out.append(("two-sided nested", ts.A, ts.q, ts.zeta, ts.zeta, ts.upper, ts.prolongations()))
+    icp = make_icp(16, c=0.1)
+    out.append(("icp callable", icp.A, icp.q, icp.zeta, icp.zeta, None, None))
+    lcp = make_lcp(16)
+    out.append(("lcp", lcp.A, lcp.q, None, None, None, None))
+    return out
+
+
+def case_engine():
+    """The one Newton driver on the PETSc engine (nrmicp._petsc) against the serial member with the
+    same prolongations: status, finest steps, z."""
+    from nrmicp import _core, _petsc
+    rows = []
+    for name, A, q, zeta, zl, upper, Ps in engine_problems():
+        A = sp.csr_matrix(A)
+        n = A.shape[0]
+        lo, hi = split(n)
+        M = mat(A, lo, hi)
+        mats, f = [], (lo, hi)
+        for P in Ps or []:
+            c = split(P.shape[1])
+            mats.append(_pmat(sp.csr_matrix(P), *f, *c))
+            f = c
+        o = _core.Options()
+        o.method = _core.Method.newton
+        o.tol = 1e-9
+        it = _core.SolveOptions()
+        it.tol, it.maxiter = 1e-9, 200
+        if zeta is None:
+            kind, c, fn = _core.ZetaKind.none, None, None
+        elif callable(zeta):
+            from nrmicp._zeta import CheckedZeta
+            kind, c, fn = _core.ZetaKind.functor, None, CheckedZeta(lambda z, lo=lo, hi=hi: zl(_full(z, lo, hi, n))[lo:hi], hi - lo)
+        else:
+            kind, c, fn = _core.ZetaKind.constant, np.array(zeta[lo:hi], dtype=float), None
+        up = None if upper is None else np.array(upper[lo:hi], dtype=float)
+        core = _petsc.Newton(M.handle, o, [P.handle for P in mats], [])
+        r = core.solve(np.array(q[lo:hi], dtype=float), kind, c, fn, up, None, None, it)
+        z = _gather(r["z"], n)
+        out = {"case": name, "status": int(r["status"]), "steps": list(r["newton"].level_steps), "inner": core.inner}
+        if RANK == 0:
+            s = nrmicp.solve(A, q, zeta=zeta, upper=upper, method="newton", hierarchy=list(Ps) if Ps else None,
+                             tol=1e-9, maxiter=200, scale=None)
+            out.update(serial_status=int(s.status), serial_steps=list(s.level_steps),
+                       err=float(np.max(np.abs(z - s.z)) / max(np.max(np.abs(s.z)), 1e-300)),
+                       res=float(oracle_residual(A, q, z, zeta) if upper is None else s.residual))
+        rows.append(out)
+    return rows
+
+
+def _full(z_local, lo, hi, n):
+    """This rank's rows in a length-n vector (an entry-wise ζ reads only them)."""
+    z = np.zeros(n)
+    z[lo:hi] = z_local
+    return z
+
+
+def _gather(local, n):
+    """Every rank's rows, on every rank."""
+    v = PETSc.Vec().createMPI((len(local), n), comm=COMM)
+    v.setArray(local)
+    sc, out = PETSc.Scatter.toAll(v)
+    sc.scatter(v, out, PETSc.InsertMode.INSERT, PETSc.ScatterMode.FORWARD)
+    return out.getArray().copy()
+
+
 if __name__ == "__main__":
     name, args = sys.argv[1], sys.argv[2:]
     result = {"agreement": lambda: case_agreement(), "partition": case_partition,
               "bad": lambda: case_bad(args[0], args[1]), "boomeramg": case_boomeramg,
               "floor": case_floor, "ssor": case_ssor, "overshoot": case_overshoot, "sweeps": case_sweeps,
-              "warm": case_warm, "units": case_units,
+              "warm": case_warm, "units": case_units, "engine": case_engine,
               "fuzz": lambda: case_fuzz(int(args[0]))}[name]()
     if RANK == 0:
         print("RESULT " + json.dumps(result), flush=True)

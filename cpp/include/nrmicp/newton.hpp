@@ -93,7 +93,7 @@ class Newton {
       throw std::invalid_argument("Newton: A must be square, got " + std::to_string(A.rows()) + "x" +
                                   std::to_string(A.cols()));
     options_.check(A.rows());
-    check_shapes(A.rows(), prolongations, coarse_operators);
+    check_shapes([&] { using detail::global_rows; return global_rows(A); }(), prolongations, coarse_operators);
     const auto t0 = std::chrono::steady_clock::now();
     levels_.finest = std::make_unique<detail::NewtonLevel<MatrixType>>(A, options_);  // checks Ω1, Ω2
     build_hierarchy(std::move(prolongations), std::move(coarse_operators));
@@ -172,19 +172,26 @@ class Newton {
     return o;
   }
 
-  static std::string shape(const RowMatrix& M) { return std::to_string(M.rows()) + "x" + std::to_string(M.cols()); }
+  /// The shape of the whole matrix (every process's rows).
+  static std::string shape(const RowMatrix& M) {
+    using detail::global_cols;
+    using detail::global_rows;
+    return std::to_string(global_rows(M)) + "x" + std::to_string(global_cols(M));
+  }
   static void check_shapes(Eigen::Index rows, const std::vector<RowMatrix>& prolongations,
                            const std::vector<RowMatrix>& coarse) {
     if (!coarse.empty() && coarse.size() != prolongations.size())
       throw std::invalid_argument("Newton: " + std::to_string(coarse.size()) + " coarse_operators for " +
                                   std::to_string(prolongations.size()) + " prolongations (one each, or none)");
+    using detail::global_cols;
+    using detail::global_rows;
     for (std::size_t l = 0; l < prolongations.size(); ++l) {
       const RowMatrix& P = prolongations[l];
-      if (P.rows() != rows || P.cols() < 1 || P.cols() > rows)
+      if (global_rows(P) != rows || global_cols(P) < 1 || global_cols(P) > rows)
         throw std::invalid_argument("Newton: prolongations[" + std::to_string(l) + "] has shape " + shape(P) +
                                     ", expected " + std::to_string(rows) + " rows and at most as many columns");
-      rows = P.cols();
-      if (!coarse.empty() && (coarse[l].rows() != rows || coarse[l].cols() != rows))
+      rows = global_cols(P);
+      if (!coarse.empty() && (global_rows(coarse[l]) != rows || global_cols(coarse[l]) != rows))
         throw std::invalid_argument("Newton: coarse_operators[" + std::to_string(l) + "] has shape " +
                                     shape(coarse[l]) + ", expected " + std::to_string(rows) + "x" + std::to_string(rows));
     }
@@ -196,6 +203,7 @@ class Newton {
   void build_hierarchy(std::vector<RowMatrix> prolongations, std::vector<RowMatrix> coarse) {
     // Eigen 3.4's SparseMatrix has no move constructor: std::move copies it. The matrices are
     // swapped into place and the vector reserved (its growth would copy every level so far).
+    using detail::comm_of;
     using detail::galerkin;
     using detail::transpose;
     auto& hierarchy = levels_.hierarchy;
@@ -212,7 +220,8 @@ class Newton {
         level.A.swap(A);
       }
       report_.reason = nonpositive_diagonal(level.A, static_cast<int>(l) + 1);
-      if (!report_.reason.empty()) {
+      if (!comm_of(levels_.A).all(report_.reason.empty())) {  // (every process gives the level up)
+        if (report_.reason.empty()) report_.reason = "a coarse operator of level " + std::to_string(l + 1) + " has a_ii <= 0 on another process";
         hierarchy.pop_back();
         break;
       }

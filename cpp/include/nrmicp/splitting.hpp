@@ -38,12 +38,18 @@ Eigen::VectorXd diagonal(const MatrixType& A) {
 /// active-set test and sets the fallback member's Ω2, so a zero diagonal (contact, games) needs no
 /// refusal; |a_ii| keeps the fallback's Ω2 + A from a zero diagonal where a_ii = −max_j |a_ij|
 /// (the row (−1, 0, 0) made it singular).
+/// max_j |a_ij| of each row (an engine's matrix overloads it: petsc/engine.hpp).
 template <typename MatrixType>
-Eigen::VectorXd newton_default_omega2(const MatrixType& A, const Eigen::VectorXd& d) {
+Eigen::VectorXd row_max_abs(const MatrixType& A) {
   Eigen::VectorXd row_max = Eigen::VectorXd::Zero(A.rows());
   for (Eigen::Index k = 0; k < A.outerSize(); ++k)
     for (typename MatrixType::InnerIterator it(A, k); it; ++it)
       row_max[it.row()] = std::max(row_max[it.row()], std::abs(it.value()));
+  return row_max;
+}
+template <typename MatrixType>
+Eigen::VectorXd newton_default_omega2(const MatrixType& A, const Eigen::VectorXd& d) {
+  const Eigen::VectorXd row_max = row_max_abs(A);
   Eigen::VectorXd omega2 = d;
   for (Eigen::Index i = 0; i < d.size(); ++i)
     if (!(d[i] >= DBL_MIN)) {

@@ -20,7 +20,8 @@ namespace nrmicp::detail {
 class Anderson {
  public:
   using Vector = Eigen::VectorXd;
-  explicit Anderson(int m) : m_(m), G_(Eigen::MatrixXd::Zero(m, m)) {}
+  /// `comm`: the processes that own the other rows of the iterates (their inner products are global).
+  explicit Anderson(int m, const Comm& comm = serial_comm()) : m_(m), G_(Eigen::MatrixXd::Zero(m, m)), comm_(comm) {}
 
   /// Given the current iterate x and its fixed-point step f = G(x) − x, returns the
   /// accelerated next iterate in x_next.
@@ -35,10 +36,10 @@ class Anderson {
       dx_[s] = x - x_prev_;
       df_[s] = f - f_prev_;
       if (count_ < m_) ++count_; else head_ = (head_ + 1) % m_;
-      for (int i = 0; i < count_; ++i) {
-        const int t = slot(i);
-        G_(s, t) = G_(t, s) = df_[s].dot(df_[t]);
-      }
+      Eigen::VectorXd dots(count_);
+      for (int i = 0; i < count_; ++i) dots[i] = df_[s].dot(df_[slot(i)]);
+      comm_.sum(dots.data(), count_);
+      for (int i = 0; i < count_; ++i) G_(s, slot(i)) = G_(slot(i), s) = dots[i];
     }
     x_prev_ = x;
     f_prev_ = f;
@@ -53,6 +54,7 @@ class Anderson {
       b[i] = df_[slot(i)].dot(f);
       for (int j = 0; j < k; ++j) Gk(i, j) = G_(slot(i), slot(j));
     }
+    comm_.sum(b.data(), k);
     const double reg = 1e-12 * (Gk.trace() > 0 ? Gk.trace() : 1.0);
     Gk.diagonal().array() += reg;
     const Eigen::VectorXd g = Gk.ldlt().solve(b);
@@ -73,6 +75,7 @@ class Anderson {
   Vector x_prev_, f_prev_;
   std::vector<Vector> dx_, df_;
   Eigen::MatrixXd G_;
+  const Comm& comm_;
 };
 
 /// Any step (the interface at the top of solver.hpp), accelerated: x⁽ᵏ⁺¹⁾ is Anderson's mix of

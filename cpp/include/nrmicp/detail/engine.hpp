@@ -4,6 +4,7 @@
 // this file is the Eigen/SuiteSparse engine, cpp/include/nrmicp/petsc/engine.hpp the PETSc one.
 //   comm_of(A)                     the global reductions (detail/comm.hpp)
 //   row_offset(A)                  the global index of the first row this process owns
+//   global_rows(A), global_cols(A) the sizes of the whole matrix
 //   multiply(A, v, out)            out = A v (this process's rows); multiply_add: out += A v
 //   abs_multiply_add(A, v, out)    out += |A| v
 //   sweep_rows(A, q, y, k, box)    k symmetric projected Gauss–Seidel sweeps on the rows owned
@@ -39,6 +40,15 @@ const Comm& comm_of(const Eigen::SparseMatrixBase<Derived>&) {
 template <typename Derived>
 Eigen::Index row_offset(const Eigen::SparseMatrixBase<Derived>&) {
   return 0;
+}
+/// The rows and columns of the whole matrix (every process's).
+template <typename Derived>
+Eigen::Index global_rows(const Eigen::SparseMatrixBase<Derived>& A) {
+  return A.rows();
+}
+template <typename Derived>
+Eigen::Index global_cols(const Eigen::SparseMatrixBase<Derived>& A) {
+  return A.cols();
 }
 template <typename Derived>
 void multiply(const Eigen::SparseMatrixBase<Derived>& A, const Eigen::VectorXd& v, Eigen::VectorXd& out) {

@@ -302,7 +302,8 @@ class NewtonLevel {
   }
   Result sweep(const Vector& q, const RowMatrix* B, const Vector* c, const Vector& z0, int sweeps, double tol) {
     using Z = Zeta<StorageIndex>;
-    return sweep(q, B ? Z::affine(*B, *c) : Z::none(), z0, sweeps, tol);
+    if constexpr (Engine<MatrixType>::serial) return sweep(q, B ? Z::affine(*B, *c) : Z::none(), z0, sweeps, tol);
+    return sweep(q, Z::none(), z0, sweeps, tol);  // (an engine without affine ζ has no B)
   }
   /// The fallback on a box problem (y ∈ [lo, hi]): the fallback member's box form (detail/modulus.hpp).
   Result sweep(const Vector& q, const Box& box, const Vector& y0, int sweeps, double tol) {

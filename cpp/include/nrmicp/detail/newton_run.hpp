@@ -77,7 +77,7 @@ LevelOutcome newton_loop(Plain& plain, const NewtonControl& ctl, const Eigen::Ve
 /// `K` (analysed for this problem), from z.
 /// `box` (B null): the LCP's bounds lo ≤ z ≤ hi (null or empty: z ≥ 0).
 template <typename MatrixType>
-LevelOutcome newton_loop(NewtonLevel<MatrixType>& level, ActiveSetSystem<typename MatrixType::StorageIndex>& K,
+LevelOutcome newton_loop(NewtonLevel<MatrixType>& level, typename Engine<MatrixType>::System& K,
                          const Eigen::VectorXd& q, const typename NewtonLevel<MatrixType>::RowMatrix* B,
                          const Eigen::VectorXd* c, const Eigen::VectorXd& z, const NewtonControl& ctl,
                          const Box* box = nullptr) {
@@ -91,7 +91,7 @@ LevelOutcome newton_loop(NewtonLevel<MatrixType>& level, ActiveSetSystem<typenam
 template <typename MatrixType>
 struct NewtonLevels {
   using StorageIndex = typename MatrixType::StorageIndex;
-  using RowMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, StorageIndex>;
+  using RowMatrix = typename Engine<MatrixType>::Coarse;
   const MatrixType& A;
   std::vector<typename Engine<MatrixType>::Level> hierarchy;  ///< below the finest: P, R = Pᵀ, A = R A_finer P
   std::unique_ptr<NewtonLevel<MatrixType>> finest;
@@ -441,6 +441,7 @@ class NewtonRun {
     const Z& zeta;
     std::vector<char> set;  // the last inner solve's inactive set: the next one starts from it
     Vector w, capped;
+    const Comm& comm() const { return run.comm(); }
     /// The inner obstacle problem, solved to Res < tol (0: to a settled active set). Without z,
     /// it starts at y = 0 (z = ψ): measured better than from z = 0.
     /// With an upper bound u the inner problem is min(ψ, u) ≤ z ≤ u (ζ(z) above u has no z between).

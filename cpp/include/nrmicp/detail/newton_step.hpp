@@ -34,7 +34,7 @@ template <typename MatrixType>
 struct FixedLinearization {
   using Level = NewtonLevel<MatrixType>;
   using Vector = Eigen::VectorXd;
-  using System = ActiveSetSystem<typename MatrixType::StorageIndex>;
+  using System = typename Engine<MatrixType>::System;
   /// The active set alone fixes the step: a set seen before is a cycle, the last one a settled solve.
   static constexpr bool set_fixes_step = true;
 

@@ -46,7 +46,7 @@ class OuterFixedPoint {
   OuterFixedPoint(Run& run, Vector z, bool given, Iterate& s, int memory, double forcing)
       : run_(run), z_(std::move(z)), psi_(z_.size()), psi_new_(z_.size()), given_(given),
         r_(run.icp_residual(z_, psi_)), test_(r_), best_z_(z_), best_r_(r_), runs_(run.sweep_budget()),
-        aa_(std::max(memory, 1)), accelerate_(memory > 0), forcing_(forcing) {
+        aa_(std::max(memory, 1), run.comm()), accelerate_(memory > 0), forcing_(forcing) {
     s.z = z_;
   }
 

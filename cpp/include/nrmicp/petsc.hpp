@@ -1,0 +1,6 @@
+// nrmicp on PETSc: the Newton member over MPI, nrmicp::Newton<nrmicp::petsc::Matrix> (the one
+// driver of newton.hpp on the PETSc engine, petsc/engine.hpp). Needs PETSc with hypre and MPI.
+#pragma once
+
+#include "petsc/engine.hpp"
+#include "newton.hpp"

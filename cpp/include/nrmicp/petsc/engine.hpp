@@ -1,0 +1,462 @@
+// nrmicp — the PETSc engine of the Newton driver (detail/engine.hpp lists the operations): the
+// Newton member over MPI with nrmicp::Newton<nrmicp::petsc::Matrix>, the same driver as the serial
+// one. A petsc::Matrix is a distributed AIJ Mat; the driver's vectors (Eigen) hold the rows this
+// process owns, so every row-wise decision is the serial code, and only the reductions
+// (petsc::MpiComm), the products (MatMult), the reduced step's solve (KSP with hypre BoomerAMG, or
+// LU on one process) and the level's sweeps and fallback (on the process's diagonal block, the
+// couplings to other processes' rows held) are PETSc's.
+// Needs PETSc (3.18 or later) with hypre; include it before any nrmicp header that instantiates
+// Newton<petsc::Matrix> (nrmicp/petsc.hpp does).
+#pragma once
+
+#include "../detail/active_set.hpp"
+#include "../detail/box.hpp"
+#include "../detail/comm.hpp"
+#include "../detail/newton_level.hpp"
+#include "../options.hpp"
+#include "../result.hpp"
+#include "../solver.hpp"
+#include "../zeta.hpp"
+
+#include <petscksp.h>
+
+#include <Eigen/SparseCore>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace nrmicp::petsc {
+
+/// A PETSc call's error as an exception (PETSc has printed its trace already).
+inline void check(PetscErrorCode e, const char* what) {
+  if (e) throw std::runtime_error(std::string("PETSc: ") + what + " failed (PETSc error " + std::to_string(e) + ")");
+}
+
+/// The reductions over an MPI communicator (detail::Comm).
+class MpiComm : public detail::Comm {
+ public:
+  explicit MpiComm(MPI_Comm c) : c_(c) { MPI_Comm_size(c, &size_); }
+  void sum(double* v, int n) const override { MPI_Allreduce(MPI_IN_PLACE, v, n, MPI_DOUBLE, MPI_SUM, c_); }
+  void sum(std::uint64_t* v, int n) const override { MPI_Allreduce(MPI_IN_PLACE, v, n, MPI_UINT64_T, MPI_SUM, c_); }
+  /// A NaN on any process is the maximum (as lpNorm keeps it serially; MPI_MAX leaves NaN undefined).
+  void max(double* v, int n) const override {
+    std::vector<double> t(2 * static_cast<std::size_t>(n));
+    for (int i = 0; i < n; ++i) {
+      t[2 * i] = std::isnan(v[i]) ? -std::numeric_limits<double>::infinity() : v[i];
+      t[2 * i + 1] = std::isnan(v[i]) ? 1.0 : 0.0;
+    }
+    MPI_Allreduce(MPI_IN_PLACE, t.data(), 2 * n, MPI_DOUBLE, MPI_MAX, c_);
+    for (int i = 0; i < n; ++i) v[i] = t[2 * i + 1] > 0 ? std::numeric_limits<double>::quiet_NaN() : t[2 * i];
+  }
+  int size() const override { return size_; }
+  MPI_Comm get() const { return c_; }
+
+ private:
+  MPI_Comm c_;
+  int size_ = 1;
+};
+
+/// A distributed AIJ matrix (a reference to the caller's Mat, which it keeps alive): rows()/cols()
+/// are this process's, as the driver's vectors are. Copies share the Mat and its work vectors.
+class Matrix {
+ public:
+  using StorageIndex = PetscInt;
+  using Block = Eigen::Map<const Eigen::SparseMatrix<double, Eigen::RowMajor, PetscInt>>;
+  static constexpr bool IsRowMajor = false;  // rows are reached through sweep_rows, not Eigen's iterators
+
+  Matrix() = default;
+  /// Takes a reference to `A` (released when the last copy goes).
+  explicit Matrix(Mat A) : s_(std::make_shared<State>(A)) {}
+
+  Mat get() const { return s_ ? s_->A : nullptr; }
+  Eigen::Index rows() const { return s_ ? s_->m : 0; }
+  Eigen::Index cols() const { return s_ ? s_->n : 0; }
+  Eigen::Index outerSize() const { return rows(); }
+  Eigen::Index row_offset() const { return s_ ? s_->lo : 0; }
+  const MpiComm& comm() const { return *s_->comm; }
+  void swap(Matrix& other) noexcept { s_.swap(other.s_); }
+
+  /// out = A v (add: out += A v).
+  void multiply(const Eigen::VectorXd& v, Eigen::VectorXd& out, bool add = false) const {
+    if (!add) out.resize(rows());
+    State& s = *s_;
+    check(VecPlaceArray(s.x, v.data()), "VecPlaceArray");
+    check(VecPlaceArray(s.y, out.data()), "VecPlaceArray");
+    check(add ? MatMultAdd(s.A, s.x, s.y, s.y) : MatMult(s.A, s.x, s.y), "MatMult");
+    check(VecResetArray(s.x), "VecResetArray");
+    check(VecResetArray(s.y), "VecResetArray");
+  }
+  /// out = Aᵀ v.
+  void multiply_transpose(const Eigen::VectorXd& v, Eigen::VectorXd& out) const {
+    out.resize(cols());
+    State& s = *s_;
+    check(VecPlaceArray(s.y, v.data()), "VecPlaceArray");
+    check(VecPlaceArray(s.x, out.data()), "VecPlaceArray");
+    check(MatMultTranspose(s.A, s.y, s.x), "MatMultTranspose");
+    check(VecResetArray(s.x), "VecResetArray");
+    check(VecResetArray(s.y), "VecResetArray");
+  }
+  /// out += |A| v (|A| formed on first use).
+  void abs_multiply_add(const Eigen::VectorXd& v, Eigen::VectorXd& out) const {
+    if (!s_->abs) s_->abs = std::make_unique<Matrix>(absolute());
+    s_->abs->multiply(v, out, true);
+  }
+  /// The diagonal block (this process's rows and columns; the whole matrix on one process), a view
+  /// valid while this Matrix lives and its values do not change.
+  Block block() const {
+    State& s = *s_;
+    if (!s.block_ready) s.open_block();
+    return Block(s.m, s.m, s.block_nnz, s.ia, s.ja, s.va);
+  }
+  /// c = A v − (diagonal block) v: the couplings of this process's rows to other processes' unknowns
+  /// (zero on one process, not computed).
+  Eigen::VectorXd coupling(const Eigen::VectorXd& v) const {
+    Eigen::VectorXd c = Eigen::VectorXd::Zero(rows());
+    if (comm().size() == 1) return c;
+    multiply(v, c);
+    c.noalias() -= block() * v;
+    return c;
+  }
+  Eigen::VectorXd diagonal() const {
+    Eigen::VectorXd d(rows());
+    Vec v;
+    check(MatCreateVecs(get(), nullptr, &v), "MatCreateVecs");
+    check(MatGetDiagonal(get(), v), "MatGetDiagonal");
+    copy_out(v, d);
+    VecDestroy(&v);
+    return d;
+  }
+  /// max_j |a_ij| of this process's rows.
+  Eigen::VectorXd row_max_abs() const {
+    Eigen::VectorXd d(rows());
+    Vec v;
+    check(MatCreateVecs(get(), nullptr, &v), "MatCreateVecs");
+    check(MatGetRowMaxAbs(get(), v, nullptr), "MatGetRowMaxAbs");
+    copy_out(v, d);
+    VecDestroy(&v);
+    return d;
+  }
+  /// Whether A is symmetric (to rounding).
+  bool symmetric() const {
+    PetscBool sym = PETSC_FALSE;
+    check(MatIsSymmetric(get(), 1e-14, &sym), "MatIsSymmetric");
+    return sym == PETSC_TRUE;
+  }
+
+ private:
+  static void copy_out(Vec v, Eigen::VectorXd& d) {
+    const PetscScalar* a;
+    check(VecGetArrayRead(v, &a), "VecGetArrayRead");
+    std::copy_n(a, d.size(), d.data());
+    VecRestoreArrayRead(v, &a);
+  }
+  /// |A| entry-wise (a copy of A with its values' absolute values).
+  Matrix absolute() const {
+    Mat B;
+    check(MatDuplicate(get(), MAT_COPY_VALUES, &B), "MatDuplicate");
+    Mat parts[2] = {B, nullptr};
+    PetscBool mpi = PETSC_FALSE;
+    PetscObjectTypeCompare(reinterpret_cast<PetscObject>(B), MATMPIAIJ, &mpi);
+    if (mpi) check(MatMPIAIJGetSeqAIJ(B, &parts[0], &parts[1], nullptr), "MatMPIAIJGetSeqAIJ");
+    for (Mat part : parts) {
+      if (!part) continue;
+      PetscScalar* a;
+      PetscInt m, n;
+      check(MatSeqAIJGetArray(part, &a), "MatSeqAIJGetArray");
+      MatInfo info;
+      MatGetInfo(part, MAT_LOCAL, &info);
+      MatGetLocalSize(part, &m, &n);
+      for (PetscInt k = 0; k < static_cast<PetscInt>(info.nz_used); ++k) a[k] = std::abs(a[k]);
+      MatSeqAIJRestoreArray(part, &a);
+    }
+    Matrix out(B);
+    MatDestroy(&B);  // out holds its own reference
+    return out;
+  }
+
+  struct State {
+    Mat A = nullptr;
+    Vec x = nullptr, y = nullptr;  // work vectors whose arrays are the driver's (VecPlaceArray)
+    PetscInt m = 0, n = 0, lo = 0;
+    std::unique_ptr<MpiComm> comm;
+    std::unique_ptr<Matrix> abs;
+    Mat Ad = nullptr;  // the diagonal block, its CSR arrays open while the State lives
+    const PetscInt *ia = nullptr, *ja = nullptr;
+    const PetscScalar* va = nullptr;
+    PetscInt block_nnz = 0;
+    bool block_ready = false;
+
+    explicit State(Mat a) : A(a) {
+      check(PetscObjectReference(reinterpret_cast<PetscObject>(A)), "PetscObjectReference");
+      check(MatGetLocalSize(A, &m, &n), "MatGetLocalSize");
+      check(MatGetOwnershipRange(A, &lo, nullptr), "MatGetOwnershipRange");
+      MPI_Comm c;
+      check(PetscObjectGetComm(reinterpret_cast<PetscObject>(A), &c), "PetscObjectGetComm");
+      comm = std::make_unique<MpiComm>(c);
+      check(MatCreateVecs(A, &x, &y), "MatCreateVecs");
+    }
+    void open_block() {
+      check(MatGetDiagonalBlock(A, &Ad), "MatGetDiagonalBlock");
+      PetscInt rows;
+      PetscBool done;
+      check(MatGetRowIJ(Ad, 0, PETSC_FALSE, PETSC_FALSE, &rows, &ia, &ja, &done), "MatGetRowIJ");
+      if (!done) throw std::runtime_error("PETSc: the diagonal block has no CSR arrays (an AIJ matrix is needed)");
+      check(MatSeqAIJGetArrayRead(Ad, &va), "MatSeqAIJGetArrayRead");
+      block_nnz = ia[rows];
+      block_ready = true;
+    }
+    ~State() {
+      if (block_ready) {
+        PetscInt rows;
+        PetscBool done;
+        MatSeqAIJRestoreArrayRead(Ad, &va);
+        MatRestoreRowIJ(Ad, 0, PETSC_FALSE, PETSC_FALSE, &rows, &ia, &ja, &done);
+      }
+      VecDestroy(&x);
+      VecDestroy(&y);
+      abs.reset();
+      MatDestroy(&A);
+    }
+  };
+  std::shared_ptr<State> s_;
+};
+
+// ---- the engine's free operations (detail/engine.hpp), found by argument-dependent lookup
+inline const detail::Comm& comm_of(const Matrix& A) { return A.comm(); }
+inline Eigen::Index row_offset(const Matrix& A) { return A.row_offset(); }
+inline Eigen::Index global_rows(const Matrix& A) {
+  PetscInt m;
+  check(MatGetSize(A.get(), &m, nullptr), "MatGetSize");
+  return m;
+}
+inline Eigen::Index global_cols(const Matrix& A) {
+  PetscInt n;
+  check(MatGetSize(A.get(), nullptr, &n), "MatGetSize");
+  return n;
+}
+inline void multiply(const Matrix& A, const Eigen::VectorXd& v, Eigen::VectorXd& out) { A.multiply(v, out); }
+inline void multiply_add(const Matrix& A, const Eigen::VectorXd& v, Eigen::VectorXd& out) { A.multiply(v, out, true); }
+template <typename V>
+void abs_multiply_add(const Matrix& A, const V& v, Eigen::VectorXd& out) {
+  A.abs_multiply_add(Eigen::VectorXd(v), out);
+}
+inline Matrix transpose(const Matrix& P) {
+  Mat R;
+  check(MatTranspose(P.get(), MAT_INITIAL_MATRIX, &R), "MatTranspose");
+  Matrix out(R);
+  MatDestroy(&R);
+  return out;
+}
+/// PᵀAP (R = Pᵀ is not needed: PETSc's PtAP).
+inline Matrix galerkin(const Matrix&, const Matrix& A, const Matrix& P) {
+  Mat C;
+  check(MatPtAP(A.get(), P.get(), MAT_INITIAL_MATRIX, 2.0, &C), "MatPtAP");
+  Matrix out(C);
+  MatDestroy(&C);
+  return out;
+}
+inline Eigen::VectorXd diagonal(const Matrix& A) { return A.diagonal(); }
+inline Eigen::VectorXd row_max_abs(const Matrix& A) { return A.row_max_abs(); }
+
+/// k symmetric projected Gauss–Seidel sweeps on this process's rows (detail::projected_gauss_seidel
+/// on the diagonal block), the couplings to other processes' unknowns held at y: Gauss–Seidel within
+/// a process, Jacobi between them (on one process, the serial sweeps exactly).
+inline void sweep_rows(const Matrix& A, const Eigen::VectorXd& q, Eigen::VectorXd& y, int sweeps, const detail::Box* box) {
+  if (A.comm().size() == 1) return detail::projected_gauss_seidel(A.block(), q, y, sweeps, box);
+  const Eigen::VectorXd qe = q + A.coupling(y);
+  detail::projected_gauss_seidel(A.block(), qe, y, sweeps, box);
+}
+
+/// detail::inject_bounds (box.hpp) on P's columns this process owns: the rows of R = Pᵀ, with every
+/// fine row's bound gathered (once per level and solve, at the nested start).
+inline Eigen::VectorXd inject_bounds(const Matrix& P, const Eigen::VectorXd& b, double none) {
+  const Matrix R = transpose(P);
+  Vec local, all;
+  VecScatter scatter;
+  check(VecCreateMPIWithArray(P.comm().get(), 1, P.rows(), PETSC_DECIDE, b.data(), &local), "VecCreateMPIWithArray");
+  check(VecScatterCreateToAll(local, &scatter, &all), "VecScatterCreateToAll");
+  check(VecScatterBegin(scatter, local, all, INSERT_VALUES, SCATTER_FORWARD), "VecScatterBegin");
+  check(VecScatterEnd(scatter, local, all, INSERT_VALUES, SCATTER_FORWARD), "VecScatterEnd");
+  const PetscScalar* ball;
+  check(VecGetArrayRead(all, &ball), "VecGetArrayRead");
+  Eigen::VectorXd c = Eigen::VectorXd::Constant(R.rows(), none), weight = Eigen::VectorXd::Zero(R.rows());
+  for (Eigen::Index j = 0; j < R.rows(); ++j) {
+    PetscInt ncols;
+    const PetscInt* cols;
+    const PetscScalar* vals;
+    const PetscInt row = static_cast<PetscInt>(R.row_offset() + j);
+    check(MatGetRow(R.get(), row, &ncols, &cols, &vals), "MatGetRow");
+    for (PetscInt k = 0; k < ncols; ++k)
+      if (vals[k] != 0 && std::isfinite(ball[cols[k]]) && std::abs(vals[k]) > weight[j]) {
+        weight[j] = std::abs(vals[k]);
+        c[j] = ball[cols[k]];
+      }
+    MatRestoreRow(R.get(), row, &ncols, &cols, &vals);
+  }
+  VecRestoreArrayRead(all, &ball);
+  VecScatterDestroy(&scatter);
+  VecDestroy(&all);
+  VecDestroy(&local);
+  return c;
+}
+
+/// A level of the hierarchy below another (detail::Level's PETSc form): P, R = Pᵀ, A = PᵀA_finer P.
+struct Level {
+  Matrix P, R, A;
+};
+/// The levels below a level (detail::Hierarchy's PETSc form).
+struct Hierarchy {
+  Level* level = nullptr;
+  std::size_t levels = 0;
+  Hierarchy below() const { return levels ? Hierarchy{level + 1, levels - 1} : *this; }
+};
+
+/// The reduced system of a Newton step (detail::ActiveSetSystem's PETSc form) for the (shifted) LCP
+/// and the box problem: K = A with the active rows and columns replaced by the identity's
+/// (MatZeroRowsColumns: K stays symmetric where A is), solved by KSP — CG (symmetric A) or BiCGSTAB
+/// with hypre BoomerAMG, stopped on the true residual as the serial Krylov solve is; where the serial
+/// rule (ActiveSetSystem::use_iterative) solves exactly, LU (PETSc's on one process, MUMPS on several). Options prefix nrmicp_inner_ (e.g. -nrmicp_inner_pc_hypre_boomeramg_...).
+class System {
+ public:
+  System(const Matrix& A, const Matrix* B, Inner inner, Hierarchy below = {}, bool = false) : A_(A) {
+    if (B) throw std::invalid_argument("the PETSc engine has no affine zeta (B): use the serial Newton member");
+    PetscInt N;
+    check(MatGetSize(A.get(), &N, nullptr), "MatGetSize");
+    iterative_ = detail::ActiveSetSystem<PetscInt>::use_iterative(inner, below.levels, N);
+    lu_ = !iterative_;
+    symmetric_ = A.symmetric();
+    check(KSPCreate(A.comm().get(), &ksp_), "KSPCreate");
+    configure();
+  }
+  System(const System&) = delete;
+  System& operator=(const System&) = delete;
+  ~System() {
+    KSPDestroy(&ksp_);
+    MatDestroy(&K_);
+  }
+
+  /// K of the active set `inactive` (rows with kInactive keep A's row; the others are identity rows).
+  bool factorize(const std::vector<char>& inactive) {
+    if (!K_) check(MatDuplicate(A_.get(), MAT_COPY_VALUES, &K_), "MatDuplicate");
+    else check(MatCopy(A_.get(), K_, SAME_NONZERO_PATTERN), "MatCopy");
+    active_.clear();
+    for (std::size_t i = 0; i < inactive.size(); ++i)
+      if (!detail::inactive_state(inactive[i])) active_.push_back(static_cast<PetscInt>(A_.row_offset() + i));
+    check(MatZeroRowsColumns(K_, static_cast<PetscInt>(active_.size()), active_.data(), 1.0, nullptr, nullptr),
+          "MatZeroRowsColumns");
+    check(KSPSetOperators(ksp_, K_, K_), "KSPSetOperators");
+    inactive_ = inactive;
+    return true;
+  }
+  /// z = K⁻¹ b from z, the active rows set first; stops at ‖b − Kz‖ ≤ target (absolute), or at
+  /// 1e-12 ‖b‖ when target is 0 (MultigridKrylov::rtol). Returns the Krylov iterations (0 for LU;
+  /// max_iterations + 1 when the solve did not converge).
+  int solve(const Eigen::VectorXd& b, Eigen::VectorXd& z, double target = 0) const {
+    for (Eigen::Index i = 0; i < z.size(); ++i)
+      if (!detail::inactive_state(inactive_[i])) z[i] = b[i];
+    Vec bv, zv;
+    check(MatCreateVecs(K_, &zv, &bv), "MatCreateVecs");
+    check(VecPlaceArray(bv, b.data()), "VecPlaceArray");
+    check(VecPlaceArray(zv, z.data()), "VecPlaceArray");
+    if (!lu_)
+      check(KSPSetTolerances(ksp_, target > 0 ? 1e-300 : 1e-12, target > 0 ? target : 0.0, PETSC_DEFAULT, max_iterations_),
+            "KSPSetTolerances");
+    check(KSPSolve(ksp_, bv, zv), "KSPSolve");
+    KSPConvergedReason reason;
+    PetscInt its;
+    KSPGetConvergedReason(ksp_, &reason);
+    KSPGetIterationNumber(ksp_, &its);
+    VecResetArray(bv);
+    VecResetArray(zv);
+    VecDestroy(&bv);
+    VecDestroy(&zv);
+    return lu_ ? 0 : reason > 0 ? static_cast<int>(its) : max_iterations_ + 1;
+  }
+  void restore_hierarchy() {}
+  const char* inner_name() const { return lu_ ? "lu" : symmetric_ ? "cg+boomeramg" : "bicgstab+boomeramg"; }
+  bool iterative() const { return iterative_; }
+  void set_max_iterations(int k) { max_iterations_ = k; }
+
+ private:
+  void configure() {
+    if (lu_) {
+      KSPSetType(ksp_, KSPPREONLY);
+      PC pc;
+      KSPGetPC(ksp_, &pc);
+      PCSetType(pc, PCLU);
+      if (A_.comm().size() > 1) PCFactorSetMatSolverType(pc, MATSOLVERMUMPS);  // PETSc's own LU is serial
+    } else {
+      KSPSetType(ksp_, symmetric_ ? KSPCG : KSPBCGS);
+      if (!symmetric_) KSPSetPCSide(ksp_, PC_RIGHT);
+      KSPSetNormType(ksp_, KSP_NORM_UNPRECONDITIONED);
+      KSPSetInitialGuessNonzero(ksp_, PETSC_TRUE);
+      PC pc;
+      KSPGetPC(ksp_, &pc);
+      PCSetType(pc, PCHYPRE);
+    }
+    KSPSetOptionsPrefix(ksp_, "nrmicp_inner_");
+    check(KSPSetFromOptions(ksp_), "KSPSetFromOptions");
+  }
+  Matrix A_;
+  KSP ksp_ = nullptr;
+  Mat K_ = nullptr;
+  std::vector<PetscInt> active_;
+  std::vector<char> inactive_;
+  bool iterative_ = false, lu_ = false, symmetric_ = false;
+  int max_iterations_ = 500;  // MultigridKrylov::default_max_iterations
+};
+
+/// The fallback member of a level (the serial engine's Solver<nrm>): nrm on this process's diagonal
+/// block, the couplings to other processes' unknowns held at the start of the run (synchronous
+/// multisplitting with one run as its step; on one process, the serial fallback exactly). Its Res
+/// and sweep count are every process's.
+class Fallback {
+ public:
+  using Local = Eigen::SparseMatrix<double, Eigen::RowMajor, PetscInt>;
+  Fallback(const Matrix& A, const Options& o) : A_(A), block_(A.block()), solver_(block_, o) {}
+  const Options& options() const { return solver_.options(); }
+  Result solve(const Eigen::VectorXd& q, const Zeta<PetscInt>& zeta, const Eigen::VectorXd* z0,
+               const detail::Callback&, const detail::Poll&, const SolveOptions* it) {
+    const detail::Comm& comm = A_.comm();
+    if (comm.size() == 1) return solver_.solve(q, zeta, z0, {}, {}, it);
+    Result r = solver_.solve(q + A_.coupling(*z0), zeta, z0, {}, {}, it);
+    r.iterations = static_cast<int>(comm.max(r.iterations));
+    Eigen::VectorXd w, zeta_z;
+    A_.multiply(r.z, w);
+    w += q;
+    r.residual = comm.all(zeta.eval(r.z, zeta_z))
+                     ? detail::bounded_residual(w, r.z - zeta_z, r.z, zeta.upper(), comm)
+                     : std::numeric_limits<double>::quiet_NaN();
+    return r;
+  }
+
+ private:
+  Matrix A_;
+  Local block_;
+  Solver<Local> solver_;
+};
+
+}  // namespace nrmicp::petsc
+
+namespace nrmicp::detail {
+
+/// The PETSc engine's types (detail/engine.hpp).
+template <>
+struct Engine<petsc::Matrix> {
+  using StorageIndex = PetscInt;
+  using Coarse = petsc::Matrix;
+  using System = petsc::System;
+  using Level = petsc::Level;
+  using Hierarchy = petsc::Hierarchy;
+  using Fallback = petsc::Fallback;
+  static constexpr bool serial = false;
+};
+
+}  // namespace nrmicp::detail

@@ -1,0 +1,101 @@
+// nrmicp._petsc — the Newton member on the PETSc engine (nrmicp/petsc.hpp), for nrmicp.distributed.
+// Conversion only: petsc4py objects arrive as their handles (Mat pointers), vectors as this
+// process's rows (numpy), and the result goes back as the core module's dict. Built when CMake finds
+// PETSc and MPI; the core module (_core) does not need it. The GIL is held throughout: PETSc calls
+// made with it released crashed in a test where holding it worked (docs/DISTRIBUTED.md).
+#include <nrmicp/petsc.hpp>
+
+#include "bridge.hpp"
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace py = pybind11;
+using namespace nrmicp::bridge;
+
+namespace {
+
+using Matrix = nrmicp::petsc::Matrix;
+using Core = nrmicp::Newton<Matrix>;
+
+Matrix from_handle(std::uintptr_t handle, const char* what) {
+  if (!handle) throw py::value_error(std::string(what) + " is a destroyed (null) PETSc Mat");
+  return Matrix(reinterpret_cast<Mat>(handle));
+}
+
+std::vector<Matrix> from_handles(const std::vector<std::uintptr_t>& handles, const char* what) {
+  std::vector<Matrix> out;
+  for (std::size_t l = 0; l < handles.size(); ++l)
+    out.push_back(from_handle(handles[l], (std::string(what) + "[" + std::to_string(l) + "]").c_str()));
+  return out;
+}
+
+/// The Newton member over a PETSc Mat: set up once (the hierarchy's Galerkin operators), solved
+/// with this process's rows of q, ζ and x0.
+class PyPetscNewton {
+ public:
+  PyPetscNewton(std::uintptr_t A, const nrmicp::Options& o, const std::vector<std::uintptr_t>& prolongations,
+                const std::vector<std::uintptr_t>& coarse)
+      : A_(from_handle(A, "A")), core_(A_, o, from_handles(prolongations, "prolongations"),
+                                       from_handles(coarse, "coarse_operators")) {}
+
+  py::dict solve(py::array q, nrmicp::ZetaKind kind, py::object zeta_c, py::object zeta_fn, py::object upper,
+                 py::object x0, py::object callback, const nrmicp::SolveOptions& it) {
+    const Eigen::VectorXd qv = to_vector(q, "q");
+    std::optional<Eigen::VectorXd> z0;
+    if (!x0.is_none()) z0 = to_vector(x0.cast<py::array>(), "x0");
+    const auto zeta = with_upper(zeta_of(kind, zeta_c, zeta_fn), upper);
+    const auto cb = make_callback(callback);
+    const nrmicp::Result r = core_.solve(qv, zeta, z0 ? &*z0 : nullptr, cb, {}, &it);
+    return result_dict(r, it.record_history);
+  }
+  py::dict polish(py::array q, nrmicp::ZetaKind kind, py::object zeta_c, py::object zeta_fn, py::object upper,
+                  py::array z, double tol) {
+    const auto zeta = with_upper(zeta_of(kind, zeta_c, zeta_fn), upper);
+    return result_dict(core_.polish(to_vector(q, "q"), zeta, to_vector(z, "z"), tol), false);
+  }
+  int levels() const { return core_.levels(); }
+  py::dict hierarchy() const {
+    const nrmicp::HierarchyReport& h = core_.hierarchy();
+    py::dict d;
+    d["requested"] = h.requested; d["used"] = h.used; d["reason"] = h.reason;
+    return d;
+  }
+  std::string inner() const { return core_.inner_name(); }
+  py::dict setup_timings() const { return timings_dict(core_.setup_timings()); }
+
+ private:
+  static nrmicp::Zeta<PetscInt> zeta_of(nrmicp::ZetaKind kind, py::object c, py::object fn) {
+    using Z = nrmicp::Zeta<PetscInt>;
+    switch (kind) {
+      case nrmicp::ZetaKind::None: return Z::none();
+      case nrmicp::ZetaKind::Constant: return Z::constant(to_vector(c.cast<py::array>(), "zeta"));
+      case nrmicp::ZetaKind::Functor: return Z::functor(CallableZeta(fn));
+      case nrmicp::ZetaKind::Affine: break;
+    }
+    throw py::value_error("zeta: an affine zeta is not available on the PETSc engine");
+  }
+  Matrix A_;
+  Core core_;
+};
+
+}  // namespace
+
+PYBIND11_MODULE(_petsc, m) {
+  m.doc() = "nrmicp's Newton member on the PETSc engine (used by nrmicp.distributed)";
+  py::module_::import("nrmicp._core");  // Options, SolveOptions, ZetaKind, NewtonStats: the core's types
+  py::class_<PyPetscNewton>(m, "Newton")
+      .def(py::init<std::uintptr_t, const nrmicp::Options&, const std::vector<std::uintptr_t>&,
+                    const std::vector<std::uintptr_t>&>(),
+           py::arg("A"), py::arg("options"), py::arg("prolongations"), py::arg("coarse_operators"))
+      .def("solve", &PyPetscNewton::solve, py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("zeta_fn"),
+           py::arg("upper"), py::arg("x0"), py::arg("callback"), py::arg("options"))
+      .def("polish", &PyPetscNewton::polish, py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("zeta_fn"),
+           py::arg("upper"), py::arg("z"), py::arg("tol"))
+      .def_property_readonly("levels", &PyPetscNewton::levels)
+      .def_property_readonly("hierarchy", &PyPetscNewton::hierarchy)
+      .def_property_readonly("inner", &PyPetscNewton::inner)
+      .def("setup_timings", &PyPetscNewton::setup_timings);
+}
