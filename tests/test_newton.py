@@ -400,33 +400,3 @@ def test_verbose_reports_every_newton_path_ending_with_the_result_message(zkind,
     assert res.message.split(";")[0] in lines[-1]
     if zkind != "callable+jacobian":  # a repeated active set ends only the fixed-system paths
         assert "the active set has settled" in lines[-1]
-
-
-def test_the_cores_projected_gauss_seidel_is_the_plain_sweep_and_checks_its_arguments():
-    # the distributed member's per-rank sweep (nrmicp._core.projected_gauss_seidel) against a
-    # plain numpy forward-then-backward projected Gauss-Seidel, in place on y
-    from nrmicp import _core
-    rng = np.random.default_rng(3)
-    A = sp.csr_matrix(sp.random(30, 30, density=0.2, random_state=4) + sp.diags(np.full(30, 6.0)))
-    q, y0 = rng.standard_normal(30), np.abs(rng.standard_normal(30))
-    ref = y0.copy()
-    Ad = A.toarray()
-    for _ in range(3):
-        for i in list(range(30)) + list(range(29, -1, -1)):
-            s = q[i] + Ad[i] @ ref - Ad[i, i] * ref[i]
-            ref[i] = max(0.0, -s / Ad[i, i])
-    y = y0.copy()
-    _core.projected_gauss_seidel(A.indptr, A.indices, A.data, q, y, 3)
-    assert np.max(np.abs(y - ref)) < 1e-13 and (y >= 0).all()
-    with pytest.raises(ValueError, match="same length"):
-        _core.projected_gauss_seidel(A.indptr, A.indices, A.data, q[:-1], y, 1)
-    frozen = y.copy()
-    frozen.flags.writeable = False
-    with pytest.raises(ValueError, match="writable"):
-        _core.projected_gauss_seidel(A.indptr, A.indices, A.data, q, frozen, 1)
-    with pytest.raises(TypeError, match="dtype"):
-        _core.projected_gauss_seidel(A.indptr, A.indices, A.data, q, y.astype(np.float32), 1)
-    bad = A.indices.copy()
-    bad[0] = 99
-    with pytest.raises(ValueError, match="outside"):
-        _core.projected_gauss_seidel(A.indptr, bad, A.data, q, y, 1)

@@ -268,10 +268,8 @@ void bind_vocabulary(py::module_& m) {
       if (static_cast<int>(s) == code) return std::string(nrmicp::to_string(s));
     throw py::value_error("unknown status code " + std::to_string(code));
   }, py::arg("code"), "What a status code means (the start of a result's message).");
-  m.def("floor_message", &nrmicp::detail::floor_message, py::arg("best"), py::arg("tol"), py::arg("floor"),
-        "The message of a Newton solve that settled at Res's rounding floor above tol.");
   using Tuning = nrmicp::detail::NewtonTuning;
-  py::dict tuning;  // the Newton member's constants, for the distributed member
+  py::dict tuning;  // the Newton member's constants, read by the Python layer and the tests
   tuning["coarse_maxiter"] = Tuning::coarse_maxiter;
   tuning["coarse_forcing"] = Tuning::coarse_forcing;
   tuning["coarse_repeat_trust"] = Tuning::coarse_repeat_trust;
@@ -348,29 +346,6 @@ void bind_utilities(py::module_& m) {
     return has_dtype<std::int64_t>(indices) ? check_compressed<std::int64_t>(indptr, indices, n_data, outer, inner, name)
                                             : check_compressed<std::int32_t>(indptr, indices, n_data, outer, inner, name);
   }, py::arg("indptr"), py::arg("indices"), py::arg("n_data"), py::arg("outer"), py::arg("inner"), py::arg("name"));
-  // In place on y: the distributed member sweeps each rank's block of A (PETSc's SOR has no projection).
-  m.def("projected_gauss_seidel", [](const py::array& indptr, const py::array& indices, const py::array& data,
-                                     const py::array& q, py::array y, int sweeps) {
-    const py::ssize_t n = q.shape(0);
-    if (y.ndim() != 1 || y.shape(0) != n || indptr.ndim() != 1 || indptr.shape(0) != n + 1)
-      throw py::value_error("projected_gauss_seidel: q, y and the rows of A (len(indptr) - 1) must have the same length");
-    if (!y.writeable()) throw py::value_error("projected_gauss_seidel: y must be writable (it is updated in place)");
-    if (sweeps < 0) throw py::value_error("projected_gauss_seidel: sweeps must be >= 0");
-    double* yp = const_cast<double*>(checked_data<double>(y, "y"));
-    const Eigen::Map<const Eigen::VectorXd> qm(checked_data<double>(q, "q"), n);
-    Eigen::Map<Eigen::VectorXd> ym(yp, n);
-    auto run = [&](auto index) {
-      using I = decltype(index);
-      const I* ip = checked_data<I>(indptr, "indptr");
-      const I* ix = checked_data<I>(indices, "indices");
-      const double* v = checked_data<double>(data, "data");
-      check_compressed<I>(indptr, indices, data.shape(0), n, n, "A");
-      const CsrMap<I> A(n, n, ip[n], ip, ix, v);
-      nrmicp::detail::projected_gauss_seidel(A, qm, ym, sweeps);
-    };
-    if (has_dtype<std::int64_t>(indices)) run(std::int64_t{}); else run(std::int32_t{});
-  }, py::arg("indptr"), py::arg("indices"), py::arg("data"), py::arg("q"), py::arg("y"), py::arg("sweeps"),
-     "Symmetric projected Gauss-Seidel sweeps on LCP(q, A), A square CSR, y updated in place.");
   // The amg set-up's interpolation sweeps (python/nrmicp/_hierarchy.py, _relax_interpolation).
   m.def("relax_interpolation", [](const py::array& b_indptr, const py::array& b_indices, const py::array& b_data,
                                   const py::array& is_c, const py::array& p_indptr, const py::array& p_indices,

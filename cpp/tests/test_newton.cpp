@@ -803,6 +803,13 @@ struct ScriptedStep {
   }
   bool linearize() { return true; }
   bool factorize(const std::vector<char>&) { return true; }
+  // the active sets' bookkeeping of one process (NewtonStep forwards NewtonLevel's)
+  const nrmicp::detail::Comm& comm() const { return nrmicp::detail::serial_comm(); }
+  std::uint64_t fingerprint(const std::vector<char>& set) const { return nrmicp::detail::hash_rows(set, 0); }
+  bool same_set(const std::vector<char>& a, const std::vector<char>& b) const { return a == b; }
+  std::size_t active_count(const std::vector<char>& set) const {
+    return set.size() - static_cast<std::size_t>(std::count(set.begin(), set.end(), nrmicp::detail::kInactive));
+  }
   double solve(const std::vector<char>&, double tol, double forcing) {
     forcings.push_back(forcing);
     tols.push_back(tol);

@@ -18,7 +18,6 @@ from __future__ import annotations
 import contextlib
 import math
 import time
-from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -47,10 +46,6 @@ _MSG_LEN = 1024
 #: Exception types re-raised as themselves on every rank; others become DistributedError.
 _KNOWN = {e.__name__: e for e in (ValueError, TypeError, ZeroDivisionError, FloatingPointError,
                                   ArithmeticError, RuntimeError, KeyError, IndexError, MemoryError)}
-#: Newton steps' acceptance window (the serial member's non-monotone rule: detail/globalization.hpp).
-_WINDOW = 5
-#: The serial member's constants (NewtonRun, Globalized), read from the core: one definition.
-_TUNING = _core.newton_tuning
 
 
 class DistributedError(RuntimeError):
@@ -65,15 +60,6 @@ def _flag_max(comm, value: float) -> float:
     v.setValue(v.getOwnershipRange()[0], value)
     v.assemble()
     out = v.max()[1]
-    v.destroy()
-    return out
-
-
-def _sum(comm, value: float) -> float:
-    """sum over ranks of one float (a one-entry-per-rank Vec)."""
-    v = PETSc.Vec().createMPI((1, PETSc.DECIDE), comm=comm)
-    v.setArray([value])
-    out = v.sum()
     v.destroy()
     return out
 
@@ -239,28 +225,26 @@ class _Zeta:
             out.setArray(r)
         return out
 
+    def core_args(self, A):
+        """(kind, c, fn) for the PETSc engine: this rank's c; a callable (or an affine ζ, as its product
+        B z + c) as a CheckedZeta of this rank's rows whose every call is collective (a failure on any
+        rank raises on all, in the same call of the one driver)."""
+        kinds = _core.ZetaKind
+        if self.kind == 0:
+            return kinds.none, None, None
+        if self.kind == 1:
+            return kinds.constant, np.array(self.c.getArray(readonly=True)), None
+        zv, out = A.createVecRight(), A.createVecLeft()
+
+        def affine(z):
+            zv.setArray(z)
+            self.B.multAdd(zv, self.c, out)
+            return np.array(out.getArray(readonly=True))
+        local = affine if self.kind == 2 else (lambda z: _collective(self.comm, self._checked, z))
+        return kinds.functor, None, CheckedZeta(local, A.getLocalSize()[0])
+
 
 # ----------------------------------------------------------------------------- the pieces
-class _Problem:
-    """An LCP(b, A) level of the nested iteration: A, b, diag(A), work vectors."""
-
-    def __init__(self, A, b):
-        self.A, self.b = A, b
-        self.d = A.getDiagonal()
-        self.w = b.duplicate()
-
-    def residual(self, y):
-        """w = A y + b (kept in self.w), Res = ‖min(w, y)‖₂."""
-        self.A.multAdd(y, self.b, self.w)
-        m = self.w.duplicate()
-        m.setArray(np.minimum(self.w.getArray(readonly=True), y.getArray(readonly=True)))
-        return m.norm()
-
-    def floor(self, y):
-        """The rounding level of Res at y (ζ = 0 in y): eps (‖|A||y| + |b|‖ + ‖y‖)."""
-        return _rounding_level(self.A, self.b, y, None)
-
-
 def _abs_mat(A):
     """|A| entry-wise, in A's layout (built for a floor test: at most a few a solve)."""
     indptr, cols, vals = A.getValuesCSR()
@@ -308,145 +292,6 @@ def _hierarchy(A, comm, prefix):
     return Ps, As, pc
 
 
-class _Newton:
-    """The Newton member on one level's LCP (y = z − c): active-set rule y − w/diag(A) ≥ 0 inactive
-    (ties inactive), steps for the correction on the inactive set by KSP (CG on symmetric A,
-    else BiCGSTAB). With `ssor_first` (the coarse levels) a step first tries local SSOR as the
-    preconditioner, at most _SSOR_ITERATIONS iterations, and sets up BoomerAMG only when that
-    does not reach the step's tolerance, going on from SSOR's iterate: a coarse step needs only
-    0.1 × Res and BoomerAMG's set-up is most of its cost (docs/MEASUREMENTS.md, "The distributed
-    Newton member's choices"). The last set's systems are kept: a set solved again (an exact repeat of
-    a loose step) reuses its submatrix and preconditioners."""
-
-    def __init__(self, prob, comm, symmetric, stats, ssor_first=False, sweeps=False):
-        self.p, self.comm, self.stats = prob, comm, stats
-        self.ksp_type = "cg" if symmetric else "bcgs"
-        # The projected sweeps after each step: the finest level only (the coarse levels' SSOR-first
-        # steps are cheaper than a sweep) and a symmetric A only (there a sweep descends the LCP's
-        # quadratic energy and cannot start a cycle; docs/MEASUREMENTS.md).
-        self.smoothing = _TUNING["smoothing_sweeps"] if sweeps and symmetric else 0
-        self.ssor_first = ssor_first
-        self.inactive = self.h = None
-        self.own = None  # smooth's copy of the rank's diagonal block of A (read once a level)
-        self.kept = {}  # the last solved set: "h", "is", "A_II" and a KSP per preconditioner
-
-    def plan(self, y):
-        """The inactive set of y (w of y in self.p.w), kept for solve; returns its fingerprint."""
-        self.inactive = self._inactive_of(y)
-        self.h = _fingerprint(self.comm, self.p.A.getOwnershipRange()[0], self.inactive)
-        return self.h
-
-    def overshoots(self, y):
-        """_overshoots of the step to y (w of y in self.p.w) from the planned set."""
-        return _overshoots(self.comm, self.p.A.getSize()[0] - self.h[0], y.getArray(readonly=True),
-                           self.p.w.getArray(readonly=True), self.p.d.getArray(readonly=True))
-
-    def smooth(self, y):
-        """The serial member's projected Gauss–Seidel sweeps after a step (self.smoothing of them,
-        symmetric), on each rank's own rows with the couplings to other ranks' unknowns held at y
-        (block Jacobi between ranks, Gauss–Seidel within: PETSc's SOR has no projection). w of y
-        in self.p.w on entry. Returns (whether the active set changed on some rank, Res of y);
-        self.p.w is then y's."""
-        p = self.p
-        ya, wa = y.getArray(readonly=True), p.w.getArray(readonly=True)
-        before = self._inactive_of(y)
-        if self.own is None:
-            indptr, indices, data = p.A.getDiagonalBlock().getValuesCSR()
-            self.own = sp.csr_matrix((data, indices, indptr), shape=(ya.size, ya.size))
-        ys = ya.copy()
-        _core.projected_gauss_seidel(self.own.indptr, self.own.indices, self.own.data, wa - self.own @ ya, ys,
-                                     self.smoothing)
-        y.setArray(ys)
-        res = p.residual(y)
-        return _flag_max(self.comm, float(np.any(before != self._inactive_of(y)))) > 0, res
-
-    def _inactive_of(self, y):
-        """_inactive of y (w of y in self.p.w): this rank's rows."""
-        return _inactive(y.getArray(readonly=True), self.p.w.getArray(readonly=True), self.p.d.getArray(readonly=True))
-
-    def solve(self, y, rtol, atol):
-        """The step on the planned set, its inner solve stopped at max(rtol ‖rhs‖, atol)."""
-        p = self.p
-        delta = y.duplicate()
-        delta.setArray(np.where(self.inactive, 0.0, -y.getArray(readonly=True)))
-        rhs = y.duplicate()
-        p.A.mult(delta, rhs)
-        rhs.axpy(1.0, p.w)
-        rhs.scale(-1.0)
-        isI = self._system()
-        if isI.getSize() > 0:
-            bI, dI = rhs.getSubVector(isI), delta.getSubVector(isI)
-            done = self.ssor_first and self._inner("ssor", bI, dI, rtol, atol, False)
-            if not done:
-                self._inner("hypre", bI, dI, rtol, atol, self.ssor_first)
-            self.stats["linear_solves"] += 1
-            rhs.restoreSubVector(isI, bI)
-            delta.restoreSubVector(isI, dI)
-        ynew = y.copy()
-        ynew.axpy(1.0, delta)
-        return ynew
-
-    def _inner(self, pc, b, x, rtol, atol, warm):
-        """One KSP run with preconditioner pc from x (warm) or 0; True when it converged."""
-        ksp = self.kept.get(pc)
-        if ksp is None:
-            ksp = self.kept[pc] = _ksp(self.comm, self.kept["A_II"], self.ksp_type, pc)
-        ksp.setInitialGuessNonzero(warm)
-        ksp.setTolerances(rtol=rtol, atol=atol)
-        ksp.solve(b, x)
-        self.stats["inner_iterations"] += ksp.getIterationNumber()
-        return ksp.getConvergedReason() > 0
-
-    def _system(self):
-        """The planned set's index set (its A_II kept): the kept one when it is the last solved set."""
-        if self.kept.get("h") != self.h:
-            self._drop_systems()
-            lo, _ = self.p.A.getOwnershipRange()
-            isI = PETSc.IS().createGeneral((np.flatnonzero(self.inactive) + lo).astype(PETSc.IntType), comm=self.comm)
-            self.kept = {"h": self.h, "is": isI, "A_II": self.p.A.createSubMatrix(isI, isI) if isI.getSize() else None}
-        return self.kept["is"]
-
-    def release(self):
-        """Free the kept systems and the block copy (the level is done)."""
-        self._drop_systems()
-        self.own = None
-
-    def _drop_systems(self):
-        for key, obj in self.kept.items():
-            if key != "h" and obj is not None:
-                obj.destroy()
-        self.kept = {}
-
-
-#: The coarse levels' SSOR tries: at most this many Krylov iterations before BoomerAMG is set up
-#: (more did not pay: docs/MEASUREMENTS.md; -nrmicp_ssor_ksp_max_it overrides).
-_SSOR_ITERATIONS = 30
-
-
-def _ksp(comm, M, kind, pc):
-    """CG or BiCGSTAB with hypre BoomerAMG (pc 'hypre': options prefix nrmicp_inner_) or local
-    SSOR (pc 'ssor': prefix nrmicp_ssor_), stopping on the true residual (the preconditioned norm
-    of a small w_I is far smaller, and stopped the solve before it started)."""
-    ksp = PETSc.KSP().create(comm)
-    ksp.setOperators(M)
-    ksp.setType(kind)
-    if kind != "cg":
-        ksp.setPCSide(PETSc.PC.Side.RIGHT)
-    ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
-    if pc == "ssor":
-        ksp.getPC().setType("sor")
-        ksp.setTolerances(max_it=_SSOR_ITERATIONS)
-        prefix, defaults = "nrmicp_ssor_", {"pc_sor_local_symmetric": None}  # on each rank's block
-    else:
-        ksp.getPC().setType("hypre")
-        ksp.setTolerances(max_it=1000)
-        prefix, defaults = "nrmicp_inner_", _boomeramg_defaults(M)  # -nrmicp_inner_pc_hypre_boomeramg_...
-    ksp.setOptionsPrefix(prefix)
-    with _scoped_options(prefix, defaults):   # defaults for this matrix only
-        ksp.setFromOptions()
-    return ksp
-
-
 @contextlib.contextmanager
 def _scoped_options(prefix, values):
     """PETSc options `values` under `prefix` while the block runs, then removed (the options
@@ -460,38 +305,6 @@ def _scoped_options(prefix, values):
     finally:
         for k in ours:
             opts.delValue(k)
-
-
-def _boomeramg_defaults(M) -> dict:
-    """BoomerAMG options for a reduced matrix: HMIS coarsening, ext+i interpolation (at most 4
-    weights a row) and one level of aggressive coarsening when M has more than 6 nonzeros a row
-    (7-point 3D, P1 triangles); hypre's defaults on sparser ones (5-point 2D), the faster on each
-    (docs/MEASUREMENTS.md, "The distributed Newton member's choices")."""
-    rows = max(M.getSize()[0], 1)
-    if M.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"] <= 6 * rows:
-        return {}
-    return {"pc_hypre_boomeramg_coarsen_type": "HMIS", "pc_hypre_boomeramg_interp_type": "ext+i",
-            "pc_hypre_boomeramg_P_max": "4", "pc_hypre_boomeramg_agg_nl": "1"}
-
-
-def _inactive(g, w, d):
-    """The inactive set {g − w/diag(A) ≥ 0} of this rank's rows (g = z − ζ(z); ties inactive: the serial
-    NewtonLevel::active_set)."""
-    return g - w / d >= 0
-
-
-def _overshoots(comm, planned, g, w, d):
-    """Globalized::overshoots: the trial (this rank's g = z − ζ(z), w and diag(A)) has more than
-    _TUNING["overshoot_growth"] times the `planned` active points (over all ranks; 0: never)."""
-    if planned <= 0:
-        return False
-    return _sum(comm, float(np.count_nonzero(~_inactive(g, w, d)))) > _TUNING["overshoot_growth"] * planned
-
-
-def _fingerprint(comm, lo, inactive):
-    idx = np.flatnonzero(inactive) + lo
-    weights = ((idx.astype(np.int64) + 1) * 2654435761 % 2147483647) / 2147483647.0
-    return _sum(comm, float(idx.size)), round(_sum(comm, float(np.sum(weights))), 8)
 
 
 class _AOR:
@@ -555,14 +368,18 @@ class _AOR:
         return zt + self.w1 * (np.abs(x) + x) / self.gamma
 
 
-def _icp_residual(A, q, zeta, z, w, g, zt):
-    """Res(z) = ‖min(Az + q, z − ζ(z))‖ (w, g, zt = ζ(z) filled)."""
+def _icp_residual(A, q, zeta, z, w, g, zt, upper=None):
+    """Res(z) = ‖min(Az + q, z − ζ(z))‖ (w, g, zt = ζ(z) filled); with this rank's upper bounds,
+    ‖mid(z − ζ(z), z − upper, w)‖ (the serial nrmicp.residual)."""
     A.multAdd(z, q, w)
     zeta(z, zt)
     z.copy(g)
     g.axpy(-1.0, zt)
     m = w.duplicate()
-    m.setArray(np.minimum(w.getArray(readonly=True), g.getArray(readonly=True)))
+    wa, ga = w.getArray(readonly=True), g.getArray(readonly=True)
+    if upper is not None:
+        wa = np.maximum(z.getArray(readonly=True) - upper, wa)
+    m.setArray(np.minimum(wa, ga))
     return m.norm()
 
 
@@ -602,337 +419,6 @@ def _stationary(A, q, zeta, member, z, tol, maxiter, stats):
     return best[0], best[2], status, k
 
 
-class _Control(NamedTuple):
-    """How the loop on one level solves (the serial member's NewtonControl): inner solves stop at
-    forcing × Res (first_forcing for the first step; 0: at `exact`), and a set so solved that
-    repeats settles only once Res < repeat_trust × Res(start); before, it is solved again (at
-    `exact`, its atol raised to a tenth of repeat_trust × Res(start) where that is finite)."""
-    first_forcing: float = 0.0
-    forcing: float = 0.0
-    repeat_trust: float = math.inf
-    exact: tuple = (1e-14, 0.0)  # (rtol, atol) of an exact step
-
-
-def _newton_loop(residual, stepper, fallback, y, *, tol, maxiter, control, floor, sweep_budget):
-    """The serial member's globalization (detail/globalization.hpp) around plain steps: a step is
-    accepted when its Res is below the largest of the last 5 accepted (the first after a start is
-    exempt); a rejected step or a cycle of active sets hands over to fallback sweeps from the
-    best iterate (10, 20, 40, ...), after which Newton resumes. The loop settles when the active
-    set repeats (see _Control) or a step that did not halve Res leaves it at its rounding level
-    (floor(y), within _TUNING["floor_factor"]); a step that overshoots (stepper.overshoots) is
-    damped first, then swept (stepper.smooth, when stepper.smoothing > 0: a repeat of a set the sweeps
-    changed is solved again). Returns (y, Res, steps, sweeps, status, floor or None)."""
-    res = start = residual(y)
-    best = (res, y.copy())
-    recent, exempt, seen, last, loose = [res], True, set(), None, False
-    trust = control.repeat_trust * start   # a loose repeat settles below it
-    again = (control.exact[0], max(control.exact[1], 0.1 * trust)) if math.isfinite(trust) else control.exact
-    moved = False  # the sweeps after the last accepted step changed its active set
-    smooth = stepper.smooth if getattr(stepper, "smoothing", 0) > 0 else None
-    steps = sweeps = 0
-    run = 10
-
-    def end(status, level=None):
-        return best[1], best[0], steps, sweeps, status, level
-
-    while True:
-        if res < tol:
-            return end(Status.CONVERGED)
-        if steps >= maxiter:
-            return end(Status.MAX_ITERATIONS)
-        h = stepper.plan(y)
-        repeat = h == last
-        trusted = not loose or res < trust   # the serial member's Globalized::newton
-        if repeat and trusted and not moved:
-            return end(Status.STAGNATED, floor(best[1]) if floor and tol > 0 else None)  # settled: no solve needed
-        if repeat or h not in seen:
-            forcing = 0.0 if repeat else control.first_forcing if steps == 0 else control.forcing
-            loose = forcing > 0
-            ynew = stepper.solve(y, *((1e-14, max(forcing * res, 0.1 * tol)) if loose else again if repeat else control.exact))
-            steps += 1
-            rnew = residual(ynew)
-            if stepper.overshoots(ynew):
-                damping = _TUNING["overshoot_damping"]   # ynew <- y + damping (ynew - y)
-                ynew.axpby(1.0 - damping, damping, y)
-                rnew = residual(ynew)
-            moved_now = False
-            if smooth is not None and not repeat:  # a repeat is the exact solve of its set: kept as solved
-                moved_now, rnew = smooth(ynew)
-            if math.isfinite(rnew) and (exempt or rnew < max(recent)):
-                y, res, res_old, exempt, last, moved = ynew, rnew, res, False, h, moved_now
-                recent = (recent + [rnew])[-_WINDOW:]
-                seen.add(h)
-                if rnew < best[0]:
-                    best = (rnew, y.copy())
-                if floor and not rnew < tol and not rnew < 0.5 * res_old:
-                    level = floor(y)
-                    if max(rnew, res_old) <= _TUNING["floor_factor"] * level:
-                        return end(Status.STAGNATED, level)
-                continue
-        if fallback is None or sweeps >= sweep_budget:
-            return end(Status.STAGNATED)
-        y = best[1].copy()
-        rb, k = fallback(y, min(run, sweep_budget - sweeps))
-        sweeps += k
-        run *= 2
-        if not rb < best[0]:
-            return end(Status.STAGNATED)
-        best, res = (rb, y.copy()), residual(y)
-        recent, exempt, last, loose, moved = [res], True, None, False, False
-        seen.clear()
-
-
-# ----------------------------------------------------------------------------- the Newton drivers
-#: Inner (KSP) tolerance of the affine member's steps relative to the step's right-hand side
-#: (inexact Newton); they also stop at tol/10 absolute, as the serial member's iterative inner solve.
-_RTOL = 1e-6
-
-
-class _Levels:
-    """The nesting hierarchy, pairs (P, its Galerkin operator or None), built on first use: a user's
-    start that converges alone (_nested_lcp) never pays BoomerAMG's set-up."""
-
-    def __init__(self, build=None, pairs=()):
-        self._build, self._pairs, self._keep = build, list(pairs), None
-        self.seconds = 0.0   # the set-up's, when built
-
-    def __bool__(self):
-        return self._build is not None or bool(self._pairs)
-
-    def pairs(self):
-        if self._build is not None:
-            t0 = time.perf_counter()
-            Ps, As, self._keep = self._build()     # the PC that owns them is kept with them
-            self._pairs, self._build = list(zip(Ps, As)), None
-            self.seconds = time.perf_counter() - t0
-        return self._pairs
-
-
-def _nested_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats, zero_start=False):
-    """LCP(b, A) by the nested Newton member: coarse problems PᵀAP, Pᵀb, solved coarse to fine,
-    each solution prolongated and projected (y ≥ 0) as the next start. A start y0 closer than a cold
-    one (and not x0 = 0: `zero_start`) is tried first for at most warm_steps finest steps (the serial
-    rule: NewtonRun::solve_obstacle; the hierarchy is set up only if the nested start takes over).
-    Returns (y, Res, status)."""
-    if not (Ps and y0 is not None and not zero_start and _closer_than_cold(A, b, y0)):
-        return _levels_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats)
-    budget = min(maxiter, _TUNING["warm_steps"])
-    yw, rw, sw = _levels_lcp(A, b, y0, _Levels(), tol, budget, symmetric, comm, stats, guessed=True)
-    if sw != Status.MAX_ITERATIONS or maxiter <= budget:
-        return yw, rw, sw
-    tried, seconds = stats["level_steps"].pop(0), stats["level_seconds"].pop(0)
-    if Ps.pairs():   # the nested start; a hierarchy of one level (a small A) goes on from the try
-        y, res, status = _levels_lcp(A, b, None, Ps, tol, maxiter - tried, symmetric, comm, stats)
-    else:
-        y, res, status = _levels_lcp(A, b, yw, Ps, tol, maxiter - tried, symmetric, comm, stats, guessed=True)
-    stats["level_steps"][0] += tried
-    stats["level_seconds"][0] += seconds
-    if status != Status.CONVERGED and rw < res:   # maxiter spent on both: the try's iterate was better
-        return yw, rw, sw
-    return y, res, status
-
-
-def _levels_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats, guessed=False):
-    """_nested_lcp's levels: nested over Ps, else from y0 (zeros when None); `guessed`: y0 is the
-    user's guess, its finest steps as loose as a nested start's."""
-    pairs = Ps.pairs() if Ps else []
-    As, bs = [A], [b]
-    for P, Ac in pairs:
-        As.append(Ac if Ac is not None else As[-1].ptap(P))
-        bc = P.createVecRight()
-        P.multTranspose(bs[-1], bc)
-        bs.append(bc)
-    y = None
-    for level in reversed(range(len(As))):
-        t0 = time.perf_counter()
-        prob = _Problem(As[level], bs[level])
-        if y is None:
-            y = y0.copy() if (level == 0 and y0 is not None) else prob.b.duplicate()
-            if y0 is None or level > 0:
-                y.set(0.0)
-        else:
-            yf = As[level].createVecLeft()
-            pairs[level][0].mult(y, yf)
-            yf.setArray(np.maximum(yf.getArray(readonly=True), 0.0))
-            y = yf
-        finest = level == 0
-        nt = _Newton(prob, comm, symmetric, stats, ssor_first=not finest, sweeps=finest)
-        y, res, steps, sweeps, status, floor = _newton_loop(
-            prob.residual, nt, _lcp_fallback(prob, comm, stats) if finest else None,
-            y, tol=tol if finest else 0.0, maxiter=maxiter if finest else _TUNING["coarse_maxiter"],
-            control=_level_control(finest, len(As) > 1 or guessed, tol), floor=prob.floor, sweep_budget=maxiter)
-        nt.release()
-        if finest:
-            stats["floor"] = floor
-        stats["level_steps"].insert(0, steps)
-        stats["level_seconds"].insert(0, time.perf_counter() - t0)
-        stats["fallback_sweeps"] += sweeps
-    return y, res, status
-
-
-def _closer_than_cold(A, b, y0):
-    """Res(max(y0, 0)) < warm_start_fraction × Res(0) on LCP(b, A): NewtonRun::closer_than_cold."""
-    y, cold = y0.copy(), b.duplicate()
-    y.setArray(np.maximum(y.getArray(readonly=True), 0.0))
-    cold.setArray(np.minimum(b.getArray(readonly=True), 0.0))
-    return _Problem(A, b).residual(y) < _TUNING["warm_start_fraction"] * cold.norm()
-
-
-def _level_control(finest, nested, tol):
-    """The serial member's controls (NewtonRun): coarse levels loose to a settled set; the finest
-    level exact (inner solve to tol/10 absolute), loose while its sets are guesses (nested or warm)."""
-    exact = (1e-14, 0.1 * tol)
-    if not finest:
-        return _Control(_TUNING["coarse_forcing"], _TUNING["coarse_forcing"], _TUNING["coarse_repeat_trust"], exact)
-    if nested:
-        return _Control(_TUNING["nested_first_forcing"], _TUNING["nested_forcing"], 0.0, exact)
-    return _Control(exact=exact)
-
-
-def _lcp_fallback(prob, comm, stats):
-    """Fallback sweeps of nrmgs (synchronous multisplitting) on the level's LCP."""
-    zeta = _Zeta(None, prob.A, comm)
-    member = []  # built on first use: most solves never fall back
-
-    def run(y, k):
-        if not member:
-            member.append(_AOR(prob.A, 1.0, 1.0, None, None, 1.0))
-        res, _, _, done = _stationary(prob.A, prob.b, zeta, member[0], y, 0.0, k, stats)
-        return res, done
-    return run
-
-
-def _affine_newton(A, q, zeta, z, tol, maxiter, comm, stats):
-    """ICP(q, A, Bz + c) by Newton on the whole problem: rows of A on the inactive set, rows of
-    I − B on the active set; BiCGSTAB with hypre BoomerAMG."""
-    lo, _ = A.getOwnershipRange()
-    d = A.getDiagonal().getArray(readonly=True)
-    w, g, zt = z.duplicate(), z.duplicate(), z.duplicate()
-    member = _AOR(A, 1.0, 1.0, None, None, 1.0)
-
-    def residual(v):
-        return _icp_residual(A, q, zeta, v, w, g, zt)
-
-    class Step:
-        def plan(self, v):  # g, w are v's (the loop evaluated v last)
-            self.inactive = _inactive(g.getArray(readonly=True), w.getArray(readonly=True), d)
-            self.h = _fingerprint(comm, lo, self.inactive)
-            return self.h
-
-        def overshoots(self, v):  # g, w are v's
-            return _overshoots(comm, A.getSize()[0] - self.h[0], g.getArray(readonly=True), w.getArray(readonly=True), d)
-
-        def solve(self, v, rtol, atol):
-            inactive = self.inactive
-            mI = _vec(A, inactive.astype(float))
-            mA = _vec(A, 1.0 - inactive)
-            J = A.copy()
-            J.diagonalScale(L=mI)
-            BB = zeta.B.copy()
-            BB.diagonalScale(L=_vec(A, inactive - 1.0))
-            J.axpy(1.0, BB, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-            J.setDiagonal(mA, addv=PETSc.InsertMode.ADD_VALUES)
-            rhs = _vec(A, -np.where(inactive, w.getArray(readonly=True), g.getArray(readonly=True)))
-            delta = z.duplicate()
-            ksp = _ksp(comm, J, "bcgs", "hypre")
-            ksp.setTolerances(rtol=rtol, atol=atol)
-            ksp.solve(rhs, delta)
-            stats["inner_iterations"] += ksp.getIterationNumber()
-            stats["linear_solves"] += 1
-            ksp.destroy()
-            J.destroy()
-            out = v.copy()
-            out.axpy(1.0, delta)
-            return out
-
-    def fallback(v, k):
-        res, _, _, done = _stationary(A, q, zeta, member, v, 0.0, k, stats)
-        return res, done
-
-    t0 = time.perf_counter()
-    z, res, steps, sweeps, status, floor = _newton_loop(
-        residual, Step(), fallback, z, tol=tol, maxiter=maxiter, control=_Control(exact=(_RTOL, 0.1 * tol)),
-        floor=lambda v: _rounding_level(A, q, v, zt), sweep_budget=maxiter)
-    stats["floor"] = floor
-    stats["level_steps"], stats["level_seconds"] = [steps], [time.perf_counter() - t0]
-    stats["fallback_sweeps"] += sweeps
-    return z, res, status
-
-
-def _obstacle_newton(A, q, c, z0, Ps, tol, maxiter, symmetric, comm, stats):
-    """ζ ≡ c (c None: the LCP): the LCP in y = z − c with b = q + A c; returns (z, Res, status)."""
-    b = q.copy()
-    y0 = None if z0 is None else z0.copy()
-    if c is not None:
-        A.multAdd(c, q, b)
-        if y0 is not None:
-            y0.axpy(-1.0, c)
-    y, res, status = _nested_lcp(A, b, y0, Ps, tol, maxiter, symmetric, comm, stats,
-                                 zero_start=z0 is not None and z0.norm(PETSc.NormType.INFINITY) == 0)
-    if c is not None:
-        y.axpy(1.0, c)
-    return y, res, status
-
-
-def _callable_newton(A, q, zeta, z0, Ps, tol, maxiter, symmetric, comm, stats):
-    """A callable ζ: the outer fixed point c_k = ζ(z_k), each obstacle problem by the Newton member
-    (nested the first time, then warm-started), as the serial member without zeta_jacobian."""
-    z = z0.copy() if z0 is not None else A.createVecLeft()
-    if z0 is None:
-        z.set(0.0)
-    w, g, zt = z.duplicate(), z.duplicate(), z.duplicate()
-    res = _icp_residual(A, q, zeta, z, w, g, zt)
-    best, status = (res, z.copy()), Status.MAX_ITERATIONS
-    for k in range(maxiter):
-        if res < tol:
-            status = Status.CONVERGED
-            break
-        c = zt.copy()
-        sub = dict(stats, level_steps=[], level_seconds=[])
-        z, _, _ = _obstacle_newton(A, q, c, z if k else None, Ps if k == 0 else _Levels(), 0.1 * tol, maxiter,
-                                   symmetric, comm, sub)
-        for key in ("linear_solves", "inner_iterations", "fallback_sweeps"):
-            stats[key] = sub[key]
-        stats["level_steps"], stats["level_seconds"] = sub["level_steps"], sub["level_seconds"]
-        stats["outer_iterations"] += 1
-        stats["nit"] += sub["level_steps"][0]
-        res = _icp_residual(A, q, zeta, z, w, g, zt)
-        if not res < best[0] and k > 0:
-            status = Status.STAGNATED
-            break
-        best = (res, z.copy())
-    if best[0] < tol:
-        status = Status.CONVERGED
-    return best[1], best[0], status
-
-
-def _polish(A, q, zeta, z, res, comm, symmetric, stats):
-    """One Newton step from z on its active set with a tight inner solve; kept when it lowers Res."""
-    trial = z.copy()
-    w, g, zt = z.duplicate(), z.duplicate(), z.duplicate()
-    if zeta.kind == 2:
-        sub = dict(stats, level_steps=[], level_seconds=[])
-        _icp_residual(A, q, zeta, trial, w, g, zt)
-        trial, r, _ = _affine_newton(A, q, zeta, trial, 0.0, 1, comm, sub)
-    else:
-        c = A.createVecLeft()
-        zeta(z, c)
-        b = q.copy()
-        A.multAdd(c, q, b)
-        y = z.copy()
-        y.axpy(-1.0, c)
-        prob = _Problem(A, b)
-        prob.residual(y)
-        nt = _Newton(prob, comm, symmetric, stats)
-        nt.plan(y)
-        y = nt.solve(y, 1e-14, 0.0)
-        nt.release()
-        y.axpy(1.0, c)
-        trial = y
-    r = _icp_residual(A, q, zeta, trial, w, g, zt)
-    return (trial, r) if r < res else (None, res)
-
-
 # ----------------------------------------------------------------------------- the entry points
 def _prepare(A, q, zeta, x0, comm, method, tol, maxiter, omega1, omega2, gamma, alpha, beta, hierarchy, rtol=0.0):
     """Every check, with every rank's failure raised on all ranks; returns the PETSc objects."""
@@ -965,30 +451,32 @@ def _prepare(A, q, zeta, x0, comm, method, tol, maxiter, omega1, omega2, gamma, 
 
 def solve(A, q, zeta=None, *, method: str = "newton", tol=None, rtol=None, maxiter: int = 10000,
           omega1=None, omega2=None, gamma: float = 1.0, alpha=None, beta=None, hierarchy="amg",
-          x0=None, polish: bool = False, comm=None, upper=None) -> Result:
+          x0=None, polish: bool = False, comm=None, upper=None, callback=None,
+          record_history: bool = False) -> Result:
     """Solve ICP(q, A, ζ) on all ranks of A's communicator (call it on every rank).
 
     A: petsc4py Mat (AIJ, square, same row and column layout) or this rank's scipy.sparse row
-    block (n_local, n). q, x0: petsc4py Vec in A's row layout or this rank's rows. zeta: None,
+    block (n_local, n). q, x0, upper: petsc4py Vec in A's row layout or this rank's rows. zeta: None,
     a constant (scalar, this rank's rows or a Vec), :class:`nrmicp.Affine` (B a petsc4py Mat in
     A's layout, c) or a callable mapping this rank's rows of z to this rank's rows of ζ(z)
-    (entry-wise or row-local ζ only). method: 'newton' (nested over hypre BoomerAMG's
-    prolongations with hierarchy='amg', cold with None, or a list of PETSc prolongation Mats,
-    finest first) or 'nrmj', 'nrmgs', 'nrmsor', 'nrmaor' (synchronous multisplitting).
+    (entry-wise or row-local ζ only). method: 'newton' — the serial library's Newton member itself
+    (nrmicp::Newton on the PETSc engine, nrmicp._petsc), nested over hypre BoomerAMG's prolongations
+    with hierarchy='amg', cold with None, or over a list of PETSc prolongation Mats, finest first; an
+    affine ζ runs its outer fixed point — or 'nrmj', 'nrmgs', 'nrmsor', 'nrmaor' (synchronous
+    multisplitting). upper (method 'newton'): z ≤ upper, as in :func:`nrmicp.solve`. callback(k, z, res)
+    sees this rank's rows of z; returning True on any rank stops every rank.
     The options mean what they mean in :func:`nrmicp.solve` and are checked by the same code;
     tol and rtol both None is nrmicp.solve's default rule (units-free Res_E, rtol 1e-10), applied by
     solving σA, σq (σ from the diagonal's global geometric mean), ``residual`` the paper's Res.
     Returns a :class:`nrmicp.Result` on every rank, with ``z`` and ``w`` as PETSc Vecs
     (:func:`gather` copies one to rank 0). A failure on any rank raises on every rank.
     """
-    if upper is not None:   # bounds arrive with the one Newton driver's PETSc engine (issue 35), not as a second copy here
-        raise NotImplementedError("upper: bounds are not available in nrmicp.distributed yet; solve them with "
-                                  "nrmicp.solve(..., upper=...) on one machine")
     comm = comm or (A.getComm() if isinstance(A, PETSc.Mat) else PETSc.COMM_WORLD)
     t_start = time.perf_counter()
     it, units = _criterion({"tol": tol, "rtol": rtol})
     Am, m, w1, w2, qv, z0, zf = _prepare(A, q, zeta, x0, comm, method, it["tol"], maxiter, omega1, omega2,
                                          gamma, alpha, beta, hierarchy, it["rtol"])
+    ua = _upper(upper, Am, comm, m)
     A_user, q_user = Am, qv
     if units:   # the iteration runs on σA, σq: its Res is the units-free Res_E
         sigma = _units_sigma(Am)
@@ -996,52 +484,107 @@ def solve(A, q, zeta=None, *, method: str = "newton", tol=None, rtol=None, maxit
         Am.scale(sigma)
         qv.scale(sigma)
         w2 = None if w2 is None else sigma * w2
-    tol = _target(Am, qv, zf, it["tol"], it["rtol"])
     polish = bool(_collective(comm, lambda: _check_polish(polish)))
-    stats = {"linear_solves": 0, "inner_iterations": 0, "fallback_sweeps": 0, "outer_iterations": 0,
-             "level_steps": [], "level_seconds": [], "nit": 0}
-    symmetric = bool(Am.isSymmetric(1e-14)) and zf.kind != 2
-    t_setup = time.perf_counter()
-    Ps = _Levels()
-    if m == "newton" and hierarchy in ("amg", "auto") and zf.kind != 2:
-        Ps = _Levels(lambda: _hierarchy(Am, comm, f"nrmicp_{id(stats)}_"))
-    elif m == "newton" and isinstance(hierarchy, (list, tuple)):
-        Ps = _Levels(pairs=[(P, None) for P in hierarchy])
-    t_iter = time.perf_counter()
     if m == "newton":
-        z, res, status, nit, iterations = _newton(Am, qv, zf, z0, Ps, tol, maxiter, symmetric, comm, stats)
+        z, res, status, message, tol, fields = _newton(Am, qv, zf, z0, ua, hierarchy, it, maxiter, w1, w2, gamma,
+                                                       polish, callback, record_history, comm)
     else:
+        tol = _target(Am, qv, zf, it["tol"], it["rtol"])
+        t_iter = time.perf_counter()
         z, res, status, nit, iterations = _multisplitting(Am, qv, zf, z0, m, tol, maxiter, w1, w2, gamma,
-                                                          alpha, beta, stats)
-    polished = None
-    if polish:
-        zp, res = _polish(Am, qv, zf, z, res, comm, symmetric, stats)
-        polished = zp is not None
-        if zp is not None:
-            z = zp
-            if res < tol:
-                status = Status.CONVERGED
-    message = _message(status, res, tol, stats.get("floor"))
+                                                          alpha, beta, {})
+        message = _core.status_message(int(status))
+        fields = dict(nit=int(nit), iterations=int(iterations), history=None, inner="none", counters={},
+                      timings={"setup": t_iter - t_start, "iterations": time.perf_counter() - t_iter})
     criterion = {"measure": "units" if units else "paper", "target": float(tol), "value": float(res)}
     w, g, zt = z.duplicate(), z.duplicate(), z.duplicate()
     if units:
         status, message = at_rounding_floor(status, message, res, tol, lambda: _rounding_level(Am, qv, z, zf(z, zt)))
-        res = _icp_residual(A_user, q_user, zf, z, w, g, zt)   # the paper's Res, and w, in the user's units
+        res = _icp_residual(A_user, q_user, zf, z, w, g, zt, ua)   # the paper's Res, and w, in the user's units
     else:
         Am.multAdd(z, qv, w)
-    t_end = time.perf_counter()
-    fields = dict(z=z, w=w, success=status == Status.CONVERGED, status=Status(status),
-                  message=message, nit=int(nit), iterations=int(iterations),
-                  residual=float(res), history=None, criterion=criterion,
-                  timings={"setup": t_iter - t_setup + Ps.seconds, "iterations": t_end - t_iter - Ps.seconds,
-                           "total": t_end - t_start},
-                  method=m, inner=("cg" if symmetric else "bicgstab") if m == "newton" else "none",
-                  counters={}, ranks=comm.getSize())
-    if m == "newton":
-        fields.update(_newton_fields(stats, iterations))
+    fields["timings"]["total"] = time.perf_counter() - t_start
+    return Result(z=z, w=w, success=status == Status.CONVERGED, status=Status(status), message=message,
+                  residual=float(res), criterion=criterion, method=m, ranks=comm.getSize(), **fields)
+
+
+def _upper(upper, Am, comm, method):
+    """This rank's rows of the upper bound (None: none); method 'newton' only."""
+    if upper is None:
+        return None
+
+    def local():
+        if method != "newton":
+            raise ValueError(f"upper: bounds are solved by method 'newton' in nrmicp.distributed, got method {method!r}")
+        return _local(upper, Am, "upper", scalar_ok=True)
+    return _collective(comm, local)
+
+
+def _prolongations(Am, hierarchy, comm):
+    """The nesting hierarchy's prolongations and their Galerkin operators (None: formed by the core)
+    as PETSc Mats, and what keeps them alive (hypre's PC)."""
+    if hierarchy in ("amg", "auto"):
+        Ps, As, pc = _hierarchy(Am, comm, f"nrmicp_{id(Am)}_")
+        return Ps, As, pc
+    if isinstance(hierarchy, (list, tuple)):
+        return list(hierarchy), [], None
+    return [], [], None
+
+
+def _newton(Am, qv, zf, z0, ua, hierarchy, it, maxiter, w1, w2, gamma, polish, callback, record_history, comm):
+    """The Newton member: nrmicp::Newton on the PETSc engine (nrmicp._petsc), its every decision the
+    serial member's. Returns (z, Res, status, message, tol, the result's other fields)."""
+    from . import _petsc
+    t0 = time.perf_counter()
+    Ps, As, keep = _prolongations(Am, hierarchy, comm)
+    o = _core.Options()
+    o.method, o.tol, o.rtol, o.maxiter, o.gamma = _core.Method.newton, it["tol"], it["rtol"], maxiter, float(gamma)
+    o.record_history = bool(record_history)
+    if w1 is not None:
+        o.omega1 = w1
+    if w2 is not None:
+        o.omega2 = w2
+    core = _collective(comm, lambda: _petsc.Newton(Am.handle, o, [P.handle for P in Ps],
+                                                   [C.handle for C in As] if len(As) == len(Ps) else []))
+    t_iter = time.perf_counter()
+    kind, c, fn = zf.core_args(Am)
+    args = (np.array(qv.getArray(readonly=True)), kind, c, fn, ua)
+    x0 = None if z0 is None else np.array(z0.getArray(readonly=True))
+    d = core.solve(*args, x0, callback, o)
+    tol = _target_of(o, Am, qv, zf, ua)
+    z_arr, res, status, message = d["z"], d["residual"], Status(d["status"]), d["message"]
+    polished = None
+    if polish:
+        p = core.polish(*args, z_arr, tol)
+        polished = p["residual"] < res
+        if polished:
+            z_arr, res = p["z"], p["residual"]
+            if res < tol:
+                status, message = Status.CONVERGED, "converged: Res < tol after polishing (Newton steps)"
+    z = _vec(Am, z_arr)
+    report = core.hierarchy
+    fields = dict(nit=int(d["nit"]), iterations=int(d["iterations"]), inner=core.inner, counters=dict(d["counters"]),
+                  history=d["history"], timings={"setup": t_iter - t0, "iterations": time.perf_counter() - t_iter},
+                  **_newton_result_fields(d, report))
     if polish:
         fields["polished"] = polished
-    return Result(**fields)
+    del keep
+    return z, res, status, message, tol, fields
+
+
+def _newton_result_fields(d, report):
+    from ._newton import result_fields
+    return result_fields(d, report)
+
+
+def _target_of(o, Am, qv, zf, ua):
+    """The absolute target the core resolved from tol and rtol (Options::target on the bounded Res(0))."""
+    if not o.rtol > 0:
+        return o.tol
+    z = qv.duplicate()
+    z.set(0.0)
+    w, g, zt = z.duplicate(), z.duplicate(), z.duplicate()
+    return o.target(_icp_residual(Am, qv, zf, z, w, g, zt, ua))
 
 
 def _units_sigma(Am):
@@ -1069,13 +612,6 @@ def _target(Am, qv, zf, tol, rtol):
     return opts.target(m.norm())
 
 
-def _message(status, res, tol, floor):
-    """The result's message: the serial member's, with the rounding level where Res settled there."""
-    if status == Status.STAGNATED and floor is not None:
-        return _core.floor_message(float(res), float(tol), float(floor))
-    return _core.status_message(int(status))
-
-
 def _start(Am, z0):
     """z0, or zeros in A's layout."""
     if z0 is not None:
@@ -1083,17 +619,6 @@ def _start(Am, z0):
     z = Am.createVecLeft()
     z.set(0.0)
     return z
-
-
-def _newton(Am, qv, zf, z0, Ps, tol, maxiter, symmetric, comm, stats):
-    """The Newton member by ζ's kind: (z, Res, status, nit, iterations)."""
-    if zf.kind == 2:
-        z, res, status = _affine_newton(Am, qv, zf, _start(Am, z0), tol, maxiter, comm, stats)
-    elif zf.kind == 3:
-        z, res, status = _callable_newton(Am, qv, zf, z0, Ps, tol, maxiter, symmetric, comm, stats)
-    else:
-        z, res, status = _obstacle_newton(Am, qv, zf.c, z0, Ps, tol, maxiter, symmetric, comm, stats)
-    return z, res, status, stats["nit"] or stats["level_steps"][0], sum(stats["level_steps"])
 
 
 def _multisplitting(Am, qv, zf, z0, m, tol, maxiter, w1, w2, gamma, alpha, beta, stats):
@@ -1105,15 +630,6 @@ def _multisplitting(Am, qv, zf, z0, m, tol, maxiter, w1, w2, gamma, alpha, beta,
     z = _start(Am, z0)
     res, nit, status, iterations = _stationary(Am, qv, zf, member, z, tol, maxiter, stats)
     return z, res, status, nit, iterations
-
-
-def _newton_fields(stats, iterations):
-    """The Newton statistics of the result (the serial result's NewtonStats fields)."""
-    return dict(linear_solves=stats["linear_solves"], inner_iterations=stats["inner_iterations"],
-                fallback_sweeps=stats["fallback_sweeps"], outer_iterations=stats["outer_iterations"],
-                level_steps=list(stats["level_steps"]), level_seconds=list(stats["level_seconds"]),
-                path="newton+fallback" if stats["fallback_sweeps"] and iterations else
-                ("fallback" if stats["fallback_sweeps"] else "newton"))
 
 
 def _check_polish(polish):

@@ -325,7 +325,7 @@ struct Hierarchy {
 /// rule (ActiveSetSystem::use_iterative) solves exactly, LU (PETSc's on one process, MUMPS on several). Options prefix nrmicp_inner_ (e.g. -nrmicp_inner_pc_hypre_boomeramg_...).
 class System {
  public:
-  System(const Matrix& A, const Matrix* B, Inner inner, Hierarchy below = {}, bool = false) : A_(A) {
+  System(const Matrix& A, const Matrix* B, Inner inner, Hierarchy below = {}, bool = false) : A_(A), below_(below) {
     if (B) throw std::invalid_argument("the PETSc engine has no affine zeta (B): use the serial Newton member");
     PetscInt N;
     check(MatGetSize(A.get(), &N, nullptr), "MatGetSize");
@@ -380,7 +380,7 @@ class System {
     return lu_ ? 0 : reason > 0 ? static_cast<int>(its) : max_iterations_ + 1;
   }
   void restore_hierarchy() {}
-  const char* inner_name() const { return lu_ ? "lu" : symmetric_ ? "cg+boomeramg" : "bicgstab+boomeramg"; }
+  const char* inner_name() const { return lu_ ? "lu" : symmetric_ ? "cg+mg" : "bicgstab+mg"; }
   bool iterative() const { return iterative_; }
   void set_max_iterations(int k) { max_iterations_ = k; }
 
@@ -399,12 +399,45 @@ class System {
       KSPSetInitialGuessNonzero(ksp_, PETSC_TRUE);
       PC pc;
       KSPGetPC(ksp_, &pc);
-      PCSetType(pc, PCHYPRE);
+      multigrid(pc);
     }
     KSPSetOptionsPrefix(ksp_, "nrmicp_inner_");
     check(KSPSetFromOptions(ksp_), "KSPSetFromOptions");
   }
+  /// The serial V-cycle (detail/multigrid.hpp) in PETSc's PCMG: the hierarchy's P's, Galerkin operators
+  /// PᵀKP of each step's K, one forward Gauss–Seidel sweep before the coarse correction and one
+  /// backward after (symmetric: CG applies), LU on the coarsest level.
+  void multigrid(PC pc) {
+    const PetscInt L = static_cast<PetscInt>(below_.levels) + 1;
+    check(PCSetType(pc, PCMG), "PCSetType");
+    check(PCMGSetLevels(pc, L, nullptr), "PCMGSetLevels");
+    check(PCMGSetGalerkin(pc, PC_MG_GALERKIN_BOTH), "PCMGSetGalerkin");
+    for (PetscInt l = 1; l < L; ++l) {
+      check(PCMGSetInterpolation(pc, l, below_.level[L - 1 - l].P.get()), "PCMGSetInterpolation");
+      smoother(pc, l, true);
+      smoother(pc, l, false);
+    }
+    KSP coarse;
+    PC cpc;
+    check(PCMGGetCoarseSolve(pc, &coarse), "PCMGGetCoarseSolve");
+    KSPSetType(coarse, KSPPREONLY);
+    KSPGetPC(coarse, &cpc);
+    PCSetType(cpc, A_.comm().size() > 1 ? PCREDUNDANT : PCLU);
+  }
+  static void smoother(PC pc, PetscInt l, bool down) {
+    KSP s;
+    PC p;
+    check(down ? PCMGGetSmootherDown(pc, l, &s) : PCMGGetSmootherUp(pc, l, &s), "PCMGGetSmoother");
+    KSPSetType(s, KSPRICHARDSON);
+    KSPSetTolerances(s, PETSC_DEFAULT, PETSC_DEFAULT, PETSC_DEFAULT, 1);
+    KSPSetNormType(s, KSP_NORM_NONE);
+    KSPGetPC(s, &p);
+    PCSetType(p, PCSOR);
+    PCSORSetSymmetric(p, down ? SOR_LOCAL_FORWARD_SWEEP : SOR_LOCAL_BACKWARD_SWEEP);
+  }
+
   Matrix A_;
+  Hierarchy below_;
   KSP ksp_ = nullptr;
   Mat K_ = nullptr;
   std::vector<PetscInt> active_;
@@ -426,7 +459,8 @@ class Fallback {
                const detail::Callback&, const detail::Poll&, const SolveOptions* it) {
     const detail::Comm& comm = A_.comm();
     if (comm.size() == 1) return solver_.solve(q, zeta, z0, {}, {}, it);
-    Result r = solver_.solve(q + A_.coupling(*z0), zeta, z0, {}, {}, it);
+    // ζ is every process's (a collective call) and the runs may differ in length: held at ζ(z0)
+    Result r = solver_.solve(q + A_.coupling(*z0), held(zeta, *z0), z0, {}, {}, it);
     r.iterations = static_cast<int>(comm.max(r.iterations));
     Eigen::VectorXd w, zeta_z;
     A_.multiply(r.z, w);
@@ -438,6 +472,14 @@ class Fallback {
   }
 
  private:
+  /// ζ, a callable or affine one held at ζ(z0) (the bounds kept).
+  static Zeta<PetscInt> held(const Zeta<PetscInt>& zeta, const Eigen::VectorXd& z0) {
+    if (zeta.kind() != ZetaKind::Functor && zeta.kind() != ZetaKind::Affine) return zeta;
+    Eigen::VectorXd psi;
+    if (!zeta.eval(z0, psi)) psi = Eigen::VectorXd::Constant(z0.size(), std::numeric_limits<double>::quiet_NaN());
+    const Zeta<PetscInt> c = Zeta<PetscInt>::constant(psi);
+    return zeta.upper().size() ? c.with_upper(zeta.upper()) : c;
+  }
   Matrix A_;
   Local block_;
   Solver<Local> solver_;
