@@ -159,6 +159,11 @@ def _bad(kind):
             return np.full_like(z, np.nan if last else 0.0)
     elif kind == "bad_option":
         kw = {"tol": -1.0}
+    elif kind == "crossing_bounds":   # upper below the obstacle on the last rank's last row
+        upper = pb.zeta[lo:hi] + 1.0
+        if last:
+            upper[-1] = pb.zeta[hi - 1] - 1.0
+        kw = {"upper": upper}
     elif kind == "bad_method":
         kw = {"method": "nrm"}
     return M, q, zeta, kw
@@ -226,14 +231,24 @@ def case_fuzz(examples):
         method = str(rng.choice(list(OPTIONS)))
         lo, hi = split(n, rng.uniform(0.2, 1.0, SIZE).tolist())
         polish = bool(rng.random() < 0.3)
+        # Newton takes bounds (some rows free above) and a callback (every rank's is called)
+        upper = None
+        if method == "newton" and rng.random() < 0.4:
+            upper = (np.zeros(n) if zeta is None else zeta) + rng.uniform(0.0, 2.0, n)
+            upper[rng.random(n) < 0.3] = np.inf
+        calls = []
         r = dist.solve(A[lo:hi], q[lo:hi], None if zeta is None else zeta[lo:hi], method=method, tol=1e-9,
-                       maxiter=100000, polish=polish, **OPTIONS[method])
+                       maxiter=100000, polish=polish, upper=None if upper is None else upper[lo:hi],
+                       callback=(lambda k, zk, res: calls.append(k) and False) if method == "newton" else None,
+                       **OPTIONS[method])
         z = dist.gather(r.z)
         if RANK == 0:
-            serial = nrmicp.solve(A, q, zeta, method="newton", tol=1e-11, polish=True)
+            serial = nrmicp.solve(A, q, zeta, upper=upper, method="newton", tol=1e-11, polish=True)
+            g = z - (0.0 if zeta is None else zeta)
+            m = np.minimum(A @ z + q, g) if upper is None else np.minimum(g, np.maximum(z - upper, A @ z + q))
             rows.append({"n": n, "method": method, "status": str(r.status), "err": float(np.max(np.abs(z - serial.z))),
-                         "res": oracle_residual(A, q, z, None if zeta is None else (lambda _z, c=zeta: c)),
-                         "scale": float(np.max(np.abs(q)))})
+                         "res": float(np.linalg.norm(m)), "bounded": upper is not None,
+                         "called": bool(calls) or method != "newton", "scale": float(np.max(np.abs(q)))})
     return rows
 
 

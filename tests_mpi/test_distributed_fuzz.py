@@ -1,5 +1,6 @@
 """Random small problems through the distributed entry points (np = 2, uneven partitions):
-every member against serial nrmicp and the numpy oracle (tests/reference_impl.py)."""
+every member against serial nrmicp and a plain numpy Res (bounds: ‖mid(z − ζ, z − u, Az + q)‖);
+Newton with bounds and a callback in some of them."""
 import os
 
 from conftest import mpirun
@@ -15,3 +16,5 @@ def test_distributed_fuzz():
         assert r["res"] < 1e-9 * 1.0001, r
         # a P-matrix ICP has one solution; z's error is bounded by ||A^-1|| Res (A is diagonally dominant)
         assert r["err"] < 1e-8, r
+        assert r["called"], r   # the callback saw the iterates
+    assert any(r["bounded"] for r in rows)

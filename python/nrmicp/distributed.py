@@ -28,7 +28,7 @@ except ImportError as exc:  # the core package needs no MPI; this module does
     raise ImportError("nrmicp.distributed needs petsc4py, PETSc (with hypre) and MPI: README, 'Beyond one machine' "
                       f"(make mpideps installs them on Debian); {exc}") from exc
 
-from . import _core
+from . import _bounds, _core
 from ._api import (Affine, Result, Status, _checked, _choice, _criterion, _iteration_options, _scalar,
                    at_rounding_floor)
 from ._scaling import sigma_from_logs
@@ -138,9 +138,9 @@ def _as_mat(B, comm):
     return mat
 
 
-def _local(v, A, name, *, scalar_ok=False):
-    """q, zeta's c, x0 -> this rank's rows as a new float64 array (local checks only: no rank
-    waits for another here; the user's object is never modified)."""
+def _local(v, A, name, *, scalar_ok=False, infinite=0):
+    """q, zeta's c, x0, upper -> this rank's rows as a new float64 array (local checks only: no rank
+    waits for another here; the user's object is never modified); `infinite`: as in as_constant."""
     lo, hi = A.getOwnershipRange()
     if isinstance(v, PETSc.Vec):
         if v.getOwnershipRange() != (lo, hi) or v.getSize() != A.getSize()[0]:
@@ -148,7 +148,7 @@ def _local(v, A, name, *, scalar_ok=False):
                              f"A's rows ({lo}, {hi}) of {A.getSize()[0]}")
         v = v.getArray(readonly=True)
     try:
-        return np.array(as_constant(v, hi - lo, name) if scalar_ok else as_vector(v, hi - lo, name))
+        return np.array(as_constant(v, hi - lo, name, infinite) if scalar_ok else as_vector(v, hi - lo, name))
     except ValueError as exc:
         raise ValueError(f"{exc} (indices of this rank's rows, which start at global row {lo})") from None
 
@@ -197,7 +197,7 @@ class _Zeta:
         elif callable(zeta):
             self.kind, self.fn = 3, CheckedZeta(zeta, A.getLocalSize()[0])
         else:
-            self.kind, self.c = 1, _local(zeta, A, "zeta", scalar_ok=True)
+            self.kind, self.c = 1, _local(zeta, A, "zeta", scalar_ok=True, infinite=-1)  # -inf: free below
 
     def _checked(self, z):
         r = self.fn(z)
@@ -434,7 +434,11 @@ def _prepare(A, q, zeta, x0, comm, method, tol, maxiter, omega1, omega2, gamma, 
             raise ValueError(f"hierarchy must be 'amg', None or a list of PETSc prolongations; got {hierarchy!r}")
         qa = _local(q, Am, "q")
         xa = None if x0 is None else _local(x0, Am, "x0")
-        return m, w1, w2, qa, xa, _Zeta(zeta, Am, comm)
+        zf = _Zeta(zeta, Am, comm)
+        if m != "newton" and zf.kind == 1 and np.any(np.isneginf(zf.c)):
+            raise ValueError(f"zeta: -inf entries (rows free below) are solved by method 'newton' in "
+                             f"nrmicp.distributed, got method {m!r}")
+        return m, w1, w2, qa, xa, zf
     m, w1, w2, qa, xa, zf = _collective(comm, local)
     d = Am.getDiagonal()
 
@@ -476,7 +480,7 @@ def solve(A, q, zeta=None, *, method: str = "newton", tol=None, rtol=None, maxit
     it, units = _criterion({"tol": tol, "rtol": rtol})
     Am, m, w1, w2, qv, z0, zf = _prepare(A, q, zeta, x0, comm, method, it["tol"], maxiter, omega1, omega2,
                                          gamma, alpha, beta, hierarchy, it["rtol"])
-    ua = _upper(upper, Am, comm, m)
+    ua = _upper(upper, Am, zf, comm, m)
     A_user, q_user = Am, qv
     if units:   # the iteration runs on σA, σq: its Res is the units-free Res_E
         sigma = _units_sigma(Am)
@@ -508,7 +512,7 @@ def solve(A, q, zeta=None, *, method: str = "newton", tol=None, rtol=None, maxit
                   residual=float(res), criterion=criterion, method=m, ranks=comm.getSize(), **fields)
 
 
-def _upper(upper, Am, comm, method):
+def _upper(upper, Am, zf, comm, method):
     """This rank's rows of the upper bound (None: none); method 'newton' only."""
     if upper is None:
         return None
@@ -516,7 +520,11 @@ def _upper(upper, Am, comm, method):
     def local():
         if method != "newton":
             raise ValueError(f"upper: bounds are solved by method 'newton' in nrmicp.distributed, got method {method!r}")
-        return _local(upper, Am, "upper", scalar_ok=True)
+        u = _local(upper, Am, "upper", scalar_ok=True, infinite=1)
+        kind = (_core.ZetaKind.none, _core.ZetaKind.constant, _core.ZetaKind.affine, _core.ZetaKind.functor)[zf.kind]
+        c = None if zf.c is None or zf.kind != 1 else np.array(zf.c.getArray(readonly=True))
+        _bounds.check(kind, c, u, method, None)
+        return u
     return _collective(comm, local)
 
 
