@@ -391,7 +391,7 @@ class Solver:
                  stall_iterations: int = 100, scale: Union[bool, str] = False, verbose: int = 0,
                  hierarchy: Any = "auto", polish: bool = False, _decouple: bool = True,
                  _units_factor: Optional[float] = None, _hierarchy_asked: Optional[tuple] = None) -> None:
-        settings = {k: v for k, v in locals().items() if k in _options.TABLE}   # the options, as given
+        settings = _options.pick(locals(), "setup", "solve")   # the options, as given
         t0 = time.perf_counter()
         self.A = as_csr(A, "A")
         n = self.A.shape[0]
@@ -1091,15 +1091,15 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
         success is declared (this matters for a constant obstacle, which the core solves as the
         shifted LCP), with the same re-solve rule as for ``scale``.
     """
-    options = {k: v for k, v in locals().items() if k in _options.TABLE}   # the options, as given
+    options = _options.pick(locals())   # the options, as given
     t0 = time.perf_counter()
     if isinstance(method, str) and method.lower() == "auto" and (
             zeta_jacobian is not None or (upper is not None and (callable(zeta) or isinstance(zeta, Affine)))):
         options["method"] = "newton"   # a ζ Jacobian, and an implicit ζ with upper, are newton's only (known here)
     # Bounds take choose_method's rule as they are: nrmgs's box form contracts as its LCP form does
     # (m(x) is 1-Lipschitz as |x| is, detail/modulus.hpp), so a row-dominant A needs as few sweeps.
-    s = Solver(A, **{k: options[k] for k in _options.names("setup", "solve")})
-    res = s.solve(q, zeta, upper=upper, **{k: options[k] for k in _options.names("call")})
+    s = Solver(A, **_options.pick(options, "setup", "solve"))
+    res = s.solve(q, zeta, upper=upper, **_options.pick(options, "call"))
     _charge_setup(res.timings, s._setup_timings)   # the whole call: the set-up is part of it
     res.timings["total"] = time.perf_counter() - t0
     return res

@@ -90,6 +90,12 @@ def defaults(*scopes: str) -> dict[str, Any]:
     return {n: TABLE[n].default for n in names(*scopes)}
 
 
+def pick(values: Mapping[str, Any], *scopes: str) -> dict[str, Any]:
+    """{name: values[name]} for the options of these scopes (all when none is named): a function's
+    ``locals()`` as its options."""
+    return {n: values[n] for n in names(*scopes)}
+
+
 def choices(name: str) -> tuple[str, ...]:
     """The values a choice option takes. A default outside the core's choices is the Python layer's
     own (method 'auto': _api.choose_method) and comes first."""
