@@ -6,6 +6,7 @@ This module turns them into the Python layer's type checks, defaults and docstri
 tests/test_options.py holds the signatures and docstrings of solve and Solver to the table."""
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any, Iterable, Mapping, Optional, Union
@@ -19,7 +20,7 @@ from ._inputs import as_diagonal, as_float
 _INT_MAX = 2**31 - 1
 #: True/False mean on/off, as scikit-learn's verbose and scipy's disp: 1 and 0.
 _BOOL_IS_INT = {"verbose"}
-#: None means the default (accelerate's type is Optional[str]).
+#: None (or False) means the default (accelerate's type is Optional[str]).
 _NONE_IS_DEFAULT = {"accelerate"}
 #: The kinds whose values are checked without knowing n.
 _SCALAR_KINDS = ("real", "integer", "boolean", "choice")
@@ -76,10 +77,7 @@ def _read_table() -> dict[str, Option]:
 TABLE = _read_table()
 
 
-#: The core's enum type of each choice option (_core.Method, ...).
-_ENUMS = {n: type(getattr(_core.Options(), n)) for n, o in TABLE.items() if o.kind == "choice"}
-
-
+@functools.lru_cache(maxsize=None)   # (every solve asks: a few µs each)
 def names(*scopes: str) -> tuple[str, ...]:
     """The options of these scopes (all when none is named), in the table's order."""
     return tuple(n for n, o in TABLE.items() if not scopes or o.scope in scopes)
@@ -96,6 +94,7 @@ def pick(values: Mapping[str, Any], *scopes: str) -> dict[str, Any]:
     return {n: values[n] for n in names(*scopes)}
 
 
+@functools.lru_cache(maxsize=None)
 def choices(name: str) -> tuple[str, ...]:
     """The values a choice option takes. A default outside the core's choices is the Python layer's
     own (method 'auto': _api.choose_method) and comes first."""
@@ -135,31 +134,42 @@ def _boolean(value, name):
     return bool(value)
 
 
+def _converter(opt: Option):
+    """convert(value, n) for one option of the core: what its field takes, type-checked."""
+    name = opt.name
+    if opt.kind == "real":
+        none_is_nan = opt.core_default is None   # NaN: the method's default (alpha, beta)
+        return lambda v, n: math.nan if v is None and none_is_nan else _scalar(v, name)
+    if opt.kind == "integer":
+        bool_ok = name in _BOOL_IS_INT
+        return lambda v, n: _scalar(int(v) if bool_ok and isinstance(v, (bool, np.bool_)) else v, name, integer=True)
+    if opt.kind == "boolean":
+        return lambda v, n: _boolean(v, name)
+    if opt.kind == "choice":
+        enum, allowed = type(getattr(_core.Options(), name)), choices(name)
+        if name in _NONE_IS_DEFAULT:   # (None, or False: the default)
+            return lambda v, n: getattr(enum, _choice(v or opt.default, allowed, name))
+        return lambda v, n: getattr(enum, _choice(v, allowed, name))
+    return lambda v, n: as_diagonal(v, n, name, positive=opt.low_open)
+
+
+#: The converter of each option of the core (the Python layer's own options have none).
+_CONVERTERS = {n: _converter(o) for n, o in TABLE.items() if o.kind != "python"}
+
+
 def convert(name: str, value: Any, n: Optional[int] = None) -> Any:
     """A value of an option of the core -> what its field takes, type-checked (TypeError/ValueError
     naming the option); the ranges are the core's to check (Options.check). Diagonals need n."""
-    opt = TABLE[name]
-    if value is None and name in _NONE_IS_DEFAULT:
-        value = opt.default
-    if opt.kind == "real":
-        return math.nan if value is None and opt.core_default is None else _scalar(value, name)
-    if opt.kind == "integer":
-        bool_ok = name in _BOOL_IS_INT and isinstance(value, (bool, np.bool_))
-        return _scalar(int(value) if bool_ok else value, name, integer=True)
-    if opt.kind == "boolean":
-        return _boolean(value, name)
-    if opt.kind == "choice":
-        return getattr(_ENUMS[name], _choice(value, choices(name), name))
-    if opt.kind == "diagonal":
-        return as_diagonal(value, n, name, positive=opt.low_open)
-    raise TypeError(f"{name} is an option of the Python layer; the core has no field for it")
+    if name not in _CONVERTERS:
+        raise TypeError(f"{name} is an option of the Python layer; the core has no field for it")
+    return _CONVERTERS[name](value, n)
 
 
 def fill(opts, values: Mapping[str, Any], n: Optional[int] = None):
     """Set the core options `opts` (Options or SolveOptions) from `values`, each converted; a diagonal
     given as None keeps its default (the method's)."""
     for name, value in values.items():
-        v = convert(name, value, n)
+        v = _CONVERTERS[name](value, n)
         if v is not None:
             setattr(opts, name, v)
     return opts
