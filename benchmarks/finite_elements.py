@@ -21,7 +21,7 @@ VmHWM during the solve, reset after building the problem, minus its resident siz
     newton-whole newton-amg on the whole A, rows with a lone diagonal not solved apart (the private
                  Solver(..., _decouple=False); the "dirrows" case's comparison, docs/finite_elements.md)
     nrmgs+aa     nrmicp nrmgs, accelerate="anderson"
-    psor         multicolour projected SOR (nrmicp._peers.psor, greedy colouring, ω from the
+    psor         multicolour projected SOR (nrmicp.bench.peers.psor, greedy colouring, ω from the
                  Jacobi spectral radius)
 
 A peer that exceeded --budget CPU seconds is not run at larger sizes of that case.
@@ -64,7 +64,7 @@ from mesh_independent import _status_kb  # noqa: E402  (this directory is on sys
 def child(peer, case, size, budget):
     import nrmicp
     import pyamg  # noqa: F401  (imported outside the timed region, as a user's process has it)
-    from nrmicp import _peers
+    from nrmicp.bench import peers
 
     p = build(case, size)
     pre = {}
@@ -76,7 +76,7 @@ def child(peer, case, size, budget):
             return dict(status="no mesh hierarchy")
     if peer == "psor":
         t = time.process_time()
-        colour, omega = _peers.colours(p.A), _peers.sor_omega(p.A)
+        colour, omega = peers.colours(p.A), peers.sor_omega(p.A)
         pre["note"] = f"{colour.max() + 1} colours, omega={omega:.3f}; set-up {time.process_time() - t:.1f} s (untimed)"
     rss0 = _status_kb("VmRSS")
     with open("/proc/self/clear_refs", "w") as f:
@@ -98,8 +98,8 @@ def child(peer, case, size, budget):
         z = r.z
         out.update(status=r.status.name.lower(), steps=int(r.nit))
     else:
-        A, q, c = _peers.shifted_lcp(p)
-        o = _peers.psor(A, q, c, TOL, omega=omega, colour=colour, maxiter=10**7, time_limit=budget)
+        A, q, c = peers.shifted_lcp(p)
+        o = peers.psor(A, q, c, TOL, omega=omega, colour=colour, maxiter=10**7, time_limit=budget)
         z = o["z"]
         out.update(status=o["status"], steps=int(o["nit"]))
     out.update(cpu=time.process_time() - c0, res=p.residual(z), n=p.n,

@@ -48,7 +48,7 @@ import time
 
 import numpy as np
 import scipy.sparse as sp
-from nrmicp._peers import estimate
+from nrmicp.bench.peers import estimate
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 

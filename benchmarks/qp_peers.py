@@ -21,7 +21,7 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from peers_impl import _peers
+from peers_impl import peers
 
 INF = 1e20  # finite "infinity" accepted by every solver here
 
@@ -31,10 +31,10 @@ def _triu(A):
 
 
 def _timed(name, **kw):
-    """nrmicp._peers.qp_once as a wrapper f(A, q, eps) -> dict(z, seconds, status, iters)."""
+    """nrmicp.bench.peers.qp_once as a wrapper f(A, q, eps) -> dict(z, seconds, status, iters)."""
     def solve(A, q, eps):
         t0 = time.perf_counter()
-        y, status, iters = _peers.qp_once(name, sp.csr_matrix(A, dtype=float), np.asarray(q, float), eps, **kw)
+        y, status, iters = peers.qp_once(name, sp.csr_matrix(A, dtype=float), np.asarray(q, float), eps, **kw)
         return dict(z=y, seconds=time.perf_counter() - t0, status=status, iters=iters)
     return solve
 
@@ -86,7 +86,7 @@ def grid_colors(m):
 
 def psor_solve(A, q, tol, *, omega=1.0, colors=None, maxiter=1_000_000, time_limit=None):
     """Projected SOR  z_i <- max(0, z_i - omega (Az + q)_i / a_ii)  in a multicolour
-    ordering (nrmicp._peers.psor): rows of one colour do not couple, so each colour's
+    ordering (nrmicp.bench.peers.psor): rows of one colour do not couple, so each colour's
     half-sweep is one vectorised SpMV on that colour's rows and is exactly Gauss-Seidel/SOR in
     that ordering (red-black for the 5-point grid; default: the greedy colouring of A's graph).
     Stops on Res(z) < tol, checked every sweep (one extra SpMV)."""
@@ -94,8 +94,8 @@ def psor_solve(A, q, tol, *, omega=1.0, colors=None, maxiter=1_000_000, time_lim
     A = sp.csr_matrix(A, dtype=float)
     q = np.asarray(q, float)
     if colors is None:
-        colors = _peers.colours(A)
-    o = _peers.psor(A, q, np.zeros(A.shape[0]), tol, omega=omega, colour=colors, maxiter=maxiter,
+        colors = peers.colours(A)
+    o = peers.psor(A, q, np.zeros(A.shape[0]), tol, omega=omega, colour=colors, maxiter=maxiter,
                     time_limit=time_limit)
     return dict(z=o["z"], seconds=time.perf_counter() - t0, status=o["status"], iters=o["nit"],
                 residual=o["residual"])
@@ -119,7 +119,7 @@ SETTINGS = {
 
 def solve_to_target(name, A, q, target, *, eps_start=None, eps_min=1e-14, time_budget=None):
     """Tighten the solver's eps by 10x (from eps_start, default = target) until
-    Res(z) < target (nrmicp._peers.tune_eps). Returns the last attempt plus `eps`, `res`,
+    Res(z) < target (nrmicp.bench.peers.tune_eps). Returns the last attempt plus `eps`, `res`,
     `reached`, `attempts` (list of (eps, res, seconds)). `seconds` is the time of the final
     (successful) run alone; `tuning_seconds` adds up all attempts."""
     f = QP_SOLVERS[name]
@@ -128,7 +128,7 @@ def solve_to_target(name, A, q, target, *, eps_start=None, eps_min=1e-14, time_b
         out = f(A, q, eps)
         return out["z"], out["status"], out["iters"]
 
-    o = _peers.tune_eps(run, A, q, target, eps_start=eps_start, eps_min=eps_min, time_budget=time_budget)
+    o = peers.tune_eps(run, A, q, target, eps_start=eps_start, eps_min=eps_min, time_budget=time_budget)
     return dict(z=o["y"], seconds=o["seconds"], status=o["status"], iters=o["iterations"],
                 eps=o["eps"], res=o["residual"], reached=o["reached"], attempts=o["attempts"],
                 tuning_seconds=o["tuning_seconds"], setting=SETTINGS[name].format(eps=o["eps"]))

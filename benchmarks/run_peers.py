@@ -42,7 +42,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 
 import qp_peers  # noqa: E402  (this directory is on sys.path when a script here runs)
 import scipy_modulus  # noqa: E402
-from peers_impl import _peers  # noqa: E402
+from peers_impl import peers  # noqa: E402
 
 REPO = os.path.dirname(HERE)
 
@@ -200,7 +200,7 @@ def main_run(args):
                     return row
 
                 def should_skip(key):
-                    est = _peers.estimate(hist.get(key, []), n, default_p)
+                    est = peers.estimate(hist.get(key, []), n, default_p)
                     if key in skip_note:
                         return skip_note[key]
                     if est is not None and est > args.budget:
@@ -408,7 +408,7 @@ def main_scale(args):
     hist = {}
     for c in cases:
         key = (c["peer"], c["method"])
-        est = _peers.estimate(hist.get(key, []), c["n"], 1.3)
+        est = peers.estimate(hist.get(key, []), c["n"], 1.3)
         if c["peer"] != "baseline" and est is not None and est > args.scale_budget:
             r = dict(c, status=f"skipped (est. > {est:.0f}s)")
             rows.append(r)

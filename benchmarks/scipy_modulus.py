@@ -30,7 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from peers_impl import _peers
+from peers_impl import peers
 
 AOR_METHODS = ("nrmaor", "nrmsor", "nrmgs", "nrmj")
 FACTOR_METHODS = ("nrm", "nrmm")
@@ -151,7 +151,7 @@ class ScipyNRM:
             res = float(np.linalg.norm(np.minimum(r, z)))
             if res < best_res:
                 best_res, best_z = res, z
-            status = _peers.verdict(res, tol, k, maxiter, t0, time_limit)  # the peers' one stopping rule
+            status = peers.verdict(res, tol, k, maxiter, t0, time_limit)  # the peers' one stopping rule
             if status:
                 break
             if self.form == "defect":

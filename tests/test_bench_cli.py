@@ -13,7 +13,8 @@ import matplotlib  # noqa: F401  (required for the PNGs: a missing one fails, no
 
 import nrmicp
 from reference_impl import residual as reference_residual
-from nrmicp import bench, scenes
+from nrmicp import scenes
+from nrmicp.bench import family
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 EXPECTED_COLUMNS = {"scene", "size", "n", "method", "z_update", "z_update_used", "tol", "status", "converged",
@@ -23,10 +24,10 @@ EXPECTED_COLUMNS = {"scene", "size", "n", "method", "z_update", "z_update_used",
 
 def _installed_qp():
     """The QP peer of this machine: CI installs one (Makefile), so its branches always run."""
-    from nrmicp import _peers
+    from nrmicp.bench import peers
 
-    qp = next((s for s in _peers.QP_SOLVERS if _peers.installed(s)), None)
-    assert qp, f"none of the QP peers {_peers.QP_SOLVERS} is installed (make deps installs piqp)"
+    qp = next((s for s in peers.QP_SOLVERS if peers.installed(s)), None)
+    assert qp, f"none of the QP peers {peers.QP_SOLVERS} is installed (make deps installs piqp)"
     return qp
 
 
@@ -48,14 +49,14 @@ def test_csv_columns_and_one_row_per_case_and_tol(quick_run):
     assert EXPECTED_COLUMNS <= columns
     keys = [(r["scene"], r["method"], r["z_update"], float(r["tol"])) for r in rows]
     assert len(keys) == len(set(keys)), "duplicate (scene, method, z-update, tol) rows"
-    expected = {(s, m, z, t) for s in bench.DEFAULT_SCENES for m in bench.QUICK_METHODS for z in ("auto",)
-                for t in bench.QUICK_TOLS}
+    expected = {(s, m, z, t) for s in family.DEFAULT_SCENES for m in family.QUICK_METHODS for z in ("auto",)
+                for t in family.QUICK_TOLS}
     # the peers, on the scenes that are LCPs (ζ constant); the QP solver on the symmetric ones
     lcp = ("bai_sym_lcp", "bai_nonsym_lcp", "obstacle_2d", "american_put")
-    expected |= {(s, "psor", "", t) for s in lcp for t in bench.QUICK_TOLS}
+    expected |= {(s, "psor", "", t) for s in lcp for t in family.QUICK_TOLS}
     qp = _installed_qp()
     if qp:  # (always: _installed_qp asserts one)
-        expected |= {(s, qp, "", t) for s in ("bai_sym_lcp", "obstacle_2d") for t in bench.QUICK_TOLS}
+        expected |= {(s, qp, "", t) for s in ("bai_sym_lcp", "obstacle_2d") for t in family.QUICK_TOLS}
     assert set(keys) == expected
     for r in rows:
         assert r["size"] == "tiny"
@@ -121,7 +122,7 @@ def test_newton_polish_and_the_peers_are_in_the_same_sweep(quick_run):
     P = scenes.build("obstacle_2d", "tiny")
     for m in methods:
         rs = _rows(rows, "obstacle_2d", m)
-        assert [float(r["tol"]) for r in rs] == list(bench.QUICK_TOLS), m
+        assert [float(r["tol"]) for r in rs] == list(family.QUICK_TOLS), m
         last = rs[-1]
         assert last["converged"] == "1" and float(last["residual"]) < 1e-8, last
         # Res < 1e-8 on this 8 x 8 grid bounds the error by ||A^-1|| Res < 1e-9
@@ -154,7 +155,7 @@ def test_newton_counts_newton_steps(quick_run):
 def test_newton_and_polish_rows_reproduced_independently(quick_run, method):
     r = _rows(quick_run[3], "obstacle_2d", method)[-1]
     P = scenes.build("obstacle_2d", "tiny")
-    base, kw = bench.split_method(method)
+    base, kw = family.split_method(method)
     res = nrmicp.solve(P.A, P.q, P.zeta, method=base, tol=float(r["tol"]), **kw)
     assert int(res.nit) == int(r["iterations"])
     res_np = reference_residual(P.A, P.q, res.z, P.zeta)

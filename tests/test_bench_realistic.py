@@ -10,7 +10,8 @@ import pytest
 import nrmicp
 import matplotlib  # noqa: F401  (required: a missing one fails, not skips)
 import pyamg  # noqa: F401  (required: a missing one fails, not skips)
-from nrmicp import bench_realistic, scenes  # noqa: E402
+from nrmicp import scenes  # noqa: E402
+from nrmicp.bench import realistic  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -29,11 +30,11 @@ def small_run(tmp_path_factory):
 
 def test_every_scene_has_the_curves_a_user_chooses_between(small_run):
     _, curves = small_run
-    for scene in bench_realistic.SCENES:
+    for scene in realistic.SCENES:
         for curve in ("newton-amg", "nrmgs+anderson", "nrmgs"):
             assert (scene, curve) in curves, (scene, curve)
         # the geometric hierarchy where the scene's grid has one (the march: its own default rule)
-        has_geo = scene == "american_put" or bench_realistic.build(scene, small=True).prolongations() is not None
+        has_geo = scene == "american_put" or realistic.build(scene, small=True).prolongations() is not None
         assert ((scene, "newton-geo") in curves) == has_geo, scene
     for scene in ("obstacle_2d", "obstacle_3d", "american_put"):  # LCPs: PSOR runs; not on the QVI
         assert (scene, "psor") in curves
@@ -42,7 +43,7 @@ def test_every_scene_has_the_curves_a_user_chooses_between(small_run):
 
 def test_newton_curves_reach_the_target_and_the_times_are_cpu_seconds_from_the_call(small_run):
     _, curves = small_run
-    for scene in bench_realistic.SCENES:
+    for scene in realistic.SCENES:
         pts = curves[(scene, "newton-amg")]
         assert pts[-1][1] < 1e-8, (scene, pts)
         seconds = [s for s, _ in pts]
@@ -56,7 +57,7 @@ def test_the_curves_match_an_independent_solve(small_run):
     returns for the same options, recomputed in numpy."""
     _, curves = small_run
     P = scenes.build("obstacle_2d", "tiny", exact=False)
-    res = nrmicp.solve(P.A, P.q, P.zeta, method="nrmgs", accelerate="anderson", tol=bench_realistic.TARGET,
+    res = nrmicp.solve(P.A, P.q, P.zeta, method="nrmgs", accelerate="anderson", tol=realistic.TARGET,
                        maxiter=10**6)
     mine = float(np.linalg.norm(np.minimum(P.A @ res.z + P.q, res.z - P.zeta)))
     assert curves[("obstacle_2d", "nrmgs+anderson")][-1][1] == pytest.approx(mine, rel=1e-6, abs=1e-14)
@@ -86,7 +87,7 @@ def test_unknown_scene_exits_nonzero(tmp_path):
 
 def test_plot_only_redraws_the_figure_from_the_csv(small_run, tmp_path):
     out, curves = small_run
-    again = bench_realistic.read_csv([str(out / "realistic.csv")])
+    again = realistic.read_csv([str(out / "realistic.csv")])
     assert {(s, c) for s, (_, found) in again.items() for c in found} == set(curves)
     proc = subprocess.run([sys.executable, "-m", "nrmicp", "bench", "--plot", str(out / "realistic.csv"),
                            "--out", str(tmp_path)], capture_output=True, text=True, timeout=120)

@@ -7,7 +7,7 @@ import sys
 
 import nrmicp
 from nrmicp import scenes
-from nrmicp.__main__ import prog_name
+from nrmicp.bench.cli import prog_name
 
 
 def _run(*args, argv0=None):
@@ -15,7 +15,7 @@ def _run(*args, argv0=None):
     if argv0 is None:
         cmd = [sys.executable, "-m", "nrmicp", *args]
     else:
-        code = (f"import sys; sys.argv[0] = {argv0!r}; from nrmicp.__main__ import main; sys.exit(main())")
+        code = (f"import sys; sys.argv[0] = {argv0!r}; from nrmicp.bench.cli import main; sys.exit(main())")
         cmd = [sys.executable, "-c", code, *args]
     return subprocess.run(cmd, capture_output=True, text=True, timeout=120)
 

@@ -196,7 +196,7 @@ def test_python_lists_are_the_cores():
 @pytest.mark.parametrize("method", [m for m in nrmicp.METHODS if m != "newton"])
 @pytest.mark.parametrize("kind", ["lcp", "icp"])
 def test_resolved_z_update_is_what_auto_does(method, kind):
-    """The core answers 'what does auto mean here' (bench.py asks it): the same iterates."""
+    """The core answers 'what does auto mean here' (bench/family.py asks it): the same iterates."""
     from nrmicp import _core
     P = make_problem(kind, 6, True)
     used = _core.resolved_z_update(getattr(_core.Method, method), False, P.zeta is not None)

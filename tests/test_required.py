@@ -8,7 +8,7 @@ import hypothesis
 import pytest
 
 import nrmicp
-from nrmicp import _peers
+from nrmicp.bench import peers
 
 
 @pytest.mark.parametrize("backend", ["cholmod", "umfpack", "eigen_llt", "eigen_lu"])
@@ -22,7 +22,7 @@ def test_required_python_packages_import(module):
 
 
 def test_a_qp_peer_is_installed():
-    assert any(_peers.installed(s) for s in _peers.QP_SOLVERS), _peers.QP_SOLVERS
+    assert any(peers.installed(s) for s in peers.QP_SOLVERS), peers.QP_SOLVERS
 
 
 def test_hypothesis_runs_derandomized_without_a_database():

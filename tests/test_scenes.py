@@ -215,9 +215,9 @@ def test_registry_builds_every_scene_with_its_sizes_grid_parameter(name):
 
 
 def test_registry_sizes_are_the_benchs():
-    from nrmicp import bench
+    from nrmicp.bench import family
 
-    assert bench.SIZES is scenes.SIZES
+    assert family.SIZES is scenes.SIZES
     for a, b in zip(("tiny", "small", "medium", "large"), ("small", "medium", "large", "realistic")):
         assert scenes.parameter("obstacle_2d", a) < scenes.parameter("obstacle_2d", b)
 

@@ -231,10 +231,10 @@ def test_game_put_rejects_a_non_positive_penalty():
 def test_bench_sweeps_the_box_scenes_with_newton_and_honest_rows(tmp_path, capsys):
     import csv
 
-    from nrmicp import bench
+    from nrmicp.bench import family
 
     scenes_ = ("two_sided_2d", "elastic_contact_p2", "game_put")
-    assert bench.main(["--quick", "--scenes", ",".join(scenes_), "--out", str(tmp_path), "--no-progress"]) == 0
+    assert family.main(["--quick", "--scenes", ",".join(scenes_), "--out", str(tmp_path), "--no-progress"]) == 0
     assert "only newton runs on the box scenes" in capsys.readouterr().out
     with open(tmp_path / "work_precision.csv", newline="") as f:
         rows = list(csv.DictReader(f))

@@ -12,6 +12,7 @@
 #include "bridge.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <exception>
@@ -19,7 +20,9 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <type_traits>
 #include <utility>
+#include <variant>
 #include <vector>
 #if defined(__GLIBCXX__)
 #include <cxxabi.h>
@@ -310,33 +313,85 @@ void bind_newton_stats(py::module_& m) {
 
 }
 
-void bind_options(py::module_& m) {
-  py::class_<SolveOptions>(m, "SolveOptions")
-      .def(py::init<>())
-      .def_readwrite("tol", &SolveOptions::tol)
-      .def_readwrite("rtol", &SolveOptions::rtol)
-      .def_readwrite("maxiter", &SolveOptions::maxiter)
-      .def_readwrite("theta", &SolveOptions::theta)
-      .def_readwrite("z_update", &SolveOptions::z_update)
-      .def_readwrite("accelerate", &SolveOptions::accelerate)
-      .def_readwrite("anderson_m", &SolveOptions::anderson_m)
-      .def_readwrite("record_history", &SolveOptions::record_history)
-      .def_readwrite("stall_iterations", &SolveOptions::stall_iterations)
-      .def_readwrite("divergence_factor", &SolveOptions::divergence_factor)
-      .def_readwrite("verbose", &SolveOptions::verbose);
-  py::class_<Options, SolveOptions>(m, "Options")
-      .def(py::init<>())
-      .def_readwrite("method", &Options::method)
-      .def("target", &Options::target, py::arg("res0"))
-      .def_readwrite("omega1", &Options::omega1)
-      .def_readwrite("omega2", &Options::omega2)
-      .def_readwrite("gamma", &Options::gamma)
-      .def_readwrite("phi", &Options::phi)
-      .def_readwrite("alpha", &Options::alpha)
-      .def_readwrite("beta", &Options::beta)
-      .def_readwrite("inner", &Options::inner)
-      .def("check", &Options::check, py::arg("n"));
+/// A field's default as Python writes it: an enum's name, None for an empty diagonal or a NaN
+/// (the method's default), else the number or bool.
+template <typename T>
+py::object python_value(const T& v) {
+  if constexpr (std::is_enum_v<T>) return py::str(nrmicp::to_string(v));
+  else if constexpr (std::is_same_v<T, Eigen::VectorXd>) return py::none();
+  else if constexpr (std::is_same_v<T, double>)
+    return std::isnan(v) ? py::object(py::none()) : py::object(py::float_(v));
+  else return py::cast(v);
+}
 
+/// One row of nrmicp::option_table as a dict: kind ('real', 'integer', 'boolean', 'choice',
+/// 'diagonal', or 'python': the Python layer's own option, of type `type`), its choices, the
+/// default of nrmicp.solve's keyword and the C++ field's (core_default).
+py::dict option_row(const nrmicp::OptionSpec& spec) {
+  static const Options defaults;
+  static const char* scopes[] = {"setup", "solve", "call"};
+  py::dict d;
+  d["name"] = spec.name;
+  d["scope"] = scopes[static_cast<int>(spec.scope)];
+  d["doc"] = spec.doc;
+  d["python"] = spec.python;
+  d["type"] = spec.python_type ? py::object(py::str(spec.python_type)) : py::object(py::none());
+  py::list choices;
+  std::visit([&](auto field) {
+    using F = decltype(field);
+    if constexpr (std::is_same_v<F, std::monostate>) {
+      d["kind"] = "python";
+      d["default"] = py::none();
+      d["core_default"] = py::none();
+    } else {
+      using T = std::decay_t<decltype(defaults.*field)>;
+      d["kind"] = std::is_same_v<T, double> ? "real"
+                  : std::is_same_v<T, int>    ? "integer"
+                  : std::is_same_v<T, bool>   ? "boolean"
+                  : std::is_enum_v<T>         ? "choice"
+                                              : "diagonal";
+      d["default"] = python_value(defaults.*field);
+      d["core_default"] = python_value(defaults.*field);
+      if constexpr (std::is_enum_v<T>)
+        for (T v : nrmicp::enum_values(T{})) choices.append(nrmicp::to_string(v));
+    }
+  }, spec.field);
+  if (spec.python_default) d["default"] = py::module_::import("ast").attr("literal_eval")(spec.python_default);
+  d["choices"] = py::tuple(choices);
+  const nrmicp::Range& r = spec.range;
+  d["low"] = r.low;
+  d["high"] = r.high;
+  d["low_open"] = r.low_open;
+  d["high_open"] = r.high_open;
+  d["finite"] = r.finite;
+  d["note"] = r.note ? py::object(py::str(r.note)) : py::object(py::none());
+  return d;
+}
+
+// The options' fields, each bound under its row's name: the per-solve ones on SolveOptions.
+void bind_options(py::module_& m) {
+  py::class_<SolveOptions> solve_options(m, "SolveOptions");
+  solve_options.def(py::init<>());
+  py::class_<Options, SolveOptions> options(m, "Options");
+  options.def(py::init<>())
+      .def("target", &Options::target, py::arg("res0"))
+      .def("check", &Options::check, py::arg("n"));
+  for (const nrmicp::OptionSpec& spec : nrmicp::option_table)
+    std::visit([&](auto field) {
+      using F = decltype(field);
+      if constexpr (!std::is_same_v<F, std::monostate>) {
+        using T = std::decay_t<decltype(std::declval<Options&>().*field)>;
+        if (spec.scope == nrmicp::Scope::Solve)
+          solve_options.def_readwrite(spec.name, static_cast<T SolveOptions::*>(field));
+        else
+          options.def_readwrite(spec.name, field);
+      }
+    }, spec.field);
+  m.def("option_table", [] {
+    py::list rows;
+    for (const nrmicp::OptionSpec& spec : nrmicp::option_table) rows.append(option_row(spec));
+    return rows;
+  }, "Every option of nrmicp.solve and nrmicp::Options, one dict per row of the C++ option table (options.hpp).");
 }
 
 // Input checks and what this build has.

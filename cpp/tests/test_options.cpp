@@ -4,6 +4,8 @@
 #include <doctest/doctest.h>
 
 #include <cmath>
+#include <string>
+#include <variant>
 
 using nrmicp::Options;
 
@@ -34,4 +36,27 @@ TEST_CASE("invalid fields are named in the error") {
   CHECK_NOTHROW(o.check(3));
   o = Options(); o.maxiter = -1;
   CHECK_THROWS_WITH_AS(o.check(3), doctest::Contains("maxiter"), std::invalid_argument);
+}
+
+TEST_CASE("each number option is checked against its row of the option table") {
+  for (const nrmicp::OptionSpec& spec : nrmicp::option_table) {
+    const nrmicp::Range& r = spec.range;
+    if (!r.bounded()) continue;
+    // just outside: past a finite high bound, else the open low bound itself or one below the closed one
+    const double bad = r.high < INFINITY ? r.high + 1 : (r.low_open ? r.low : r.low - 1);
+    Options o;
+    if (auto* f = std::get_if<double Options::*>(&spec.field)) o.*(*f) = bad;
+    else if (auto* i = std::get_if<int Options::*>(&spec.field)) o.*(*i) = static_cast<int>(bad);
+    else continue;  // the diagonals: checked entry by entry above
+    CAPTURE(spec.name);
+    const std::string expected = std::string(spec.name) + " must";
+    CHECK_THROWS_WITH_AS(o.check(3), doctest::Contains(expected.c_str()), std::invalid_argument);
+  }
+}
+
+TEST_CASE("the option table names each option once, and the defaults lie in their ranges") {
+  for (const nrmicp::OptionSpec& a : nrmicp::option_table)
+    for (const nrmicp::OptionSpec& b : nrmicp::option_table)
+      if (&a != &b) CHECK(std::string(a.name) != b.name);
+  CHECK_NOTHROW(Options().check(3));
 }

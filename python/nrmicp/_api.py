@@ -18,7 +18,8 @@ from numpy.typing import ArrayLike
 from . import _core
 from ._inputs import as_constant, as_csr, as_diagonal, as_float, as_vector
 from ._scaling import SCALINGS, ScaledCallable, equilibrate, scale_matrix, units_factor
-from . import _bounds, _newton
+from . import _bounds, _newton, _options
+from ._options import _INT_MAX, _choice, _scalar  # noqa: F401 (the distributed glue imports them from here)
 from ._zeta import CheckedZeta
 from ._decoupled import Reduced, decoupled_rows
 from ._result import Result, wants_result
@@ -33,14 +34,15 @@ ZetaLike = Union[None, float, ArrayLike, "Affine", Callable[[np.ndarray], ArrayL
 #: A diagonal parameter (omega1, omega2, phi): a scalar (times I) or a length-n vector.
 DiagonalLike = Union[None, float, ArrayLike]
 
-# The option names and the statuses are defined once, in the C++ core (options.hpp, result.hpp).
+# The options and the statuses are declared once, in the C++ core (options.hpp's option table,
+# read by _options.py; result.hpp).
 #: The methods, in the order of the paper: the NRM family, then the baselines.
 METHODS = tuple(_core.Method.__members__)
 #: method= also takes "auto" (the default): nrmgs or newton by choose_method's rule.
-METHOD_CHOICES = ("auto",) + METHODS
-Z_UPDATES = tuple(_core.ZUpdate.__members__)
-INNERS = tuple(_core.Inner.__members__)
-ACCELERATIONS = tuple(_core.Accelerate.__members__)
+METHOD_CHOICES = _options.choices("method")
+Z_UPDATES = _options.choices("z_update")
+INNERS = _options.choices("inner")
+ACCELERATIONS = _options.choices("accelerate")
 
 class _NamedIntEnum(enum.IntEnum):
     """An IntEnum (compares and indexes like the core's int codes) that prints its name:
@@ -126,55 +128,10 @@ def _norm(m) -> float:
     return big * float(np.linalg.norm(m / big))
 
 
-def _choice(value, allowed, name):
-    if not isinstance(value, str) or value.lower() not in allowed:
-        raise ValueError(f"{name} must be one of {', '.join(map(repr, allowed))}; got {value!r}")
-    return value.lower()
-
-
-#: Integer options are a C++ int.
-_INT_MAX = 2**31 - 1
-
-
-def _scalar(value, name, *, low=None, low_inclusive=False, high=None, allow_none=False, integer=False):
-    if value is None and allow_none:
-        return None
-    if integer and high is None:
-        high = _INT_MAX
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise TypeError(f"{name} must be a {'whole ' if integer else ''}number, got {value!r}")
-    if not math.isfinite(as_float(value)):   # before int(): int(nan) and int(inf) raise unnamed
-        raise ValueError(f"{name} must be finite, got {value!r}")
-    if integer and int(value) != value:
-        raise TypeError(f"{name} must be a whole number, got {value!r}")
-    v = int(value) if integer else float(value)
-    if low is not None and (v < low or (v == low and not low_inclusive)):
-        raise ValueError(f"{name} must be {'>=' if low_inclusive else '>'} {low}, got {value!r}")
-    if high is not None and v > high:
-        raise ValueError(f"{name} must be <= {high}, got {value!r}")
-    return v
-
-
-def _iteration_options(opts, *, tol, maxiter, z_update, accelerate, anderson_m, theta, record_history,
-                       stall_iterations, verbose=0, rtol=0.0):
-    """Fill a core SolveOptions (the per-solve options), checking types here; values are checked by
-    the core (Options.check), which knows the rules."""
-    opts.tol = _scalar(tol, "tol")
-    opts.rtol = _scalar(rtol, "rtol")
-    opts.maxiter = _scalar(maxiter, "maxiter", integer=True)
-    opts.z_update = getattr(_core.ZUpdate, _choice(z_update, Z_UPDATES, "z_update"))
-    opts.accelerate = getattr(_core.Accelerate, _choice(accelerate or "none", ACCELERATIONS, "accelerate"))
-    opts.anderson_m = _scalar(anderson_m, "anderson_m", integer=True)
-    opts.theta = _scalar(theta, "theta")
-    if not (isinstance(record_history, (bool, np.bool_)) or (isinstance(record_history, (int, np.integer))
-                                                               and record_history in (0, 1))):
-        raise TypeError(f"record_history must be True or False, got {record_history!r}")
-    opts.record_history = bool(record_history)
-    opts.stall_iterations = _scalar(stall_iterations, "stall_iterations", integer=True)
-    # True/False mean on/off, as scikit-learn's verbose and scipy's disp: 1 and 0
-    opts.verbose = _scalar(int(verbose) if isinstance(verbose, (bool, np.bool_)) else verbose, "verbose",
-                           integer=True)
-    return opts
+def _iteration_options(opts, **values):
+    """Fill a core SolveOptions (or Options) from per-solve options, checking types here (_options.fill);
+    values are checked by the core (Options.check), which knows the rules."""
+    return _options.fill(opts, values)
 
 
 #: Progress lines of solves with ``verbose > 0`` go to this logger (level INFO).
@@ -351,7 +308,9 @@ def _units_parameters(opts, method: str, sigma: float, n: int) -> None:
 #: rows) needs O(h⁻²) sweeps, and a zero or negative diagonal stops the AOR-type members.
 AUTO_MARGIN = 0.25
 #: Options only the stationary members read: given with method="auto", they choose nrmgs.
-_STATIONARY_ONLY = {"accelerate": "none", "z_update": "auto", "theta": 1.0, "alpha": None, "beta": None}
+_STATIONARY_ONLY = {k: _options.TABLE[k].default for k in ("accelerate", "z_update", "theta", "alpha", "beta")}
+#: The set-up options the core's Options holds beside the method (the splitting, the inner solver).
+_SPLITTING = tuple(k for k in _options.names("setup") if _options.TABLE[k].kind != "python" and k != "method")
 
 
 def dominance_margin(A: sp.csr_matrix) -> float:
@@ -432,12 +391,8 @@ class Solver:
                  stall_iterations: int = 100, scale: Union[bool, str] = False, verbose: int = 0,
                  hierarchy: Any = "auto", polish: bool = False, _decouple: bool = True,
                  _units_factor: Optional[float] = None, _hierarchy_asked: Optional[tuple] = None) -> None:
+        settings = _options.pick(locals(), "setup", "solve")   # the options, as given
         t0 = time.perf_counter()
-        settings = dict(method=method, omega1=omega1, omega2=omega2, gamma=gamma, phi=phi, alpha=alpha, beta=beta,
-                        inner=inner, tol=tol, rtol=rtol, maxiter=maxiter, theta=theta, z_update=z_update,
-                        accelerate=accelerate, anderson_m=anderson_m, record_history=record_history,
-                        stall_iterations=stall_iterations, scale=scale, verbose=verbose, hierarchy=hierarchy,
-                        polish=polish)
         self.A = as_csr(A, "A")
         n = self.A.shape[0]
         if n == 0:
@@ -451,16 +406,8 @@ class Solver:
         self.scale = _scale_choice(scale)
         opts = _core.Options()
         opts.method = getattr(_core.Method, self.method)
-        for name, value, positive in (("omega1", omega1, True), ("omega2", omega2, True), ("phi", phi, False)):
-            vec = as_diagonal(value, n, name, positive=positive)
-            if vec is not None:
-                setattr(opts, name, vec)
-        opts.gamma = _scalar(gamma, "gamma")
-        opts.alpha = math.nan if alpha is None else _scalar(alpha, "alpha")
-        opts.beta = math.nan if beta is None else _scalar(beta, "beta")
-        opts.inner = getattr(_core.Inner, _choice(inner, INNERS, "inner"))
-        self._defaults = {k: settings[k] for k in ("tol", "rtol", "maxiter", "theta", "z_update", "accelerate",
-                                                   "anderson_m", "record_history", "stall_iterations", "verbose")}
+        _options.fill(opts, {k: settings[k] for k in _SPLITTING}, n)
+        self._defaults = {k: settings[k] for k in _options.names("solve")}
         resolved, units = _criterion(self._defaults)
         _checked(_iteration_options(opts, **resolved), n)
         # the default rule's σ: the whole A's (a Reduced passes it to the solver of its coupled rows)
@@ -668,9 +615,8 @@ class Solver:
         checked against the method."""
         unknown = set(iteration_options) - set(self._defaults)
         if unknown:
-            raise TypeError(f"Solver.solve() got unexpected keyword argument(s) {sorted(unknown)}; the splitting "
-                            "options (method, omega1, omega2, gamma, phi, alpha, beta, inner, scale) are fixed at "
-                            "set-up")
+            raise TypeError(f"Solver.solve() got unexpected keyword argument(s) {sorted(unknown)}; the set-up "
+                            f"options ({', '.join(_options.names('setup'))}) are fixed by Solver(...)")
         it = dict(self._defaults, **iteration_options)
         if units is None:
             it, units = _criterion(it)
@@ -995,7 +941,7 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
         callable ζ with ``upper``: method 'newton' (the outer fixed point, no ``zeta_jacobian``;
         'auto' picks it); lower > upper anywhere is a ValueError naming both.
         ``result.active_mask`` says where z is at a bound.
-    method : str
+    method : {'auto', 'nrm', 'nrmm', 'nrmaor', 'nrmsor', 'nrmgs', 'nrmj', 'mms', 'two_sweep', 'newton'}, default 'auto'
         ``'auto'`` (default): ``'nrmgs'`` when every row of A is diagonally dominant by at least
         a quarter of its diagonal (Bai's shifted matrices, implicit time steps with a large mass
         term: tens of sweeps), else ``'newton'`` (unshifted elliptic A, zero diagonals); an option
@@ -1008,11 +954,11 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
         symbolic analysis once; nested iteration over ``hierarchy``; falls back to sweeps of 'nrm'
         when a step does not reduce Res or the active set cycles). Its ``maxiter`` counts Newton
         steps (and bounds the fallback sweeps). The rule of 'auto': README "Which method for which problem".
-    tol : float, optional
+    tol : float > 0, default None
         Stop when Res(z) = ‖min(Az + q, z − ζ(z))‖₂ < tol (absolute, the paper's criterion;
         scipy.sparse.linalg's ``atol``). With ``rtol``, the target is max(tol, rtol · Res(0)).
         Giving ``tol`` or ``rtol`` selects the paper's Res (the other one defaults to 0).
-    rtol : float in [0, 1), optional
+    rtol : float in [0, 1), default None
         Relative tolerance, as scipy.sparse.linalg's: stop when Res(z) < max(tol, rtol · Res(0)),
         Res(0) = ‖min(q, −ζ(0))‖₂ the residual at z = 0 (scipy's ‖b‖; it does not depend on
         ``x0``). ``tol=0`` with ``rtol > 0`` is a purely relative target.
@@ -1023,20 +969,24 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
         Res_E is within 100x of the rounding level of double precision at z. Scaling A and q
         together, or z, changes neither the iterates nor the decision. ``result.criterion`` says
         which rule decided, its target and value; ``residual`` is always the paper's Res of ``z``.
-    maxiter : int
-    omega1, omega2 : float or array_like (n,), positive
+    maxiter : int >= 0, default 10000
+        At most this many x-updates (method 'newton': Newton steps on the finest level, which also
+        bound its fallback sweeps).
+    omega1, omega2 : float or array_like (n,) > 0, default None
         Ω1, Ω2. Defaults: Ω1 = I; Ω2 = I (nrm, the paper's definition), αI (nrmm),
         diag(A) (AOR types, mms, two_sweep; Theorem 4.2's Ω2 ≥ DΩ1).
-    gamma : float > 0
+    gamma : float > 0, default 1.0
         γ; only rescales the modulus variable.
-    phi : float or array_like (n,), ≥ 0
+    phi : float or array_like (n,) >= 0, default None
         The relaxation diagonal φ (default 0).
-    alpha, beta : float
-        AOR parameters (nrmaor: defaults α = 1, β = α; nrmsor: α, β = α); for nrmm α sets Ω2 = αI
-        (default: the mean of diag(A)). nrmgs and nrmj fix them.
-    theta : float in (0, 2]
+    alpha : float > 0, default None
+        AOR α (nrmaor, nrmsor: default 1); for nrmm α sets Ω2 = αI (default: the mean of diag(A)).
+        nrmgs and nrmj fix α and β.
+    beta : float >= 0, default None
+        AOR β (nrmaor: default β = α; nrmsor has β = α).
+    theta : float in (0, 2], default 1.0
         Relaxation of the two-sweep method only.
-    z_update : {'auto', 'explicit', 'solve'}
+    z_update : {'auto', 'explicit', 'solve'}, default 'auto'
         How z is recovered from the modulus vector: 'solve' is the paper's Step 1 (a solve with A,
         factorized once); 'explicit' needs no solve with A. 'auto' = 'explicit' (measured 4-10x
         faster on ICPs at equal iteration counts, and convergent on unshifted-Laplacian and
@@ -1044,7 +994,7 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
         the paper's Ω2 = I (there only 'solve' converged) and for the baseline 'mms' (whose
         definition, Zheng–Vong, includes it). Use 'solve' when ζ has Lipschitz
         constant about 1 (impulse control). An LCP never factorizes A unless 'solve' is asked for.
-    inner : {'auto', 'cholmod', 'umfpack', 'eigen_llt', 'eigen_lu', 'cg'}
+    inner : {'auto', 'cholmod', 'umfpack', 'eigen_llt', 'eigen_lu', 'cg'}, default 'auto'
         Factorization for Ω2 + (A + φ)Ω1 (nrm, nrmm) and for A ('solve' z-update). 'auto':
         CHOLMOD when symmetric positive definite, else UMFPACK (Eigen's solvers without SuiteSparse).
         'cg' (method 'newton' only): the reduced systems by a Krylov method preconditioned with a
@@ -1055,11 +1005,13 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
         solve. 'auto' picks it with a hierarchy from n = 1,000 on (measured 2-8x faster than the
         direct solve up to n = 10,000, 2.4-10x above with CG, 2.6-3.7x with BiCGSTAB on 2D
         convection-diffusion; README, "Newton's inner solve").
-    accelerate : {'none', 'anderson'}
+    accelerate : {'none', 'anderson'}, default 'none'
         Safeguarded Anderson acceleration of the fixed-point map (memory ``anderson_m``).
-    x0 : array_like (n,), optional
+    anderson_m : int in [1, 100], default 5
+        Anderson memory: the number of past differences kept.
+    x0 : array_like (n,), default None
         Initial guess for z (warm start); default zeros.
-    callback : callable, optional
+    callback : callable, default None
         Called once for every iterate k = 0 (the start), 1, 2, ..., the last one too whatever ended
         the solve (the iterates of ``result.history``; method 'newton': the finest-level ones), by
         scipy's rule: ``callback(intermediate_result)`` (the only parameter named exactly so)
@@ -1067,20 +1019,20 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
         other callable is called as ``callback(zk)`` with the iterate. For a converged solve the
         last call has ``result.z`` (before ``polish``). Raise StopIteration (or return True) to
         stop: status CALLBACK_STOP (unless that iterate converged).
-    record_history : bool
+    record_history : bool, default False
         Keep (iteration, seconds, Res) of every iterate in ``result.history``.
-    stall_iterations : int
+    stall_iterations : int >= 1, default 100
         The window of the no-progress rules: STAGNATED when Res stops improving at rounding level
         for this many iterations, when 3 consecutive windows of this many iterations bring no lower
         Res, or when the best Res has not improved for 10 windows and, at the rate Res falls, would
         not be reached again within maxiter (README "What you get back").
-    verbose : int >= 0 or bool
+    verbose : int >= 0, default 0
         0 or False (default): silent; True means 1. k > 0: a progress line (iteration, Res, best Res, elapsed seconds) at
         the first iterate, then about every k seconds, and a final line with the result's message,
         ``nit`` (and ``iterations`` when they differ) and the call's seconds. Lines go
         to the ``logging`` logger ``"nrmicp"`` at level INFO, and to stderr when logging is not
         configured. The C++ loop decides when to report: there is no per-iteration Python call.
-    scale : False, True, 'rows' or 'both'
+    scale : False, True, 'rows' or 'both', default False
         Diagonal equilibration for badly scaled problems (default off). 'rows': D_r = 1/max|row|;
         'both' (= True): Ruiz equilibration of rows and columns. The solver then iterates on
         ICP(D_r q, D_r A D_c, ζ') in y = D_c⁻¹ z with ζ'(y) = D_c⁻¹ ζ(D_c y) (None stays None, a
@@ -1093,7 +1045,7 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
         otherwise ends with status STAGNATED (success False) and the best iterate.
         ``result.scaling`` records the kind, the number of re-solves and each round's
         (tolerance, status, Res).
-    hierarchy : 'auto', 'amg', list of sparse matrices, or None
+    hierarchy : 'auto', 'amg', list of sparse matrices, or None, default 'auto'
         Nested iteration of method 'newton' (other methods: 'auto' or None only). A list
         [P_0, P_1, ...] of prolongations (P_l of shape (n_l, n_{l+1}), n_0 = n) defines coarse
         problems P_lᵀ A_l P_l, P_lᵀ q_l, solved coarse to fine, each solution prolongated,
@@ -1107,7 +1059,7 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
         serving the inner solves, before the nested start takes over (README "Time stepping").
         A coarse operator with a non-positive diagonal ends the hierarchy there; any level given up
         raises a :class:`nrmicp.HierarchyWarning` at set-up and shows in ``result.hierarchy``.
-    zeta_jacobian : callable, optional
+    zeta_jacobian : callable, default None
         Method 'newton' with a callable ζ: ``zeta_jacobian(z)`` returns a generalized Jacobian of ζ
         at z as an (n, n) sparse matrix or 2-D array, or as a linear operator (a
         ``scipy.sparse.linalg.LinearOperator``, or anything with ``shape`` and ``matvec`` that
@@ -1115,7 +1067,7 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
         then Newton works on the whole ICP (a semismooth Newton method: for a max-type ζ, policy
         iteration), each step's active set placed by an outer step. Without it, a callable ζ is
         handled by an outer fixed point ζ(z_k) -> obstacle problem, each solved by warm-started Newton.
-    polish : bool
+    polish : bool, default False
         After the method stops, take Newton steps from its answer on its active set (at most 3)
         and keep them if they lower Res (``result.polished``); typically the first one drops Res
         to rounding level. When Res stays above ``tol`` at its rounding floor, the status is
@@ -1139,17 +1091,15 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
         success is declared (this matters for a constant obstacle, which the core solves as the
         shifted LCP), with the same re-solve rule as for ``scale``.
     """
+    options = _options.pick(locals())   # the options, as given
     t0 = time.perf_counter()
     if isinstance(method, str) and method.lower() == "auto" and (
             zeta_jacobian is not None or (upper is not None and (callable(zeta) or isinstance(zeta, Affine)))):
-        method = "newton"   # a ζ Jacobian, and an implicit ζ with upper, are newton's only (known here at the call)
+        options["method"] = "newton"   # a ζ Jacobian, and an implicit ζ with upper, are newton's only (known here)
     # Bounds take choose_method's rule as they are: nrmgs's box form contracts as its LCP form does
     # (m(x) is 1-Lipschitz as |x| is, detail/modulus.hpp), so a row-dominant A needs as few sweeps.
-    s = Solver(A, method=method, omega1=omega1, omega2=omega2, gamma=gamma, phi=phi, alpha=alpha, beta=beta,
-               inner=inner, tol=tol, rtol=rtol, maxiter=maxiter, theta=theta, z_update=z_update, accelerate=accelerate,
-               anderson_m=anderson_m, record_history=record_history, stall_iterations=stall_iterations,
-               scale=scale, verbose=verbose, hierarchy=hierarchy, polish=polish)
-    res = s.solve(q, zeta, upper=upper, x0=x0, callback=callback, zeta_jacobian=zeta_jacobian)
+    s = Solver(A, **_options.pick(options, "setup", "solve"))
+    res = s.solve(q, zeta, upper=upper, **_options.pick(options, "call"))
     _charge_setup(res.timings, s._setup_timings)   # the whole call: the set-up is part of it
     res.timings["total"] = time.perf_counter() - t0
     return res

@@ -12,6 +12,8 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
+#include <variant>
 
 namespace nrmicp {
 
@@ -72,17 +74,17 @@ inline std::string to_text(double v) {
 /// The options a solve may change: Solver::solve and Newton::solve take them whole, overriding
 /// the set-up's. The Newton member uses tol, rtol, maxiter, record_history and verbose (its
 /// globalization has its own stopping rules) and refuses z_update, theta and accelerate.
+/// Each field's default is its initializer here; its range and one-line doc are its row of
+/// option_table (below), which Options::check and the Python layer read.
 struct SolveOptions {
-  double tol = 1e-8;               ///< stop when Res(z) = ‖min(Az + q, z − ζ(z))‖₂ < target(Res(0)) (scipy's atol)
-  /// Relative tolerance (scipy.sparse.linalg's rtol): the target is max(tol, rtol · Res(0)),
-  /// Res(0) = ‖min(q, −ζ(0))‖₂ the residual at z = 0 (scipy's ‖b‖: independent of the start).
+  double tol = 1e-8;
   double rtol = 0.0;
-  int maxiter = 10000;             ///< at most this many x-updates (Newton: Newton steps on the finest level)
-  double theta = 1.0;              ///< relaxation of the two-sweep step, 0 < θ ≤ 2 (two_sweep only: others need 1)
+  int maxiter = 10000;
+  double theta = 1.0;
   ZUpdate z_update = ZUpdate::Auto;
   Accelerate accelerate = Accelerate::None;
-  int anderson_m = 5;              ///< Anderson memory (number of past differences kept)
-  bool record_history = false;     ///< keep (iteration, seconds, Res) of every iterate
+  int anderson_m = 5;
+  bool record_history = false;
   /// STAGNATED after this many iterations without a better Res whose steps are at rounding level
   /// (tol below what floating point reaches), after 3 consecutive windows of this many
   /// iterations whose smallest Res does not improve on the previous windows' (a cycle), or when
@@ -93,8 +95,6 @@ struct SolveOptions {
   /// DIVERGED when Res exceeds this factor times the best Res seen, or the modulus vector x grows
   /// by this factor while Res does not improve.
   double divergence_factor = 1e10;
-  /// Progress report: 0 silent; k > 0 calls the solve's progress hook at the first iterate, then
-  /// whenever k seconds have passed since the last report, and once at the end.
   int verbose = 0;
 };
 
@@ -103,13 +103,13 @@ struct SolveOptions {
 /// method's default (docs/SPEC.md); a NaN alpha/beta takes the method's default too.
 struct Options : SolveOptions {
   Method method = Method::NRMGS;
-  Eigen::VectorXd omega1;          ///< Ω1 (positive), length n or empty
-  Eigen::VectorXd omega2;          ///< Ω2 (positive), length n or empty
-  double gamma = 1.0;              ///< γ > 0
-  Eigen::VectorXd phi;             ///< relaxation diagonal φ (≥ 0), length n or empty
-  double alpha = std::numeric_limits<double>::quiet_NaN();  ///< AOR α (NRMM: Ω2 = αI)
-  double beta = std::numeric_limits<double>::quiet_NaN();   ///< AOR β
-  Inner inner = Inner::Auto;       ///< how the linear systems are solved (a sparse factorization, or 'cg': newton's iterative solve)
+  Eigen::VectorXd omega1;
+  Eigen::VectorXd omega2;
+  double gamma = 1.0;
+  Eigen::VectorXd phi;
+  double alpha = std::numeric_limits<double>::quiet_NaN();
+  double beta = std::numeric_limits<double>::quiet_NaN();
+  Inner inner = Inner::Auto;
 
   /// These options with the per-solve ones replaced by `s` (when given), checked.
   Options with(const SolveOptions* s, Eigen::Index n) const {
@@ -127,51 +127,9 @@ struct Options : SolveOptions {
     return t > 0 ? t : DBL_MIN;
   }
 
-  /// Throws std::invalid_argument naming the offending field, its value and what is accepted.
-  void check(Eigen::Index n) const {
-    auto fail = [](const std::string& msg) { throw std::invalid_argument("Options: " + msg); };
-    auto num = [](double v) { return to_text(v); };
-    if (!(rtol >= 0 && rtol < 1)) fail("rtol must lie in [0, 1), got " + num(rtol));
-    if (!(tol > 0 || (rtol > 0 && tol == 0)) || !std::isfinite(tol))
-      fail("tol must be a finite number > 0 (or 0 with rtol > 0), got " + num(tol));
-    if (maxiter < 0) fail("maxiter must be >= 0, got " + std::to_string(maxiter));
-    if (!(gamma > 0) || !std::isfinite(gamma)) fail("gamma must be a finite number > 0, got " + num(gamma));
-    if (gamma < DBL_MIN) fail("gamma = " + num(gamma) + " is subnormal; it must be >= " + num(DBL_MIN));
-    auto check_vec = [&](const Eigen::VectorXd& v, const char* name, bool strictly_positive) {
-      if (v.size() == 0) return;
-      if (v.size() != n)
-        fail(std::string(name) + " must have length n = " + std::to_string(n) + ", got " + std::to_string(v.size()));
-      for (Eigen::Index i = 0; i < n; ++i) {
-        const double x = v[i];
-        if (!std::isfinite(x) || (strictly_positive ? !(x > 0) : x < 0))
-          fail(std::string(name) + "[" + std::to_string(i) + "] = " + num(x) + "; it must be finite and " +
-               (strictly_positive ? "> 0" : ">= 0"));
-        if (strictly_positive && x < DBL_MIN)  // 1/x overflows, and x·y loses its digits
-          fail(std::string(name) + "[" + std::to_string(i) + "] = " + num(x) + " is subnormal; it must be >= " +
-               num(DBL_MIN) + " (rescale the problem)");
-      }
-    };
-    check_vec(omega1, "omega1", true);
-    check_vec(omega2, "omega2", true);
-    check_vec(phi, "phi", false);
-    if (!std::isnan(alpha) && (!(alpha > 0) || !std::isfinite(alpha)))
-      fail("alpha must be a finite number > 0, got " + num(alpha));
-    if (!std::isnan(alpha) && alpha < DBL_MIN) fail("alpha = " + num(alpha) + " is subnormal; it must be >= " + num(DBL_MIN));
-    if (!std::isnan(beta) && (!(beta >= 0) || !std::isfinite(beta)))
-      fail("beta must be a finite number >= 0, got " + num(beta));
-    if (!(theta > 0 && theta <= 2)) fail("theta must lie in (0, 2], got " + num(theta));
-    if (theta != 1 && method != Method::TwoSweep)
-      fail("theta is the relaxation of method 'two_sweep'; method '" + std::string(to_string(method)) +
-           "' has none (got theta = " + num(theta) + ")");
-    if (anderson_m < 1 || anderson_m > 100) fail("anderson_m must lie in [1, 100], got " + std::to_string(anderson_m));
-    if (stall_iterations < 1) fail("stall_iterations must be >= 1, got " + std::to_string(stall_iterations));
-    if (!(divergence_factor > 1)) fail("divergence_factor must be > 1, got " + num(divergence_factor));
-    if (verbose < 0) fail("verbose must be >= 0 (seconds between progress lines; 0: silent), got " + std::to_string(verbose));
-    if ((method == Method::MMS || method == Method::TwoSweep) && (omega1.size() || phi.size()))
-      fail("method '" + std::string(to_string(method)) + "' fixes omega1 = I and phi = 0; use an NRM-family "
-           "method to set them");
-    if (method == Method::Newton) check_newton(fail);
-  }
+  /// Throws std::invalid_argument naming the offending field, its value and what is accepted:
+  /// each option against its row of option_table, then the rules that tie options together.
+  void check(Eigen::Index n) const;
 
  private:
   /// The options of the stationary members that the Newton member does not have.
@@ -252,6 +210,241 @@ inline constexpr ZUpdate all_z_updates[] = {ZUpdate::Auto, ZUpdate::Explicit, ZU
 inline constexpr Inner all_inners[] = {Inner::Auto, Inner::Cholmod, Inner::Umfpack, Inner::EigenLLT, Inner::EigenLU,
                                        Inner::CG};
 inline constexpr Accelerate all_accelerations[] = {Accelerate::None, Accelerate::Anderson};
+
+/// Every value of an option enum, by its type (the option table's choices).
+inline constexpr const auto& enum_values(Method) { return all_methods; }
+inline constexpr const auto& enum_values(ZUpdate) { return all_z_updates; }
+inline constexpr const auto& enum_values(Inner) { return all_inners; }
+inline constexpr const auto& enum_values(Accelerate) { return all_accelerations; }
+
+// ---------------------------------------------------------------------------------------------
+// The option table: one row per option of nrmicp.solve / nrmicp::Options, the one declaration of
+// its name (the C++ field's and the Python keyword's), scope, range and one-line doc. The default
+// is the field's initializer above. Options::check checks each field against its row; the Python
+// layer reads the table (nrmicp._core.option_table(), python/nrmicp/_options.py) for its
+// signatures' defaults, its docstrings' parameter lines and its type checks.
+
+/// When an option is given: at set-up only (nrmicp.Solver(...); Options), per solve (a set-up
+/// default that each solve may override; SolveOptions), or with each call only (Solver.solve).
+enum class Scope { Setup, Solve, Call };
+
+/// The values a number (or each entry of a diagonal) may take: between low and high, each bound
+/// open or closed; `finite`: not ±inf; `normal`: a positive value is at least DBL_MIN (1/x
+/// overflows below, and x·y loses its digits). `note` is said after the range in messages;
+/// `exempt` names the values another option admits (tol = 0 with rtol > 0).
+struct Range {
+  double low = -std::numeric_limits<double>::infinity();
+  double high = std::numeric_limits<double>::infinity();
+  bool low_open = false;
+  bool high_open = false;
+  bool finite = false;
+  bool normal = false;
+  const char* note = nullptr;
+  bool (*exempt)(const Options&) = nullptr;
+
+  constexpr bool bounded() const {
+    return low > -std::numeric_limits<double>::infinity() || high < std::numeric_limits<double>::infinity();
+  }
+  bool contains(double v) const {
+    return (low_open ? v > low : v >= low) && (high_open ? v < high : v <= high) && (!finite || std::isfinite(v));
+  }
+};
+
+namespace range {
+constexpr Range none() { return Range{}; }
+constexpr Range above(double low, bool finite = false) {
+  Range r;
+  r.low = low;
+  r.low_open = true;
+  r.finite = finite;
+  return r;
+}
+constexpr Range at_least(double low, bool finite = false) {
+  Range r = above(low, finite);
+  r.low_open = false;
+  return r;
+}
+constexpr Range between(double low, double high, bool low_open, bool high_open) {
+  Range r = above(low);
+  r.low_open = low_open;
+  r.high = high;
+  r.high_open = high_open;
+  return r;
+}
+constexpr Range normal(Range r) {
+  r.normal = true;
+  return r;
+}
+constexpr Range noted(Range r, const char* note, bool (*exempt)(const Options&) = nullptr) {
+  r.note = note;
+  r.exempt = exempt;
+  return r;
+}
+}  // namespace range
+
+/// The Options member an option sets; none for the Python layer's own options.
+using OptionField = std::variant<std::monostate, double Options::*, int Options::*, bool Options::*,
+                                 Method Options::*, ZUpdate Options::*, Inner Options::*, Accelerate Options::*,
+                                 Eigen::VectorXd Options::*>;
+
+struct OptionSpec {
+  const char* name;
+  OptionField field;
+  Scope scope;
+  Range range;
+  const char* doc;                         ///< one line
+  const char* python_default = nullptr;    ///< as Python writes it, where it is not the field's default
+  const char* python_type = nullptr;       ///< the type of an option without field, as Python's docs write it
+  bool python = true;                      ///< false: C++ only (nrmicp.solve has no such keyword)
+};
+
+namespace detail {
+constexpr bool tol_zero_with_rtol(const Options& o) { return o.tol == 0 && o.rtol > 0; }
+}  // namespace detail
+
+// In the order of nrmicp.solve's keywords.
+inline constexpr OptionSpec option_table[] = {
+    {"method", &Options::method, Scope::Setup, range::none(),
+     "the member of the family (paper §3), a baseline (§2) or the semismooth Newton member", "'auto'"},
+    {"tol", &Options::tol, Scope::Solve,
+     range::noted(range::above(0, true), "or 0 with rtol > 0", detail::tol_zero_with_rtol),
+     "stop when Res(z) = ‖min(Az + q, z − ζ(z))‖₂ < max(tol, rtol · Res(0)) (scipy's atol)", "None"},
+    {"rtol", &Options::rtol, Scope::Solve, range::between(0, 1, false, true),
+     "relative tolerance: the target is max(tol, rtol · Res(0)), Res(0) the residual at z = 0", "None"},
+    {"maxiter", &Options::maxiter, Scope::Solve, range::at_least(0),
+     "at most this many x-updates (newton: Newton steps on the finest level)"},
+    {"omega1", &Options::omega1, Scope::Setup, range::normal(range::above(0)),
+     "Ω1, a positive diagonal (a scalar times I, or a length-n vector)"},
+    {"omega2", &Options::omega2, Scope::Setup, range::normal(range::above(0)),
+     "Ω2, a positive diagonal (a scalar times I, or a length-n vector)"},
+    {"gamma", &Options::gamma, Scope::Setup, range::normal(range::above(0, true)),
+     "γ, which only rescales the modulus variable x"},
+    {"phi", &Options::phi, Scope::Setup, range::at_least(0),
+     "the relaxation diagonal φ of Method 3.1 (stationary members)"},
+    {"alpha", &Options::alpha, Scope::Setup, range::normal(range::above(0, true)),
+     "AOR α (nrmaor, nrmsor); nrmm: Ω2 = αI"},
+    {"beta", &Options::beta, Scope::Setup, range::at_least(0, true), "AOR β (nrmaor)"},
+    {"theta", &Options::theta, Scope::Solve, range::between(0, 2, true, false),
+     "relaxation of the two-sweep step (two_sweep only: the others need 1)"},
+    {"z_update", &Options::z_update, Scope::Solve, range::none(),
+     "how z is recovered from the modulus vector x (stationary members)"},
+    {"inner", &Options::inner, Scope::Setup, range::none(),
+     "how the linear systems are solved: a sparse factorization, or newton's multigrid-preconditioned Krylov"},
+    {"accelerate", &Options::accelerate, Scope::Solve, range::none(),
+     "safeguarded Anderson acceleration of the fixed-point map (stationary members)"},
+    {"anderson_m", &Options::anderson_m, Scope::Solve, range::between(1, 100, false, false),
+     "Anderson memory (the number of past differences kept)"},
+    {"x0", {}, Scope::Call, range::none(), "the initial guess for z (a warm start); zeros when None", "None",
+     "array_like (n,)"},
+    {"callback", {}, Scope::Call, range::none(),
+     "called with every iterate, scipy's way; StopIteration or True stops the solve", "None", "callable"},
+    {"record_history", &Options::record_history, Scope::Solve, range::none(),
+     "keep (iteration, seconds, Res) of every iterate"},
+    {"stall_iterations", &Options::stall_iterations, Scope::Solve, range::at_least(1),
+     "the window of the no-progress rules (STAGNATED)"},
+    {"scale", {}, Scope::Setup, range::none(), "diagonal equilibration of badly scaled problems", "False",
+     "False, True, 'rows' or 'both'"},
+    {"verbose", &Options::verbose, Scope::Solve,
+     range::noted(range::at_least(0), "seconds between progress lines; 0: silent"),
+     "a progress line every this many seconds (0: silent)"},
+    {"hierarchy", {}, Scope::Setup, range::none(), "the nested iteration of method 'newton'", "'auto'",
+     "'auto', 'amg', list of sparse matrices, or None"},
+    {"polish", {}, Scope::Setup, range::none(), "Newton steps on the answer's active set after the method stops",
+     "False", "bool"},
+    {"zeta_jacobian", {}, Scope::Call, range::none(),
+     "a generalized Jacobian of a callable ζ, for method 'newton' on the whole ICP", "None", "callable"},
+    {"divergence_factor", &Options::divergence_factor, Scope::Solve, range::above(1),
+     "DIVERGED when Res exceeds this factor times the best Res seen", nullptr, nullptr, false},
+};
+
+namespace detail {
+
+/// A number for a message: an int field's as an integer, a double's as to_text.
+inline std::string option_value_text(double v, bool integer) {
+  return integer ? std::to_string(static_cast<long long>(v)) : to_text(v);
+}
+
+/// "must lie in [0, 1)", "must be a finite number > 0", "must be >= 1": what `r` accepts.
+inline std::string range_text(const Range& r, bool integer) {
+  if (r.high < std::numeric_limits<double>::infinity())
+    return std::string("must lie in ") + (r.low_open ? "(" : "[") + option_value_text(r.low, integer) + ", " +
+           option_value_text(r.high, integer) + (r.high_open ? ")" : "]");
+  return std::string("must be ") + (r.finite ? "a finite number " : "") + (r.low_open ? "> " : ">= ") +
+         option_value_text(r.low, integer);
+}
+
+/// A number option against its row: NaN passes where the default is NaN (the method's default).
+inline void check_number(const OptionSpec& spec, double v, double default_value, bool integer, const Options& o) {
+  const Range& r = spec.range;
+  if (!r.bounded() || (std::isnan(v) && std::isnan(default_value)) || (r.exempt && r.exempt(o))) return;
+  const auto name = [&] { return std::string("Options: ") + spec.name; };
+  if (!r.contains(v))
+    throw std::invalid_argument(name() + " " + range_text(r, integer) +
+                                (r.note ? std::string(" (") + r.note + ")" : "") + ", got " +
+                                option_value_text(v, integer));
+  if (r.normal && v < DBL_MIN)
+    throw std::invalid_argument(name() + " = " + to_text(v) + " is subnormal; it must be >= " +
+                                to_text(DBL_MIN));
+}
+
+/// A diagonal option (empty: the method's default) against its row, entry by entry.
+inline void check_diagonal(const OptionSpec& spec, const Eigen::VectorXd& v, Eigen::Index n) {
+  if (v.size() == 0) return;
+  const std::string name = std::string("Options: ") + spec.name;
+  if (v.size() != n)
+    throw std::invalid_argument(name + " must have length n = " + std::to_string(n) + ", got " +
+                                std::to_string(v.size()));
+  // (locals, not the row's fields, in the loop: it runs as fast as a loop over two constants)
+  const bool open = spec.range.low_open, normal = spec.range.normal;
+  const double low = spec.range.low;
+  auto at = [&](Eigen::Index i) { return name + "[" + std::to_string(i) + "] = " + to_text(v[i]); };
+  for (Eigen::Index i = 0; i < n; ++i) {
+    if (!std::isfinite(v[i]) || (open ? !(v[i] > low) : v[i] < low))
+      throw std::invalid_argument(at(i) + "; it must be finite and " + (open ? "> " : ">= ") + to_text(low));
+    if (normal && v[i] < DBL_MIN)  // 1/x overflows, and x·y loses its digits
+      throw std::invalid_argument(at(i) + " is subnormal; it must be >= " + to_text(DBL_MIN) + " (rescale the problem)");
+  }
+}
+
+/// The diagonals' rows bound them below only (check_diagonal reads no high bound).
+constexpr bool diagonals_bounded_below_only() {
+  for (const OptionSpec& spec : option_table)
+    if (std::holds_alternative<Eigen::VectorXd Options::*>(spec.field) &&
+        spec.range.high < std::numeric_limits<double>::infinity())
+      return false;
+  return true;
+}
+static_assert(diagonals_bounded_below_only(), "check_diagonal reads a diagonal's low bound only");
+
+/// One option of `o` against its row of option_table.
+inline void check_option(const OptionSpec& spec, const Options& o, Eigen::Index n) {
+  static const Options defaults;
+  std::visit([&](auto field) {
+    using F = decltype(field);
+    if constexpr (std::is_same_v<F, double Options::*> || std::is_same_v<F, int Options::*>)
+      check_number(spec, static_cast<double>(o.*field), static_cast<double>(defaults.*field),
+                   std::is_same_v<F, int Options::*>, o);
+    else if constexpr (std::is_same_v<F, Eigen::VectorXd Options::*>)
+      check_diagonal(spec, o.*field, n);
+  }, spec.field);
+}
+
+}  // namespace detail
+
+inline void Options::check(Eigen::Index n) const {
+  auto fail = [](const std::string& msg) { throw std::invalid_argument("Options: " + msg); };
+  // A row whose range another option relaxes (tol by rtol) comes after the others: that one is valid.
+  for (const bool relaxed : {false, true})
+    for (const OptionSpec& spec : option_table)
+      if ((spec.range.exempt != nullptr) == relaxed) detail::check_option(spec, *this, n);
+  if (theta != 1 && method != Method::TwoSweep)
+    fail("theta is the relaxation of method 'two_sweep'; method '" + std::string(to_string(method)) +
+         "' has none (got theta = " + to_text(theta) + ")");
+  if ((method == Method::MMS || method == Method::TwoSweep) && (omega1.size() || phi.size()))
+    fail("method '" + std::string(to_string(method)) + "' fixes omega1 = I and phi = 0; use an NRM-family "
+         "method to set them");
+  if (method == Method::Newton) check_newton(fail);
+}
 
 /// The z-update a solve uses. Auto = Explicit: measured faster (no solve with A: 4-10x on ICPs
 /// at equal iteration counts) and more robust (it converged on unshifted-Laplacian and

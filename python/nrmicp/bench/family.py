@@ -1,5 +1,5 @@
 """The family sweep (``nrmicp bench --family``; plain ``nrmicp bench`` is the realistic-scene
-figure, nrmicp/bench_realistic.py): what each extra digit of accuracy costs in time.
+figure, nrmicp/bench/realistic.py): what each extra digit of accuracy costs in time.
 
     python -m nrmicp bench --family [--quick] [--scenes ...] [--methods ...] [--peers psor,qp] [--z-updates ...]
                            [--tols ... | --tol-min 1e-12 --tol-max 1e-2] [--size small]
@@ -9,7 +9,7 @@ For every scene, method and z-update it sweeps ``tol`` (default 1e-2, 1e-3, …,
 methods are nrmicp's members, ``newton`` (its 'iterations' are Newton steps on the finest level;
 ``hierarchy='auto'``) and any member with ``+polish`` (``polish=True``: Newton steps on the
 settled active set, to the rounding floor); next to them, in the same diagrams, the peers a user would otherwise
-reach for (nrmicp/_peers.py): red-black projected SOR in numpy with SOR's optimal ω, and a QP
+reach for (nrmicp/bench/peers.py): red-black projected SOR in numpy with SOR's optimal ω, and a QP
 solver (PIQP, else OSQP) on min ½zᵀAz + qᵀz, z ≥ 0, its eps tightened from tol by 10× until
 Res < tol (the time of that last run). The peers run on the scenes that are LCPs (ζ constant),
 the QP solver on the symmetric ones; one that is not installed is skipped with a note. It
@@ -75,7 +75,7 @@ from typing import Optional
 
 import numpy as np
 
-from ._cli import int_at_least, positive_float
+from .argtypes import int_at_least, positive_float
 
 # --------------------------------------------------------------------------- scenes
 
@@ -101,7 +101,7 @@ TARGETS = (1e-6, 1e-10)
 #: takes well over the ~0.1 ms Python overhead of a call: Bai's iteration counts do not grow with
 #: n (so n = 4096), while the PDE scenes' grow like h⁻² (so 32 × 32 grids already take ~10³
 #: iterations; 'medium' quadruples them).
-from .scenes._registry import SIZES  # noqa: E402
+from ..scenes._registry import SIZES  # noqa: E402
 
 _LABELS = {
     "bai_sym_lcp": "Bai, symmetric, LCP",
@@ -247,7 +247,7 @@ def _z_update_used(problem, z_update: str, method: str = "") -> str:
     needed = getattr(problem, "solver_options", {}).get("z_update")
     if needed:
         return needed
-    from . import _core
+    from .. import _core
     icp = problem.zeta is not None and not isinstance(problem.zeta, np.ndarray)
     omega2_given = "omega2" in getattr(problem, "solver_options", {})
     if method not in _core.Method.__members__:
@@ -262,7 +262,7 @@ def _status_name(status) -> str:
 # --- cases: an nrmicp member ('nrmgs'), a member with polish ('nrmgs+polish'), or a peer
 
 #: Peers (not nrmicp) the bench can run next to nrmicp: red-black projected SOR (numpy) and the QP
-#: solvers of nrmicp._peers. 'qp' means the first installed of nrmicp._peers.QP_SOLVERS.
+#: solvers of nrmicp.bench.peers. 'qp' means the first installed of nrmicp.bench.peers.QP_SOLVERS.
 PEERS = ("psor", "qp", "piqp", "osqp")
 DEFAULT_PEERS = ("psor", "qp")
 
@@ -317,37 +317,37 @@ def _run_nrmicp(problem, method, z_update_used, maxiter):
 def _run_peer(problem, peer, maxiter):
     """solve(tol, history) for a peer, after its one-off tuning (colouring and ω for PSOR; done
     once per scene outside the timings, as a user who knows the grid would), and its setting."""
-    from . import _peers
+    from . import peers
 
-    A, q, c = _peers.shifted_lcp(problem)
+    A, q, c = peers.shifted_lcp(problem)
     if peer == "psor":
-        colour, omega = _peers.colours(A), _peers.sor_omega(A)
+        colour, omega = peers.colours(A), peers.sor_omega(A)
         setting = f"omega={omega:.4g}, {colour.max() + 1} colours"
 
         def solve(tol, history=False):
-            return dict(_peers.psor(A, q, c, tol, omega=omega, colour=colour, maxiter=maxiter, history=history),
+            return dict(peers.psor(A, q, c, tol, omega=omega, colour=colour, maxiter=maxiter, history=history),
                         setting=setting)
         return solve, setting
 
     def solve(tol, history=False):
-        return _peers.qp(peer, A, q, c, tol)
-    return solve, f"{peer} {_peers.installed(peer)}"
+        return peers.qp(peer, A, q, c, tol)
+    return solve, f"{peer} {peers.installed(peer)}"
 
 
 def resolve_peers(names, problems):
     """The peers to run per scene and the notes to print for those that cannot run."""
-    from . import _peers
+    from . import peers
 
     notes, out = [], []
     for p in names:
         if p == "qp":
-            have = [s for s in _peers.QP_SOLVERS if _peers.installed(s)]
+            have = [s for s in peers.QP_SOLVERS if peers.installed(s)]
             if not have:
-                notes.append(f"peer qp skipped: none of {', '.join(_peers.QP_SOLVERS)} is installed "
+                notes.append(f"peer qp skipped: none of {', '.join(peers.QP_SOLVERS)} is installed "
                              "(pip install piqp)")
                 continue
             p = have[0]
-        elif p != "psor" and not _peers.installed(p):
+        elif p != "psor" and not peers.installed(p):
             notes.append(f"peer {p} skipped: not installed (pip install {p})")
             continue
         if p not in out:
@@ -355,7 +355,7 @@ def resolve_peers(names, problems):
     per_scene, skipped = {s: [] for s in problems}, {}
     for p in out:
         for s, P in problems.items():
-            why = _peers.applicable(p, P)
+            why = peers.applicable(p, P)
             if why:
                 skipped.setdefault((p, why), []).append(s)
             else:
@@ -455,9 +455,9 @@ def run_case(problem, scene, method, z_update, tols, *, size, maxiter, repeat, h
 
 def _peers_without_history():
     """Peers whose solvers report no per-iteration Res (the QP solvers): no history line."""
-    from . import _peers
+    from . import peers
 
-    return _peers.QP_SOLVERS
+    return peers.QP_SOLVERS
 
 
 def rounding_floor(problem, cases) -> float:
@@ -930,7 +930,7 @@ def _selection(args, known_methods) -> _Selection:
 
 def _sweep(sel, args) -> dict:
     """Every (scene, method, z-update) and peer case: scene -> (problem, cases, rounding floor)."""
-    from . import scenes
+    from .. import scenes
 
     problems = {s: scenes.build(s, sel.size) for s in sel.scenes}  # exact references are not timed
     peers, notes = resolve_peers(sel.peers, problems)

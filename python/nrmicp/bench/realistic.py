@@ -34,7 +34,7 @@ from typing import Optional
 
 import numpy as np
 
-from ._cli import positive_float
+from .argtypes import positive_float
 
 #: Scene -> (label, builder(small) -> Problem). Sizes: the README's (and --small's for tests).
 SCENES = {
@@ -65,7 +65,7 @@ COLOURS = {"newton-geo": "#1f77b4", "newton-amg": "#17becf", "nrmgs+anderson": "
 
 
 def build(scene: str, small: bool = False):
-    from . import scenes
+    from .. import scenes
 
     if scene not in SCENES:
         raise ValueError(f"unknown scene {scene!r}; choose from {', '.join(SCENES)}")
@@ -99,29 +99,29 @@ def _solve_curve(problem, options, budget):
 
 
 def _psor_curve(problem, budget):
-    from . import _peers
+    from . import peers
 
-    A, q, c = _peers.shifted_lcp(problem)
-    colour, omega = _peers.colours(A), _peers.sor_omega(A)  # untimed: a user who knows the grid knows them
-    out = _peers.psor(A, q, c, TARGET, omega=omega, colour=colour, maxiter=10**7, history=True,
+    A, q, c = peers.shifted_lcp(problem)
+    colour, omega = peers.colours(A), peers.sor_omega(A)  # untimed: a user who knows the grid knows them
+    out = peers.psor(A, q, c, TARGET, omega=omega, colour=colour, maxiter=10**7, history=True,
                       time_limit=budget, clock=time.process_time)
     h = out["history"]
     return list(zip(h["seconds"], h["residual"]))
 
 
 def _qp_solver():
-    from . import _peers
+    from . import peers
 
-    have = [s for s in _peers.QP_SOLVERS if _peers.installed(s)]
+    have = [s for s in peers.QP_SOLVERS if peers.installed(s)]
     return have[0] if have else None
 
 
 def _qp_point(solver, A, q, eps, queue):
-    from . import _peers
+    from . import peers
 
     t0 = time.process_time()
-    y, _, _ = _peers.qp_once(solver, A, q, eps)
-    queue.put((time.process_time() - t0, _peers._res(A, q, y)))
+    y, _, _ = peers.qp_once(solver, A, q, eps)
+    queue.put((time.process_time() - t0, peers._res(A, q, y)))
 
 
 def _qp_curve(problem, budget):
@@ -130,10 +130,10 @@ def _qp_curve(problem, budget):
     point of the curve."""
     import multiprocessing as mp
 
-    from . import _peers
+    from . import peers
 
     solver = _qp_solver()
-    A, q, _ = _peers.shifted_lcp(problem)
+    A, q, _ = peers.shifted_lcp(problem)
     ctx = mp.get_context("fork")
     points, spent = [], 0.0
     for eps in QP_EPS:
@@ -156,18 +156,18 @@ def _qp_curve(problem, budget):
 
 def _march_curve(problem, curve, small):
     """The American put march per tol: [(CPU seconds of the march, max Res over its steps)]."""
-    from . import _peers
-    from .scenes.american import _March, _nested_first_step
+    from . import peers
+    from ..scenes.american import _March, _nested_first_step
 
     import nrmicp
 
-    from .scenes import parameter
+    from ..scenes import parameter
 
     n_space = parameter("american_put", SIZE[small])
     m = _March(400.0, 100.0, 0.05, 0.2, 1.0, n_space, N_TIME, 2)
     points = []
     if curve == "psor":  # untimed, as on the other scenes
-        colour, omega = _peers.colours(m.A), _peers.sor_omega(m.A)
+        colour, omega = peers.colours(m.A), peers.sor_omega(m.A)
     for tol in MARCH_TOLS:
         t0 = time.process_time()
         v, worst = m.payoff.copy(), 0.0
@@ -184,11 +184,11 @@ def _march_curve(problem, curve, small):
             q = m.q(kind, v)
             if curve == "psor":
                 qs = q + m.A @ m.payoff
-                out = _peers.psor(m.A, qs, m.payoff, tol, omega=omega, colour=colour, maxiter=10**6)
+                out = peers.psor(m.A, qs, m.payoff, tol, omega=omega, colour=colour, maxiter=10**6)
                 v, r = out["z"], out["residual"]
             elif curve == "qp":
                 qs = q + m.A @ m.payoff
-                o = _peers.tune_eps(lambda eps: _peers.qp_once(_qp_solver(), m.A, qs, eps), m.A, qs, tol)
+                o = peers.tune_eps(lambda eps: peers.qp_once(_qp_solver(), m.A, qs, eps), m.A, qs, tol)
                 v, r = o["y"] + m.payoff, o["residual"]
             else:
                 res = (first if step == 0 else solver).solve(q, zeta=m.payoff, x0=v, tol=tol, maxiter=10**6)
