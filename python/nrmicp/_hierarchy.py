@@ -10,6 +10,9 @@ list and solves coarse to fine. Building it is this module's job:
   interpolation, the coarser ones by Ruge–Stüben on pyamg's compiled kernels. Nonnegative, so a
   prolongated feasible start stays feasible; on finite-element matrices (P2: no M-matrix) the
   coarse problems then predict the fine active set (docs/finite_elements.md has the measurements).
+  With ``components`` (a vector problem's unknowns: elasticity's displacement components) every
+  level is built by component, P block-diagonal (:func:`same_component`; docs/MEASUREMENTS.md,
+  "The amg hierarchy by component").
 - a list of matrices: a geometric hierarchy (the grid scenes offer theirs as
   ``Problem.prolongations``), checked here.
 - None: no hierarchy (a cold start).
@@ -199,12 +202,12 @@ def same_component(A: sp.csr_matrix, components) -> sp.csr_matrix:
     P by itself, block-diagonal by component and ≥ 0. A itself when components is None."""
     if components is None:
         return A
-    rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
-    keep = components[rows] == components[A.indices]
+    keep = np.repeat(components, np.diff(A.indptr)) == components[A.indices]
     if keep.all():
         return A
-    indptr = np.zeros_like(A.indptr)
-    np.cumsum(np.bincount(rows[keep], minlength=A.shape[0]), out=indptr[1:])
+    kept = np.zeros(A.nnz + 1, dtype=A.indptr.dtype)   # kept[k]: entries kept among A's first k
+    np.cumsum(keep, out=kept[1:])
+    indptr = kept[A.indptr]
     return sp.csr_matrix((A.data[keep], A.indices[keep], indptr), shape=A.shape)
 
 

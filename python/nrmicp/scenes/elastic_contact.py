@@ -25,7 +25,7 @@ Sizes: refinements r give n = 2·2^r·(2^{r+1} + 1) for P1 (16,512 / 65,792 / 26
 hierarchy's nested interpolation (each component by itself), to pass as ``hierarchy=``. Without it,
 ``Problem.solver_options`` = ``{"components": 2}`` (``Problem.solve`` passes it) tells the default
 'amg' hierarchy that the two components interleave: 'amg' by component takes 3-4 finest Newton steps
-and about 2 CG iterations a solve, plain scalar 'amg' 5-8 and 23-96 (README "Bounds and free unknowns").
+and about 2 CG iterations a solve, plain scalar 'amg' 4-8 and 23-96 (README "Bounds and free unknowns").
 
 scikit-fem is imported when a scene is built (a test and benchmark dependency, as for fe_obstacle).
 
