@@ -8,9 +8,11 @@ Scenes (nrmicp.scenes): the two-sided membrane 2D (two_sided_membrane_2d, m = 12
 1M) and elastic contact (elastic_contact, vector P1 at r = 6, 7, 8 and P2 at r = 5, 6, 7: n = 16k,
 66k, 263k, of which about √n are bounded and all the others free).
 
-1. Scaling: ``nrmicp.solve(A, q, zeta=lower, upper=upper)`` with every default (hierarchy 'auto',
-   the units-free stop): finest Newton steps (and per level, finest first), CPU seconds of the call
-   (set-up and hierarchy included), Res/Res(0), CG iterations / linear solves.
+1. Scaling: ``nrmicp.solve(A, q, zeta=lower, upper=upper, **problem.solver_options)`` with every
+   default (hierarchy 'auto', the units-free stop; elastic contact's scene passes components=2, the
+   interleaved displacement components, to the 'amg' hierarchy): finest Newton steps (and per level,
+   finest first), CPU seconds of the call (set-up and hierarchy included), Res/Res(0), CG iterations /
+   linear solves.
 2. Peers at the largest size of each scene, all stopped at the same target Res < 1e-8·Res(0)
    (Res = ‖mid(z − lower, z − upper, Az + q)‖₂, recomputed in numpy for every solver; nrmicp
    with rtol=1e-8):
@@ -33,6 +35,8 @@ Scenes (nrmicp.scenes): the two-sided membrane 2D (two_sided_membrane_2d, m = 12
                    |u| ≤ 0.05): the same A, q and answer, every row bounded (the issue's workaround).
      mesh          the contact problem with the scene's mesh hierarchy (Problem.prolongations(),
                    built untimed) instead of the default 'amg': where the default's time goes.
+     scalar        the contact problem without components=2: the scalar 'amg' (Ruge–Stüben on the
+                   whole vector operator), what the scene's option saves.
 
 Every solve runs in its own subprocess (CPU seconds of the child, building the problem excluded).
 A peer that runs longer than --budget seconds is stopped and reported as such. With --out, each
@@ -103,10 +107,12 @@ def problem(case, scene, size):
         A, q, lower = membranes(scene[-2:].upper(), size)
         return A, q, lower, np.full(len(q), np.inf), {}
     if case == "finite":
-        return A, q, np.where(np.isfinite(lower), lower, -1.0), upper, {}
+        return A, q, np.where(np.isfinite(lower), lower, -1.0), upper, dict(p.solver_options)
     if case == "mesh":
         return A, q, lower, upper, {"hierarchy": p.prolongations()}
-    return A, q, lower, upper, {"rtol": RTOL} if case == "target" else {}
+    if case == "scalar":
+        return A, q, lower, upper, {}
+    return A, q, lower, upper, {**p.solver_options, **({"rtol": RTOL} if case == "target" else {})}
 
 
 # ----------------------------------------------------------------------------- children
@@ -282,7 +288,7 @@ def main():
             for size in sizes[scene]:
                 row = {"scene": scene, "size": size, "ours": ours("default", scene, size, a.budget)}
                 if scene != "membrane":
-                    row.update({c: ours(c, scene, size, a.budget) for c in ("membranes", "finite", "mesh")})
+                    row.update({c: ours(c, scene, size, a.budget) for c in ("membranes", "finite", "mesh", "scalar")})
                     contact.append(row)
                 if size == sizes[scene][-1]:
                     row["target"] = ours("target", scene, size, a.budget)
@@ -320,12 +326,20 @@ def print_tables(scaling, contact, compared, peer_names):
         print(f"| {r['scene']} | {t.get('n', 0):,} | {cell(t)} | {cells} |")
     print("\nElastic contact (free unknowns) against the obstacle problem of the same mesh and size (defaults):\n")
     print("| scene | n | contact | membranes (obstacle) | contact / membranes | finite bounds | contact / finite |"
-          " contact, mesh hierarchy |")
-    print("|---|---|---|---|---|---|---|---|")
+          " contact, mesh hierarchy | contact, scalar 'amg' | scalar / contact |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for r in contact:
         o = r["ours"]
         print(f"| {r['scene']} | {o.get('n', 0):,} | {cell(o)} | {cell(r['membranes'])} | {ratio(o, r['membranes'])} | "
-              f"{cell(r['finite'])} | {ratio(o, r['finite'])} | {cell(r['mesh'])} |")
+              f"{cell(r['finite'])} | {ratio(o, r['finite'])} | {cell(r['mesh'])} | {cell(r['scalar'])} | "
+              f"{ratio(r['scalar'], o)} |")
+    print("\nCG iterations per linear solve (all levels), default / scalar 'amg' / mesh hierarchy:\n")
+    print("| scene | n | default | scalar 'amg' | mesh |")
+    print("|---|---|---|---|---|")
+    for r in contact:
+        cg = [f"{x['inner_iterations'] / x['solves']:.1f}" if x.get("solves") else "" for x in
+              (r["ours"], r["scalar"], r["mesh"])]
+        print(f"| {r['scene']} | {r['ours'].get('n', 0):,} | {' | '.join(cg)} |")
 
 
 if __name__ == "__main__":

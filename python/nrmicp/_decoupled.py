@@ -93,7 +93,8 @@ class Reduced:
         A_FF = sp.csr_matrix(rows[:, self.F])
         A_FF.sort_indices()
         hierarchy, asked = _hierarchy_part(settings["hierarchy"], A, self.F)
-        part = dict(settings, hierarchy=hierarchy,
+        labels = settings["components"]   # checked: one per row of A, or None
+        part = dict(settings, hierarchy=hierarchy, components=None if labels is None else labels[self.F],
                     **{k: _diagonal_part(settings[k], self.F) for k in ("omega1", "omega2", "phi")})
         self.inner = solver_cls(A_FF, _decouple=False, _units_factor=units_factor, _hierarchy_asked=asked, **part)
         self.n = n

@@ -10,6 +10,9 @@ list and solves coarse to fine. Building it is this module's job:
   interpolation, the coarser ones by Ruge–Stüben on pyamg's compiled kernels. Nonnegative, so a
   prolongated feasible start stays feasible; on finite-element matrices (P2: no M-matrix) the
   coarse problems then predict the fine active set (docs/finite_elements.md has the measurements).
+  With ``components`` (a vector problem's unknowns: elasticity's displacement components) every
+  level is built by component, P block-diagonal (:func:`same_component`; docs/MEASUREMENTS.md,
+  "The amg hierarchy by component").
 - a list of matrices: a geometric hierarchy (the grid scenes offer theirs as
   ``Problem.prolongations``), checked here.
 - None: no hierarchy (a cold start).
@@ -171,6 +174,43 @@ def nonpositive_diagonal(M, what: str):
     return None if bad.size == 0 else f"{what} has a_ii = {d[bad[0]]:.3g} <= 0 at row {bad[0]}"
 
 
+def check_components(components, n: int) -> np.ndarray | None:
+    """The ``components=`` option as one label per unknown (an int array of length n), or None
+    for a scalar problem (None, 1, or a single label: the amg hierarchy is then exactly the
+    scalar one). An int k: k components interleaved (unknown i is component i mod k, n a
+    multiple of k). Raises TypeError/ValueError naming ``components``."""
+    if components is None:
+        return None
+    if isinstance(components, (int, np.integer)) and not isinstance(components, (bool, np.bool_)):
+        k = int(components)
+        if not 1 <= k <= n or n % k:
+            raise ValueError(f"components={k}: an int is the number of interleaved components (unknown i is "
+                             f"component i mod k), which must be >= 1 and divide n = {n}")
+        return None if k == 1 else np.arange(n) % k
+    labels = np.asarray(components)
+    if labels.dtype.kind not in "iu":
+        raise TypeError(f"components must be None, an int (the number of interleaved components) or an "
+                        f"integer array of n = {n} labels, got {type(components).__name__} of dtype {labels.dtype}")
+    if labels.shape != (n,):
+        raise ValueError(f"components must hold one label per unknown, shape ({n},), got shape {labels.shape}")
+    return None if n == 0 or (labels == labels[0]).all() else labels.astype(np.int64)
+
+
+def same_component(A: sp.csr_matrix, components) -> sp.csr_matrix:
+    """A without its couplings between unknowns of different ``components`` (labels, one per row;
+    the unknown-based AMG for systems): its strength, splitting and weights make each component's
+    P by itself, block-diagonal by component and ≥ 0. A itself when components is None."""
+    if components is None:
+        return A
+    keep = np.repeat(components, np.diff(A.indptr)) == components[A.indices]
+    if keep.all():
+        return A
+    kept = np.zeros(A.nnz + 1, dtype=A.indptr.dtype)   # kept[k]: entries kept among A's first k
+    np.cumsum(keep, out=kept[1:])
+    indptr = kept[A.indptr]
+    return sp.csr_matrix((A.data[keep], A.indices[keep], indptr), shape=A.shape)
+
+
 def _auxiliary_level(A, theta, sweeps, truncate):
     """One prolongation of A built on :func:`auxiliary_m_matrix`, or None when the splitting
     leaves no coarse (or no fine) point, or why the level is given up (a str)."""
@@ -185,34 +225,37 @@ def _auxiliary_level(A, theta, sweeps, truncate):
     if is_c.all() or not is_c.any():
         return None
     P = _rs_interpolation(B, S, is_c, "direct")
-    return _canonical(_relax_interpolation(B, P, is_c, sweeps, truncate))
+    return _canonical(_relax_interpolation(B, P, is_c, sweeps, truncate)), is_c
 
 
-def _rs_levels(A, theta, max_coarse, max_levels, interpolation) -> list:
+def _rs_levels(A, theta, max_coarse, max_levels, interpolation, components=None) -> list:
     """pyamg's ruge_stuben_solver's levels below A (classical strength θ, norm 'abs'; RS
     splitting; ``interpolation`` 'direct' or 'classical'): pairs (P_l, A_{l+1} = P_lᵀ A_l P_l),
     at most max_levels − 1 of them, until a level has at most max_coarse unknowns or the
-    splitting leaves no coarse or no fine point."""
+    splitting leaves no coarse or no fine point. With ``components`` (labels of A's rows) each
+    level is built on :func:`same_component` of its operator, a C point keeping its label."""
     out = []
     while len(out) < max_levels - 1 and A.shape[0] > max_coarse:
-        S = _strength(A, theta, "abs")
+        A_c = same_component(A, components)
+        S = _strength(A_c, theta, "abs")
         is_c = _rs_split(S)
         if is_c.all() or not is_c.any():
             break
-        P = _rs_interpolation(A, S, is_c, interpolation)
+        P = _rs_interpolation(A_c, S, is_c, interpolation)
+        components = None if components is None else components[is_c]   # P's columns: the C points in order
         A = sp.csr_matrix(P.T.tocsr() @ A @ P)   # pyamg's order of the products
         A.sort_indices()   # pyamg's strength graph is sorted: RS breaks its ties in that order
         out.append((P, A))
     return out
 
 
-def amg_prolongations(A, **opts) -> list:
+def amg_prolongations(A, components=None, **opts) -> list:
     """Classical (Ruge–Stüben) AMG prolongations of A, finest first, built for nested iteration
     (the P of :func:`amg_levels`)."""
-    return [P for P, _ in amg_levels(A, **opts)]
+    return [P for P, _ in amg_levels(A, components, **opts)]
 
 
-def amg_levels(A, **opts) -> list:
+def amg_levels(A, components=None, **opts) -> list:
     """Classical (Ruge–Stüben) AMG levels of A, finest first, built for nested iteration: pairs
     (P_l, A_{l+1}) of a prolongation and the Galerkin operator A_{l+1} = P_lᵀ A_l P_l it makes,
     which the set-up forms anyway (the core takes them instead of forming them again).
@@ -224,15 +267,20 @@ def amg_levels(A, **opts) -> list:
     auxiliary matrix annihilates: constants), each truncated at ``truncate`` × the row maximum
     (row sums kept); the next operator is the true Galerkin product PᵀAP. Below: pyamg's
     ``ruge_stuben_solver`` (classical strength θ, classical interpolation).
+    ``components`` (:func:`check_components`: None, an int k of interleaved components, or a label
+    per unknown): a vector problem's unknowns, each level coarsened and interpolated by component
+    (:func:`same_component`: strength only between unknowns of the same component), so P is
+    block-diagonal by component and ≥ 0, exact for each component's constants (the translations
+    of elasticity); the coarse operators are the true PᵀAP. None (or 1): the scalar hierarchy.
     Options (defaults): ``theta`` (0.25), ``max_coarse`` (10), ``max_levels`` (30), ``sweeps``
     (3), ``truncate`` (0.2), ``aux_levels`` (1). Works for nonsymmetric A (the strength reads
     A's rows). Returns a list of pairs of float64 canonical ``scipy.sparse.csr_matrix``, P_l of
     shape (n_l, n_{l+1}) and A_{l+1}; ``[]`` when A is already small enough to be the coarsest level.
     """
-    return amg_levels_why(A, **opts)[0]
+    return amg_levels_why(A, components, **opts)[0]
 
 
-def amg_levels_why(A, **opts) -> tuple:
+def amg_levels_why(A, components=None, **opts) -> tuple:
     """(:func:`amg_levels`, why the set-up gave up the next level: a str naming the level, the
     row and the non-positive diagonal entry that stopped it; None when it ended by its own rules
     (max_coarse, max_levels, a splitting without coarse or fine points))."""
@@ -243,17 +291,22 @@ def amg_levels_why(A, **opts) -> tuple:
     unknown = set(opts) - set(_RS_DEFAULTS)
     if unknown:
         raise TypeError(f"amg_prolongations got unknown options {sorted(unknown)}; known: {sorted(_RS_DEFAULTS)}")
+    labels = check_components(components, A.shape[0])
     with _small_pages():
-        return _levels(A, {**_RS_DEFAULTS, **opts})
+        return _levels(A, labels, {**_RS_DEFAULTS, **opts})
 
 
-def _levels(A, kw) -> tuple:
-    """amg_levels_why's (levels, why) of A with the options kw (all given)."""
+def _levels(A, components, kw) -> tuple:
+    """amg_levels_why's (levels, why) of A with the labels `components` (or None) and the options kw (all given)."""
     out = []
     while len(out) < kw["aux_levels"] and A.shape[0] > kw["max_coarse"] and len(out) < kw["max_levels"] - 1:
-        P = _auxiliary_level(A, kw["theta"], kw["sweeps"], kw["truncate"])
-        if P is None or isinstance(P, str):
-            return out, None if P is None else f"the amg set-up gave up level {len(out) + 1}: level {len(out)}'s {P}"
+        # by component on every level (on the first only: 12-48 CG iterations a solve; docs/MEASUREMENTS.md)
+        level = _auxiliary_level(same_component(A, components), kw["theta"], kw["sweeps"], kw["truncate"])
+        if level is None or isinstance(level, str):
+            why = None if level is None else f"the amg set-up gave up level {len(out) + 1}: level {len(out)}'s {level}"
+            return out, why
+        P, is_c = level
+        components = None if components is None else components[is_c]
         A_fine, A = A, _canonical(P.T @ (A @ P))   # our own product: canonical in place, no copy
         out.append((P, A))
     if A.shape[0] <= kw["max_coarse"] or len(out) >= kw["max_levels"] - 1:
@@ -263,7 +316,8 @@ def _levels(A, kw) -> tuple:
     # "denser" = 1.2x A's nonzeros (docs/MEASUREMENTS.md, "The fold of a denser first coarse level")
     dense = len(out) == 1 and A.nnz > 1.2 * A_fine.nnz
     out += [(_canonical(P), _canonical(Ac)) for P, Ac in
-            _rs_levels(A, kw["theta"], kw["max_coarse"], kw["max_levels"] - len(out), "direct" if dense else "classical")]
+            _rs_levels(A, kw["theta"], kw["max_coarse"], kw["max_levels"] - len(out), "direct" if dense else "classical",
+                       components)]
     if dense and len(out) > 1:   # (P_0 P_1)ᵀ A (P_0 P_1) = P_1ᵀ A_1 P_1 = A_2
         out[:2] = [(_canonical(out[0][0] @ out[1][0]), out[1][1])]
     return out, None

@@ -52,25 +52,26 @@ def resolves_to_amg(hierarchy, A) -> bool:
     return hierarchy == "amg" or (hierarchy == "auto" and n >= AUTO_AMG_MIN_N and sparse and _has_pyamg())
 
 
-def amg_levels_or_rows(A):
+def amg_levels_or_rows(A, components=None):
     """amg_levels_why of an unscaled A, or None when one of its Galerkin operators PᵀAP has a
     non-positive diagonal: the core would end the hierarchy there and start cold. That happens when
     A is a symmetric matrix with its rows scaled apart, D·S; equilibrated rows keep the diagonals
     positive, so the caller then scales the rows (scale='rows'; docs/MEASUREMENTS.md, "Row-scaled
     matrices and the amg set-up")."""
-    pairs, why = amg_levels_why(A)
+    pairs, why = amg_levels_why(A, components)
     return (pairs, why) if all((Ac.diagonal() > 0).all() for _, Ac in pairs) else None
 
 
-def levels(hierarchy, A, A_core, dc, built=None, asked=None) -> tuple:
+def levels(hierarchy, A, A_core, dc, built=None, asked=None, components=None) -> tuple:
     """hierarchy= -> (prolongations for the core's matrix A_core (= A, or D_r A D_c when scaled),
     their Galerkin operators or None: the amg set-up forms them (or `built`, amg_levels_why's
     formed already), a given list leaves them to the core; the levels requested; why some are
     given up before the core, or None). 'auto': 'amg' for a sparse A of n >= AUTO_AMG_MIN_N when
     pyamg is importable, else none (cold start). `asked`: (levels requested, why) of a list made
-    from the user's (the coupled rows' part: _decoupled.py)."""
+    from the user's (the coupled rows' part: _decoupled.py). `components`: the amg set-up's labels
+    (_hierarchy.check_components), or None."""
     if resolves_to_amg(hierarchy, A):
-        pairs, why = amg_levels_why(A_core) if built is None else built
+        pairs, why = amg_levels_why(A_core, components) if built is None else built
         return [P for P, _ in pairs], [Ac for _, Ac in pairs], len(pairs) + 1 + (why is not None), why
     if isinstance(hierarchy, str) and hierarchy == "auto":
         hierarchy = None
@@ -107,11 +108,11 @@ def shortened(report: dict) -> str:
     return f"{report['requested']} levels requested, {used} used, {how}: {report['reason']}"
 
 
-def make_core(A_core, opts, hierarchy, A, dc, built=None, asked=None):
+def make_core(A_core, opts, hierarchy, A, dc, built=None, asked=None, components=None):
     """(The C++ Newton object (NewtonI32/NewtonI64) with its prolongations (and coarse operators),
     the hierarchy_report of its set-up)."""
     idx = A_core.indices.dtype
-    Ps, coarse, requested, why = levels(hierarchy, A, A_core, dc, built, asked)
+    Ps, coarse, requested, why = levels(hierarchy, A, A_core, dc, built, asked, components)
 
     def triple(M):
         return (M.indptr.astype(idx, copy=False), M.indices.astype(idx, copy=False),   # the core copies them

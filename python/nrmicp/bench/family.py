@@ -293,6 +293,8 @@ def _run_nrmicp(problem, method, z_update_used, maxiter):
     base, kw = split_method(method)
     if getattr(problem, "upper", None) is not None:
         kw = dict(kw, upper=problem.upper)
+    if "components" in getattr(problem, "solver_options", {}):   # a vector scene's unknowns, for 'amg'
+        kw = dict(kw, components=problem.solver_options["components"])
 
     def solve(tol, history=False):
         res = nrmicp.solve(problem.A, problem.q, problem.zeta, method=base, tol=tol, maxiter=maxiter,
