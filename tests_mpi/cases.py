@@ -67,7 +67,7 @@ def problems():
 
 
 SERIAL_METHOD = {"newton": "newton", "nrmj": "nrmj", "nrmgs": "nrmgs", "nrmsor": "nrmsor", "nrmaor": "nrmaor"}
-OPTIONS = {"newton": {}, "nrmj": {}, "nrmgs": {}, "nrmsor": {"alpha": 1.2}, "nrmaor": {"alpha": 1.1, "beta": 0.9}}
+OPTIONS = {"newton": {"hierarchy": "amg"}, "nrmj": {}, "nrmgs": {}, "nrmsor": {"alpha": 1.2}, "nrmaor": {"alpha": 1.1, "beta": 0.9}}
 
 
 def case_agreement(weights=None):
@@ -257,10 +257,12 @@ def case_boomeramg():
     user's stays in the options database after a solve."""
     pb3 = obstacle_3d(7, exact=False)
     lo, hi = split(pb3.A.shape[0])
-    r = dist.solve(sp.csr_matrix(pb3.A)[lo:hi], pb3.q[lo:hi], pb3.zeta[lo:hi], method="newton", tol=1e-9)
+    r = dist.solve(sp.csr_matrix(pb3.A)[lo:hi], pb3.q[lo:hi], pb3.zeta[lo:hi], method="newton", tol=1e-9,
+                   hierarchy="amg")
     hier = PETSc.Options("nrmicp_hierarchy_")
     hier["pc_hypre_boomeramg_max_levels"] = 3
-    r3 = dist.solve(sp.csr_matrix(pb3.A)[lo:hi], pb3.q[lo:hi], pb3.zeta[lo:hi], method="newton", tol=1e-9)
+    r3 = dist.solve(sp.csr_matrix(pb3.A)[lo:hi], pb3.q[lo:hi], pb3.zeta[lo:hi], method="newton", tol=1e-9,
+                    hierarchy="amg")
     hier.delValue("pc_hypre_boomeramg_max_levels")
     return {"status": str(r.status), "levels": len(r.level_steps), "levels_3": len(r3.level_steps),
             "status_3": str(r3.status),
@@ -280,10 +282,10 @@ def case_floor():
              lambda M, lo, hi: nrmicp.Affine(mat(B, lo, hi), c[lo:hi]))):
         lo, hi = split(A.shape[0])
         M = mat(A, lo, hi)
-        r = dist.solve(M, vec(M, q), dzeta(M, lo, hi), method="newton", tol=1e-17)
+        r = dist.solve(M, vec(M, q), dzeta(M, lo, hi), method="newton", tol=1e-17, hierarchy="amg")
         z = dist.gather(r.z)
         if RANK == 0:
-            serial = nrmicp.solve(A, q, zeta, method="newton", tol=1e-17)
+            serial = nrmicp.solve(A, q, zeta, method="newton", tol=1e-17, hierarchy="amg")
             out[name] = {"status": str(r.status), "message": r.message, "res": float(r.residual), "nit": r.nit,
                          "serial_status": str(serial.status), "err": float(np.max(np.abs(z - serial.z)))}
     return out
@@ -296,7 +298,7 @@ def case_overshoot():
     pb = fe_obstacle("P3", 2, exact=False)
     A = sp.csr_matrix(pb.A)
     lo, hi = split(A.shape[0])
-    r = dist.solve(A[lo:hi], pb.q[lo:hi], pb.zeta[lo:hi], method="newton", tol=1e-9)
+    r = dist.solve(A[lo:hi], pb.q[lo:hi], pb.zeta[lo:hi], method="newton", tol=1e-9, hierarchy="amg")
     z = dist.gather(r.z)
     if RANK == 0:
         serial = nrmicp.solve(A, pb.q, pb.zeta, method="newton", tol=1e-11)
@@ -327,9 +329,10 @@ def case_warm():
     pb = obstacle_2d(63, exact=False)
     A = sp.csr_matrix(pb.A)
     lo, hi = split(A.shape[0])
-    first = dist.solve(A[lo:hi], pb.q[lo:hi], pb.zeta[lo:hi], method="newton", tol=1e-10)
+    first = dist.solve(A[lo:hi], pb.q[lo:hi], pb.zeta[lo:hi], method="newton", tol=1e-10, hierarchy="amg")
     q_next = pb.q + 0.5
-    runs = {name: dist.solve(A[lo:hi], q_next[lo:hi], pb.zeta[lo:hi], method="newton", tol=1e-10, x0=x0)
+    runs = {name: dist.solve(A[lo:hi], q_next[lo:hi], pb.zeta[lo:hi], method="newton", tol=1e-10, x0=x0,
+                             hierarchy="amg")
             for name, x0 in (("warm", first.z), ("zeros", np.zeros(hi - lo)), ("ones", np.ones(hi - lo)))}
     zs = {name: dist.gather(r.z) for name, r in runs.items()}
     if RANK == 0:

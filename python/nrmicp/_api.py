@@ -314,24 +314,26 @@ _STATIONARY_ONLY = {k: _options.TABLE[k].default for k in ("accelerate", "z_upda
 _SPLITTING = tuple(k for k in _options.names("setup") if _options.TABLE[k].kind != "python" and k != "method")
 
 
-def dominance_margin(A: sp.csr_matrix) -> float:
-    """min_i (a_ii − Σ_{j≠i} |a_ij|) / a_ii over the rows of A; −inf when some a_ii <= 0."""
-    d = A.diagonal()
+def dominance_margin(A: sp.csr_matrix, diagonal=None) -> float:
+    """min_i (a_ii − Σ_{j≠i} |a_ij|) / a_ii over the rows of A; −inf when some a_ii <= 0.
+    `diagonal`: the rows' a_ii when A is a block of rows (a rank's, in nrmicp.distributed)."""
+    d = A.diagonal() if diagonal is None else diagonal
     if A.shape[0] == 0 or not np.all(d > 0):   # (an empty row has a_ii = 0: every row is stored below)
         return -math.inf
     row_sums = np.add.reduceat(np.abs(A.data), A.indptr[:-1])   # one pass, no copy of A
     return float(np.min((2 * d - row_sums) / d))
 
 
-def choose_method(A: sp.csr_matrix, options: dict) -> str:
+def choose_method(A: sp.csr_matrix, options: dict, margin=None) -> str:
     """What method="auto" takes for A (the rule of README "Which method for which problem"):
     the member of any stationary-only option given, newton for a hierarchy list (and, in
-    :func:`solve`, for a ``zeta_jacobian``), else nrmgs where A's rows are dominant by AUTO_MARGIN and newton elsewhere."""
+    :func:`solve`, for a ``zeta_jacobian``), else nrmgs where A's rows are dominant by AUTO_MARGIN and newton elsewhere.
+    `margin`: A's dominance_margin when known (nrmicp.distributed reduces it over the ranks)."""
     if any(options.get(k, v) is not None and options.get(k, v) != v for k, v in _STATIONARY_ONLY.items()):
         return "nrmgs"
     if isinstance(options.get("hierarchy"), (list, tuple)):
         return "newton"
-    return "nrmgs" if dominance_margin(A) >= AUTO_MARGIN else "newton"
+    return "nrmgs" if (dominance_margin(A) if margin is None else margin) >= AUTO_MARGIN else "newton"
 
 
 def _outer_hint(solver, measure) -> str:

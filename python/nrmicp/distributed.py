@@ -28,8 +28,10 @@ except ImportError as exc:  # the core package needs no MPI; this module does
     raise ImportError("nrmicp.distributed needs petsc4py, PETSc (with hypre) and MPI: README, 'Beyond one machine' "
                       f"(make mpideps installs them on Debian); {exc}") from exc
 
-from . import _bounds, _core
-from ._api import (Affine, Result, Status, _checked, _choice, _criterion, _iteration_options, _scalar,
+from . import _bounds, _core, _options
+from ._newton import AUTO_AMG_MIN_N
+from ._api import (Affine, Result, Status, _checked, _choice, _criterion, _iteration_options, _scalar, choose_method,
+                   dominance_margin,
                    at_rounding_floor)
 from ._scaling import sigma_from_logs
 from ._inputs import as_constant, as_diagonal, as_vector
@@ -39,6 +41,16 @@ __all__ = ["solve", "gather", "METHODS", "DistributedError"]
 
 #: The distributed members: Newton, and the AOR-type NRM members as synchronous multisplitting.
 METHODS = ("newton", "nrmj", "nrmgs", "nrmsor", "nrmaor")
+#: nrmicp.solve's options that cannot apply on PETSc, and why (refused naming them unless at their defaults).
+_UNSUPPORTED = {
+    "scale": "the default rule's units scaling is the one scaling here",
+    "accelerate": "the multisplitting members are not accelerated", "anderson_m": "no acceleration here",
+    "phi": "the multisplitting members have phi = 0", "theta": "two_sweep is serial only",
+    "z_update": "the multisplitting members update z explicitly",
+    "inner": "the PETSc engine's reduced solves are its own: PETSc options -nrmicp_inner_...",
+    "verbose": "no progress lines from several ranks",
+    "components": "BoomerAMG builds the hierarchy: PETSc options -nrmicp_hierarchy_pc_hypre_boomeramg_...",
+    "zeta_jacobian": "the PETSc engine has no Jacobian path yet: the outer fixed point solves a callable zeta"}
 #: AOR parameters (alpha, beta) the members fix; None: the user's (default 1, beta = alpha).
 _AOR_FIXED = {"nrmj": (1.0, 0.0), "nrmgs": (1.0, 1.0)}
 #: Longest error message exchanged between ranks (bytes, UTF-8).
@@ -425,6 +437,8 @@ def _prepare(A, q, zeta, x0, comm, method, tol, maxiter, omega1, omega2, gamma, 
     A_in = _collective(comm, _check_mat, A)
     Am = _as_mat(A_in, comm) if sp.issparse(A_in) else A_in
     n, nloc = Am.getSize()[0], Am.getLocalSize()[0]
+    if isinstance(method, str) and method.lower() == "auto":
+        method = _auto_method(Am, {"hierarchy": hierarchy, "alpha": alpha, "beta": beta}, comm)
 
     def local():
         m, w1, w2 = _check_options(method, n, tol, maxiter, omega1, omega2, gamma, alpha, beta, nloc, rtol)
@@ -453,10 +467,7 @@ def _prepare(A, q, zeta, x0, comm, method, tol, maxiter, omega1, omega2, gamma, 
     return Am, m, w1, w2, _vec(Am, qa), None if xa is None else _vec(Am, xa), zf.make(Am)
 
 
-def solve(A, q, zeta=None, *, method: str = "newton", tol=None, rtol=None, maxiter: int = 10000,
-          omega1=None, omega2=None, gamma: float = 1.0, alpha=None, beta=None, hierarchy="amg",
-          x0=None, polish: bool = False, comm=None, upper=None, callback=None,
-          record_history: bool = False) -> Result:
+def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     """Solve ICP(q, A, ζ) on all ranks of A's communicator (call it on every rank).
 
     A: petsc4py Mat (AIJ, square, same row and column layout) or this rank's scipy.sparse row
@@ -469,13 +480,22 @@ def solve(A, q, zeta=None, *, method: str = "newton", tol=None, rtol=None, maxit
     affine ζ runs its outer fixed point — or 'nrmj', 'nrmgs', 'nrmsor', 'nrmaor' (synchronous
     multisplitting). upper (method 'newton'): z ≤ upper, as in :func:`nrmicp.solve`. callback(k, z, res)
     sees this rank's rows of z; returning True on any rank stops every rank.
-    The options mean what they mean in :func:`nrmicp.solve` and are checked by the same code;
+    ``options`` are :func:`nrmicp.solve`'s, with its defaults, checked by the same code (one table:
+    nrmicp._options); those that cannot apply on PETSc (``_UNSUPPORTED``: scale, accelerate, anderson_m,
+    phi, theta, z_update, inner, verbose, components, zeta_jacobian) raise a ValueError naming them.
+    method='auto' is nrmicp.solve's rule on every rank's rows; hierarchy='auto' is 'amg' from
+    n = 4096 on (BoomerAMG: no pyamg needed).
     tol and rtol both None is nrmicp.solve's default rule (units-free Res_E, rtol 1e-10), applied by
     solving σA, σq (σ from the diagonal's global geometric mean), ``residual`` the paper's Res.
     Returns a :class:`nrmicp.Result` on every rank, with ``z`` and ``w`` as PETSc Vecs
     (:func:`gather` copies one to rank 0). A failure on any rank raises on every rank.
     """
     comm = comm or (A.getComm() if isinstance(A, PETSc.Mat) else PETSc.COMM_WORLD)
+    _collective(comm, lambda: _options.validate(options, where="distributed.solve", unsupported=_UNSUPPORTED))
+    o = {**_options.defaults(), **options}
+    method, tol, rtol, maxiter, x0, hierarchy = (o[k] for k in ("method", "tol", "rtol", "maxiter", "x0", "hierarchy"))
+    omega1, omega2, gamma, alpha, beta = (o[k] for k in ("omega1", "omega2", "gamma", "alpha", "beta"))
+    polish, callback, record_history = o["polish"], o["callback"], o["record_history"]
     t_start = time.perf_counter()
     it, units = _criterion({"tol": tol, "rtol": rtol})
     Am, m, w1, w2, qv, z0, zf = _prepare(A, q, zeta, x0, comm, method, it["tol"], maxiter, omega1, omega2,
@@ -491,7 +511,7 @@ def solve(A, q, zeta=None, *, method: str = "newton", tol=None, rtol=None, maxit
     polish = bool(_collective(comm, lambda: _check_polish(polish)))
     if m == "newton":
         z, res, status, message, tol, fields = _newton(Am, qv, zf, z0, ua, hierarchy, it, maxiter, w1, w2, gamma,
-                                                       polish, callback, record_history, comm)
+                                                       polish, callback, record_history, o["stall_iterations"], comm)
     else:
         tol = _target(Am, qv, zf, it["tol"], it["rtol"])
         t_iter = time.perf_counter()
@@ -510,6 +530,15 @@ def solve(A, q, zeta=None, *, method: str = "newton", tol=None, rtol=None, maxit
     fields["timings"]["total"] = time.perf_counter() - t_start
     return Result(z=z, w=w, success=status == Status.CONVERGED, status=Status(status), message=message,
                   residual=float(res), criterion=criterion, method=m, ranks=comm.getSize(), **fields)
+
+
+def _auto_method(Am, options, comm):
+    """nrmicp.solve's method='auto' (choose_method), A's dominance margin reduced over the ranks."""
+    indptr, _, vals = Am.getValuesCSR()
+    rows = sp.csr_matrix((vals, np.zeros_like(vals, dtype=np.int32), indptr), shape=(len(indptr) - 1, 1))
+    local = dominance_margin(rows, np.array(Am.getDiagonal().getArray(readonly=True))) if rows.shape[0] else math.inf
+    margin = -_flag_max(comm, -local)   # (a rank without rows has no say)
+    return choose_method(None, options, margin)
 
 
 def _upper(upper, Am, zf, comm, method):
@@ -531,7 +560,7 @@ def _upper(upper, Am, zf, comm, method):
 def _prolongations(Am, hierarchy, comm):
     """The nesting hierarchy's prolongations and their Galerkin operators (None: formed by the core)
     as PETSc Mats, and what keeps them alive (hypre's PC)."""
-    if hierarchy in ("amg", "auto"):
+    if hierarchy == "amg" or (hierarchy == "auto" and Am.getSize()[0] >= AUTO_AMG_MIN_N):
         Ps, As, pc = _hierarchy(Am, comm, f"nrmicp_{id(Am)}_")
         return Ps, As, pc
     if isinstance(hierarchy, (list, tuple)):
@@ -539,7 +568,7 @@ def _prolongations(Am, hierarchy, comm):
     return [], [], None
 
 
-def _newton(Am, qv, zf, z0, ua, hierarchy, it, maxiter, w1, w2, gamma, polish, callback, record_history, comm):
+def _newton(Am, qv, zf, z0, ua, hierarchy, it, maxiter, w1, w2, gamma, polish, callback, record_history, stall, comm):
     """The Newton member: nrmicp::Newton on the PETSc engine (nrmicp._petsc), its every decision the
     serial member's. Returns (z, Res, status, message, tol, the result's other fields)."""
     from . import _petsc
@@ -547,7 +576,7 @@ def _newton(Am, qv, zf, z0, ua, hierarchy, it, maxiter, w1, w2, gamma, polish, c
     Ps, As, keep = _prolongations(Am, hierarchy, comm)
     o = _core.Options()
     o.method, o.tol, o.rtol, o.maxiter, o.gamma = _core.Method.newton, it["tol"], it["rtol"], maxiter, float(gamma)
-    o.record_history = bool(record_history)
+    o.record_history, o.stall_iterations = bool(record_history), int(stall)
     if w1 is not None:
         o.omega1 = w1
     if w2 is not None:
