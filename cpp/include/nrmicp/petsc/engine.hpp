@@ -380,7 +380,15 @@ class System {
     return lu_ ? 0 : reason > 0 ? static_cast<int>(its) : max_iterations_ + 1;
   }
   void restore_hierarchy() {}
-  const char* inner_name() const { return lu_ ? "lu" : symmetric_ ? "cg+mg" : "bicgstab+mg"; }
+  /// "lu", or the Krylov method and the preconditioner ("cg+mg", "bicgstab+hypre", ...).
+  const char* inner_name() const {
+    PC pc;
+    PCType type;
+    KSPGetPC(ksp_, &pc);
+    PCGetType(pc, &type);
+    name_ = lu_ ? "lu" : std::string(symmetric_ ? "cg+" : "bicgstab+") + (type ? type : "none");
+    return name_.c_str();
+  }
   bool iterative() const { return iterative_; }
   void set_max_iterations(int k) { max_iterations_ = k; }
 
@@ -399,10 +407,40 @@ class System {
       KSPSetInitialGuessNonzero(ksp_, PETSC_TRUE);
       PC pc;
       KSPGetPC(ksp_, &pc);
+      if (wide_stencil()) return boomeramg(pc);
       multigrid(pc);
     }
     KSPSetOptionsPrefix(ksp_, "nrmicp_inner_");
     check(KSPSetFromOptions(ksp_), "KSPSetFromOptions");
+  }
+  /// More than 6 nonzeros a row (3D 7-point, finite elements): each step's Galerkin operators PᵀKP
+  /// cost more than a BoomerAMG set-up on K with aggressive coarsening (docs/MEASUREMENTS.md, "The
+  /// PETSc engine's reduced solves").
+  bool wide_stencil() const {
+    MatInfo info;
+    PetscInt N;
+    check(MatGetInfo(A_.get(), MAT_GLOBAL_SUM, &info), "MatGetInfo");
+    check(MatGetSize(A_.get(), &N, nullptr), "MatGetSize");
+    return info.nz_used > 6.0 * static_cast<double>(N);
+  }
+  /// BoomerAMG on each step's K: HMIS coarsening, ext+i interpolation (at most 4 weights a row), one
+  /// aggressive level — defaults for this KSP only; the user's -nrmicp_inner_ options win.
+  void boomeramg(PC pc) {
+    PCSetType(pc, PCHYPRE);
+    static const char* ours[][2] = {{"-nrmicp_inner_pc_hypre_boomeramg_coarsen_type", "HMIS"},
+                                    {"-nrmicp_inner_pc_hypre_boomeramg_interp_type", "ext+i"},
+                                    {"-nrmicp_inner_pc_hypre_boomeramg_P_max", "4"},
+                                    {"-nrmicp_inner_pc_hypre_boomeramg_agg_nl", "1"}};
+    std::vector<const char*> set;
+    for (const auto& o : ours) {
+      PetscBool given = PETSC_FALSE;
+      PetscOptionsHasName(nullptr, nullptr, o[0], &given);
+      if (!given && !PetscOptionsSetValue(nullptr, o[0], o[1])) set.push_back(o[0]);
+    }
+    KSPSetOptionsPrefix(ksp_, "nrmicp_inner_");
+    const PetscErrorCode e = KSPSetFromOptions(ksp_);
+    for (const char* name : set) PetscOptionsClearValue(nullptr, name);  // (nothing of ours stays behind)
+    check(e, "KSPSetFromOptions");
   }
   /// The serial V-cycle (detail/multigrid.hpp) in PETSc's PCMG: the hierarchy's P's, Galerkin operators
   /// PᵀKP of each step's K, one forward Gauss–Seidel sweep before the coarse correction and one
@@ -443,6 +481,7 @@ class System {
   std::vector<PetscInt> active_;
   std::vector<char> inactive_;
   bool iterative_ = false, lu_ = false, symmetric_ = false;
+  mutable std::string name_;  // inner_name's
   int max_iterations_ = 500;  // MultigridKrylov::default_max_iterations
 };
 
