@@ -98,7 +98,7 @@ struct Box {
   /// stays free on every level), and takes the bound of the bounded fine row it weighs most (P's
   /// largest entry in its column: the coarse point itself under classical AMG and grid interpolation).
   /// A coarse box makes a start, not a constraint of the fine problem: it needs to be near, not safe
-  /// (the smallest bound around tightened it level by level: docs/MEASUREMENTS.md, "Bounds: nested
+  /// (the smallest bound around would tighten it level by level: docs/MEASUREMENTS.md, "Bounds: nested
   /// iteration on the two-sided membrane").
   template <typename RowMatrix>
   Box coarse(const RowMatrix& P) const {

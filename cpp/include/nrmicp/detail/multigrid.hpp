@@ -156,7 +156,7 @@ class MultigridKrylov {
   /// as they are (the next setup updates them from the last K). The next setup frees them again.
   /// A_l and K_l have one pattern and the coarse levels need A_l only for nested iteration, before
   /// the finest level's solve: not held during it, for one pass of the Galerkin products a solve
-  /// (docs/MEASUREMENTS.md).
+  /// (docs/MEASUREMENTS.md, "The algebraic hierarchy on grids", Memory).
   template <typename M>
   void restore_hierarchy(const M& A_values) {
     if (!lent_) return;
@@ -169,7 +169,8 @@ class MultigridKrylov {
     lent_ = false;
   }
   /// The most changed entries of K (of `nnz`) that setup applies as an update: each costs about
-  /// as much as 5 entries of the full product (a search in C's row per term; docs/MEASUREMENTS.md).
+  /// as much as 5 entries of the full product (a search in C's row per term; docs/MEASUREMENTS.md,
+  /// "`MultigridKrylov::max_changes` = nnz / 8").
   static std::size_t max_changes(Eigen::Index nnz) { return static_cast<std::size_t>(nnz / 8); }
 
   /// K z = b from the start z (the current Newton iterate: close), until ‖b − Kz‖ ≤ `target`
@@ -242,7 +243,7 @@ class MultigridKrylov {
   /// C += Pᵀ ΔK P, ΔK given by its changed entries (`in`); `out` gets C's changed entries. The
   /// terms are added to C's values in place; a touched position's value before the update is kept
   /// in `out` and its change is the difference (no dense sum per position of C: docs/MEASUREMENTS.md,
-  /// memory). False when a term falls outside C's pattern (C then
+  /// "The algebraic hierarchy on grids", Memory). False when a term falls outside C's pattern (C then
   /// partly updated).
   bool add_galerkin_change(const RowMatrix& P, const std::vector<Change<StorageIndex>>& in, RowMatrix& C,
                            std::vector<Change<StorageIndex>>& out) {
@@ -304,7 +305,7 @@ class MultigridKrylov {
   /// Eigen's preconditioned BiCGSTAB (its residual is the unpreconditioned b − Kz, relative to
   /// ‖b‖, updated recursively as CG's is) until ‖b − Kz‖ ≤ stop. z is kept when the solve breaks
   /// down (a non-finite iterate). The convergence is Eigen's test on the recursive residual: the
-  /// true one has a rounding floor (docs/MEASUREMENTS.md) that the Newton loop's
+  /// true one has a rounding floor (docs/MEASUREMENTS.md, "BiCGSTAB for a nonsymmetric K") that the Newton loop's
   /// target tol / 10 can lie below, where a check of the true residual would fail every step.
   int krylov(const Vector& b, Vector& z, double stop) const {
     const double bn = b.norm();
@@ -370,7 +371,7 @@ class MultigridKrylov {
 
   /// The pre-smoothing of level l: the forward sweep on M e = r from e = 0 and the residual it
   /// leaves, res = r − M e = −(strict upper part of M) e, without a second read of M (docs/
-  /// MEASUREMENTS.md, "fused sweep"). A symmetric M: row j's entries left of the diagonal are column
+  /// MEASUREMENTS.md, "Fused sweep"). A symmetric M: row j's entries left of the diagonal are column
   /// j's above it, so once e_j is known they scatter −m_ij e_j into res_i (i < j). Any M: row i's
   /// residual is final once e is known up to i + reach (M's largest column − row), so it is formed
   /// that many rows behind the sweep, while row i is still in cache (a grid's reach is a line or a

@@ -135,7 +135,8 @@ class NewtonLevel {
   }
   /// Frees what a solve on this level built (the reduced system, the fallback's factorization).
   /// Nested iteration releases each coarse level once its solution is prolongated: the finer
-  /// levels' solves then run without them in memory, and the next solve rebuilds them (docs/MEASUREMENTS.md).
+  /// levels' solves then run without them in memory, and the next solve rebuilds them
+  /// (docs/MEASUREMENTS.md, "The algebraic hierarchy on grids", Memory).
   void release() {
     restore_hierarchy();
     lcp_system_.reset();
@@ -221,10 +222,8 @@ class NewtonLevel {
 
   /// The inactive set ℐ = {x ≥ 0} = {g/Ω1 − w/Ω2 ≥ 0}. A tie x = 0 (z = ζ and w = 0) counts as
   /// inactive: if it is in fact active the solve puts it back at no cost, while holding every
-  /// tie at the obstacle peels a region of exact zeros one node per step. Measured on the
-  /// American put (n_space = 1600, warm start x0 = the previous time step, hierarchy None, where
-  /// the far field is z = ψ, w = 0 exactly): 9.09 steps per time step with ties active, 1.49
-  /// with ties inactive (the same as a plain scipy active-set loop with this rule).
+  /// tie at the obstacle peels a region of exact zeros one node per step (docs/MEASUREMENTS.md,
+  /// "Ties in the active-set test").
   /// With a (nonempty) box, g = y and each row has one of three states (Box::state).
   void active_set(const Vector& w, const Vector& g, std::vector<char>& inactive, const Box* box = nullptr) const {
     inactive.resize(static_cast<std::size_t>(w.size()));

@@ -189,32 +189,31 @@ class NewtonTally {
 struct NewtonTuning {
   /// Newton steps per coarse level: until its active set settles (at most this many), since a
   /// cut-short coarse solve leaves a band of wrong active set that Res does not show
-  /// (docs/MEASUREMENTS.md, coarse_maxiter).
+  /// (docs/MEASUREMENTS.md, "`NewtonTuning::coarse_maxiter` = 100").
   static constexpr int coarse_maxiter = 100;
   /// The inner solves on the coarse levels stop at this fraction of the iterate's Res: a start
-  /// needs no more; not on the finest level (docs/MEASUREMENTS.md, coarse_forcing).
+  /// needs no more; not on the finest level (docs/MEASUREMENTS.md, "`NewtonTuning::coarse_forcing` = 0.1").
   static constexpr double coarse_forcing = 0.1;
   /// A coarse level's loosely solved set that repeats settles once Res is below this fraction of
   /// the level's start (the accuracy of the finest level's first step); before, the set is solved
-  /// to a tenth of that and the loop goes on (NewtonControl::repeat_trust). Measured on P1 elements
-  /// with a 1000× coefficient jump (docs/MEASUREMENTS.md, coarse_repeat_trust): a start whose Res
-  /// is the jump's, not the contact's, settled after one loose step with no contact, level after
-  /// level, and the finest level peeled from there in 20 steps instead of 6; 1e-2 did the same.
+  /// to a tenth of that and the loop goes on (NewtonControl::repeat_trust): a start whose Res is not
+  /// the contact's (a coefficient jump's) would settle after one loose step on a wrong set, level
+  /// after level (docs/MEASUREMENTS.md, "`NewtonTuning::coarse_repeat_trust` = 1e-4").
   static constexpr double coarse_repeat_trust = 1e-4;
   /// The first finest-level step from a nested start stops its inner solve at this fraction of the
   /// start's Res: that step's active set is the prolongation's guess, wrong along the free boundary,
-  /// and a solve to tol / 10 is spent on it (docs/MEASUREMENTS.md, nested_first_forcing).
+  /// and a solve to tol / 10 is spent on it (docs/MEASUREMENTS.md, "`NewtonTuning::nested_first_forcing` = 1e-4").
   static constexpr double nested_first_forcing = 1e-4;
   /// The later finest-level steps from a nested start stop their inner solves at this fraction of
   /// the iterate's Res while their active set is new; a set that repeats is solved to tol / 10
-  /// (NewtonControl::repeat_trust; docs/MEASUREMENTS.md, nested_forcing).
+  /// (NewtonControl::repeat_trust; docs/MEASUREMENTS.md, "`NewtonTuning::nested_forcing` = 0.1").
   static constexpr double nested_forcing = 0.1;
   /// A user's start replaces the nested one when its Res is below this fraction of the cold start's
-  /// (y = 0): a time step's previous solution is at 0.01–0.3 of it, a guess no better (ψ + 10⁻¹²,
-  /// a random guess) at about 1 or more (docs/MEASUREMENTS.md, "Warm starts with a hierarchy").
+  /// (y = 0): a time step's previous solution lies well below it, a guess no better near it or
+  /// above (docs/MEASUREMENTS.md, "Warm starts with a hierarchy").
   static constexpr double warm_start_fraction = 0.5;
-  /// Finest steps a user's start gets before the nested start takes over: the marches' time steps
-  /// took at most 6 (docs/MEASUREMENTS.md, "Warm starts with a hierarchy").
+  /// Finest steps a user's start gets before the nested start takes over: what a time step from
+  /// the last one takes (docs/MEASUREMENTS.md, "Warm starts with a hierarchy").
   static constexpr int warm_steps = 6;
   /// The outer fixed point on a callable ζ without its Jacobian (detail::OuterFixedPoint): Anderson's
   /// memory on the outer map z ↦ S(ζ(z)) (docs/MEASUREMENTS.md, "The outer fixed point, accelerated").
@@ -224,7 +223,7 @@ struct NewtonTuning {
   static constexpr double outer_forcing = 0.1;
   /// The semismooth loop's outer steps (solve_semismooth) are used while their obstacle solve's Res is
   /// below this fraction of the ICP's Res where it started (else the obstacle problem was not solved:
-  /// an LCP of a matrix that is no P-matrix, from the fuzz test).
+  /// an LCP of a matrix that is no P-matrix may have no solution the steps find).
   static constexpr double outer_trust = 0.1;
 };
 
@@ -359,7 +358,7 @@ class NewtonRun {
     SemismoothLinearization<MatrixType> lin(*levels_.finest, q, zeta, record);
     // A step's set is its outer step's, unless that repeats the last step's set: on it the step would
     // return to the same z⁺ (exactly so for an affine ζ), a cycle when the set is wrong (a matrix that is
-    // no M-matrix, from the fuzz test); the test x ≥ 0 at z picks that step's set instead.
+    // no M-matrix); the test x ≥ 0 at z picks that step's set instead.
     lin.predict = [this, &q](const Vector& z, const Vector& zeta_z, std::vector<char>& inactive) {
       if (outer_mode_ && !is_outer(z) && !outer_step(q, zeta_z, z)) outer_mode_ = false;
       const bool use = outer_mode_ && outer_set_ != step_set_;
@@ -443,7 +442,8 @@ class NewtonRun {
     Vector w, capped;
     const Comm& comm() const { return run.comm(); }
     /// The inner obstacle problem, solved to Res < tol (0: to a settled active set). Without z,
-    /// it starts at y = 0 (z = ψ): measured better than from z = 0.
+    /// it starts at y = 0 (z = ψ) rather than at z = 0 (docs/MEASUREMENTS.md, "The outer fixed
+    /// point's inner solves").
     /// With an upper bound u the inner problem is min(ψ, u) ≤ z ≤ u (ζ(z) above u has no z between).
     Result obstacle(const Vector& psi, const Vector* z, bool first, double tol) {
       const Vector& lower = run.upper_.size() ? (capped = psi.cwiseMin(run.upper_)) : psi;
@@ -513,8 +513,8 @@ class NewtonRun {
     return newton_loop(*levels_.finest, levels_.finest->lcp_system(), q_shift, nullptr, nullptr, y0, control, &box);
   }
   /// From the inactive set `set` of the last inner solve: a guess, tried without fallback; when its
-  /// steps are rejected (on impulse_control(101) they were, every outer step: Res 3.2, stagnated),
-  /// the loop is rerun from y0 on y0's own active set, as without a guess.
+  /// steps are rejected the loop is rerun from y0 on y0's own active set, as without a guess
+  /// (docs/MEASUREMENTS.md, "The outer fixed point's inner solves").
   LevelOutcome from_set(const Vector& q_shift, const Vector& y0, const std::vector<char>& set, NewtonControl control,
                         const Box& box) {
     auto guess = control;

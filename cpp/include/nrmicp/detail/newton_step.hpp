@@ -152,11 +152,9 @@ class NewtonStep {
   /// `sweeps` projected Gauss–Seidel sweeps on the trial z⁺ (FixedLinearization: ζ none, constant
   /// or affine); true when they changed its active set. Projected Gauss–Seidel is no contraction
   /// where A's diagonal does not dominate, so sweeps that raise Res are dropped: always for an affine
-  /// ζ (a nonsymmetric A with a weak diagonal: swept 4.0 → 216, rejected, STAGNATED;
-  /// docs/MEASUREMENTS.md), on the LCP when they did not move the active set either (moving it is
-  /// their purpose: the free boundary moves several layers a step). Found on a positive definite
-  /// nonsymmetric A (n = 200): the exact step on the right set (Res 3e-14) swept to 3.8e-7 every
-  /// time, the set repeating, and the solve ended STAGNATED.
+  /// ζ, on the LCP when they did not move the active set either (moving it is their purpose: the free
+  /// boundary moves several layers a step); else a step exact on the right set is swept off it, every
+  /// time (docs/MEASUREMENTS.md, "`Globalized::kSmoothingSweeps` = 2").
   bool smooth(int sweeps) {
     if (sweeps <= 0 || !lin_.smoothable()) return false;
     const Vector& g = lin_.g_is_z() ? z_new_ : g_new_;
@@ -167,8 +165,7 @@ class NewtonStep {
     lin_.smooth(z_new_, sweeps);
     r_new_ = lin_.evaluate(z_new_, w_new_, g_new_, zeta_new_);
     const bool moved = !level_.has_active_set(w_new_, g, before_, lin_.box);
-    // (on the LCP a rise within twice Res is rounding's: the golden master's 2D obstacle with a
-    // callable ζ at tol 1e-10 took 37 outer Newton steps instead of 18 when such sweeps were dropped)
+    // (on the LCP a rise within twice Res is rounding's, and dropping such sweeps cost steps: same section)
     if (guarded ? !(r_new_ < r_plain) : !moved && !(r_new_ <= 2 * r_plain)) {
       z_new_.swap(unswept_);
       r_new_ = lin_.evaluate(z_new_, w_new_, g_new_, zeta_new_);

@@ -202,9 +202,10 @@ class Monitor {
   // Stuck: Res bit-identical for kStuck iterates in a row, and either x did not move in those
   // steps (a fixed point of the iteration that is not a solution) or ‖z‖∞ grew at each of them
   // (a runaway Res does not see: nrm on a zero row with q_i < 0 grows z_i by the same amount
-  // each step, forever). z moving otherwise is not stuck: on impulse control Res stays
-  // bit-identical while max z falls by 0.1 a step, then converges; and a run where z stays and x
-  // moves is a plateau (below). ‖z‖∞ is computed only on the iterates of a run.
+  // each step, forever). z moving otherwise is not stuck: Res can stay bit-identical while z falls
+  // steadily, then converge (docs/MEASUREMENTS.md, "The stall rule's windows and the stuck rule");
+  // and a run where z stays and x moves is a plateau (below). ‖z‖∞ is computed only on the iterates
+  // of a run.
   static constexpr int kStuck = 5;
   enum class Stuck { None, FixedPoint, Runaway };
   void track_stuck(double r, const Iterate& s) {
@@ -227,15 +228,13 @@ class Monitor {
   // No progress, two ways, judged at the end of each window of stall_iterations iterates.
   // (1) In 3 consecutive windows the smallest Res of a window is not below the previous
   // window's (a cycle, or a slow divergence). Windows, not the global best: Res may jump up at
-  // first and then fall steadily (nrmm on the American put: 127 iterations to return below its
-  // first Res). (2) Out of reach: the best Res has not been improved for kOutOfReach windows'
-  // worth of iterations, and at the rate the window minima fell in the last window Res would
-  // not get back to the best within maxiter (the paper's nrm on obstacle_2d(64): best at
-  // iteration 2, then Res 4x higher, falling 5% per 500 iterations). A slow return that fits in
-  // the budget goes on (nrm on obstacle_2d(32): 965 iterations back to its best, then
-  // converges). A window of bit-identical Res is neutral for both: the iteration can sit on
-  // such a plateau for thousands of steps while x moves towards the solution (impulse control,
-  // thermoforming), and plateau iterations do not count as iterations without improvement.
+  // first and then fall steadily. (2) Out of reach: the best Res has not been improved for
+  // kOutOfReach windows' worth of iterations, and at the rate the window minima fell in the last
+  // window Res would not get back to the best within maxiter; a slow return that fits in the
+  // budget goes on. A window of bit-identical Res is neutral for both: the iteration can sit on
+  // such a plateau for thousands of steps while x moves towards the solution, and plateau
+  // iterations do not count as iterations without improvement (docs/MEASUREMENTS.md, "The stall
+  // rule's windows and the stuck rule").
   // A window whose largest step ‖Δx‖∞ is below the previous window's is no bad window whatever Res
   // did: the iteration still contracts (a box problem's Res rises for hundreds of sweeps while its
   // contact zones form: docs/MEASUREMENTS.md, "The stall rule and a contracting box iteration").
