@@ -1,5 +1,5 @@
 // nrmicp — the plain Newton step of the Newton member on one level (docs/SPEC.md, "The Newton
-// member"). With the inactive set ℐ = {x ≥ 0} of the current z (NewtonLevel::active_set) it
+// member"). With the inactive set ℐ = {x ≥ 0} of the current z (ActiveSetTest::active_set) it
 // solves the piece of the modulus equation on which x lies,
 //   (A z⁺ + q)_ℐ = 0,   (z⁺ − B z⁺)_𝒜 = c_𝒜         (detail/active_set.hpp)
 // for ζ's linearization ζ(v) ≈ Bv + c at z. What changes between problems is the linearization
@@ -120,10 +120,10 @@ class NewtonStep {
   void active_set(std::vector<char>& inactive) {
     if constexpr (predicts_set<Linearization>::value)
       if (lin_.predict_set(z_, zeta_z_, inactive)) return;
-    level_.active_set(w_, g(), inactive, lin_.box);
+    level_.test().active_set(w_, g(), inactive, lin_.box);
   }
   /// x ← x of z up to the factor γ/(2Ω1) (what the Monitor reads); ‖Δx‖∞ (∞ when x was empty).
-  double modulus(Vector& x) const { return level_.modulus(w_, g(), x); }
+  double modulus(Vector& x) const { return level_.test().modulus(w_, g(), x); }
   /// ζ's linearization at z; false when ζ's Jacobian failed.
   bool linearize() { return lin_.linearize(z_, zeta_z_); }
   /// How far ζ's Jacobian at z misses ζ's difference quotient (SemismoothLinearization::jacobian_miss).
@@ -158,13 +158,13 @@ class NewtonStep {
   bool smooth(int sweeps) {
     if (sweeps <= 0 || !lin_.smoothable()) return false;
     const Vector& g = lin_.g_is_z() ? z_new_ : g_new_;
-    level_.active_set(w_new_, g, before_, lin_.box);
+    level_.test().active_set(w_new_, g, before_, lin_.box);
     const bool guarded = !lin_.g_is_z();
     const double r_plain = r_new_;
     unswept_ = z_new_;
     lin_.smooth(z_new_, sweeps);
     r_new_ = lin_.evaluate(z_new_, w_new_, g_new_, zeta_new_);
-    const bool moved = !level_.has_active_set(w_new_, g, before_, lin_.box);
+    const bool moved = !level_.test().has_active_set(w_new_, g, before_, lin_.box);
     // (on the LCP a rise within twice Res is rounding's, and dropping such sweeps cost steps: same section)
     if (guarded ? !(r_new_ < r_plain) : !moved && !(r_new_ <= 2 * r_plain)) {
       z_new_.swap(unswept_);
@@ -179,7 +179,7 @@ class NewtonStep {
   double trial_residual() const { return r_new_; }
   /// The number of active points of the trial iterate z⁺ (after solve).
   std::size_t trial_active_count() const {
-    return level_.active_count(w_new_, lin_.g_is_z() ? z_new_ : g_new_, lin_.box);
+    return level_.test().active_count(w_new_, lin_.g_is_z() ? z_new_ : g_new_, lin_.box);
   }
   /// The trial iterate z⁺ moved back to z + alpha (z⁺ − z); its Res.
   double damp(double alpha) {
@@ -196,9 +196,9 @@ class NewtonStep {
     return comm.inf_norm(z_new_ - z_) <= 1e-14 * comm.inf_norm(z_new_);
   }
   /// The active sets' bookkeeping over every process (NewtonLevel's).
-  std::uint64_t fingerprint(const std::vector<char>& inactive) const { return level_.fingerprint(inactive); }
-  bool same_set(const std::vector<char>& a, const std::vector<char>& b) const { return level_.same_set(a, b); }
-  std::size_t active_count(const std::vector<char>& inactive) const { return level_.active_count(inactive); }
+  std::uint64_t fingerprint(const std::vector<char>& inactive) const { return level_.test().fingerprint(inactive); }
+  bool same_set(const std::vector<char>& a, const std::vector<char>& b) const { return level_.test().same_set(a, b); }
+  std::size_t active_count(const std::vector<char>& inactive) const { return level_.test().active_count(inactive); }
   const Comm& comm() const { return level_.comm(); }
   /// z ← the trial iterate.
   void accept() {
