@@ -64,7 +64,8 @@ namespace detail {
 
 /// ‖M − Mᵀ‖_F ≤ 1e-14 ‖M‖_F, read off M's compressed storage (each entry's mirror found by
 /// binary search in its sorted inner vector; a mirror that is not stored is 0), without
-/// forming Mᵀ, which showed in a nested Newton solve's profile (docs/MEASUREMENTS.md).
+/// forming Mᵀ, which showed in a nested Newton solve's profile (docs/MEASUREMENTS.md, "Inner solvers
+/// and splittings").
 template <typename SpMat>
 bool is_symmetric(const SpMat& M) {
   using StorageIndex = typename SpMat::StorageIndex;
@@ -197,7 +198,8 @@ bool factored(EigenSolver& s) {
 }
 #if defined(NRMICP_HAVE_CHOLMOD)
 /// Pivots this close to rounding (min/max pivot of LLᵀ; κ ≳ 4.5e12) mean a singular matrix: its
-/// solves would follow the machine's rounding, which differs between CPUs (docs/MEASUREMENTS.md).
+/// solves would follow the machine's rounding, which differs between CPUs (docs/MEASUREMENTS.md,
+/// "Inner solvers and splittings").
 inline constexpr double singular_rcond = 1e3 * std::numeric_limits<double>::epsilon();
 template <typename ColMatrix>
 bool factored(CholmodLLT<ColMatrix>& s) {
@@ -238,7 +240,7 @@ decltype(auto) with_backend(Inner k, F&& f) {
     case Inner::EigenLLT:
       return f(Backend<Eigen::SimplicialLLT<ColMatrix, Eigen::Lower, Eigen::AMDOrdering<StorageIndex>>>{});
     case Inner::EigenLU:
-      // COLAMD: AMD ordering is far slower for SparseLU (docs/MEASUREMENTS.md, "Inner solvers").
+      // COLAMD: AMD ordering is far slower for SparseLU (docs/MEASUREMENTS.md, "Inner solvers and splittings").
       return f(Backend<Eigen::SparseLU<ColMatrix, Eigen::COLAMDOrdering<StorageIndex>>>{});
     case Inner::CG:
       throw std::invalid_argument("inner = 'cg' is the iterative inner solve of method 'newton' only; the "

@@ -5,7 +5,7 @@
 // with nested iteration over user-supplied prolongations and a fallback to the paper's
 // iteration (docs/SPEC.md, "The Newton member"). A step with D = diag(sign x) solves the piece
 // of F on which x lies: with the inactive set ℐ = {x ≥ 0} (z − ζ > 0, w = 0) and the active set
-// 𝒜 = {x < 0} (z − ζ = 0), i.e. x ≥ 0 ⇔ (z − ζ)/Ω1 ≥ w/Ω2 (ties: NewtonLevel::active_set):
+// 𝒜 = {x < 0} (z − ζ = 0), i.e. x ≥ 0 ⇔ (z − ζ)/Ω1 ≥ w/Ω2 (ties: ActiveSetTest::active_set):
 //   (Az + q)_ℐ = 0,   (z − ζ(z))_𝒜 = 0            (detail/active_set.hpp)
 // and x⁺ is recovered by the start formula x = γ/2 (Ω1⁻¹ g − Ω2⁻¹ w). For an LCP this is the
 // primal–dual active-set method; on each piece F is affine, so the step is exact there. With

@@ -37,7 +37,7 @@ Eigen::VectorXd diagonal(const MatrixType& A) {
 /// largest |a_ij| plus |a_ii| (1 for an empty row). Ω2 only weighs w against z − ζ in the
 /// active-set test and sets the fallback member's Ω2, so a zero diagonal (contact, games) needs no
 /// refusal; |a_ii| keeps the fallback's Ω2 + A from a zero diagonal where a_ii = −max_j |a_ij|
-/// (the row (−1, 0, 0) made it singular).
+/// (a row (−1, 0, 0) would make it singular).
 /// max_j |a_ij| of each row (an engine's matrix overloads it: petsc/engine.hpp).
 template <typename MatrixType>
 Eigen::VectorXd row_max_abs(const MatrixType& A) {

@@ -76,7 +76,7 @@ struct Box {
   double upper(Eigen::Index i) const { return hi.size() ? hi[i] : std::numeric_limits<double>::infinity(); }
   double clamp(Eigen::Index i, double v) const { return std::min(upper(i), std::max(lower(i), v)); }
   /// The state of row i at y_i, w_i with the active-set weight r = Ω1/Ω2: x = y − r w below lo is at
-  /// the lower bound, above hi at the upper one, else inactive (ties inactive: NewtonLevel::active_set).
+  /// the lower bound, above hi at the upper one, else inactive (ties inactive: ActiveSetTest::active_set).
   char state(double y, double w, double r, Eigen::Index i) const {
     const double x = y - r * w;
     return x < lower(i) ? kAtLower : x > upper(i) ? kAtUpper : kInactive;
@@ -98,7 +98,7 @@ struct Box {
   /// stays free on every level), and takes the bound of the bounded fine row it weighs most (P's
   /// largest entry in its column: the coarse point itself under classical AMG and grid interpolation).
   /// A coarse box makes a start, not a constraint of the fine problem: it needs to be near, not safe
-  /// (the smallest bound around tightened it level by level: docs/MEASUREMENTS.md, "Bounds: nested
+  /// (the smallest bound around would tighten it level by level: docs/MEASUREMENTS.md, "Bounds: nested
   /// iteration on the two-sided membrane").
   template <typename RowMatrix>
   Box coarse(const RowMatrix& P) const {

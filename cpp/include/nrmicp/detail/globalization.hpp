@@ -3,18 +3,18 @@
 // in the spirit of detail::Accelerated, which guards a step with a fallback too.
 //
 // A Newton step is accepted when its Res is below the largest Res of the last 5 accepted iterates
-// (NonMonotone: the active-set steps are not monotone in Res — measured on the nested 2D
-// obstacle, 2813 → 1.6e-3 → 1.4e-2 → 1e-13 — but the reference value never grows; the first step
-// after a start is exempt: a start is not a Newton iterate); a step whose active set more than
-// triples is halved first (an overshoot: Globalized::overshoots). A step that is rejected, an active
-// set seen before (a cycle) or a singular reduced system hands over to sweeps of the fallback
-// member (nrm: M = A, the paper's first member; it converged on P-matrices where both nrmgs and
-// the active-set steps cycle) from the best iterate, 10, then 20, 40, ... sweeps, after which
-// Newton resumes. The step's own ends (StepEnd): the active set repeats, or z no longer moves
-// beyond rounding (STAGNATED: z solves its own piece, Res is at its rounding floor); the fallback
-// brings no better iterate (STAGNATED; MAX_ITERATIONS when it has spent its budget); maxiter
-// Newton steps (MAX_ITERATIONS); ζ's Jacobian failed (ZETA_FAILED). Everything else — tol,
-// divergence, the callback, Ctrl-C, the history — is the Monitor's (detail/stopping.hpp).
+// (NonMonotone: the active-set steps are not monotone in Res, but the reference value never grows;
+// the first step after a start is exempt: a start is not a Newton iterate); a step whose active set
+// more than triples is halved first (an overshoot: Globalized::overshoots). A step that is rejected,
+// an active set seen before (a cycle) or a singular reduced system hands over to sweeps of the
+// fallback member (nrm: M = A, the paper's first member, chosen for P-matrices on which nrmgs
+// cycles as the active-set steps do) from the best iterate, 10, then 20, 40, ... sweeps, after which
+// Newton resumes (docs/MEASUREMENTS.md, "Non-monotone acceptance and the fallback member"). The
+// step's own ends (StepEnd): the active set repeats, or z no longer moves beyond rounding
+// (STAGNATED: z solves its own piece, Res is at its rounding floor); the fallback brings no better
+// iterate (STAGNATED; MAX_ITERATIONS when it has spent its budget); maxiter Newton steps
+// (MAX_ITERATIONS); ζ's Jacobian failed (ZETA_FAILED). Everything else — tol, divergence, the
+// callback, Ctrl-C, the history — is the Monitor's (detail/stopping.hpp).
 #pragma once
 
 #include "../result.hpp"
@@ -57,14 +57,14 @@ inline constexpr double kFloorFactor = 100;
 
 /// A Newton step whose trial has more than kOvershootGrowth times the active points of the
 /// (nonempty) set it was solved on has overshot, and is damped to z + kOvershootDamping (z⁺ − z)
-/// (Globalized::overshoots; docs/MEASUREMENTS.md, kOvershootGrowth).
+/// (Globalized::overshoots; docs/MEASUREMENTS.md, "`Globalized::kOvershootGrowth` = 3").
 inline constexpr double kOvershootGrowth = 3.0;
 inline constexpr double kOvershootDamping = 0.5;
 /// Each new step of an LCP or affine ICP (ζ none, constant or affine) is followed by this many
 /// symmetric projected Gauss–Seidel sweeps before its active set is read: the step leaves a wrong contact band at the
 /// free boundary that the next steps would peel one layer each; a sweep frees or activates
 /// several layers at the cost of two passes over A (NewtonLevel::projected_gauss_seidel;
-/// docs/MEASUREMENTS.md, kSmoothingSweeps).
+/// docs/MEASUREMENTS.md, "`Globalized::kSmoothingSweeps` = 2").
 inline constexpr int kSmoothingSweeps = 2;
 
 /// A step that does not reduce Res by this factor is slow: near Res's rounding level it is taken
@@ -76,16 +76,16 @@ inline constexpr double kSlowStep = 0.5;
 /// one, each step on the set contracts only as the outer fixed point does, and a wrong one makes Res
 /// grow. Judged poor: kPoorSlowSteps accepted steps in a row, each slow (kSlowStep) above the rounding
 /// level, or kPoorGrowthSteps steps rejected because Res grew, each on the active set of the step
-/// before (a step that moves the set may raise Res with the right Jacobian too: a random non-M-matrix
-/// of the fuzz test did; docs/MEASUREMENTS.md, "A Jacobian that does not deliver"). The solve then goes on without it.
+/// before (a step that moves the set may raise Res with the right Jacobian too: docs/MEASUREMENTS.md,
+/// "A Jacobian that does not deliver"). The solve then goes on without it.
 inline constexpr int kPoorSlowSteps = 3;
 inline constexpr int kPoorGrowthSteps = 2;
 /// A Jacobian that misses ζ's difference quotient along the last move by more than this fraction
 /// (Plain::jacobian_miss) is not ζ's derivative: negated misses by 1, ten times too large 0.9, zero 1.
 inline constexpr double kJacobianMiss = 0.5;
 /// With outer steps (NewtonControl::outer_steps) a step is slow when it does not reduce Res by this
-/// factor, on any active set (no peeling excuses it): with ζ's derivative the steps reduced it 100–10⁴-
-/// fold, the outer map alone about 4-fold on thermoforming (docs/MEASUREMENTS.md, "Matrix-free Newton steps").
+/// factor, on any active set (no peeling excuses it): with ζ's derivative the steps reduce it far more,
+/// a poor Jacobian's only as the outer map does (docs/MEASUREMENTS.md, "Matrix-free Newton steps").
 inline constexpr double kOuterSlowStep = 0.1;
 
 class JacobianCheck {
@@ -125,8 +125,8 @@ inline std::string floor_message(double best, double tol, double floor) {
          ", rounding level eps (||A||z| + |q||| + ||z| + |zeta(z)||) = " + to_text(floor) + "; returning the best iterate";
 }
 
-/// A settled set (or a z that stood still) far above the rounding level: no floor to blame (a
-/// positive definite nonsymmetric A, n = 200, stopped at Res 3.8e-7 with the level 9.5e-11).
+/// A settled set (or a z that stood still) far above the rounding level: no floor to blame, another
+/// member may do better (docs/MEASUREMENTS.md, "The rounding floor judged before and after a step").
 inline std::string repeat_message(double best, double tol, double floor) {
   return "stagnated: the Newton steps stopped moving (the active set repeated, or a step left z unchanged) at best "
          "Res " + to_text(best) + " >= tol " + to_text(tol) + ", above the rounding level " + to_text(floor) +
@@ -161,8 +161,8 @@ struct NewtonControl {
   /// divergence rules as for every member.
   SolveOptions solve = coarse();
   /// Warm start by active set: when not empty, the first step uses this inactive set instead of
-  /// the one of the start (after a change of the obstacle the old contact set is a far better
-  /// guess than the test on the old z: measured on thermoforming_1d, 1 step instead of 6).
+  /// the one of the start: after a change of the obstacle the old contact set is a far better
+  /// guess than the test on the old z (docs/MEASUREMENTS.md, "A warm start by active set").
   std::vector<char> start_set;
   /// An iterative inner solve may stop at forcing × Res (inexact Newton; a direct one is exact
   /// whatever the forcing), the first step at first_forcing × Res. A set so solved that repeats
@@ -182,7 +182,7 @@ struct NewtonControl {
   /// after a start or a fallback is: a start is not a Newton iterate) and JacobianCheck judges the
   /// steps on any set by kOuterSlowStep. When it finds them poor, the Jacobian is given up if it misses
   /// ζ's difference quotient by more than kJacobianMiss; else the problem, not the Jacobian, defeated
-  /// the outer steps (a matrix that is no M-matrix, in the fuzz test): they end (*outer_steps = false,
+  /// the outer steps (a matrix that is no M-matrix): they end (*outer_steps = false,
   /// as NewtonRun sets it when an outer step does not solve its obstacle problem) and the loop goes
   /// on from the best iterate with the plain steps (x ≥ 0 at z), as from a start.
   bool* outer_steps = nullptr;
@@ -312,20 +312,19 @@ class Globalized {
     return std::isfinite(ctl_.repeat_trust) ? std::max(ctl_.solve.tol, ctl_.repeat_trust * start_r_) : ctl_.solve.tol;
   }
   // The trial's active set is more than kOvershootGrowth times the (nonempty) one it was solved on.
-  // From a set whose contact is far too small (nested starts on P3 and 3D P2 elements, where A
-  // is no M-matrix) the full step sinks below the obstacle well beyond the true contact set, and
-  // the next steps peel that excess one layer at a time; half the step lands near the true set
-  // (docs/MEASUREMENTS.md, kOvershootGrowth).
+  // From a set whose contact is far too small (a nested start where A is no M-matrix) the full step
+  // sinks below the obstacle well beyond the true contact set, and the next steps peel that excess
+  // one layer at a time; half the step lands near the true set (docs/MEASUREMENTS.md,
+  // "`Globalized::kOvershootGrowth` = 3").
   bool overshoots() const {
     const std::size_t active = plain_.active_count(inactive_);
     return active > 0 && static_cast<double>(plain_.trial_active_count()) > kOvershootGrowth * static_cast<double>(active);
   }
   // Res before a step that did not halve it, and after it, are within kFloorFactor of the rounding
   // level of Res. Both: a step that leaves the floor band has moved the active set (a non-monotone
-  // step, accepted) and Newton goes on. Measured (obstacle_2d m = 1023, A = Laplacian / h², geometric
-  // hierarchy, tol 1e-8): the step from Res 4.9e-6 (level 2.4e-7, 8 points of the active set still
-  // wrong) went to 0.68; judged on the Res before it alone, the solve stopped there, the next step
-  // reaches 6.4e-8.
+  // step, accepted) and Newton goes on: judged on the Res before it alone, a solve with a few points
+  // of its active set still wrong stopped short (docs/MEASUREMENTS.md, "The rounding floor judged
+  // before and after a step").
   bool at_rounding_level(double r) {
     floor_ = plain_.rounding_level();
     return r <= kFloorFactor * floor_;

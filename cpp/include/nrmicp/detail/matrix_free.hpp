@@ -9,7 +9,8 @@
 // (the level's LCP system: a direct factorization, or its V-cycle-preconditioned CG), exact when
 // J = 0. K K₀⁻¹ = I − E K₀⁻¹ with E = J's active rows: the identity but for a block of the size of
 // 𝒜, J_𝒜· composed with the A-harmonic extension — for a smoothing J (a PDE solve) a compact
-// perturbation, so the Krylov iterations do not grow with the mesh (docs/MEASUREMENTS.md).
+// perturbation, so the Krylov iterations do not grow with the mesh (docs/MEASUREMENTS.md, "Matrix-free
+// Newton steps").
 #pragma once
 
 #include "../zeta.hpp"

@@ -4,8 +4,8 @@
 // gradients when K is symmetric positive definite, else BiCGSTAB (Eigen's).
 //
 // Per Newton step (setup): the Galerkin operators K_{l+1} = P_lᵀ K_l P_l of the reduced system
-// (K changes with the active set, so they are recomputed) and a direct factorization of the
-// coarsest one. The V-cycle smooths with one forward Gauss–Seidel sweep before the coarse
+// (K changes with the active set, so they are recomputed: detail/galerkin.hpp) and a direct
+// factorization of the coarsest one (detail/vcycle.hpp). The V-cycle smooths with one forward Gauss–Seidel sweep before the coarse
 // correction and one backward sweep after it: a symmetric preconditioner, positive definite for
 // symmetric positive definite K, so CG applies. K's active rows are identity rows with zeroed
 // columns (the LCP): K stays SPD when A is, and so does every PᵀKP of full-rank P.
@@ -21,47 +21,20 @@
 // solves (Eigen's solvers allocate theirs per solve).
 #pragma once
 
-#include "../inner_solver.hpp"
-#include "sparse_product.hpp"
+#include "galerkin.hpp"
+#include "vcycle.hpp"
 
 #include <Eigen/IterativeLinearSolvers>
 #include <Eigen/SparseCore>
 
-#include <algorithm>
-#include <cmath>
 #include <cstddef>
-#include <stdexcept>
 #include <type_traits>
 #include <vector>
 
 namespace nrmicp::detail {
 
-/// One level of a hierarchy below a finer one, as pyamg's MultilevelSolver.Level: P maps this
-/// level to the next finer one, R = Pᵀ (formed once), A = R A_finer P its Galerkin operator.
-template <typename StorageIndex>
-struct Level {
-  using RowMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, StorageIndex>;
-  RowMatrix P, R, A;
-};
-
-/// The levels below a level, owned elsewhere (by nrmicp::Newton): level[0] is the next coarser one.
-/// Not const: the finest level's V-cycle frees and restores the operators A (MultigridKrylov, `borrow`).
-template <typename StorageIndex>
-struct Hierarchy {
-  Level<StorageIndex>* level = nullptr;
-  std::size_t levels = 0;
-  Hierarchy below() const { return levels ? Hierarchy{level + 1, levels - 1} : *this; }
-};
-
 template <typename StorageIndex>
 class MultigridKrylov;
-
-/// One changed entry of a matrix on a fixed pattern: M(row, col) += delta.
-template <typename StorageIndex>
-struct Change {
-  StorageIndex row, col;
-  double delta;
-};
 
 /// The V-cycle as a preconditioner of Eigen's iterative solvers (their preconditioner concept:
 /// the set-up is MultigridKrylov::setup's, so compute/analyzePattern/factorize do nothing).
@@ -78,6 +51,35 @@ struct VCyclePreconditioner {
     return e;
   }
   Eigen::ComputationInfo info() const { return Eigen::Success; }
+};
+
+/// A nonsymmetric K in row-major storage, for the sweeps, products and Galerkin operators; on K's
+/// previous pattern only the values are copied (through to_row_: K's storage position → rows_').
+template <typename StorageIndex>
+class RowCopy {
+ public:
+  using RowMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, StorageIndex>;
+  template <typename M>
+  void copy(const M& K, bool same_pattern) {
+    const StorageIndex* outer = K.outerIndexPtr();
+    const StorageIndex* row = K.innerIndexPtr();
+    if (!same_pattern || rows_.nonZeros() != K.nonZeros()) {
+      rows_ = K;  // Eigen transposes the storage; rows come out sorted
+      to_row_.resize(static_cast<std::size_t>(K.nonZeros()));
+      std::vector<StorageIndex> next(rows_.outerIndexPtr(), rows_.outerIndexPtr() + K.rows());
+      for (Eigen::Index j = 0; j < K.cols(); ++j)
+        for (StorageIndex p = outer[j]; p < outer[j + 1]; ++p) to_row_[p] = next[row[p]]++;
+      return;
+    }
+    const double* v = K.valuePtr();
+    double* w = rows_.valuePtr();
+    for (Eigen::Index p = 0; p < K.nonZeros(); ++p) w[to_row_[p]] = v[p];
+  }
+  const RowMatrix& matrix() const { return rows_; }
+
+ private:
+  RowMatrix rows_;
+  std::vector<StorageIndex> to_row_;
 };
 
 template <typename StorageIndex>
@@ -101,76 +103,50 @@ class MultigridKrylov {
   /// kept (BiCGSTAB). `borrow`: the hierarchy's operators A_l become this V-cycle's K_l instead of
   /// being copied (start_from_hierarchy), and are freed while it works (restore_hierarchy).
   MultigridKrylov(Hierarchy<StorageIndex> h, bool symmetric, bool borrow = false)
-      : grid_(h.level), levels_(h.levels), symmetric_(symmetric), borrow_(borrow) {
-    k_.resize(levels_ + 1);
+      : galerkin_(h, borrow), vcycle_(h.levels, symmetric), symmetric_(symmetric) {
     bicgstab_.preconditioner().mg = this;
   }
   MultigridKrylov(const MultigridKrylov&) = delete;  // the preconditioner points here
   MultigridKrylov& operator=(const MultigridKrylov&) = delete;
 
   /// Galerkin operators of K and the coarsest factorization. K must outlive this until the next
-  /// setup. False if singular.
-  ///
-  /// K keeps one pattern across Newton steps (detail/active_set.hpp: only its values change),
-  /// so the Galerkin operators P_lᵀ K_l P_l keep theirs: their patterns are formed on the first
-  /// setup, later setups only recompute the values (detail/sparse_product.hpp). `changes`, when
-  /// given, lists every entry of K that changed since the previous successful setup; if they are
-  /// few (max_changes) the operators are updated by P_lᵀ ΔK_l P_l level by level instead
-  /// (a Newton step changes the rows and columns of the points that changed sets: a few hundred
-  /// of 10⁵–10⁶; add_galerkin_change).
+  /// setup. False if singular. `changes`, when given, lists every entry of K that changed since
+  /// the previous successful setup: the operators are then updated if they are few
+  /// (GalerkinOperators::form).
   bool setup(const ColMatrix& K, const std::vector<Change<StorageIndex>>* changes = nullptr) {
-    if (borrow_ && !lent_) free_hierarchy();
+    galerkin_.lend();
     fine_ = &K;
-    const bool same_pattern = fine_pattern_ == K.nonZeros();
-    if (!symmetric_) copy_rows(K, same_pattern);
-    if (!(same_pattern && changes && valid_ && update_galerkin(*changes))) {
-      for (std::size_t l = 0; l < levels_; ++l) {
-        if (l == 0) galerkin(0, fine(), k_[1].K, same_pattern);
-        else galerkin(l, k_[l].K, k_[l + 1].K, same_pattern);
-      }
-    }
-    fine_pattern_ = K.nonZeros();
-    valid_ = finish_setup(K);
+    if (!symmetric_) rows_.copy(K, galerkin_.same_pattern(K.nonZeros()));
+    galerkin_.form(fine(), K.nonZeros(), valid_ ? changes : nullptr);
+    valid_ = vcycle_.setup(K, fine(), galerkin_);
+    if (valid_ && !symmetric_) bicgstab_.compute(rows_.matrix());
     return valid_;
   }
 
-  /// Takes the hierarchy's own operators (Level::A, the Galerkin ones of the level's A) as those
-  /// of a K equal to A with `nnz` stored entries: the first setup then updates them by K − A, or
-  /// recomputes them on their patterns, instead of forming the patterns (and K P) anew. Copied,
-  /// or taken (`borrow`: the hierarchy then holds none until restore_hierarchy).
+  /// The hierarchy's own operators taken as those of a K equal to A with `nnz` stored entries
+  /// (GalerkinOperators::start_from_hierarchy): the first setup builds on them.
   void start_from_hierarchy(Eigen::Index nnz) {
-    for (std::size_t l = 0; l < levels_; ++l) {
-      if (borrow_) k_[l + 1].K.swap(grid_[l].A);
-      else k_[l + 1].K = grid_[l].A;
-    }
-    lent_ = borrow_;
-    fine_pattern_ = nnz;
+    galerkin_.start_from_hierarchy(nnz);
     valid_ = true;
   }
 
   /// Whether the hierarchy's operators are freed while this V-cycle works (`borrow`).
-  bool lent() const { return lent_; }
+  bool lent() const { return galerkin_.lent(); }
 
   /// The hierarchy's operators formed again, as the Galerkin ones of `A_values` (a column-major
   /// matrix on K's pattern holding A's values), on the patterns of this V-cycle's K_l, which stay
   /// as they are (the next setup updates them from the last K). The next setup frees them again.
   /// A_l and K_l have one pattern and the coarse levels need A_l only for nested iteration, before
   /// the finest level's solve: not held during it, for one pass of the Galerkin products a solve
-  /// (docs/MEASUREMENTS.md).
+  /// (docs/MEASUREMENTS.md, "The algebraic hierarchy on grids", Memory).
   template <typename M>
   void restore_hierarchy(const M& A_values) {
-    if (!lent_) return;
-    if (!symmetric_) copy_rows(A_values, fine_pattern_ == A_values.nonZeros());  // rows_: K's again at setup
-    for (std::size_t l = 0; l < levels_; ++l) {
-      grid_[l].A = k_[l + 1].K;   // its pattern
-      if (l == 0) galerkin(0, symmetric_ ? rows(A_values) : rows(rows_), grid_[0].A, true);
-      else galerkin(l, grid_[l - 1].A, grid_[l].A, true);
-    }
-    lent_ = false;
+    if (!galerkin_.lent()) return;
+    if (!symmetric_) rows_.copy(A_values, galerkin_.same_pattern(A_values.nonZeros()));  // K's again at setup
+    galerkin_.restore(symmetric_ ? as_rows(A_values) : as_rows(rows_.matrix()));
   }
-  /// The most changed entries of K (of `nnz`) that setup applies as an update: each costs about
-  /// as much as 5 entries of the full product (a search in C's row per term; docs/MEASUREMENTS.md).
-  static std::size_t max_changes(Eigen::Index nnz) { return static_cast<std::size_t>(nnz / 8); }
+  /// GalerkinOperators::max_changes.
+  static std::size_t max_changes(Eigen::Index nnz) { return GalerkinOperators<StorageIndex>::max_changes(nnz); }
 
   /// K z = b from the start z (the current Newton iterate: close), until ‖b − Kz‖ ≤ `target`
   /// (absolute), or ≤ rtol ‖b‖ when target is 0: CG for a symmetric K, else BiCGSTAB. Returns
@@ -181,100 +157,14 @@ class MultigridKrylov {
   }
 
   /// e = one V-cycle applied to r (≈ K⁻¹ r).
-  void precondition(const Vector& r, Vector& e) const { vcycle(0, r, e); }
+  void precondition(const Vector& r, Vector& e) const { vcycle_.apply(fine(), galerkin_, r, e); }
 
   const char* name() const { return symmetric_ ? "cg" : "bicgstab"; }
   int max_iterations() const { return max_iterations_; }
   void set_max_iterations(int k) { max_iterations_ = k; }
-  std::size_t levels() const { return levels_ + 1; }
+  std::size_t levels() const { return galerkin_.levels() + 1; }
 
  private:
-  /// C = P_lᵀ `finer` P_l, the Galerkin operator of level l's finer one: only its values when
-  /// `keep_pattern` and every term falls inside C's pattern, else C formed anew.
-  template <typename M>
-  void galerkin(std::size_t l, const M& finer, RowMatrix& C, bool keep_pattern) {
-    const Level<StorageIndex>& g = grid_[l];
-    if (keep_pattern && galerkin_values(g.R, finer, g.P, C, position_)) return;
-    RowMatrix formed = product(g.R, product(finer, g.P));
-    C.swap(formed);   // Eigen 3.4's SparseMatrix has no move assignment: = would copy
-  }
-
-  /// The hierarchy's operators freed (restored by restore_hierarchy; `borrow`).
-  void free_hierarchy() {
-    for (std::size_t l = 0; l < levels_; ++l) {
-      RowMatrix none;
-      grid_[l].A.swap(none);
-    }
-    lent_ = true;
-  }
-
-  /// 1 / diag of every level and the coarsest factorization, after the operators changed.
-  bool finish_setup(const ColMatrix& K) {
-    for (std::size_t l = 0; l < levels_; ++l) {
-      k_[l].inv_diag = (l == 0 ? Vector(K.diagonal()) : Vector(k_[l].K.diagonal())).cwiseInverse();
-      if (!k_[l].inv_diag.allFinite()) return false;
-      if (!symmetric_) k_[l].reach = l == 0 ? reach_of(rows_) : reach_of(k_[l].K);
-    }
-    const ColMatrix coarsest = levels_ == 0 ? K : ColMatrix(k_.back().K);
-    try {
-      coarsest_.compute(coarsest, Inner::Auto, "the coarsest multigrid level");
-    } catch (const std::runtime_error&) {
-      return false;
-    }
-    if (!symmetric_) bicgstab_.compute(rows_);
-    return true;
-  }
-
-  /// The Galerkin operators updated level by level for K's changed entries. False (some levels
-  /// updated, the rest not: setup then recomputes them all) when there are too many changes or
-  /// a term falls outside a level's pattern.
-  bool update_galerkin(const std::vector<Change<StorageIndex>>& changes) {
-    if (changes.size() > max_changes(fine_pattern_)) return false;
-    const std::vector<Change<StorageIndex>>* in = &changes;
-    for (std::size_t l = 0; l < levels_; ++l) {
-      std::vector<Change<StorageIndex>>& out = level_changes_[l % 2];
-      if (!add_galerkin_change(grid_[l].P, *in, k_[l + 1].K, out)) return false;
-      in = &out;
-    }
-    return true;
-  }
-
-  /// C += Pᵀ ΔK P, ΔK given by its changed entries (`in`); `out` gets C's changed entries. The
-  /// terms are added to C's values in place; a touched position's value before the update is kept
-  /// in `out` and its change is the difference (no dense sum per position of C: docs/MEASUREMENTS.md,
-  /// memory). False when a term falls outside C's pattern (C then
-  /// partly updated).
-  bool add_galerkin_change(const RowMatrix& P, const std::vector<Change<StorageIndex>>& in, RowMatrix& C,
-                           std::vector<Change<StorageIndex>>& out) {
-    const StorageIndex *po = P.outerIndexPtr(), *pi = P.innerIndexPtr(), *co = C.outerIndexPtr(),
-                       *ci = C.innerIndexPtr();
-    const double* pv = P.valuePtr();
-    double* cv = C.valuePtr();
-    listed_.resize(static_cast<std::size_t>(C.nonZeros()), false);  // all false between calls
-    out.clear();                                                      // (row, position, value before)
-    bool inside = true;
-    for (const auto& change : in) {
-      for (StorageIndex a = po[change.row]; a < po[change.row + 1] && inside; ++a)
-        for (StorageIndex b = po[change.col]; b < po[change.col + 1]; ++b) {
-          const StorageIndex* begin = ci + co[pi[a]];
-          const StorageIndex* end = ci + co[pi[a] + 1];
-          const StorageIndex* at = std::lower_bound(begin, end, pi[b]);
-          if (at == end || *at != pi[b]) { inside = false; break; }
-          const auto p = static_cast<std::size_t>(at - ci);
-          if (!listed_[p]) { listed_[p] = true; out.push_back({pi[a], static_cast<StorageIndex>(p), cv[p]}); }
-          cv[p] += pv[a] * change.delta * pv[b];
-        }
-      if (!inside) break;
-    }
-    for (auto& change : out) {   // col holds the position, delta the value before, until here
-      const auto p = static_cast<std::size_t>(change.col);
-      change.delta = cv[p] - change.delta;
-      change.col = ci[p];
-      listed_[p] = false;
-    }
-    return inside;
-  }
-
   /// Preconditioned CG; ‖b − Kz‖ ≤ stop, the target as given (no bound by rtol ‖b‖: it cost
   /// iterations; docs/MEASUREMENTS.md, "The Krylov target taken as given").
   int cg(const Vector& b, Vector& z, double stop) const {
@@ -284,7 +174,7 @@ class MultigridKrylov {
     r = b - r;
     if (r.norm() <= stop) return 0;
     s.resize(b.size()); p.resize(b.size()); Kp.resize(b.size());
-    vcycle(0, r, s);
+    precondition(r, s);
     p = s;
     double rs = r.dot(s);
     for (int k = 1; k <= max_iterations_; ++k) {
@@ -293,7 +183,7 @@ class MultigridKrylov {
       z += alpha * p;
       r -= alpha * Kp;
       if (r.norm() <= stop) return k;
-      vcycle(0, r, s);
+      precondition(r, s);
       const double rs_new = r.dot(s);
       p = s + (rs_new / rs) * p;
       rs = rs_new;
@@ -304,8 +194,9 @@ class MultigridKrylov {
   /// Eigen's preconditioned BiCGSTAB (its residual is the unpreconditioned b − Kz, relative to
   /// ‖b‖, updated recursively as CG's is) until ‖b − Kz‖ ≤ stop. z is kept when the solve breaks
   /// down (a non-finite iterate). The convergence is Eigen's test on the recursive residual: the
-  /// true one has a rounding floor (docs/MEASUREMENTS.md) that the Newton loop's
-  /// target tol / 10 can lie below, where a check of the true residual would fail every step.
+  /// true one has a rounding floor (docs/MEASUREMENTS.md, "BiCGSTAB for a nonsymmetric K") that the
+  /// Newton loop's target tol / 10 can lie below, where a check of the true residual would fail
+  /// every step.
   int krylov(const Vector& b, Vector& z, double stop) const {
     const double bn = b.norm();
     if (bn == 0) { z.setZero(); return 0; }
@@ -319,144 +210,20 @@ class MultigridKrylov {
     return s.info() == Eigen::Success ? k : max_iterations_ + 1;
   }
 
-  /// M's compressed storage read as rows: M's own rows when row-major, Mᵀ's when column-major
-  /// (= M for a symmetric M).
-  template <typename M>
-  static Eigen::Map<const RowMatrix> rows(const M& K) {
-    return Eigen::Map<const RowMatrix>(K.rows(), K.cols(), K.nonZeros(), K.outerIndexPtr(), K.innerIndexPtr(),
-                                       K.valuePtr());
-  }
   /// The fine operator, row-major: K's own storage when symmetric, else its row copy.
-  Eigen::Map<const RowMatrix> fine() const { return symmetric_ ? rows(*fine_) : rows(rows_); }
+  Eigen::Map<const RowMatrix> fine() const { return symmetric_ ? as_rows(*fine_) : as_rows(rows_.matrix()); }
 
-  /// rows_ = K in row-major storage; on K's previous pattern only the values are copied
-  /// (through to_row_: K's storage position → rows_' storage position).
-  template <typename M>
-  void copy_rows(const M& K, bool same_pattern) {
-    const StorageIndex* outer = K.outerIndexPtr();
-    const StorageIndex* row = K.innerIndexPtr();
-    if (!same_pattern || rows_.nonZeros() != K.nonZeros()) {
-      rows_ = K;  // Eigen transposes the storage; rows come out sorted
-      to_row_.resize(static_cast<std::size_t>(K.nonZeros()));
-      std::vector<StorageIndex> next(rows_.outerIndexPtr(), rows_.outerIndexPtr() + K.rows());
-      for (Eigen::Index j = 0; j < K.cols(); ++j)
-        for (StorageIndex p = outer[j]; p < outer[j + 1]; ++p) to_row_[p] = next[row[p]]++;
-      return;
-    }
-    const double* v = K.valuePtr();
-    double* w = rows_.valuePtr();
-    for (Eigen::Index p = 0; p < K.nonZeros(); ++p) w[to_row_[p]] = v[p];
-  }
-
-  /// One Gauss–Seidel sweep on M e = r, forward or backward; `after_row(i)` runs once e_i is new.
-  struct NoHook {
-    void operator()(Eigen::Index) const {}
-  };
-  template <typename M, typename AfterRow = NoHook>
-  static void gauss_seidel(const M& A, const Vector& inv_diag, const Vector& r, Vector& e, bool forward,
-                           AfterRow after_row = {}) {
-    const Eigen::Index n = A.rows();
-    const StorageIndex* outer = A.outerIndexPtr();
-    const StorageIndex* col = A.innerIndexPtr();
-    const double* v = A.valuePtr();
-    for (Eigen::Index t = 0; t < n; ++t) {
-      const Eigen::Index i = forward ? t : n - 1 - t;
-      double sum = r[i];
-      for (StorageIndex p = outer[i]; p < outer[i + 1]; ++p) sum -= v[p] * e[col[p]];
-      e[i] += sum * inv_diag[i];
-      after_row(i);
-    }
-  }
-
-  /// The pre-smoothing of level l: the forward sweep on M e = r from e = 0 and the residual it
-  /// leaves, res = r − M e = −(strict upper part of M) e, without a second read of M (docs/
-  /// MEASUREMENTS.md, "fused sweep"). A symmetric M: row j's entries left of the diagonal are column
-  /// j's above it, so once e_j is known they scatter −m_ij e_j into res_i (i < j). Any M: row i's
-  /// residual is final once e is known up to i + reach (M's largest column − row), so it is formed
-  /// that many rows behind the sweep, while row i is still in cache (a grid's reach is a line or a
-  /// plane of unknowns). Exact only for a plain sweep (inv_diag = 1 / diag(M): the lower part's
-  /// residual it drops is zero then); a damped one needs the product again.
-  template <typename M>
-  void presmooth(const M& A, const Vector& inv_diag, Eigen::Index reach, const Vector& r, Vector& e, Vector& res) const {
-    const Eigen::Index n = A.rows();
-    const StorageIndex* outer = A.outerIndexPtr();
-    const StorageIndex* col = A.innerIndexPtr();
-    const double* v = A.valuePtr();
-    e.setZero(n);
-    res.resize(n);
-    if (symmetric_) {
-      gauss_seidel(A, inv_diag, r, e, true, [&](Eigen::Index j) {
-        res[j] = 0.0;   // rows after j add to it
-        for (StorageIndex p = outer[j]; p < outer[j + 1]; ++p)
-          if (col[p] < j) res[col[p]] -= v[p] * e[j];
-      });
-      return;
-    }
-    auto upper_residual = [&](Eigen::Index i) {
-      double s = 0.0;
-      for (StorageIndex p = outer[i]; p < outer[i + 1]; ++p)
-        if (col[p] > i) s -= v[p] * e[col[p]];
-      res[i] = s;
-    };
-    gauss_seidel(A, inv_diag, r, e, true, [&](Eigen::Index j) {
-      if (j >= reach) upper_residual(j - reach);
-    });
-    for (Eigen::Index i = std::max<Eigen::Index>(n - reach, 0); i < n; ++i) upper_residual(i);
-  }
-
-  /// The largest column − row of M's entries (0 for a lower-triangular M).
-  template <typename M>
-  static Eigen::Index reach_of(const M& A) {
-    const StorageIndex* outer = A.outerIndexPtr();
-    const StorageIndex* col = A.innerIndexPtr();
-    Eigen::Index reach = 0;
-    for (Eigen::Index i = 0; i < A.rows(); ++i)
-      for (StorageIndex p = outer[i]; p < outer[i + 1]; ++p) reach = std::max<Eigen::Index>(reach, col[p] - i);
-    return reach;
-  }
-
-  /// e ≈ K_l⁻¹ r: one V-cycle on level l.
-  void vcycle(std::size_t l, const Vector& r, Vector& e) const {
-    if (l == levels_) { coarsest_.solve(r, e); return; }
-    KLevel& k = k_[l];
-    auto smooth_and_correct = [&](const auto& A) {
-      presmooth(A, k.inv_diag, k.reach, r, e, k.res);
-      k.rc.noalias() = grid_[l].R * k.res;
-      vcycle(l + 1, k.rc, k.ec);
-      e.noalias() += grid_[l].P * k.ec;
-      gauss_seidel(A, k.inv_diag, r, e, false);
-    };
-    if (l == 0) smooth_and_correct(fine());
-    else smooth_and_correct(k_[l].K);
-  }
-
-  /// Level l of the reduced system: K_l = R K_{l−1} P (l ≥ 1; level 0 is the fine K), 1 / diag(K_l)
-  /// (l < coarsest) and the V-cycle's vectors there.
-  struct KLevel {
-    RowMatrix K;
-    Vector inv_diag, res, rc, ec;
-    Eigen::Index reach = 0;   // nonsymmetric K_l: its largest column − row (the lagged residual's)
-  };
   struct CGWork {
     Vector r, s, p, Kp;
   };
   mutable CGWork cg_;
-  Level<StorageIndex>* grid_;             // the levels below: prolongations, restrictions, A_l
-  std::size_t levels_;
-  mutable std::vector<KLevel> k_;         // K_0 (= fine_), K_1, ...: the reduced system per level
-  Eigen::Index fine_pattern_ = -1;        // nonzeros of the K the patterns were formed for
-  bool valid_ = false;                    // the last setup succeeded (an update builds on it)
-  std::vector<Change<StorageIndex>> level_changes_[2];   // scratch of update_galerkin
-  std::vector<bool> listed_;              // scratch of add_galerkin_change: a position of C is in its list
-  std::vector<StorageIndex> position_;    // scratch of product_values
-  const ColMatrix* fine_ = nullptr;
+  GalerkinOperators<StorageIndex> galerkin_;   // K_1, ..., K_L on the hierarchy
+  VCycle<StorageIndex> vcycle_;
   bool symmetric_;
-  bool borrow_;                           // the hierarchy's A_l are freed while this V-cycle works
-  bool lent_ = false;                     // ... and are now (restore_hierarchy forms them again)
+  bool valid_ = false;                    // the last setup succeeded (an update builds on it)
+  const ColMatrix* fine_ = nullptr;
   int max_iterations_ = default_max_iterations;
-  RowMatrix rows_;                        // K in row-major storage (nonsymmetric K)
-  std::vector<StorageIndex> to_row_;      // K's storage position → rows_'
-  InnerSolver<StorageIndex> coarsest_;
+  RowCopy<StorageIndex> rows_;            // K in row-major storage (nonsymmetric K)
   mutable Eigen::BiCGSTAB<RowMatrix, VCyclePreconditioner<StorageIndex>> bicgstab_;
 };
 

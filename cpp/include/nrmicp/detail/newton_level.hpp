@@ -20,6 +20,7 @@
 #include <limits>
 #include <memory>
 #include <optional>
+#include <utility>
 #include <vector>
 
 namespace nrmicp::detail {
@@ -77,6 +78,139 @@ void sweep_rows(const Eigen::SparseMatrixBase<Derived>& A, const Eigen::VectorXd
   if constexpr (Derived::IsRowMajor) projected_gauss_seidel(A.derived(), q, y, sweeps, box);
 }
 
+/// A level's active-set test, x = g − (Ω1/Ω2) w ≥ 0 row by row, and the bookkeeping of sets over
+/// every process: counts, comparisons and fingerprints (to detect cycles).
+template <typename MatrixType>
+class ActiveSetTest {
+ public:
+  using Vector = Eigen::VectorXd;
+
+  /// `ratio`: Ω1/Ω2 of the level's matrix `A` (which gives the global row indices).
+  ActiveSetTest(const MatrixType& A, const Comm& comm, Vector ratio) : A_(A), comm_(comm), ratio_(std::move(ratio)) {}
+
+  /// x ← Ω1 (g/Ω1 − w/Ω2) = g − (Ω1/Ω2) w, the modulus vector up to the factor γ/(2Ω1), in place
+  /// (a second n-vector for the old x cost 8 MB a million unknowns); returns ‖Δx‖∞, ∞ when x was empty.
+  double modulus(const Vector& w, const Vector& g, Vector& x) const {
+    if (x.size() != w.size()) {
+      x = g - ratio_.cwiseProduct(w);
+      return comm_.max(std::numeric_limits<double>::infinity());  // (every process takes part)
+    }
+    double step = 0;
+    for (Eigen::Index i = 0; i < x.size(); ++i) {
+      const double xi = g[i] - ratio_[i] * w[i];
+      const double d = std::abs(xi - x[i]);
+      if (d > step || std::isnan(d)) step = d;  // a NaN stays (as in lpNorm)
+      x[i] = xi;
+    }
+    return comm_.max(step);
+  }
+
+  /// The inactive set ℐ = {x ≥ 0} = {g/Ω1 − w/Ω2 ≥ 0}. A tie x = 0 (z = ζ and w = 0) counts as
+  /// inactive: if it is in fact active the solve puts it back at no cost, while holding every
+  /// tie at the obstacle peels a region of exact zeros one node per step (docs/MEASUREMENTS.md,
+  /// "Ties in the active-set test").
+  /// With a (nonempty) box, g = y and each row has one of three states (Box::state).
+  void active_set(const Vector& w, const Vector& g, std::vector<char>& inactive, const Box* box = nullptr) const {
+    inactive.resize(static_cast<std::size_t>(w.size()));
+    for (Eigen::Index i = 0; i < w.size(); ++i) inactive[i] = state(w, g, i, box);
+  }
+  /// Whether (w, g)'s active set is `inactive`, without storing it.
+  bool has_active_set(const Vector& w, const Vector& g, const std::vector<char>& inactive, const Box* box = nullptr) const {
+    bool same = true;
+    for (Eigen::Index i = 0; i < w.size() && same; ++i) same = inactive[i] == state(w, g, i, box);
+    return comm_.all(same);
+  }
+  /// The number of active points of (w, g) (the complement of active_set's), without storing the set.
+  std::size_t active_count(const Vector& w, const Vector& g, const Box* box = nullptr) const {
+    std::size_t k = 0;
+    for (Eigen::Index i = 0; i < w.size(); ++i) k += !inactive_state(state(w, g, i, box));
+    return static_cast<std::size_t>(comm_.sum(static_cast<double>(k)));
+  }
+  /// The number of active points of `inactive` (every process's).
+  std::size_t active_count(const std::vector<char>& inactive) const {
+    const auto k = static_cast<double>(inactive.size()) - std::count(inactive.begin(), inactive.end(), kInactive);
+    return static_cast<std::size_t>(comm_.sum(k));
+  }
+  /// Whether two active sets are the same on every process.
+  bool same_set(const std::vector<char>& a, const std::vector<char>& b) const { return comm_.all(a == b); }
+  /// A fingerprint of an active set (to detect cycles): a sum over its rows not inactive of a
+  /// mix of the global row index and the state, so that processes add their parts.
+  std::uint64_t fingerprint(const std::vector<char>& inactive) const {
+    return comm_.sum(hash_rows(inactive, static_cast<std::uint64_t>(row_offset(A_))));
+  }
+
+ private:
+  char state(const Vector& w, const Vector& g, Eigen::Index i, const Box* box) const {
+    if (box) return box->state(g[i], w[i], ratio_[i], i);
+    return (g[i] - ratio_[i] * w[i]) >= 0 ? kInactive : kAtLower;
+  }
+
+  const MatrixType& A_;
+  const Comm& comm_;
+  Vector ratio_;  // Ω1/Ω2: x ≥ 0 ⇔ g − (Ω1/Ω2) w ≥ 0
+};
+
+/// A level's fallback member: nrm with the level's Ω1, Ω2 (Ω2 as Newton's) and Anderson, set up on
+/// the level's first fallback (most solves never fall back).
+template <typename MatrixType>
+class FallbackMember {
+ public:
+  using Vector = Eigen::VectorXd;
+
+  explicit FallbackMember(const MatrixType& A) : A_(A) {}
+
+  /// Up to `sweeps` sweeps from z0 for ICP(q, A, ζ); the best iterate. `level`: the level's options
+  /// (Ω1, Ω2, inner); the sweeps' phases go to `tm`. A fallback whose Ω2 + AΩ1 is singular sweeps
+  /// nothing: Res +inf and the reason in the message.
+  Result sweep(const Options& level, const Vector& q, const Zeta<typename MatrixType::StorageIndex>& zeta,
+               const Vector& z0, int sweeps, double tol, Timings& tm) {
+    if (!fallback_) try {
+      ScopedTimer t(tm.factorization);
+      fallback_.emplace(A_, options(level));  // factorizes Ω2 + AΩ1 once
+    } catch (const FactorizationError& e) {
+      if (e.reason() != FactorizationError::Reason::Singular) throw;
+      Result none;
+      none.z = z0;
+      none.residual = std::numeric_limits<double>::infinity();
+      none.status = Status::Stagnated;
+      none.message = std::string("its fallback member nrm cannot be set up: ") + e.what();
+      return none;
+    }
+    SolveOptions it = fallback_->options();
+    it.tol = tol > 0 ? tol : std::numeric_limits<double>::min();
+    it.maxiter = sweeps;
+    it.stall_iterations = std::max(1, sweeps);
+    Result r = fallback_->solve(q, zeta, &z0, {}, {}, &it);
+    absorb(tm, r.timings);
+    return r;
+  }
+  /// Frees its factorization (set up again on the next fallback).
+  void reset() { fallback_.reset(); }
+
+ private:
+  /// nrm with the level's Ω1, Ω2.
+  Options options(const Options& level) const {
+    const Parameters p = resolve_parameters(A_, level);
+    Options f;
+    f.method = Method::NRM;
+    f.omega1 = p.omega1;
+    f.omega2 = p.omega2;
+    f.inner = direct_inner(level.inner);  // nrm factorizes
+    f.accelerate = Accelerate::Anderson;  // plain nrm diverged on zero-diagonal LCPs (SPEC)
+    return f;
+  }
+  /// The sweeps' phases into the level's record (its set-up, a lazy factorization, as factorization).
+  static void absorb(Timings& tm, const Timings& f) {
+    tm.factorization += f.factorization;
+    tm.zeta += f.zeta;
+    tm.spmv += f.spmv;
+    tm.inner_solve += f.inner_solve;
+  }
+
+  const MatrixType& A_;
+  std::optional<typename Engine<MatrixType>::Fallback> fallback_;
+};
+
 /// One level: its matrix, the weights Ω1/Ω2 of the active-set test, the reduced LCP system
 /// (analysed on first use, then only refactorized) and the fallback member (nrm, Ω2 as Newton's).
 template <typename MatrixType>
@@ -88,11 +222,8 @@ class NewtonLevel {
   using System = typename Engine<MatrixType>::System;
 
   /// `options` gives Ω1, Ω2 (empty: I and diag(A)) and the inner solver.
-  NewtonLevel(const MatrixType& A, const Options& options) : A_(A), comm_(comm_of(A)), options_(options) {
-    options_.method = Method::Newton;
-    const Parameters p = resolve_parameters(A, options_);  // Ω2: diag(A), or the row maximum where a_ii ≤ 0
-    ratio_ = p.omega1.cwiseQuotient(p.omega2);
-  }
+  NewtonLevel(const MatrixType& A, const Options& options)
+      : A_(A), comm_(comm_of(A)), options_(newton_options(options)), test_(A, comm_, ratio(A, options_)) {}
 
   /// The levels below this one (level[0]: the next coarser one), for the multigrid-preconditioned
   /// Krylov inner solve; they must outlive this level.
@@ -135,7 +266,8 @@ class NewtonLevel {
   }
   /// Frees what a solve on this level built (the reduced system, the fallback's factorization).
   /// Nested iteration releases each coarse level once its solution is prolongated: the finer
-  /// levels' solves then run without them in memory, and the next solve rebuilds them (docs/MEASUREMENTS.md).
+  /// levels' solves then run without them in memory, and the next solve rebuilds them
+  /// (docs/MEASUREMENTS.md, "The algebraic hierarchy on grids", Memory).
   void release() {
     restore_hierarchy();
     lcp_system_.reset();
@@ -202,58 +334,8 @@ class NewtonLevel {
     return eps * (comm_.stable_norm(t) + comm_.stable_norm(z.cwiseAbs() + (z - g).cwiseAbs()));
   }
 
-  /// x ← Ω1 (g/Ω1 − w/Ω2) = g − (Ω1/Ω2) w, the modulus vector up to the factor γ/(2Ω1), in place
-  /// (a second n-vector for the old x cost 8 MB a million unknowns); returns ‖Δx‖∞, ∞ when x was empty.
-  double modulus(const Vector& w, const Vector& g, Vector& x) const {
-    if (x.size() != w.size()) {
-      x = g - ratio_.cwiseProduct(w);
-      return comm_.max(std::numeric_limits<double>::infinity());  // (every process takes part)
-    }
-    double step = 0;
-    for (Eigen::Index i = 0; i < x.size(); ++i) {
-      const double xi = g[i] - ratio_[i] * w[i];
-      const double d = std::abs(xi - x[i]);
-      if (d > step || std::isnan(d)) step = d;  // a NaN stays (as in lpNorm)
-      x[i] = xi;
-    }
-    return comm_.max(step);
-  }
-
-  /// The inactive set ℐ = {x ≥ 0} = {g/Ω1 − w/Ω2 ≥ 0}. A tie x = 0 (z = ζ and w = 0) counts as
-  /// inactive: if it is in fact active the solve puts it back at no cost, while holding every
-  /// tie at the obstacle peels a region of exact zeros one node per step. Measured on the
-  /// American put (n_space = 1600, warm start x0 = the previous time step, hierarchy None, where
-  /// the far field is z = ψ, w = 0 exactly): 9.09 steps per time step with ties active, 1.49
-  /// with ties inactive (the same as a plain scipy active-set loop with this rule).
-  /// With a (nonempty) box, g = y and each row has one of three states (Box::state).
-  void active_set(const Vector& w, const Vector& g, std::vector<char>& inactive, const Box* box = nullptr) const {
-    inactive.resize(static_cast<std::size_t>(w.size()));
-    for (Eigen::Index i = 0; i < w.size(); ++i) inactive[i] = state(w, g, i, box);
-  }
-  /// Whether (w, g)'s active set is `inactive`, without storing it.
-  bool has_active_set(const Vector& w, const Vector& g, const std::vector<char>& inactive, const Box* box = nullptr) const {
-    bool same = true;
-    for (Eigen::Index i = 0; i < w.size() && same; ++i) same = inactive[i] == state(w, g, i, box);
-    return comm_.all(same);
-  }
-  /// The number of active points of (w, g) (the complement of active_set's), without storing the set.
-  std::size_t active_count(const Vector& w, const Vector& g, const Box* box = nullptr) const {
-    std::size_t k = 0;
-    for (Eigen::Index i = 0; i < w.size(); ++i) k += !inactive_state(state(w, g, i, box));
-    return static_cast<std::size_t>(comm_.sum(static_cast<double>(k)));
-  }
-  /// The number of active points of `inactive` (every process's).
-  std::size_t active_count(const std::vector<char>& inactive) const {
-    const auto k = static_cast<double>(inactive.size()) - std::count(inactive.begin(), inactive.end(), kInactive);
-    return static_cast<std::size_t>(comm_.sum(k));
-  }
-  /// Whether two active sets are the same on every process.
-  bool same_set(const std::vector<char>& a, const std::vector<char>& b) const { return comm_.all(a == b); }
-  /// A fingerprint of an active set (to detect cycles): a sum over its rows not inactive of a
-  /// mix of the global row index and the state, so that processes add their parts.
-  std::uint64_t fingerprint(const std::vector<char>& inactive) const {
-    return comm_.sum(hash_rows(inactive, static_cast<std::uint64_t>(row_offset(A_))));
-  }
+  /// The active-set test (Ω1/Ω2 of this level) and the bookkeeping of sets.
+  const ActiveSetTest<MatrixType>& test() const { return test_; }
 
   /// `sweeps` symmetric projected Gauss–Seidel sweeps on LCP(q, A) from y (the free function of
   /// that name); a column-major A (no row access) is not swept at all.
@@ -275,25 +357,7 @@ class NewtonLevel {
   /// Up to `sweeps` sweeps of the fallback member (nrm) from z0 for ICP(q, A, ζ); the best iterate.
   /// A fallback whose Ω2 + AΩ1 is singular sweeps nothing: Res +inf and the reason in the message.
   Result sweep(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector& z0, int sweeps, double tol) {
-    if (!fallback_) try {
-      ScopedTimer t(timings().factorization);
-      fallback_.emplace(A_, fallback_options());  // factorizes Ω2 + AΩ1 once
-    } catch (const FactorizationError& e) {
-      if (e.reason() != FactorizationError::Reason::Singular) throw;
-      Result none;
-      none.z = z0;
-      none.residual = std::numeric_limits<double>::infinity();
-      none.status = Status::Stagnated;
-      none.message = std::string("its fallback member nrm cannot be set up: ") + e.what();
-      return none;
-    }
-    SolveOptions it = fallback_->options();
-    it.tol = tol > 0 ? tol : std::numeric_limits<double>::min();
-    it.maxiter = sweeps;
-    it.stall_iterations = std::max(1, sweeps);
-    Result r = fallback_->solve(q, zeta, &z0, {}, {}, &it);
-    absorb(r.timings);
-    return r;
+    return fallback_.sweep(options_, q, zeta, z0, sweeps, tol, timings());
   }
   /// ζ(v) into zv, timed; false when ζ failed.
   bool eval_zeta(const Zeta<StorageIndex>& zeta, const Vector& v, Vector& zv) const {
@@ -313,39 +377,23 @@ class NewtonLevel {
   }
 
  private:
-  char state(const Vector& w, const Vector& g, Eigen::Index i, const Box* box) const {
-    if (box) return box->state(g[i], w[i], ratio_[i], i);
-    return (g[i] - ratio_[i] * w[i]) >= 0 ? kInactive : kAtLower;
+  static Options newton_options(Options o) {
+    o.method = Method::Newton;
+    return o;
   }
-  /// The fallback's sweeps' phases into this level's record (its set-up, a lazy factorization, as factorization).
-  void absorb(const Timings& f) const {
-    timings().factorization += f.factorization;
-    timings().zeta += f.zeta;
-    timings().spmv += f.spmv;
-    timings().inner_solve += f.inner_solve;
+  /// Ω1/Ω2 of the active-set test, resolved (Ω2: diag(A), or the row maximum where a_ii ≤ 0).
+  static Vector ratio(const MatrixType& A, const Options& o) {
+    const Parameters p = resolve_parameters(A, o);
+    return p.omega1.cwiseQuotient(p.omega2);
   }
-
   const MatrixType& A_;
   const Comm& comm_;
-  Vector ratio_;  // Ω1/Ω2: x ≥ 0 ⇔ g − (Ω1/Ω2) w ≥ 0
   Options options_;  // the level's inner solver, Ω1, Ω2 as given (resolved when needed, not held as n-vectors)
-
-  /// The fallback member nrm with this level's Ω1, Ω2 (built on a level's first fallback: most
-  /// solves never fall back).
-  Options fallback_options() const {
-    const Parameters p = resolve_parameters(A_, options_);
-    Options f;
-    f.method = Method::NRM;
-    f.omega1 = p.omega1;
-    f.omega2 = p.omega2;
-    f.inner = direct_inner(options_.inner);  // nrm factorizes
-    f.accelerate = Accelerate::Anderson;  // plain nrm diverged on zero-diagonal LCPs (SPEC)
-    return f;
-  }
+  ActiveSetTest<MatrixType> test_;
   std::unique_ptr<System> lcp_system_;
   typename Engine<MatrixType>::Hierarchy below_;
   bool borrow_ = false;
-  std::optional<typename Engine<MatrixType>::Fallback> fallback_;
+  FallbackMember<MatrixType> fallback_{A_};
   Timings* tm_ = nullptr;
   mutable Timings unrecorded_;
 };

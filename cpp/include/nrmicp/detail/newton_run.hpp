@@ -4,6 +4,7 @@
 //   newton_loop              one level: a plain step (detail/newton_step.hpp), globalized
 //                            (detail/globalization.hpp), in the family's loop with its Monitor
 //   NewtonRun::solve_obstacle   ζ none or constant: the (shifted) LCP, nested coarse to fine
+//                            (ObstacleSolver, which also solves the other strategies' obstacle problems)
 //   NewtonRun::solve_affine     ζ = Bz + c: Newton on the full system, from the obstacle problem
 //   NewtonRun::solve_outer_fixed_point  a callable ζ: z ← S(ζ(z)) (detail/outer_fixed_point.hpp)
 //   NewtonRun::solve_semismooth a callable ζ with its Jacobian: semismooth Newton on the ICP
@@ -189,32 +190,31 @@ class NewtonTally {
 struct NewtonTuning {
   /// Newton steps per coarse level: until its active set settles (at most this many), since a
   /// cut-short coarse solve leaves a band of wrong active set that Res does not show
-  /// (docs/MEASUREMENTS.md, coarse_maxiter).
+  /// (docs/MEASUREMENTS.md, "`NewtonTuning::coarse_maxiter` = 100").
   static constexpr int coarse_maxiter = 100;
   /// The inner solves on the coarse levels stop at this fraction of the iterate's Res: a start
-  /// needs no more; not on the finest level (docs/MEASUREMENTS.md, coarse_forcing).
+  /// needs no more; not on the finest level (docs/MEASUREMENTS.md, "`NewtonTuning::coarse_forcing` = 0.1").
   static constexpr double coarse_forcing = 0.1;
   /// A coarse level's loosely solved set that repeats settles once Res is below this fraction of
   /// the level's start (the accuracy of the finest level's first step); before, the set is solved
-  /// to a tenth of that and the loop goes on (NewtonControl::repeat_trust). Measured on P1 elements
-  /// with a 1000× coefficient jump (docs/MEASUREMENTS.md, coarse_repeat_trust): a start whose Res
-  /// is the jump's, not the contact's, settled after one loose step with no contact, level after
-  /// level, and the finest level peeled from there in 20 steps instead of 6; 1e-2 did the same.
+  /// to a tenth of that and the loop goes on (NewtonControl::repeat_trust): a start whose Res is not
+  /// the contact's (a coefficient jump's) would settle after one loose step on a wrong set, level
+  /// after level (docs/MEASUREMENTS.md, "`NewtonTuning::coarse_repeat_trust` = 1e-4").
   static constexpr double coarse_repeat_trust = 1e-4;
   /// The first finest-level step from a nested start stops its inner solve at this fraction of the
   /// start's Res: that step's active set is the prolongation's guess, wrong along the free boundary,
-  /// and a solve to tol / 10 is spent on it (docs/MEASUREMENTS.md, nested_first_forcing).
+  /// and a solve to tol / 10 is spent on it (docs/MEASUREMENTS.md, "`NewtonTuning::nested_first_forcing` = 1e-4").
   static constexpr double nested_first_forcing = 1e-4;
   /// The later finest-level steps from a nested start stop their inner solves at this fraction of
   /// the iterate's Res while their active set is new; a set that repeats is solved to tol / 10
-  /// (NewtonControl::repeat_trust; docs/MEASUREMENTS.md, nested_forcing).
+  /// (NewtonControl::repeat_trust; docs/MEASUREMENTS.md, "`NewtonTuning::nested_forcing` = 0.1").
   static constexpr double nested_forcing = 0.1;
   /// A user's start replaces the nested one when its Res is below this fraction of the cold start's
-  /// (y = 0): a time step's previous solution is at 0.01–0.3 of it, a guess no better (ψ + 10⁻¹²,
-  /// a random guess) at about 1 or more (docs/MEASUREMENTS.md, "Warm starts with a hierarchy").
+  /// (y = 0): a time step's previous solution lies well below it, a guess no better near it or
+  /// above (docs/MEASUREMENTS.md, "Warm starts with a hierarchy").
   static constexpr double warm_start_fraction = 0.5;
-  /// Finest steps a user's start gets before the nested start takes over: the marches' time steps
-  /// took at most 6 (docs/MEASUREMENTS.md, "Warm starts with a hierarchy").
+  /// Finest steps a user's start gets before the nested start takes over: what a time step from
+  /// the last one takes (docs/MEASUREMENTS.md, "Warm starts with a hierarchy").
   static constexpr int warm_steps = 6;
   /// The outer fixed point on a callable ζ without its Jacobian (detail::OuterFixedPoint): Anderson's
   /// memory on the outer map z ↦ S(ζ(z)) (docs/MEASUREMENTS.md, "The outer fixed point, accelerated").
@@ -224,37 +224,31 @@ struct NewtonTuning {
   static constexpr double outer_forcing = 0.1;
   /// The semismooth loop's outer steps (solve_semismooth) are used while their obstacle solve's Res is
   /// below this fraction of the ICP's Res where it started (else the obstacle problem was not solved:
-  /// an LCP of a matrix that is no P-matrix, from the fuzz test).
+  /// an LCP of a matrix that is no P-matrix may have no solution the steps find).
   static constexpr double outer_trust = 0.1;
 };
 
-/// One solve: the strategies by ζ, and the statistics they gather over levels and outer steps.
+/// One solve's obstacle problems ψ ≤ z (≤ upper): ζ none or constant, and the inner solves of the
+/// strategies by ζ. The finest level's loop from the nested start, the user's start or the last
+/// inner solve's active set; their statistics go to the solve's tally.
 template <typename MatrixType>
-class NewtonRun {
+class ObstacleSolver {
  public:
-  using StorageIndex = typename MatrixType::StorageIndex;
   using Vector = Eigen::VectorXd;
-  using Z = Zeta<StorageIndex>;
 
-  /// `nest`: start from the nested coarse-to-fine solution (solve_obstacle may try the user's z0 first).
-  /// `upper`: the upper bounds of z (empty: none; solve_obstacle only).
-  NewtonRun(const NewtonLevels<MatrixType>& levels, const Options& o, const Hooks& hooks, bool nest,
-            const Vector& upper = Vector())
-      : levels_(levels), o_(o), hooks_(hooks), nest_(nest), upper_(upper), tally_(levels.A, levels.count()) {
-    record_into(&tally_.timings());
-  }
-  ~NewtonRun() { record_into(nullptr); }
-  NewtonRun(const NewtonRun&) = delete;
-  NewtonRun& operator=(const NewtonRun&) = delete;
+  /// `upper`: the upper bounds of z (empty: none).
+  ObstacleSolver(const NewtonLevels<MatrixType>& levels, const Options& o, const Hooks& hooks, const Vector& upper,
+                 NewtonTally<MatrixType>& tally)
+      : levels_(levels), o_(o), hooks_(hooks), upper_(upper), tally_(tally) {}
 
   /// The obstacle problem z ≥ ψ as LCP(q + Aψ, A) in y = z − ψ; an empty ψ is ψ = 0, the LCP itself
   /// (no shifted copy of q, no vector of zeros: two n-vectors of the finest level's peak memory).
   /// `nest`: start from the nested solution. `report`: this is the problem being solved (history,
   /// callback), not an inner one. `set` (optional): the inactive set to start from, replaced by the final one.
-  /// `upper` (optional, NewtonRun's): z ≤ upper too; ψ and upper may be −∞ resp. +∞ in places
-  /// (ShiftedBounds: the box problem in y).
-  Result solve_obstacle(const Vector& q, const Vector& psi, const Vector* z0, bool nest, double tol = -1,
-                        int maxiter = -1, bool report = true, std::vector<char>* set = nullptr) {
+  /// z ≤ upper too; ψ and upper may be −∞ resp. +∞ in places (ShiftedBounds: the box problem in y).
+  /// tol, maxiter < 0: the solve's.
+  Result solve(const Vector& q, const Vector& psi, const Vector* z0, bool nest, double tol, int maxiter, bool report,
+               std::vector<char>* set) {
     const ShiftedBounds bounds(psi, upper_, false);
     const Box& box = bounds.box;
     const bool shifted = bounds.shifted();
@@ -295,6 +289,138 @@ class NewtonRun {
     return finish_obstacle(out, keep_try ? *tried : out, bounds.s, q, t0);
   }
 
+  /// The control of a finest-level loop; `report`: this loop is the problem being solved.
+  NewtonControl finest_control(const Vector& shift, double tol, int maxiter, bool report) const {
+    NewtonControl c;
+    c.solve = o_;
+    c.solve.tol = tol;
+    c.solve.maxiter = maxiter;
+    c.solve.record_history = report && o_.record_history;
+    c.solve.verbose = report ? o_.verbose : 0;
+    c.sweep_budget = o_.maxiter;
+    if (report) {  // the callback's k counts on from the steps before this loop, as tally_.absorb()'s history does
+      if (hooks_.callback)
+        c.callback = [&cb = hooks_.callback, base = tally_.nit()](int k, const Vector& z, double r) { return cb(base + k, z, r); };
+      c.progress = hooks_.progress;
+    }
+    c.shift = &shift;
+    c.poll = hooks_.poll;
+    return c;
+  }
+
+ private:
+  /// The reductions over every process (the finest level's engine).
+  const Comm& comm() const { return levels_.finest->comm(); }
+
+  /// The obstacle problem's result from the finest level's `answer` (z = y + ψ), after the loop `run`
+  /// (from t0) is tallied.
+  Result finish_obstacle(const LevelOutcome& run, const LevelOutcome& answer, const Vector& s, const Vector& q,
+                         std::chrono::steady_clock::time_point t0) {
+    tally_.absorb(run, 0, ScopedTimer::seconds_since(t0));
+    return s.size() > 0 ? tally_.finish(answer, answer.z + s, q) : tally_.finish(answer, answer.z, q);
+  }
+
+  /// The control of a finest-level loop from a guessed start (nested or the user's): the sets of its
+  /// steps are guesses until one repeats, solved loosely till then.
+  NewtonControl guess_control(const Vector& psi, double tol, int maxiter, bool report) const {
+    auto c = finest_control(psi, tol, maxiter, report);
+    c.first_forcing = NewtonTuning::nested_first_forcing;
+    c.forcing = NewtonTuning::nested_forcing;
+    c.repeat_trust = 0;
+    return c;
+  }
+
+  /// Res(y) < warm_start_fraction × Res(0) on LCP(q_shift, A): y is a guess worth more than a cold start.
+  bool closer_than_cold(const Vector& q_shift, const Vector& y, const Box& box) {
+    ScopedTimer t(tally_.timings().spmv);
+    Vector w = q_shift;
+    multiply_add(levels_.A, y, w);
+    const double cold = box.empty() ? comm().stable_norm(q_shift.cwiseMin(0.0))
+                                    : box.residual(q_shift, Vector::Zero(y.size()), comm());
+    return box.residual(w, y, comm()) < NewtonTuning::warm_start_fraction * cold;
+  }
+
+  LevelOutcome finest_lcp(const Vector& q_shift, const Vector& y0, const NewtonControl& control, const Box& box) {
+    return newton_loop(*levels_.finest, levels_.finest->lcp_system(), q_shift, nullptr, nullptr, y0, control, &box);
+  }
+  /// From the inactive set `set` of the last inner solve: a guess, tried without fallback; when its
+  /// steps are rejected the loop is rerun from y0 on y0's own active set, as without a guess
+  /// (docs/MEASUREMENTS.md, "The outer fixed point's inner solves").
+  LevelOutcome from_set(const Vector& q_shift, const Vector& y0, const std::vector<char>& set, NewtonControl control,
+                        const Box& box) {
+    auto guess = control;
+    guess.start_set = set;
+    guess.sweep_budget = 0;
+    auto tried = finest_lcp(q_shift, y0, guess, box);
+    if (tried.settled || tried.status != Status::Stagnated || tried.steps >= control.solve.maxiter) return tried;
+    tally_.absorb(tried, 0, 0.0);
+    control.solve.maxiter -= tried.steps;
+    return finest_lcp(q_shift, y0, control, box);
+  }
+
+  /// Nested start for LCP(q_shift, A) in y ≥ 0: Newton on each coarse level to a settled active
+  /// set, coarse to fine, each solution prolongated and projected onto y ≥ 0.
+  Vector nested_start(const Vector& q_shift, const Box& box) {
+    levels_.finest->restore_hierarchy();  // the coarse levels solve on the A_l its V-cycle freed
+    const std::size_t L = levels_.coarse.size();
+    std::vector<Vector> qs(L + 1);
+    std::vector<Box> boxes(L + 1);  // empty for the LCP
+    qs[0] = q_shift;
+    boxes[0] = box;
+    for (std::size_t l = 0; l < L; ++l) {
+      multiply(levels_.hierarchy[l].R, qs[l], qs[l + 1]);
+      boxes[l + 1] = boxes[l].coarse(levels_.hierarchy[l].P);
+    }
+    Vector y = Vector::Zero(L ? levels_.coarse.back()->size() : q_shift.size());
+    NewtonControl c;
+    c.solve.maxiter = NewtonTuning::coarse_maxiter;
+    c.forcing = c.first_forcing = NewtonTuning::coarse_forcing;
+    c.repeat_trust = NewtonTuning::coarse_repeat_trust;
+    c.sweep_budget = 1000;
+    for (std::size_t l = L; l >= 1; --l) {
+      const auto t0 = std::chrono::steady_clock::now();
+      auto& level = *levels_.coarse[l - 1];
+      const auto out = newton_loop(level, level.lcp_system(), qs[l], nullptr, nullptr, y, c, &boxes[l]);
+      tally_.absorb(out, static_cast<int>(l), ScopedTimer::seconds_since(t0));
+      y = boxes[l - 1].prolongate(levels_.hierarchy[l - 1].P, boxes[l], out.z);
+      level.release();
+    }
+    return y;
+  }
+
+  const NewtonLevels<MatrixType>& levels_;
+  const Options& o_;
+  const Hooks& hooks_;
+  const Vector& upper_;
+  NewtonTally<MatrixType>& tally_;
+};
+
+/// One solve: the strategies by ζ, and the statistics they gather over levels and outer steps.
+template <typename MatrixType>
+class NewtonRun {
+ public:
+  using StorageIndex = typename MatrixType::StorageIndex;
+  using Vector = Eigen::VectorXd;
+  using Z = Zeta<StorageIndex>;
+
+  /// `nest`: start from the nested coarse-to-fine solution (solve_obstacle may try the user's z0 first).
+  /// `upper`: the upper bounds of z (empty: none; solve_obstacle only).
+  NewtonRun(const NewtonLevels<MatrixType>& levels, const Options& o, const Hooks& hooks, bool nest,
+            const Vector& upper = Vector())
+      : levels_(levels), o_(o), hooks_(hooks), nest_(nest), upper_(upper), tally_(levels.A, levels.count()),
+        obstacle_(levels, o, hooks, upper, tally_) {
+    record_into(&tally_.timings());
+  }
+  ~NewtonRun() { record_into(nullptr); }
+  NewtonRun(const NewtonRun&) = delete;
+  NewtonRun& operator=(const NewtonRun&) = delete;
+
+  /// The obstacle problem z ≥ ψ (ObstacleSolver::solve; tol, maxiter < 0: the solve's).
+  Result solve_obstacle(const Vector& q, const Vector& psi, const Vector* z0, bool nest, double tol = -1,
+                        int maxiter = -1, bool report = true, std::vector<char>* set = nullptr) {
+    return obstacle_.solve(q, psi, z0, nest, tol, maxiter, report, set);
+  }
+
   /// ζ(z) = Bz + c: Newton on the full system, from the obstacle problem with ψ = ζ(z0) (or
   /// from z0 itself when it is given and there is no nesting).
   Result solve_affine(const Vector& q, const Z& zeta, const Vector* z0) {
@@ -306,7 +432,7 @@ class NewtonRun {
     auto K = levels_.finest->affine_system(zeta.B(), &Timings::setup);  // analysed once for the solve
     const Vector& c = zeta.c();
     const auto out = newton_loop(*levels_.finest, *K, q, &zeta.B(), &c, start,
-                                 finest_control(Vector::Zero(n), o_.tol, o_.maxiter, true));
+                                 obstacle_.finest_control(Vector::Zero(n), o_.tol, o_.maxiter, true));
     tally_.absorb(out, 0, ScopedTimer::seconds_since(t0));
     return tally_.finish(out, out.z, q);
   }
@@ -359,7 +485,7 @@ class NewtonRun {
     SemismoothLinearization<MatrixType> lin(*levels_.finest, q, zeta, record);
     // A step's set is its outer step's, unless that repeats the last step's set: on it the step would
     // return to the same z⁺ (exactly so for an affine ζ), a cycle when the set is wrong (a matrix that is
-    // no M-matrix, from the fuzz test); the test x ≥ 0 at z picks that step's set instead.
+    // no M-matrix); the test x ≥ 0 at z picks that step's set instead.
     lin.predict = [this, &q](const Vector& z, const Vector& zeta_z, std::vector<char>& inactive) {
       if (outer_mode_ && !is_outer(z) && !outer_step(q, zeta_z, z)) outer_mode_ = false;
       const bool use = outer_mode_ && outer_set_ != step_set_;
@@ -386,7 +512,7 @@ class NewtonRun {
     Step plain(*levels_.finest, std::move(lin), start);
     if (std::isnan(plain.residual())) return tally_.zeta_failed(z_start, q);
     static const Vector no_shift;
-    auto control = finest_control(no_shift, o_.tol, o_.maxiter - tally_.nit(), true);
+    auto control = obstacle_.finest_control(no_shift, o_.tol, o_.maxiter - tally_.nit(), true);
     control.sweep_budget = o_.maxiter - tally_.fallback_sweeps();
     control.outer_steps = &outer_mode_;
     const auto out = newton_loop(plain, control, start);
@@ -435,38 +561,7 @@ class NewtonRun {
   std::vector<char> step_set_;   // the last Newton step's set, when its outer step's (empty: the test x ≥ 0's)
 
   /// The outer fixed point's view of this run (the interface of detail::OuterFixedPoint).
-  struct Outer {
-    NewtonRun& run;
-    const Vector& q;
-    const Z& zeta;
-    std::vector<char> set;  // the last inner solve's inactive set: the next one starts from it
-    Vector w, capped;
-    const Comm& comm() const { return run.comm(); }
-    /// The inner obstacle problem, solved to Res < tol (0: to a settled active set). Without z,
-    /// it starts at y = 0 (z = ψ): measured better than from z = 0.
-    /// With an upper bound u the inner problem is min(ψ, u) ≤ z ≤ u (ζ(z) above u has no z between).
-    Result obstacle(const Vector& psi, const Vector* z, bool first, double tol) {
-      const Vector& lower = run.upper_.size() ? (capped = psi.cwiseMin(run.upper_)) : psi;
-      Result inner = run.solve_obstacle(q, lower, z, first && run.nest_, tol, run.o_.maxiter - run.tally_.nit(), false, &set);
-      run.tally_.outer_step();
-      return inner;
-    }
-    double icp_residual(const Vector& v, Vector& zv) { return run.levels_.finest->icp_residual(q, zeta, v, zv, w, run.upper_); }
-    /// (none with an upper bound: the fallback member has no box; the outer loop then ends at its best iterate)
-    Result sweep(const Vector& z0, int sweeps) {
-      if (run.upper_.size()) {
-        Result none;
-        none.z = z0;
-        none.residual = std::numeric_limits<double>::infinity();
-        return none;
-      }
-      const Result sw = run.levels_.finest->sweep(q, zeta, z0, sweeps, run.o_.tol);
-      run.tally_.sweeps(sw.iterations);
-      return sw;
-    }
-    int sweeps_spent() const { return run.tally_.fallback_sweeps(); }
-    int sweep_budget() const { return run.o_.maxiter; }
-  };
+  struct Outer;
 
   /// The reductions over every process (the finest level's engine).
   const Comm& comm() const { return levels_.finest->comm(); }
@@ -481,107 +576,50 @@ class NewtonRun {
     return solve_obstacle(q, psi, z0, nest_, 0.0, std::min(start_maxiter, o_.maxiter), false).z;
   }
 
-  /// The obstacle problem's result from the finest level's `answer` (z = y + ψ), after the loop `run`
-  /// (from t0) is tallied.
-  Result finish_obstacle(const LevelOutcome& run, const LevelOutcome& answer, const Vector& s, const Vector& q,
-                         std::chrono::steady_clock::time_point t0) {
-    tally_.absorb(run, 0, ScopedTimer::seconds_since(t0));
-    return s.size() > 0 ? tally_.finish(answer, answer.z + s, q) : tally_.finish(answer, answer.z, q);
-  }
-
-  /// The control of a finest-level loop from a guessed start (nested or the user's): the sets of its
-  /// steps are guesses until one repeats, solved loosely till then.
-  NewtonControl guess_control(const Vector& psi, double tol, int maxiter, bool report) const {
-    auto c = finest_control(psi, tol, maxiter, report);
-    c.first_forcing = NewtonTuning::nested_first_forcing;
-    c.forcing = NewtonTuning::nested_forcing;
-    c.repeat_trust = 0;
-    return c;
-  }
-
-  /// Res(y) < warm_start_fraction × Res(0) on LCP(q_shift, A): y is a guess worth more than a cold start.
-  bool closer_than_cold(const Vector& q_shift, const Vector& y, const Box& box) {
-    ScopedTimer t(tally_.timings().spmv);
-    Vector w = q_shift;
-    multiply_add(levels_.A, y, w);
-    const double cold = box.empty() ? comm().stable_norm(q_shift.cwiseMin(0.0))
-                                    : box.residual(q_shift, Vector::Zero(y.size()), comm());
-    return box.residual(w, y, comm()) < NewtonTuning::warm_start_fraction * cold;
-  }
-
-  LevelOutcome finest_lcp(const Vector& q_shift, const Vector& y0, const NewtonControl& control, const Box& box) {
-    return newton_loop(*levels_.finest, levels_.finest->lcp_system(), q_shift, nullptr, nullptr, y0, control, &box);
-  }
-  /// From the inactive set `set` of the last inner solve: a guess, tried without fallback; when its
-  /// steps are rejected (on impulse_control(101) they were, every outer step: Res 3.2, stagnated),
-  /// the loop is rerun from y0 on y0's own active set, as without a guess.
-  LevelOutcome from_set(const Vector& q_shift, const Vector& y0, const std::vector<char>& set, NewtonControl control,
-                        const Box& box) {
-    auto guess = control;
-    guess.start_set = set;
-    guess.sweep_budget = 0;
-    auto tried = finest_lcp(q_shift, y0, guess, box);
-    if (tried.settled || tried.status != Status::Stagnated || tried.steps >= control.solve.maxiter) return tried;
-    tally_.absorb(tried, 0, 0.0);
-    control.solve.maxiter -= tried.steps;
-    return finest_lcp(q_shift, y0, control, box);
-  }
-
-  /// Nested start for LCP(q_shift, A) in y ≥ 0: Newton on each coarse level to a settled active
-  /// set, coarse to fine, each solution prolongated and projected onto y ≥ 0.
-  Vector nested_start(const Vector& q_shift, const Box& box) {
-    levels_.finest->restore_hierarchy();  // the coarse levels solve on the A_l its V-cycle freed
-    const std::size_t L = levels_.coarse.size();
-    std::vector<Vector> qs(L + 1);
-    std::vector<Box> boxes(L + 1);  // empty for the LCP
-    qs[0] = q_shift;
-    boxes[0] = box;
-    for (std::size_t l = 0; l < L; ++l) {
-      multiply(levels_.hierarchy[l].R, qs[l], qs[l + 1]);
-      boxes[l + 1] = boxes[l].coarse(levels_.hierarchy[l].P);
-    }
-    Vector y = Vector::Zero(L ? levels_.coarse.back()->size() : q_shift.size());
-    NewtonControl c;
-    c.solve.maxiter = NewtonTuning::coarse_maxiter;
-    c.forcing = c.first_forcing = NewtonTuning::coarse_forcing;
-    c.repeat_trust = NewtonTuning::coarse_repeat_trust;
-    c.sweep_budget = 1000;
-    for (std::size_t l = L; l >= 1; --l) {
-      const auto t0 = std::chrono::steady_clock::now();
-      auto& level = *levels_.coarse[l - 1];
-      const auto out = newton_loop(level, level.lcp_system(), qs[l], nullptr, nullptr, y, c, &boxes[l]);
-      tally_.absorb(out, static_cast<int>(l), ScopedTimer::seconds_since(t0));
-      y = boxes[l - 1].prolongate(levels_.hierarchy[l - 1].P, boxes[l], out.z);
-      level.release();
-    }
-    return y;
-  }
-
-  /// The control of a finest-level loop; `report`: this loop is the problem being solved.
-  NewtonControl finest_control(const Vector& shift, double tol, int maxiter, bool report) const {
-    NewtonControl c;
-    c.solve = o_;
-    c.solve.tol = tol;
-    c.solve.maxiter = maxiter;
-    c.solve.record_history = report && o_.record_history;
-    c.solve.verbose = report ? o_.verbose : 0;
-    c.sweep_budget = o_.maxiter;
-    if (report) {  // the callback's k counts on from the steps before this loop, as tally_.absorb()'s history does
-      if (hooks_.callback)
-        c.callback = [&cb = hooks_.callback, base = tally_.nit()](int k, const Vector& z, double r) { return cb(base + k, z, r); };
-      c.progress = hooks_.progress;
-    }
-    c.shift = &shift;
-    c.poll = hooks_.poll;
-    return c;
-  }
-
   const NewtonLevels<MatrixType>& levels_;
   const Options& o_;
   const Hooks& hooks_;
   const bool nest_;
   const Vector& upper_;
   NewtonTally<MatrixType> tally_;
+  ObstacleSolver<MatrixType> obstacle_;   // every obstacle problem of this solve, tallied into tally_
+};
+
+/// The outer fixed point's view of a NewtonRun: its inner obstacle solves, Res of the ICP and the
+/// fallback's sweeps, counted in the run's tally.
+template <typename MatrixType>
+struct NewtonRun<MatrixType>::Outer {
+  NewtonRun& run;
+  const Vector& q;
+  const Z& zeta;
+  std::vector<char> set;  // the last inner solve's inactive set: the next one starts from it
+  Vector w, capped;
+  const Comm& comm() const { return run.comm(); }
+  /// The inner obstacle problem, solved to Res < tol (0: to a settled active set). Without z,
+  /// it starts at y = 0 (z = ψ) rather than at z = 0 (docs/MEASUREMENTS.md, "The outer fixed
+  /// point's inner solves").
+  /// With an upper bound u the inner problem is min(ψ, u) ≤ z ≤ u (ζ(z) above u has no z between).
+  Result obstacle(const Vector& psi, const Vector* z, bool first, double tol) {
+    const Vector& lower = run.upper_.size() ? (capped = psi.cwiseMin(run.upper_)) : psi;
+    Result inner = run.solve_obstacle(q, lower, z, first && run.nest_, tol, run.o_.maxiter - run.tally_.nit(), false, &set);
+    run.tally_.outer_step();
+    return inner;
+  }
+  double icp_residual(const Vector& v, Vector& zv) { return run.levels_.finest->icp_residual(q, zeta, v, zv, w, run.upper_); }
+  /// (none with an upper bound: the fallback member has no box; the outer loop then ends at its best iterate)
+  Result sweep(const Vector& z0, int sweeps) {
+    if (run.upper_.size()) {
+      Result none;
+      none.z = z0;
+      none.residual = std::numeric_limits<double>::infinity();
+      return none;
+    }
+    const Result sw = run.levels_.finest->sweep(q, zeta, z0, sweeps, run.o_.tol);
+    run.tally_.sweeps(sw.iterations);
+    return sw;
+  }
+  int sweeps_spent() const { return run.tally_.fallback_sweeps(); }
+  int sweep_budget() const { return run.o_.maxiter; }
 };
 
 }  // namespace nrmicp::detail

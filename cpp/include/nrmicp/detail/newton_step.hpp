@@ -1,5 +1,5 @@
 // nrmicp — the plain Newton step of the Newton member on one level (docs/SPEC.md, "The Newton
-// member"). With the inactive set ℐ = {x ≥ 0} of the current z (NewtonLevel::active_set) it
+// member"). With the inactive set ℐ = {x ≥ 0} of the current z (ActiveSetTest::active_set) it
 // solves the piece of the modulus equation on which x lies,
 //   (A z⁺ + q)_ℐ = 0,   (z⁺ − B z⁺)_𝒜 = c_𝒜         (detail/active_set.hpp)
 // for ζ's linearization ζ(v) ≈ Bv + c at z. What changes between problems is the linearization
@@ -120,10 +120,10 @@ class NewtonStep {
   void active_set(std::vector<char>& inactive) {
     if constexpr (predicts_set<Linearization>::value)
       if (lin_.predict_set(z_, zeta_z_, inactive)) return;
-    level_.active_set(w_, g(), inactive, lin_.box);
+    level_.test().active_set(w_, g(), inactive, lin_.box);
   }
   /// x ← x of z up to the factor γ/(2Ω1) (what the Monitor reads); ‖Δx‖∞ (∞ when x was empty).
-  double modulus(Vector& x) const { return level_.modulus(w_, g(), x); }
+  double modulus(Vector& x) const { return level_.test().modulus(w_, g(), x); }
   /// ζ's linearization at z; false when ζ's Jacobian failed.
   bool linearize() { return lin_.linearize(z_, zeta_z_); }
   /// How far ζ's Jacobian at z misses ζ's difference quotient (SemismoothLinearization::jacobian_miss).
@@ -152,23 +152,20 @@ class NewtonStep {
   /// `sweeps` projected Gauss–Seidel sweeps on the trial z⁺ (FixedLinearization: ζ none, constant
   /// or affine); true when they changed its active set. Projected Gauss–Seidel is no contraction
   /// where A's diagonal does not dominate, so sweeps that raise Res are dropped: always for an affine
-  /// ζ (a nonsymmetric A with a weak diagonal: swept 4.0 → 216, rejected, STAGNATED;
-  /// docs/MEASUREMENTS.md), on the LCP when they did not move the active set either (moving it is
-  /// their purpose: the free boundary moves several layers a step). Found on a positive definite
-  /// nonsymmetric A (n = 200): the exact step on the right set (Res 3e-14) swept to 3.8e-7 every
-  /// time, the set repeating, and the solve ended STAGNATED.
+  /// ζ, on the LCP when they did not move the active set either (moving it is their purpose: the free
+  /// boundary moves several layers a step); else a step exact on the right set is swept off it, every
+  /// time (docs/MEASUREMENTS.md, "`Globalized::kSmoothingSweeps` = 2").
   bool smooth(int sweeps) {
     if (sweeps <= 0 || !lin_.smoothable()) return false;
     const Vector& g = lin_.g_is_z() ? z_new_ : g_new_;
-    level_.active_set(w_new_, g, before_, lin_.box);
+    level_.test().active_set(w_new_, g, before_, lin_.box);
     const bool guarded = !lin_.g_is_z();
     const double r_plain = r_new_;
     unswept_ = z_new_;
     lin_.smooth(z_new_, sweeps);
     r_new_ = lin_.evaluate(z_new_, w_new_, g_new_, zeta_new_);
-    const bool moved = !level_.has_active_set(w_new_, g, before_, lin_.box);
-    // (on the LCP a rise within twice Res is rounding's: the golden master's 2D obstacle with a
-    // callable ζ at tol 1e-10 took 37 outer Newton steps instead of 18 when such sweeps were dropped)
+    const bool moved = !level_.test().has_active_set(w_new_, g, before_, lin_.box);
+    // (on the LCP a rise within twice Res is rounding's, and dropping such sweeps cost steps: same section)
     if (guarded ? !(r_new_ < r_plain) : !moved && !(r_new_ <= 2 * r_plain)) {
       z_new_.swap(unswept_);
       r_new_ = lin_.evaluate(z_new_, w_new_, g_new_, zeta_new_);
@@ -182,7 +179,7 @@ class NewtonStep {
   double trial_residual() const { return r_new_; }
   /// The number of active points of the trial iterate z⁺ (after solve).
   std::size_t trial_active_count() const {
-    return level_.active_count(w_new_, lin_.g_is_z() ? z_new_ : g_new_, lin_.box);
+    return level_.test().active_count(w_new_, lin_.g_is_z() ? z_new_ : g_new_, lin_.box);
   }
   /// The trial iterate z⁺ moved back to z + alpha (z⁺ − z); its Res.
   double damp(double alpha) {
@@ -199,9 +196,9 @@ class NewtonStep {
     return comm.inf_norm(z_new_ - z_) <= 1e-14 * comm.inf_norm(z_new_);
   }
   /// The active sets' bookkeeping over every process (NewtonLevel's).
-  std::uint64_t fingerprint(const std::vector<char>& inactive) const { return level_.fingerprint(inactive); }
-  bool same_set(const std::vector<char>& a, const std::vector<char>& b) const { return level_.same_set(a, b); }
-  std::size_t active_count(const std::vector<char>& inactive) const { return level_.active_count(inactive); }
+  std::uint64_t fingerprint(const std::vector<char>& inactive) const { return level_.test().fingerprint(inactive); }
+  bool same_set(const std::vector<char>& a, const std::vector<char>& b) const { return level_.test().same_set(a, b); }
+  std::size_t active_count(const std::vector<char>& inactive) const { return level_.test().active_count(inactive); }
   const Comm& comm() const { return level_.comm(); }
   /// z ← the trial iterate.
   void accept() {

@@ -4,10 +4,9 @@
 // Why not Eigen's product: the Galerkin operators of the Newton member's reduced system K are
 // recomputed every Newton step, and K keeps one pattern (detail/active_set.hpp), so their
 // patterns are fixed and only the values change; Eigen has no values-only product, and its
-// product sorts each result by two storage-order conversions. Measured with perf on
-// obstacle_2d, n = 10⁶, nested with the CG inner solve: Eigen's products and conversions were
-// 25% of the solve; with these two passes (Gustavson's row-by-row method) the values-only
-// product is about 1%.
+// product sorts each result by two storage-order conversions. Two passes (Gustavson's row-by-row
+// method) make the per-step product a values-only one (docs/MEASUREMENTS.md, "The two-pass sparse
+// product").
 #pragma once
 
 #include <Eigen/SparseCore>

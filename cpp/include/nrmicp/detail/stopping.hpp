@@ -45,6 +45,96 @@ struct StepEnd {
   std::string message;
 };
 
+/// Stuck: Res bit-identical for kStuck iterates in a row, and either x did not move in those
+/// steps (a fixed point of the iteration that is not a solution) or ‖z‖∞ grew at each of them
+/// (a runaway Res does not see: nrm on a zero row with q_i < 0 grows z_i by the same amount
+/// each step, forever). z moving otherwise is not stuck: Res can stay bit-identical while z falls
+/// steadily, then converge (docs/MEASUREMENTS.md, "The stall rule's windows and the stuck rule");
+/// and a run where z stays and x moves is a plateau (StallWindows). ‖z‖∞ is computed only on the
+/// iterates of a run.
+class StuckRule {
+ public:
+  static constexpr int kStuck = 5;
+  enum class Stuck { None, FixedPoint, Runaway };
+  /// The iterate s with Res r, the one before with Res last_r.
+  void track(double r, double last_r, const Iterate& s, const Comm& comm) {
+    if (!(r == last_r)) {
+      same_ = 0;
+      return;
+    }
+    const double znorm = comm.inf_norm(s.z);
+    if (same_++ == 0) {
+      x_still_ = z_grows_ = true;
+    } else {
+      z_grows_ = z_grows_ && znorm > run_znorm_;
+    }
+    run_znorm_ = znorm;
+    x_still_ = x_still_ && s.step == 0;
+    if (same_ < kStuck) return;
+    if (x_still_) stuck_ = Stuck::FixedPoint;
+    else if (z_grows_) stuck_ = Stuck::Runaway;
+  }
+  Stuck stuck() const { return stuck_; }
+
+ private:
+  int same_ = 0;
+  bool x_still_ = true, z_grows_ = true;
+  double run_znorm_ = 0;
+  Stuck stuck_ = Stuck::None;
+};
+
+/// No progress, two ways, judged at the end of each window of stall_iterations iterates.
+/// (1) In 3 consecutive windows the smallest Res of a window is not below the previous
+/// window's (a cycle, or a slow divergence). Windows, not the global best: Res may jump up at
+/// first and then fall steadily. (2) Out of reach: the best Res has not been improved for
+/// kOutOfReach windows' worth of iterations, and at the rate the window minima fell in the last
+/// window Res would not get back to the best within maxiter; a slow return that fits in the
+/// budget goes on. A window of bit-identical Res is neutral for both: the iteration can sit on
+/// such a plateau for thousands of steps while x moves towards the solution, and plateau
+/// iterations do not count as iterations without improvement (docs/MEASUREMENTS.md, "The stall
+/// rule's windows and the stuck rule").
+/// A window whose largest step ‖Δx‖∞ is below the previous window's is no bad window whatever Res
+/// did: the iteration still contracts (a box problem's Res rises for hundreds of sweeps while its
+/// contact zones form: docs/MEASUREMENTS.md, "The stall rule and a contracting box iteration").
+class StallWindows {
+ public:
+  static constexpr int kOutOfReach = 10;
+  /// Iterate k with Res r and step ‖Δx‖∞; `best`: the best Res so far, `since_best` the iterations
+  /// without improvement.
+  void track(int k, double r, double step, double best, int since_best, const SolveOptions& o) {
+    win_min_ = std::min(win_min_, r);
+    win_max_ = std::max(win_max_, r);
+    win_step_ = std::max(win_step_, step);
+    if (++win_count_ < o.stall_iterations) return;
+    if (win_max_ != win_min_) {
+      const bool contracts = win_step_ < prev_win_step_;
+      bad_windows_ = (win_min_ < prev_win_min_ || contracts) ? 0 : bad_windows_ + 1;
+      out_of_reach_ = since_best >= double(kOutOfReach) * o.stall_iterations && !reachable(k, best, o);
+    }
+    prev_win_min_ = win_min_;
+    prev_win_step_ = win_step_;
+    win_min_ = std::numeric_limits<double>::infinity();
+    win_max_ = -win_min_;
+    win_step_ = 0;
+    win_count_ = 0;
+  }
+  bool stalled() const { return bad_windows_ >= 3 || out_of_reach_; }
+  bool out_of_reach() const { return out_of_reach_; }
+
+ private:
+  // Would Res, falling from prev_win_min_ to win_min_ per window, reach the best by maxiter?
+  bool reachable(int k, double best, const SolveOptions& o) const {
+    if (!(win_min_ < prev_win_min_) || !(best > 0)) return false;
+    const double windows = std::log(best / win_min_) / std::log(win_min_ / prev_win_min_);
+    return k + windows * o.stall_iterations <= double(o.maxiter);
+  }
+
+  int win_count_ = 0, bad_windows_ = 0;
+  bool out_of_reach_ = false;
+  double win_min_ = std::numeric_limits<double>::infinity(), win_max_ = -win_min_, prev_win_min_ = win_min_;
+  double win_step_ = 0, prev_win_step_ = std::numeric_limits<double>::infinity();  // largest ‖Δx‖∞ of a window
+};
+
 class Monitor {
  public:
   using Vector = Eigen::VectorXd;
@@ -67,9 +157,9 @@ class Monitor {
     if (!s.finite) return finish_with(Status::Diverged, k);
     if (!s.zeta_ok) return finish_with(Status::ZetaFailed, k);
     record(k, r);
-    track_stuck(r, s);
+    stuck_.track(r, last_r_, s, *comm_);
     const bool improved = track_best(k, r, s);
-    track_windows(k, r, s.step);
+    windows_.track(k, r, s.step, best_, since_best_, o_);
     res_.iterations = k;
     const std::optional<Status> end = verdict(r);
     // The callback sees every iterate that has a Res (those of the history), the last one too;
@@ -124,11 +214,11 @@ class Monitor {
   }
 
  private:
-  // Converged, diverged or stagnated at this iterate (after record/track_best/track_windows).
+  // Converged, diverged or stagnated at this iterate (after record, the stuck rule, track_best, the windows).
   std::optional<Status> verdict(double r) const {
     if (r < o_.tol) return Status::Converged;
     if (!std::isfinite(r) || r > o_.divergence_factor * best_ || x_runaway_) return Status::Diverged;
-    if (floor_count_ >= o_.stall_iterations || bad_windows_ >= 3 || out_of_reach_ || stuck_ != Stuck::None)
+    if (floor_count_ >= o_.stall_iterations || windows_.stalled() || stuck_.stuck() != StuckRule::Stuck::None)
       return Status::Stagnated;
     return std::nullopt;
   }
@@ -137,15 +227,15 @@ class Monitor {
   std::string message(bool start) const {
     std::string m = to_string(res_.status);
     if (x_runaway_) m += " (the modulus vector x grew by more than divergence_factor while Res did not improve)";
-    if (res_.status == Status::Stagnated && out_of_reach_)
+    if (res_.status == Status::Stagnated && windows_.out_of_reach())
       m += " (the best Res was not improved in " + std::to_string(since_best_) +
            " iterations, and at the rate Res fell in the last " + std::to_string(o_.stall_iterations) +
            " it would not get back to it within maxiter)";
-    if (res_.status == Status::Stagnated && stuck_ == Stuck::FixedPoint)
+    if (res_.status == Status::Stagnated && stuck_.stuck() == StuckRule::Stuck::FixedPoint)
       m += " (the iterate no longer changes: a fixed point of the iteration that is not a solution; Res was "
-           "bit-identical for " + std::to_string(kStuck) + " iterations)";
-    if (res_.status == Status::Stagnated && stuck_ == Stuck::Runaway)
-      m += " (Res was bit-identical for " + std::to_string(kStuck) + " iterations while max|z| kept growing: the "
+           "bit-identical for " + std::to_string(StuckRule::kStuck) + " iterations)";
+    if (res_.status == Status::Stagnated && stuck_.stuck() == StuckRule::Stuck::Runaway)
+      m += " (Res was bit-identical for " + std::to_string(StuckRule::kStuck) + " iterations while max|z| kept growing: the "
            "iterate runs away along a direction Res does not see, e.g. on a zero row of A with q_i < 0)";
     if (start)
       m += "; returning the initial guess z0 (no iterate had a lower Res)";
@@ -199,70 +289,6 @@ class Monitor {
     }
     if (!(xnorm <= o_.divergence_factor * x_ref_) || !std::isfinite(xnorm)) x_runaway_ = true;
   }
-  // Stuck: Res bit-identical for kStuck iterates in a row, and either x did not move in those
-  // steps (a fixed point of the iteration that is not a solution) or ‖z‖∞ grew at each of them
-  // (a runaway Res does not see: nrm on a zero row with q_i < 0 grows z_i by the same amount
-  // each step, forever). z moving otherwise is not stuck: on impulse control Res stays
-  // bit-identical while max z falls by 0.1 a step, then converges; and a run where z stays and x
-  // moves is a plateau (below). ‖z‖∞ is computed only on the iterates of a run.
-  static constexpr int kStuck = 5;
-  enum class Stuck { None, FixedPoint, Runaway };
-  void track_stuck(double r, const Iterate& s) {
-    if (!(r == last_r_)) {
-      same_ = 0;
-      return;
-    }
-    const double znorm = comm_->inf_norm(s.z);
-    if (same_++ == 0) {
-      x_still_ = z_grows_ = true;
-    } else {
-      z_grows_ = z_grows_ && znorm > run_znorm_;
-    }
-    run_znorm_ = znorm;
-    x_still_ = x_still_ && s.step == 0;
-    if (same_ < kStuck) return;
-    if (x_still_) stuck_ = Stuck::FixedPoint;
-    else if (z_grows_) stuck_ = Stuck::Runaway;
-  }
-  // No progress, two ways, judged at the end of each window of stall_iterations iterates.
-  // (1) In 3 consecutive windows the smallest Res of a window is not below the previous
-  // window's (a cycle, or a slow divergence). Windows, not the global best: Res may jump up at
-  // first and then fall steadily (nrmm on the American put: 127 iterations to return below its
-  // first Res). (2) Out of reach: the best Res has not been improved for kOutOfReach windows'
-  // worth of iterations, and at the rate the window minima fell in the last window Res would
-  // not get back to the best within maxiter (the paper's nrm on obstacle_2d(64): best at
-  // iteration 2, then Res 4x higher, falling 5% per 500 iterations). A slow return that fits in
-  // the budget goes on (nrm on obstacle_2d(32): 965 iterations back to its best, then
-  // converges). A window of bit-identical Res is neutral for both: the iteration can sit on
-  // such a plateau for thousands of steps while x moves towards the solution (impulse control,
-  // thermoforming), and plateau iterations do not count as iterations without improvement.
-  // A window whose largest step ‖Δx‖∞ is below the previous window's is no bad window whatever Res
-  // did: the iteration still contracts (a box problem's Res rises for hundreds of sweeps while its
-  // contact zones form: docs/MEASUREMENTS.md, "The stall rule and a contracting box iteration").
-  static constexpr int kOutOfReach = 10;
-  void track_windows(int k, double r, double step) {
-    win_min_ = std::min(win_min_, r);
-    win_max_ = std::max(win_max_, r);
-    win_step_ = std::max(win_step_, step);
-    if (++win_count_ < o_.stall_iterations) return;
-    if (win_max_ != win_min_) {
-      const bool contracts = win_step_ < prev_win_step_;
-      bad_windows_ = (win_min_ < prev_win_min_ || contracts) ? 0 : bad_windows_ + 1;
-      out_of_reach_ = since_best_ >= double(kOutOfReach) * o_.stall_iterations && !reachable(k);
-    }
-    prev_win_min_ = win_min_;
-    prev_win_step_ = win_step_;
-    win_min_ = std::numeric_limits<double>::infinity();
-    win_max_ = -win_min_;
-    win_step_ = 0;
-    win_count_ = 0;
-  }
-  // Would Res, falling from prev_win_min_ to win_min_ per window, reach the best by maxiter?
-  bool reachable(int k) const {
-    if (!(win_min_ < prev_win_min_) || !(best_ > 0)) return false;
-    const double windows = std::log(best_ / win_min_) / std::log(win_min_ / prev_win_min_);
-    return k + windows * o_.stall_iterations <= double(o_.maxiter);
-  }
   bool call_back(int k, const Vector& z, double r) const {
     return shift_.size() ? callback_(k, z + shift_, r) : callback_(k, z, r);
   }
@@ -275,20 +301,16 @@ class Monitor {
   Result& res_;
   std::string step_message_;
   Vector best_z_;
-  int same_ = 0;
-  bool x_still_ = true, z_grows_ = true;
-  double run_znorm_ = 0;
-  Stuck stuck_ = Stuck::None;
+  StuckRule stuck_;
+  StallWindows windows_;
   double best_ = std::numeric_limits<double>::infinity();
-  int best_k_ = 0, floor_count_ = 0, win_count_ = 0, bad_windows_ = 0, since_best_ = 0;
-  bool out_of_reach_ = false, x_runaway_ = false;
+  int best_k_ = 0, floor_count_ = 0, since_best_ = 0;
+  bool x_runaway_ = false;
   int x_ref_k_ = -1;
   const int* count_ = nullptr;
   const Comm* comm_ = &serial_comm();
   double x_scale_ = 0, x_ref_ = 0;
   double last_r_ = std::numeric_limits<double>::quiet_NaN();
-  double win_min_ = std::numeric_limits<double>::infinity(), win_max_ = -win_min_, prev_win_min_ = win_min_;
-  double win_step_ = 0, prev_win_step_ = std::numeric_limits<double>::infinity();  // largest ‖Δx‖∞ of a window
   clock::time_point t_start_, last_poll_, last_report_;
 };
 
