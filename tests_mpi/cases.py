@@ -449,12 +449,42 @@ def _gather(local, n):
     return out.getArray().copy()
 
 
+
+def case_options():
+    """distributed.solve's options from nrmicp.solve's table: each refused one's message, an unknown
+    name's, and what the supported ones deliver (one rank)."""
+    import nrmicp._options as table
+    other = {"scale": True, "accelerate": "anderson", "anderson_m": 3, "phi": 0.5, "theta": 0.5, "z_update": "solve",
+             "inner": "cg", "verbose": 1, "components": 2, "zeta_jacobian": lambda z: sp.eye(len(z))}
+    A = sp.diags([-1.0, 4.0, -1.0], [-1, 0, 1], shape=(8, 8), format="csr")
+    q = np.linspace(-1.0, 1.0, 8)
+
+    def outcome(**kw):
+        try:
+            dist.solve(A, q, method="newton", **kw)
+            return ["no exception", ""]
+        except Exception as exc:  # noqa: BLE001 - the outcome is the test's subject
+            return [type(exc).__name__, str(exc)]
+    seen = []
+    r = dist.solve(A, q, method="newton", tol=1e-12, maxiter=50, stall_iterations=7, record_history=True,
+                   callback=lambda k, z, res: seen.append(k) and False, polish=True, gamma=2.0)
+    z = dist.gather(r.z)
+    w = A @ z + q
+    return {"unsupported": sorted(dist._UNSUPPORTED), "other": sorted(other), "table": list(table.names()),
+            "refused": {name: outcome(**{name: value}) for name, value in other.items()},
+            "unknown": outcome(tolerance=1e-8),
+            "supported": {"success": bool(r.success), "res": float(r.residual), "calls": len(seen),
+                          "history": len(r.history["residual"]) if r.history is not None else -1,
+                          "polished": "polished" in r, "min_z": float(z.min()), "min_w": float(w.min()),
+                          "zw": float(abs(z @ w))},
+            "auto": [dist.solve(A, q).method, nrmicp.solve(A, q).method]}
+
 if __name__ == "__main__":
     name, args = sys.argv[1], sys.argv[2:]
     result = {"agreement": lambda: case_agreement(), "partition": case_partition,
               "bad": lambda: case_bad(args[0], args[1]), "boomeramg": case_boomeramg,
               "floor": case_floor, "overshoot": case_overshoot, "sweeps": case_sweeps,
-              "warm": case_warm, "units": case_units, "engine": case_engine,
+              "warm": case_warm, "units": case_units, "engine": case_engine, "options": case_options,
               "fuzz": lambda: case_fuzz(int(args[0]))}[name]()
     if RANK == 0:
         print("RESULT " + json.dumps(result), flush=True)

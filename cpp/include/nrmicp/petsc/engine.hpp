@@ -325,7 +325,10 @@ struct Hierarchy {
 /// rule (ActiveSetSystem::use_iterative) solves exactly, LU (PETSc's on one process, MUMPS on several). Options prefix nrmicp_inner_ (e.g. -nrmicp_inner_pc_hypre_boomeramg_...).
 class System {
  public:
-  System(const Matrix& A, const Matrix* B, Inner inner, Hierarchy below = {}, bool = false) : A_(A), below_(below) {
+  /// `finest`: the finest level's system (the serial engine's `borrow`: it alone frees the hierarchy's
+  /// operators while it solves); every other level's loose solves try SSOR first where BoomerAMG is used.
+  System(const Matrix& A, const Matrix* B, Inner inner, Hierarchy below = {}, bool finest = false)
+      : A_(A), below_(below) {
     if (B) throw std::invalid_argument("the PETSc engine has no affine zeta (B): use the serial Newton member");
     PetscInt N;
     check(MatGetSize(A.get(), &N, nullptr), "MatGetSize");
@@ -334,11 +337,13 @@ class System {
     symmetric_ = A.symmetric();
     check(KSPCreate(A.comm().get(), &ksp_), "KSPCreate");
     configure();
+    if (!finest && iterative_ && wide_stencil()) ssor_first();
   }
   System(const System&) = delete;
   System& operator=(const System&) = delete;
   ~System() {
     KSPDestroy(&ksp_);
+    KSPDestroy(&ssor_);
     MatDestroy(&K_);
   }
 
@@ -352,6 +357,7 @@ class System {
     check(MatZeroRowsColumns(K_, static_cast<PetscInt>(active_.size()), active_.data(), 1.0, nullptr, nullptr),
           "MatZeroRowsColumns");
     check(KSPSetOperators(ksp_, K_, K_), "KSPSetOperators");
+    if (ssor_) check(KSPSetOperators(ssor_, K_, K_), "KSPSetOperators");
     inactive_ = inactive;
     return true;
   }
@@ -365,21 +371,20 @@ class System {
     check(MatCreateVecs(K_, &zv, &bv), "MatCreateVecs");
     check(VecPlaceArray(bv, b.data()), "VecPlaceArray");
     check(VecPlaceArray(zv, z.data()), "VecPlaceArray");
-    if (!lu_)
-      check(KSPSetTolerances(ksp_, target > 0 ? 1e-300 : 1e-12, target > 0 ? target : 0.0, PETSC_DEFAULT, max_iterations_),
-            "KSPSetTolerances");
-    check(KSPSolve(ksp_, bv, zv), "KSPSolve");
-    KSPConvergedReason reason;
-    PetscInt its;
-    KSPGetConvergedReason(ksp_, &reason);
-    KSPGetIterationNumber(ksp_, &its);
+    int its = 0;
+    // a loose coarse solve: SSOR's CG first, BoomerAMG (its set-up the cost) only if that falls short
+    const bool done = ssor_ && target > 0 && run(ssor_, bv, zv, target, ssor_iterations, its);
+    if (!done && !run(ksp_, bv, zv, target, max_iterations_, its)) its = max_iterations_ + 1;
     VecResetArray(bv);
     VecResetArray(zv);
     VecDestroy(&bv);
     VecDestroy(&zv);
-    return lu_ ? 0 : reason > 0 ? static_cast<int>(its) : max_iterations_ + 1;
+    return lu_ ? 0 : its;
   }
   void restore_hierarchy() {}
+  /// The SSOR tries' iterations before BoomerAMG takes over (more did not pay: docs/MEASUREMENTS.md,
+  /// "The PETSc engine's reduced solves").
+  static constexpr int ssor_iterations = 30;
   /// "lu", or the Krylov method and the preconditioner ("cg+mg", "bicgstab+hypre", ...).
   const char* inner_name() const {
     PC pc;
@@ -393,6 +398,34 @@ class System {
   void set_max_iterations(int k) { max_iterations_ = k; }
 
  private:
+  /// One KSP solve from zv to ‖b − Kz‖ ≤ target (1e-12 ‖b‖ when 0), at most `cap` iterations (added
+  /// to `its`); whether it converged.
+  bool run(KSP ksp, Vec bv, Vec zv, double target, int cap, int& its) const {
+    if (!lu_)
+      check(KSPSetTolerances(ksp, target > 0 ? 1e-300 : 1e-12, target > 0 ? target : 0.0, PETSC_DEFAULT, cap),
+            "KSPSetTolerances");
+    check(KSPSolve(ksp, bv, zv), "KSPSolve");
+    KSPConvergedReason reason;
+    PetscInt k;
+    KSPGetConvergedReason(ksp, &reason);
+    KSPGetIterationNumber(ksp, &k);
+    its += static_cast<int>(k);
+    return reason > 0;
+  }
+  /// The coarse levels' first try: the same Krylov method with local symmetric SOR (prefix nrmicp_ssor_).
+  void ssor_first() {
+    check(KSPCreate(A_.comm().get(), &ssor_), "KSPCreate");
+    KSPSetType(ssor_, symmetric_ ? KSPCG : KSPBCGS);
+    if (!symmetric_) KSPSetPCSide(ssor_, PC_RIGHT);
+    KSPSetNormType(ssor_, KSP_NORM_UNPRECONDITIONED);
+    KSPSetInitialGuessNonzero(ssor_, PETSC_TRUE);
+    PC pc;
+    KSPGetPC(ssor_, &pc);
+    PCSetType(pc, PCSOR);
+    PCSORSetSymmetric(pc, SOR_LOCAL_SYMMETRIC_SWEEP);
+    KSPSetOptionsPrefix(ssor_, "nrmicp_ssor_");
+    check(KSPSetFromOptions(ssor_), "KSPSetFromOptions");
+  }
   void configure() {
     if (lu_) {
       KSPSetType(ksp_, KSPPREONLY);
@@ -476,7 +509,7 @@ class System {
 
   Matrix A_;
   Hierarchy below_;
-  KSP ksp_ = nullptr;
+  KSP ksp_ = nullptr, ssor_ = nullptr;
   Mat K_ = nullptr;
   std::vector<PetscInt> active_;
   std::vector<char> inactive_;
