@@ -57,7 +57,7 @@ def main(m):
         t_serial = time.perf_counter() - t0
         print(f"2D obstacle n={n} np={SIZE}: serial {s.level_steps[0]} finest steps {t_serial:.2f} s ({s.inner}); "
               f"PETSc engine {r['newton'].level_steps[0]} finest steps {t_petsc:.2f} s ({core.inner}); "
-              f"ratio {t_petsc / t_serial:.2f}; Res {s.residual:.2e} / {r['residual']:.2e}")
+              f"ratio {t_petsc / t_serial:.2f}; Res {s.residual:.2e} / {r['residual']:.2e}; levels {list(s.level_steps)} / {list(r['newton'].level_steps)}")
 
 
 if __name__ == "__main__":

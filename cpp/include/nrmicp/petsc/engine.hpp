@@ -337,13 +337,18 @@ class System {
     symmetric_ = A.symmetric();
     check(KSPCreate(A.comm().get(), &ksp_), "KSPCreate");
     configure();
-    if (!finest && iterative_ && wide_stencil()) ssor_first();
+    if (!finest && iterative_ && costly_galerkin()) ssor_first();
+    // the solves' vectors, their arrays the driver's (VecPlaceArray): no 8 MB a million rows per solve
+    check(VecCreateMPIWithArray(A.comm().get(), 1, A.rows(), PETSC_DECIDE, nullptr, &bv_), "VecCreateMPIWithArray");
+    check(VecDuplicate(bv_, &zv_), "VecDuplicate");
   }
   System(const System&) = delete;
   System& operator=(const System&) = delete;
   ~System() {
     KSPDestroy(&ksp_);
     KSPDestroy(&ssor_);
+    VecDestroy(&bv_);
+    VecDestroy(&zv_);
     MatDestroy(&K_);
   }
 
@@ -367,24 +372,23 @@ class System {
   int solve(const Eigen::VectorXd& b, Eigen::VectorXd& z, double target = 0) const {
     for (Eigen::Index i = 0; i < z.size(); ++i)
       if (!detail::inactive_state(inactive_[i])) z[i] = b[i];
-    Vec bv, zv;
-    check(MatCreateVecs(K_, &zv, &bv), "MatCreateVecs");
-    check(VecPlaceArray(bv, b.data()), "VecPlaceArray");
-    check(VecPlaceArray(zv, z.data()), "VecPlaceArray");
+    check(VecPlaceArray(bv_, b.data()), "VecPlaceArray");
+    check(VecPlaceArray(zv_, z.data()), "VecPlaceArray");
     int its = 0;
     // a loose coarse solve: SSOR's CG first, BoomerAMG (its set-up the cost) only if that falls short
-    const bool done = ssor_ && target > 0 && run(ssor_, bv, zv, target, ssor_iterations, its);
-    if (!done && !run(ksp_, bv, zv, target, max_iterations_, its)) its = max_iterations_ + 1;
-    VecResetArray(bv);
-    VecResetArray(zv);
-    VecDestroy(&bv);
-    VecDestroy(&zv);
+    const bool done = ssor_ && target > 0 && run(ssor_, bv_, zv_, target, ssor_iterations, its);
+    if (!done && !run(ksp_, bv_, zv_, target, max_iterations_, its)) its = max_iterations_ + 1;
+    VecResetArray(bv_);
+    VecResetArray(zv_);
     return lu_ ? 0 : its;
   }
   void restore_hierarchy() {}
   /// The SSOR tries' iterations before BoomerAMG takes over (more did not pay: docs/MEASUREMENTS.md,
   /// "The PETSc engine's reduced solves").
   static constexpr int ssor_iterations = 30;
+  /// Where the hierarchy's coarse operators outweigh this level's matrix by more than this, BoomerAMG
+  /// replaces the V-cycle (costly_galerkin).
+  static constexpr double kGalerkinComplexity = 1.3;
   /// "lu", or the Krylov method and the preconditioner ("cg+mg", "bicgstab+hypre", ...).
   const char* inner_name() const {
     PC pc;
@@ -440,21 +444,24 @@ class System {
       KSPSetInitialGuessNonzero(ksp_, PETSC_TRUE);
       PC pc;
       KSPGetPC(ksp_, &pc);
-      if (wide_stencil()) return boomeramg(pc);
+      if (costly_galerkin()) return boomeramg(pc);
       multigrid(pc);
     }
     KSPSetOptionsPrefix(ksp_, "nrmicp_inner_");
     check(KSPSetFromOptions(ksp_), "KSPSetFromOptions");
   }
-  /// More than 6 nonzeros a row (3D 7-point, finite elements): each step's Galerkin operators PᵀKP
-  /// cost more than a BoomerAMG set-up on K with aggressive coarsening (docs/MEASUREMENTS.md, "The
-  /// PETSc engine's reduced solves").
-  bool wide_stencil() const {
+  /// The hierarchy below holds more than `kGalerkinComplexity` times this level's nonzeros (3D, P1
+  /// elements): each step's Galerkin operators PᵀKP of every level cost more than a BoomerAMG set-up on
+  /// K with aggressive coarsening (docs/MEASUREMENTS.md, "The PETSc engine's reduced solves").
+  bool costly_galerkin() const {
+    double below = 0;
+    for (std::size_t l = 0; l < below_.levels; ++l) below += nonzeros(below_.level[l].A);
+    return below > kGalerkinComplexity * nonzeros(A_);
+  }
+  static double nonzeros(const Matrix& M) {
     MatInfo info;
-    PetscInt N;
-    check(MatGetInfo(A_.get(), MAT_GLOBAL_SUM, &info), "MatGetInfo");
-    check(MatGetSize(A_.get(), &N, nullptr), "MatGetSize");
-    return info.nz_used > 6.0 * static_cast<double>(N);
+    check(MatGetInfo(M.get(), MAT_GLOBAL_SUM, &info), "MatGetInfo");
+    return info.nz_used;
   }
   /// BoomerAMG on each step's K: HMIS coarsening, ext+i interpolation (at most 4 weights a row), one
   /// aggressive level — defaults for this KSP only; the user's -nrmicp_inner_ options win.
@@ -510,6 +517,7 @@ class System {
   Matrix A_;
   Hierarchy below_;
   KSP ksp_ = nullptr, ssor_ = nullptr;
+  Vec bv_ = nullptr, zv_ = nullptr;
   Mat K_ = nullptr;
   std::vector<PetscInt> active_;
   std::vector<char> inactive_;
