@@ -315,7 +315,8 @@ struct Level {
 struct Hierarchy {
   Level* level = nullptr;
   std::size_t levels = 0;
-  Hierarchy below() const { return levels ? Hierarchy{level + 1, levels - 1} : *this; }
+  std::size_t depth = 0;  ///< the coarse levels above this hierarchy (0: it is the finest level's)
+  Hierarchy below() const { return levels ? Hierarchy{level + 1, levels - 1, depth + 1} : *this; }
 };
 
 /// The reduced system of a Newton step (detail::ActiveSetSystem's PETSc form) for the (shifted) LCP
@@ -453,10 +454,21 @@ class System {
   /// The hierarchy below holds more than `kGalerkinComplexity` times this level's nonzeros (3D, P1
   /// elements): each step's Galerkin operators PᵀKP of every level cost more than a BoomerAMG set-up on
   /// K with aggressive coarsening (docs/MEASUREMENTS.md, "The PETSc engine's reduced solves").
+  /// A coarse level also when any coarse level above it is (the levels it reaches by `depth`): the bottom
+  /// of a dense hierarchy is small against its own level but not cheap (3D: PtAP with dense P's).
   bool costly_galerkin() const {
+    if (costly_below(below_, nonzeros(A_))) return true;
+    for (std::size_t up = 1; up < below_.depth; ++up) {
+      const Level* above = below_.level - 1 - up;  // a coarse level above this one (this level's A is level[-1].A)
+      const Hierarchy from{const_cast<Level*>(above + 1), below_.levels + up, below_.depth - up};
+      if (costly_below(from, nonzeros(above->A))) return true;
+    }
+    return false;
+  }
+  static bool costly_below(const Hierarchy& h, double own) {
     double below = 0;
-    for (std::size_t l = 0; l < below_.levels; ++l) below += nonzeros(below_.level[l].A);
-    return below > kGalerkinComplexity * nonzeros(A_);
+    for (std::size_t l = 0; l < h.levels; ++l) below += nonzeros(h.level[l].A);
+    return below > kGalerkinComplexity * own;
   }
   static double nonzeros(const Matrix& M) {
     MatInfo info;
