@@ -417,15 +417,21 @@ class System {
     its += static_cast<int>(k);
     return reason > 0;
   }
+  /// CG (symmetric A) or right-preconditioned BiCGSTAB from the given z, stopped on the true residual
+  /// (as the serial Krylov solve); its PC.
+  PC krylov(KSP ksp) const {
+    KSPSetType(ksp, symmetric_ ? KSPCG : KSPBCGS);
+    if (!symmetric_) KSPSetPCSide(ksp, PC_RIGHT);
+    KSPSetNormType(ksp, KSP_NORM_UNPRECONDITIONED);
+    KSPSetInitialGuessNonzero(ksp, PETSC_TRUE);
+    PC pc;
+    KSPGetPC(ksp, &pc);
+    return pc;
+  }
   /// The coarse levels' first try: the same Krylov method with local symmetric SOR (prefix nrmicp_ssor_).
   void ssor_first() {
     check(KSPCreate(A_.comm().get(), &ssor_), "KSPCreate");
-    KSPSetType(ssor_, symmetric_ ? KSPCG : KSPBCGS);
-    if (!symmetric_) KSPSetPCSide(ssor_, PC_RIGHT);
-    KSPSetNormType(ssor_, KSP_NORM_UNPRECONDITIONED);
-    KSPSetInitialGuessNonzero(ssor_, PETSC_TRUE);
-    PC pc;
-    KSPGetPC(ssor_, &pc);
+    PC pc = krylov(ssor_);
     PCSetType(pc, PCSOR);
     PCSORSetSymmetric(pc, SOR_LOCAL_SYMMETRIC_SWEEP);
     KSPSetOptionsPrefix(ssor_, "nrmicp_ssor_");
@@ -439,12 +445,7 @@ class System {
       PCSetType(pc, PCLU);
       if (A_.comm().size() > 1) PCFactorSetMatSolverType(pc, MATSOLVERMUMPS);  // PETSc's own LU is serial
     } else {
-      KSPSetType(ksp_, symmetric_ ? KSPCG : KSPBCGS);
-      if (!symmetric_) KSPSetPCSide(ksp_, PC_RIGHT);
-      KSPSetNormType(ksp_, KSP_NORM_UNPRECONDITIONED);
-      KSPSetInitialGuessNonzero(ksp_, PETSC_TRUE);
-      PC pc;
-      KSPGetPC(ksp_, &pc);
+      PC pc = krylov(ksp_);
       if (costly_galerkin()) return boomeramg(pc);
       multigrid(pc);
     }
