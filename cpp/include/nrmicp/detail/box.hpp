@@ -41,6 +41,15 @@ inline Eigen::VectorXd unshift(const Eigen::VectorXd& y, const Eigen::VectorXd& 
   return z;
 }
 
+/// One entry p = P_ij of the injection below: the fine row's finite bound b_i becomes the coarse row's
+/// (c_j) when |p| is the largest weight seen so far, the first such row on a tie.
+inline void weigh_bound(double p, double b, double& weight, double& c) {
+  if (p != 0 && std::isfinite(b) && std::abs(p) > weight) {
+    weight = std::abs(p);
+    c = b;
+  }
+}
+
 /// Per column j of P, the finite bound b_i of the row i with the largest |P_ij|, the first such row
 /// on a tie (`none` where no row of the column is bounded): the engine's injection of bounds (Box::coarse).
 template <typename Derived>
@@ -49,10 +58,7 @@ Eigen::VectorXd inject_bounds(const Eigen::SparseMatrixBase<Derived>& P, const E
   Eigen::VectorXd c = Eigen::VectorXd::Constant(P.cols(), none), weight = Eigen::VectorXd::Zero(P.cols());
   for (Eigen::Index i = 0; i < P.rows(); ++i)
     for (typename Derived::InnerIterator it(P.derived(), i); it; ++it)
-      if (it.value() != 0 && std::isfinite(b[i]) && std::abs(it.value()) > weight[it.index()]) {
-        weight[it.index()] = std::abs(it.value());
-        c[it.index()] = b[i];
-      }
+      weigh_bound(it.value(), b[i], weight[it.index()], c[it.index()]);
   return c;
 }
 

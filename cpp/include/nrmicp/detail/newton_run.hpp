@@ -406,7 +406,7 @@ class NewtonRun {
   /// `nest`: start from the nested coarse-to-fine solution (solve_obstacle may try the user's z0 first).
   /// `upper`: the upper bounds of z (empty: none; solve_obstacle only).
   NewtonRun(const NewtonLevels<MatrixType>& levels, const Options& o, const Hooks& hooks, bool nest,
-            const Vector& upper = Vector())
+            const Vector& upper)  // (held by reference: no temporary default)
       : levels_(levels), o_(o), hooks_(hooks), nest_(nest), upper_(upper), tally_(levels.A, levels.count()),
         obstacle_(levels, o, hooks, upper, tally_) {
     record_into(&tally_.timings());

@@ -2,8 +2,8 @@
 // Newton member over MPI with nrmicp::Newton<nrmicp::petsc::Matrix>, the same driver as the serial
 // one. A petsc::Matrix is a distributed AIJ Mat; the driver's vectors (Eigen) hold the rows this
 // process owns, so every row-wise decision is the serial code, and only the reductions
-// (petsc::MpiComm), the products (MatMult), the reduced step's solve (KSP with hypre BoomerAMG, or
-// LU on one process) and the level's sweeps and fallback (on the process's diagonal block, the
+// (petsc::MpiComm), the products (MatMult), the reduced step's solve (KSP: the serial V-cycle in PCMG,
+// BoomerAMG, or LU) and the level's sweeps and fallback (on the process's diagonal block, the
 // couplings to other processes' rows held) are PETSc's.
 // Needs PETSc (3.18 or later) with hypre; include it before any nrmicp header that instantiates
 // Newton<petsc::Matrix> (nrmicp/petsc.hpp does).
@@ -78,7 +78,6 @@ class Matrix {
   Mat get() const { return s_ ? s_->A : nullptr; }
   Eigen::Index rows() const { return s_ ? s_->m : 0; }
   Eigen::Index cols() const { return s_ ? s_->n : 0; }
-  Eigen::Index outerSize() const { return rows(); }
   Eigen::Index row_offset() const { return s_ ? s_->lo : 0; }
   const MpiComm& comm() const { return *s_->comm; }
   void swap(Matrix& other) noexcept { s_.swap(other.s_); }
@@ -90,16 +89,6 @@ class Matrix {
     check(VecPlaceArray(s.x, v.data()), "VecPlaceArray");
     check(VecPlaceArray(s.y, out.data()), "VecPlaceArray");
     check(add ? MatMultAdd(s.A, s.x, s.y, s.y) : MatMult(s.A, s.x, s.y), "MatMult");
-    check(VecResetArray(s.x), "VecResetArray");
-    check(VecResetArray(s.y), "VecResetArray");
-  }
-  /// out = Aᵀ v.
-  void multiply_transpose(const Eigen::VectorXd& v, Eigen::VectorXd& out) const {
-    out.resize(cols());
-    State& s = *s_;
-    check(VecPlaceArray(s.y, v.data()), "VecPlaceArray");
-    check(VecPlaceArray(s.x, out.data()), "VecPlaceArray");
-    check(MatMultTranspose(s.A, s.y, s.x), "MatMultTranspose");
     check(VecResetArray(s.x), "VecResetArray");
     check(VecResetArray(s.y), "VecResetArray");
   }
@@ -168,11 +157,9 @@ class Matrix {
     for (Mat part : parts) {
       if (!part) continue;
       PetscScalar* a;
-      PetscInt m, n;
       check(MatSeqAIJGetArray(part, &a), "MatSeqAIJGetArray");
       MatInfo info;
       MatGetInfo(part, MAT_LOCAL, &info);
-      MatGetLocalSize(part, &m, &n);
       for (PetscInt k = 0; k < static_cast<PetscInt>(info.nz_used); ++k) a[k] = std::abs(a[k]);
       MatSeqAIJRestoreArray(part, &a);
     }
@@ -293,11 +280,7 @@ inline Eigen::VectorXd inject_bounds(const Matrix& P, const Eigen::VectorXd& b, 
     const PetscScalar* vals;
     const PetscInt row = static_cast<PetscInt>(R.row_offset() + j);
     check(MatGetRow(R.get(), row, &ncols, &cols, &vals), "MatGetRow");
-    for (PetscInt k = 0; k < ncols; ++k)
-      if (vals[k] != 0 && std::isfinite(ball[cols[k]]) && std::abs(vals[k]) > weight[j]) {
-        weight[j] = std::abs(vals[k]);
-        c[j] = ball[cols[k]];
-      }
+    for (PetscInt k = 0; k < ncols; ++k) detail::weigh_bound(vals[k], ball[cols[k]], weight[j], c[j]);
     MatRestoreRow(R.get(), row, &ncols, &cols, &vals);
   }
   VecRestoreArrayRead(all, &ball);
