@@ -71,6 +71,12 @@ def random_q(A, rng):
     return rng.uniform(-3, 3, A.shape[0]) * A.diagonal()
 
 
+def random_box_problem(A, rng):
+    """q, lower, upper of a random mixed box problem for A (mixed_bounds, then random_q, in that order)."""
+    lower, upper, _ = mixed_bounds(A.shape[0], rng)
+    return random_q(A, rng), lower, upper
+
+
 def known_problem(A, rng):
     """(q, lower, upper, z*, state*) with the solution z* known: per row at its lower bound with w > 0
     (state -1), at its upper bound with w < 0 (+1), strictly between or free with w = 0 (0), fixed
@@ -173,8 +179,7 @@ def test_random_box_problems_agree_with_the_reference(kind, n):
     rng = np.random.default_rng([36, n, len(kind)])
     for _ in range(2):
         A = MATRICES[kind](n, rng)
-        lower, upper, _kinds = mixed_bounds(n, rng)
-        q = random_q(A, rng)
+        q, lower, upper = random_box_problem(A, rng)
         ref = reference_box_solve(A, q, lower, upper)
         res = solve_quiet(A, q, lower, upper=upper)
         assert res.success, res.message
@@ -277,8 +282,7 @@ def test_decoupled_rows_with_bounds():
     for i in lone:
         A.rows[i], A.data[i] = [i], [float(rng.uniform(0.5, 2.0))]
     A = sp.csr_matrix(A)
-    lower, upper, _ = mixed_bounds(160, rng)
-    q = random_q(A, rng)
+    q, lower, upper = random_box_problem(A, rng)
     ref = reference_box_solve(A, q, lower, upper)
     for scale in (False, "both"):
         res = solve_quiet(A, q, lower, upper=upper, scale=scale)
@@ -296,8 +300,7 @@ def test_decoupled_rows_with_bounds():
 def test_default_stopping_rule_and_explicit_tol():
     rng = np.random.default_rng(367)
     A = m_matrix(300, rng)
-    lower, upper, _ = mixed_bounds(300, rng)
-    q = random_q(A, rng)
+    q, lower, upper = random_box_problem(A, rng)
     ref = reference_box_solve(A, q, lower, upper)
     default = solve_quiet(A, q, lower, upper=upper)
     assert default.success and rel_err(default.z, ref.z) <= AGREE
@@ -319,8 +322,7 @@ def test_inner_cg_agrees_with_the_direct_solve(kind):
     """inner='cg': CG (K symmetric) or BiCGSTAB, preconditioned by the V-cycle, on the reduced systems."""
     rng = np.random.default_rng([368, len(kind)])
     A = MATRICES[kind](400, rng)
-    lower, upper, _ = mixed_bounds(400, rng)
-    q = random_q(A, rng)
+    q, lower, upper = random_box_problem(A, rng)
     direct = solve_quiet(A, q, lower, upper=upper, tol=1e-12)
     for hierarchy in (None, "amg"):
         cg = solve_quiet(A, q, lower, upper=upper, inner="cg", tol=1e-12, hierarchy=hierarchy)
@@ -398,8 +400,7 @@ def test_two_sided_membrane_with_curved_obstacles_finest_steps_stay_flat(hierarc
 def test_warm_start_and_a_start_outside_the_box():
     rng = np.random.default_rng(370)
     A = m_matrix(200, rng)
-    lower, upper, _ = mixed_bounds(200, rng)
-    q = random_q(A, rng)
+    q, lower, upper = random_box_problem(A, rng)
     ref = reference_box_solve(A, q, lower, upper)
     warm = solve_quiet(A, q, lower, upper=upper, x0=ref.z)
     assert warm.success and warm.nit == 0
@@ -414,8 +415,7 @@ def test_warm_start_and_a_start_outside_the_box():
 def test_callback_iterates_stay_in_the_box(scale):
     rng = np.random.default_rng(371)
     A = m_matrix(200, rng, symmetric=False)
-    lower, upper, _ = mixed_bounds(200, rng)
-    q = random_q(A, rng)
+    q, lower, upper = random_box_problem(A, rng)
     seen = []
     res = solve_quiet(A, q, lower, upper=upper, callback=lambda zk: seen.append(np.array(zk)), scale=scale,
                       x0=rng.uniform(-5, 5, 200), hierarchy="amg")

@@ -16,7 +16,7 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike
 
 from . import _core
-from ._inputs import as_constant, as_csr, as_diagonal, as_float, as_vector
+from ._inputs import as_constant, as_csr, as_vector
 from ._scaling import SCALINGS, ScaledCallable, equilibrate, scale_matrix, units_factor
 from . import _bounds, _newton, _options
 from ._options import _INT_MAX, _choice, _scalar  # noqa: F401 (the distributed glue imports them from here)
@@ -670,11 +670,8 @@ class Solver:
                                 "rounds": [(float(tk), Status(s).name, float(r)) for tk, s, r in rounds.rounds]}
         if self.polish:
             extra["polished"] = polished is not None
-            if polished is not None and res < tol and status != Status.CONVERGED:
-                status, message = Status.CONVERGED, "converged: Res < tol after polishing (Newton steps)"
-            elif (res >= tol and polish_core is not None and Status(polish_core["status"]) == Status.STAGNATED
-                  and "rounding floor" in polish_core["message"]):
-                status, message = Status.STAGNATED, f"{message}; polish: {polish_core['message']}"
+            status, message = _newton.polish_outcome(status, message, res, tol, polished is not None, polish_core)
+            status = Status(status)
         if self.method == "newton":
             extra.update(_newton.result_fields(rounds.best_d, self._hierarchy))
             message = _newton.with_jacobian_note(message, extra["path"], rounds.best_d["message"])

@@ -167,6 +167,18 @@ def polish(solver, problem, z, res, original_residual, dc):
     return (zp, wp, rp), d
 
 
+def polish_outcome(status, message: str, res: float, tol: float, polished: bool, polish_core):
+    """(status, message) after ``polish``: CONVERGED where the kept polish steps brought Res below tol;
+    where they could not, STAGNATED at Res's rounding floor with the polish's message appended (its
+    core result `polish_core`, None when not run). Both entry points (nrmicp.solve, distributed) ask it."""
+    if polished and res < tol and int(status) != int(_core.Status.CONVERGED):
+        return int(_core.Status.CONVERGED), "converged: Res < tol after polishing (Newton steps)"
+    if (res >= tol and polish_core is not None and int(polish_core["status"]) == int(_core.Status.STAGNATED)
+            and "rounding floor" in polish_core["message"]):
+        return int(_core.Status.STAGNATED), f"{message}; polish: {polish_core['message']}"
+    return status, message
+
+
 def result_fields(d, report: dict) -> dict:
     """The Newton member's result fields: every field of the core's NewtonStats (result.hpp), and
     ``hierarchy`` (a copy of the set-up's hierarchy_report)."""

@@ -29,7 +29,7 @@ except ImportError as exc:  # the core package needs no MPI; this module does
                       f"(make mpideps installs them on Debian); {exc}") from exc
 
 from . import _bounds, _core, _options
-from ._newton import AUTO_AMG_MIN_N
+from ._newton import AUTO_AMG_MIN_N, check_polish, polish_outcome, result_fields
 from ._api import (Affine, Result, Status, _checked, _choice, _criterion, _iteration_options, _scalar, choose_method,
                    dominance_margin,
                    at_rounding_floor)
@@ -508,7 +508,7 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
         Am.scale(sigma)
         qv.scale(sigma)
         w2 = None if w2 is None else sigma * w2
-    polish = bool(_collective(comm, lambda: _check_polish(polish)))
+    polish = bool(_collective(comm, lambda: check_polish(polish)))
     if m == "newton":
         z, res, status, message, tol, fields = _newton(Am, qv, zf, z0, ua, hierarchy, it, maxiter, w1, w2, gamma,
                                                        polish, callback, record_history, o["stall_iterations"], comm)
@@ -596,22 +596,17 @@ def _newton(Am, qv, zf, z0, ua, hierarchy, it, maxiter, w1, w2, gamma, polish, c
         polished = p["residual"] < res
         if polished:
             z_arr, res = p["z"], p["residual"]
-            if res < tol:
-                status, message = Status.CONVERGED, "converged: Res < tol after polishing (Newton steps)"
+        status, message = polish_outcome(status, message, res, tol, polished, p)
+        status = Status(status)
     z = _vec(Am, z_arr)
     report = core.hierarchy
     fields = dict(nit=int(d["nit"]), iterations=int(d["iterations"]), inner=core.inner, counters=dict(d["counters"]),
                   history=d["history"], timings={"setup": t_iter - t0, "iterations": time.perf_counter() - t_iter},
-                  **_newton_result_fields(d, report))
+                  **result_fields(d, report))
     if polish:
         fields["polished"] = polished
     del keep
     return z, res, status, message, tol, fields
-
-
-def _newton_result_fields(d, report):
-    from ._newton import result_fields
-    return result_fields(d, report)
 
 
 def _target_of(o, Am, qv, zf, ua):
@@ -667,11 +662,6 @@ def _multisplitting(Am, qv, zf, z0, m, tol, maxiter, w1, w2, gamma, alpha, beta,
     z = _start(Am, z0)
     res, nit, status, iterations = _stationary(Am, qv, zf, member, z, tol, maxiter, stats)
     return z, res, status, nit, iterations
-
-
-def _check_polish(polish):
-    from ._newton import check_polish
-    return check_polish(polish)
 
 
 def gather(v):
