@@ -1,4 +1,5 @@
-// nrmicp._petsc — the Newton member on the PETSc engine (nrmicp/petsc.hpp), for nrmicp.distributed.
+// nrmicp._petsc — the Newton member and the stationary members (synchronous multisplitting, the serial
+// nrmicp::Solver's one loop) on the PETSc engine (nrmicp/petsc.hpp), for nrmicp.distributed.
 // Conversion only: petsc4py objects arrive as their handles (Mat pointers), vectors as this
 // process's rows (numpy), and the result goes back as the core module's dict. Built when CMake finds
 // PETSc and MPI; the core module (_core) does not need it. The GIL is held throughout: PETSc calls
@@ -19,6 +20,7 @@ namespace {
 
 using Matrix = nrmicp::petsc::Matrix;
 using Core = nrmicp::Newton<Matrix>;
+using Zeta = nrmicp::Zeta<PetscInt>;
 
 Matrix from_handle(std::uintptr_t handle, const char* what) {
   if (!handle) throw py::value_error(std::string(what) + " is a destroyed (null) PETSc Mat");
@@ -30,6 +32,17 @@ std::vector<Matrix> from_handles(const std::vector<std::uintptr_t>& handles, con
   for (std::size_t l = 0; l < handles.size(); ++l)
     out.push_back(from_handle(handles[l], (std::string(what) + "[" + std::to_string(l) + "]").c_str()));
   return out;
+}
+
+/// ζ of this process's rows (an affine ζ comes as a callable: the engine has no B).
+Zeta zeta_of(nrmicp::ZetaKind kind, py::object c, py::object fn) {
+  switch (kind) {
+    case nrmicp::ZetaKind::None: return Zeta::none();
+    case nrmicp::ZetaKind::Constant: return Zeta::constant(to_vector(c.cast<py::array>(), "zeta"));
+    case nrmicp::ZetaKind::Functor: return Zeta::functor(CallableZeta(fn));
+    case nrmicp::ZetaKind::Affine: break;
+  }
+  throw py::value_error("zeta: an affine zeta is not available on the PETSc engine");
 }
 
 /// The Newton member over a PETSc Mat: set up once (the hierarchy's Galerkin operators), solved
@@ -67,24 +80,58 @@ class PyPetscNewton {
   py::dict setup_timings() const { return timings_dict(core_.setup_timings()); }
 
  private:
-  static nrmicp::Zeta<PetscInt> zeta_of(nrmicp::ZetaKind kind, py::object c, py::object fn) {
-    using Z = nrmicp::Zeta<PetscInt>;
-    switch (kind) {
-      case nrmicp::ZetaKind::None: return Z::none();
-      case nrmicp::ZetaKind::Constant: return Z::constant(to_vector(c.cast<py::array>(), "zeta"));
-      case nrmicp::ZetaKind::Functor: return Z::functor(CallableZeta(fn));
-      case nrmicp::ZetaKind::Affine: break;
-    }
-    throw py::value_error("zeta: an affine zeta is not available on the PETSc engine");
-  }
   Matrix A_;
   Core core_;
 };
 
+/// A stationary member (nrm, nrmm, nrmaor, nrmsor, nrmgs, nrmj, two_sweep) over a PETSc Mat: the
+/// serial nrmicp::Solver on the PETSc engine, each process's diagonal block split (multisplitting).
+class PyPetscSolver {
+ public:
+  PyPetscSolver(std::uintptr_t A, const nrmicp::Options& o) : A_(from_handle(A, "A")), core_(A_, o) {}
+
+  py::dict solve(py::array q, nrmicp::ZetaKind kind, py::object zeta_c, py::object zeta_fn, py::object upper,
+                 py::object x0, py::object callback, const nrmicp::SolveOptions& it, py::object progress) {
+    const Eigen::VectorXd qv = to_vector(q, "q");
+    std::optional<Eigen::VectorXd> z0;
+    if (!x0.is_none()) z0 = to_vector(x0.cast<py::array>(), "x0");
+    const auto zeta = with_upper(zeta_of(kind, zeta_c, zeta_fn), upper);
+    const nrmicp::Result r =
+        core_.solve(qv, zeta, z0 ? &*z0 : nullptr, make_callback(callback), {}, &it, make_progress(progress));
+    return result_dict(r, it.record_history);
+  }
+  py::dict setup_timings() const { return timings_dict(core_.setup_timings()); }
+  std::string inner() const { return core_.inner_name(); }
+
+ private:
+  Matrix A_;
+  nrmicp::Solver<Matrix> core_;
+};
+
+/// w = Az + q and Res(z) of ICP(q, A, ζ) (with `upper`: the bounded Res), every process's rows
+/// together; with `rounding`, also Res's rounding level at z (the Newton member's floor,
+/// detail::NewtonLevel::rounding_level). For the distributed entry point's re-measures: its target
+/// (Res at z = 0), the paper's Res in the user's units, the default rule's floor.
+py::dict measure(std::uintptr_t A, py::array q, nrmicp::ZetaKind kind, py::object zeta_c, py::object zeta_fn,
+                 py::object upper, py::array z, bool rounding) {
+  const Matrix M = from_handle(A, "A");
+  nrmicp::Options o;
+  o.method = nrmicp::Method::Newton;
+  const nrmicp::detail::NewtonLevel<Matrix> level(M, o);
+  const Eigen::VectorXd qv = to_vector(q, "q"), zv = to_vector(z, "z");
+  const Zeta zeta = with_upper(zeta_of(kind, zeta_c, zeta_fn), upper);
+  Eigen::VectorXd w, zeta_z;
+  py::dict d;
+  d["residual"] = level.icp_residual(qv, zeta, zv, zeta_z, w, zeta.upper());
+  d["w"] = py::array_t<double>(w.size(), w.data());
+  if (rounding) d["rounding_level"] = level.rounding_level(zv, qv, zv - zeta_z);
+  return d;
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_petsc, m) {
-  m.doc() = "nrmicp's Newton member on the PETSc engine (used by nrmicp.distributed)";
+  m.doc() = "nrmicp's Newton and stationary members on the PETSc engine (used by nrmicp.distributed)";
   py::module_::import("nrmicp._core");  // Options, SolveOptions, ZetaKind, NewtonStats: the core's types
   py::class_<PyPetscNewton>(m, "Newton")
       .def(py::init<std::uintptr_t, const nrmicp::Options&, const std::vector<std::uintptr_t>&,
@@ -98,4 +145,13 @@ PYBIND11_MODULE(_petsc, m) {
       .def_property_readonly("hierarchy", &PyPetscNewton::hierarchy)
       .def_property_readonly("inner", &PyPetscNewton::inner)
       .def("setup_timings", &PyPetscNewton::setup_timings);
+  py::class_<PyPetscSolver>(m, "Solver")
+      .def(py::init<std::uintptr_t, const nrmicp::Options&>(), py::arg("A"), py::arg("options"))
+      .def("solve", &PyPetscSolver::solve, py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("zeta_fn"),
+           py::arg("upper"), py::arg("x0"), py::arg("callback"), py::arg("options"), py::arg("progress") = py::none())
+      .def_property_readonly("inner", &PyPetscSolver::inner)
+      .def("setup_timings", &PyPetscSolver::setup_timings);
+  m.def("measure", &measure, py::arg("A"), py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("zeta_fn"),
+        py::arg("upper"), py::arg("z"), py::arg("rounding") = false,
+        "{'w', 'residual'[, 'rounding_level']} of z: w = Az + q and Res(z) over every process's rows.");
 }

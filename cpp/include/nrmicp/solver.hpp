@@ -39,6 +39,15 @@
 // Everything else is shared: the stopping rules, the history, the best iterate and the
 // Ctrl-C poll live in detail::Monitor (detail/stopping.hpp); Anderson acceleration wraps any
 // step (detail::Accelerated, detail/anderson.hpp); Res is defined once (detail/residual.hpp).
+//
+// ONE LOOP, TWO ENGINES. Solver<MatrixType> runs over any engine's matrix (detail/engine.hpp): an
+// Eigen sparse matrix (every row this process's), or petsc::Matrix (petsc/engine.hpp), whose
+// processes each own a block of rows. There the member is the modulus-based synchronous
+// multisplitting (the paper's reference [49]): each process splits its diagonal block by the serial
+// Splitting (so one process takes exactly the serial member's iterates), the couplings to other
+// processes' unknowns enter through the global product A ẑ, and every Res, step norm and decision of
+// the Monitor is reduced over the processes (detail/comm.hpp). The z-update 'solve' needs a
+// factorization of the whole A: serial only.
 #pragma once
 
 #include "detail/anderson.hpp"
@@ -101,7 +110,9 @@ class Solver {
   /// Progress lines (Options::verbose > 0): (k, Res, best Res, seconds, final message or empty).
   using Progress = detail::Progress;
 
-  Solver(const MatrixType& A, Options options) : A_(A), options_(std::move(options)) {
+  Solver(const MatrixType& A, Options options)
+      : A_(A), block_(detail::block_of(A)),
+        options_(std::move(options)) {
     if (A.rows() != A.cols())
       throw std::invalid_argument("Solver: A must be square, got " + std::to_string(A.rows()) + "x" +
                                   std::to_string(A.cols()));
@@ -113,7 +124,7 @@ class Solver {
     params_ = resolve_parameters(A, options_);
     {
       detail::ScopedTimer t(setup_factorization_);
-      splitting_.emplace(A, options_.method, params_, options_.inner);
+      splitting_.emplace(block_, options_.method, params_, options_.inner);
     }
     if (options_.z_update == ZUpdate::Solve) factorize_A();
     setup_timings_.setup = detail::ScopedTimer::seconds_since(t0);
@@ -141,7 +152,7 @@ class Solver {
     if (q.size() != n) throw std::invalid_argument("Solver::solve: q has length " + std::to_string(q.size()) + ", expected n = " + std::to_string(n));
     if (z0 && z0->size() != n) throw std::invalid_argument("Solver::solve: x0 has length " + std::to_string(z0->size()) + ", expected n = " + std::to_string(n));
     zeta.check(n);
-    resolve_tolerance(o, q, zeta);
+    resolve_tolerance(o, q, zeta, comm());
     Result r;
     if (zeta.bounded()) {
       if (zeta.kind() == ZetaKind::Affine || zeta.kind() == ZetaKind::Functor)
@@ -152,7 +163,7 @@ class Solver {
     } else if (zeta.kind() == ZetaKind::Constant) {
       // ζ ≡ c: LCP(q + Ac, A) in y = z − c. Res and w are the same in both variables.
       Vector q_shift = q;
-      q_shift.noalias() += A_ * zeta.c();
+      add_product(zeta.c(), q_shift);
       // y0 = z0 − c (z0 = 0 by default), so that the iterates are exactly those of the ICP.
       const Vector y0 = z0 ? Vector(*z0 - zeta.c()) : Vector(-zeta.c());
       r = iterate(q_shift, Zeta<StorageIndex>::none(), &y0, {callback, poll, progress}, o, zeta.c());
@@ -167,10 +178,27 @@ class Solver {
 
  private:
   void factorize_A() const {
-    std::lock_guard<std::mutex> lock(a_mutex_);
-    if (a_solver_.ready()) return;
-    detail::ScopedTimer t(a_factorization_);
-    a_solver_.compute(ColMatrix(A_), options_.inner, "A (for the z-update 'solve')");
+    if constexpr (!detail::Engine<MatrixType>::serial) {
+      throw std::invalid_argument(
+          "Solver: z_update 'solve' (the paper's Step 1, a solve with A; what 'auto' means for method 'nrm' on an "
+          "ICP with omega2 = I, and for 'mms') needs a factorization of the whole A, which the distributed "
+          "engine does not have: use z_update='explicit'");
+    } else {
+      std::lock_guard<std::mutex> lock(a_mutex_);
+      if (a_solver_.ready()) return;
+      detail::ScopedTimer t(a_factorization_);
+      a_solver_.compute(ColMatrix(A_), options_.inner, "A (for the z-update 'solve')");
+    }
+  }
+  /// out += A v (the engine's product).
+  void add_product(const Vector& v, Vector& out) const {
+    using detail::multiply_add;
+    multiply_add(A_, v, out);
+  }
+  /// The processes that own the other rows (serial_comm() for an Eigen matrix).
+  const detail::Comm& comm() const {
+    using detail::comm_of;
+    return comm_of(A_);
   }
 
   using Hooks = detail::Hooks;
@@ -182,7 +210,7 @@ class Solver {
     const detail::BoxModulus box(zeta.kind() == ZetaKind::Constant ? zeta.c() : Vector(), zeta.upper(),
                                  params_.omega1, params_.gamma);
     Vector q_shift = q;
-    q_shift.noalias() += A_ * box.s;
+    add_product(box.s, q_shift);
     const Vector y0 = z0 ? Vector(*z0 - box.s) : Vector(-box.s);
     Result r = iterate(q_shift, Zeta<StorageIndex>::none(), &y0, hooks, o, box.s, &box);
     r.z = detail::unshift(r.z, box.s, zeta.upper().size() ? box.box.hi : Vector(), zeta.upper());
@@ -205,11 +233,13 @@ class Solver {
     detail::Context<MatrixType> ctx(A_, q, zeta, params_, zu, a_solver_, res.timings);
     ctx.box = box;
     detail::Monitor monitor(o, hooks.callback, hooks.poll, hooks.progress, shift, res, A_.rows());
+    monitor.reduce_with(ctx.comm);
     detail::Iterate s;
     if (!ctx.start(z0, s)) {
       res.status = Status::ZetaFailed;
       res.z = s.z;
-      res.w = A_ * s.z + q;
+      res.w = q;
+      add_product(s.z, res.w);
       res.residual = std::numeric_limits<double>::quiet_NaN();
       res.message = std::string(to_string(res.status)) + " at the initial guess";
       return res;
@@ -255,7 +285,11 @@ class Solver {
     detail::loop(step, s, monitor);
   }
 
+  // The matrix each process splits: A itself serially (a reference), else its diagonal block (a view).
+  using Block = decltype(detail::block_of(std::declval<const MatrixType&>()));
+
   const MatrixType& A_;
+  Block block_;
   Options options_;
   Parameters params_;
   std::optional<Splitting<StorageIndex>> splitting_;

@@ -5,6 +5,8 @@
 // diagonal when β = 0); for NRM and NRMM (M = A) Lm is factorized once.
 #pragma once
 
+#include "detail/comm.hpp"
+#include "detail/engine.hpp"
 #include "inner_solver.hpp"
 #include "options.hpp"
 
@@ -68,8 +70,16 @@ struct Parameters {
 
 namespace detail {
 
-/// α and β by the method's definition (into p), refusing those the method does not have.
-inline void resolve_alpha_beta(const Options& o, const Eigen::VectorXd& d, Parameters& p) {
+/// mean(d) over every process's rows (1 when there are none): nrmm's default α, one value on every process.
+inline double mean_diagonal(const Eigen::VectorXd& d, const Comm& comm) {
+  const double rows = comm.sum(static_cast<double>(d.size()));
+  return rows > 0 ? comm.sum(d.sum()) / rows : 1.0;  // (serially d.mean(), bit for bit)
+}
+
+/// α and β by the method's definition (into p), refusing those the method does not have. `comm`: the
+/// processes that own the other rows of d = diag(A).
+inline void resolve_alpha_beta(const Options& o, const Eigen::VectorXd& d, Parameters& p,
+                               const Comm& comm = serial_comm()) {
   const bool has_alpha = !std::isnan(o.alpha), has_beta = !std::isnan(o.beta);
   auto reject = [&](bool given, const char* name, const char* why) {
     if (given)
@@ -85,7 +95,7 @@ inline void resolve_alpha_beta(const Options& o, const Eigen::VectorXd& d, Param
       reject(has_beta, "beta", "M = A; alpha sets Omega2 = alpha*I");
       if (has_alpha && o.omega2.size())
         throw std::invalid_argument("Options: method 'nrmm' sets omega2 = alpha*I; give alpha or omega2, not both");
-      p.alpha = has_alpha ? o.alpha : (d.size() > 0 ? d.mean() : 1.0); p.beta = 1;
+      p.alpha = has_alpha ? o.alpha : mean_diagonal(d, comm); p.beta = 1;
       if (!has_alpha && !o.omega2.size() && !(p.alpha >= DBL_MIN))
         throw std::invalid_argument("Options: method 'nrmm' takes alpha = mean(diag(A)) = " + to_text(p.alpha) +
                                     " by default, which must be > 0 and not subnormal; pass alpha (Omega2 = "
@@ -134,7 +144,8 @@ Parameters resolve_parameters(const MatrixType& A, const Options& o) {
   Parameters p;
   p.diagonal = diagonal(A);
   p.gamma = o.gamma;
-  detail::resolve_alpha_beta(o, p.diagonal, p);
+  using detail::comm_of;  // (an engine's matrix brings its own: petsc/engine.hpp)
+  detail::resolve_alpha_beta(o, p.diagonal, p, comm_of(A));
   p.omega1 = o.omega1.size() ? o.omega1 : Eigen::VectorXd::Ones(n);
   p.phi = o.phi.size() ? o.phi : Eigen::VectorXd::Zero(n);
   if (o.omega2.size())

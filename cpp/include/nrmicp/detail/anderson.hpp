@@ -85,7 +85,7 @@ template <typename Step, typename ContextType>
 class Accelerated {
  public:
   using Vector = Eigen::VectorXd;
-  Accelerated(Step& plain, ContextType& ctx, int m) : plain_(plain), ctx_(ctx), aa_(m) {}
+  Accelerated(Step& plain, ContextType& ctx, int m) : plain_(plain), ctx_(ctx), aa_(m, ctx.comm) {}
 
   double evaluate(Iterate& s) {
     x_k_ = s.x;  // the one-pass sweep moves x while it evaluates
@@ -105,7 +105,7 @@ class Accelerated {
   void move_x(Iterate& s) {
     plain_.move_x(s);
     aa_.step(x_k_, plain_.dx(), x_next_);
-    s.step = (x_next_ - x_k_).template lpNorm<Eigen::Infinity>();
+    s.step = ctx_.comm.inf_norm(x_next_ - x_k_);
     x_plain_.swap(s.x);
     s.x.swap(x_next_);
     pending_ = true;

@@ -6,6 +6,8 @@
 //   row_offset(A)                  the global index of the first row this process owns
 //   global_rows(A), global_cols(A) the sizes of the whole matrix
 //   multiply(A, v, out)            out = A v (this process's rows); multiply_add: out += A v
+//   diagonal_block(A)              the rows and columns this process owns, as a serial matrix (the
+//                                  stationary members' splitting: multisplitting, solver.hpp)
 //   abs_multiply_add(A, v, out)    out += |A| v
 //   sweep_rows(A, q, y, k, box)    k symmetric projected Gauss–Seidel sweeps on the rows owned
 //   galerkin(P, A), transpose(P)   the coarse operator PᵀAP and R = Pᵀ of a hierarchy level
@@ -57,6 +59,17 @@ void multiply(const Eigen::SparseMatrixBase<Derived>& A, const Eigen::VectorXd& 
 template <typename Derived>
 void multiply_add(const Eigen::SparseMatrixBase<Derived>& A, const Eigen::VectorXd& v, Eigen::VectorXd& out) {
   out.noalias() += A.derived() * v;
+}
+/// Every row and column is this process's: A itself.
+template <typename Derived>
+const Derived& diagonal_block(const Eigen::SparseMatrixBase<Derived>& A) {
+  return A.derived();
+}
+/// diagonal_block of any engine's matrix (found by argument-dependent lookup): A itself serially (a
+/// reference), a view of the block otherwise.
+template <typename MatrixType>
+decltype(auto) block_of(const MatrixType& A) {
+  return diagonal_block(A);
 }
 template <typename Derived, typename V>
 void abs_multiply_add(const Eigen::SparseMatrixBase<Derived>& A, const V& v, Eigen::VectorXd& out) {

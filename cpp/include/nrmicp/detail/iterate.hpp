@@ -1,6 +1,10 @@
 // nrmicp — what every step of Method 3.1 shares: the iterate (x, z, ζ(z)) and the problem it
 // iterates on, with the operations all steps use (products, ζ, the z-update, Res, the start).
 // With bounds the problem is the box problem in y = z − s and m(x) replaces |x| (detail/modulus.hpp).
+// Over an engine whose processes own parts of the rows (detail/engine.hpp: the PETSc engine), the
+// vectors hold this process's rows, the products are the engine's, and every Res, every flag a step
+// or the Monitor decides on (ζ failed, z not finite) is reduced over the processes (detail/comm.hpp),
+// so that every process takes the same decisions.
 #pragma once
 
 #include "../inner_solver.hpp"
@@ -8,6 +12,8 @@
 #include "../result.hpp"
 #include "../splitting.hpp"
 #include "../zeta.hpp"
+#include "comm.hpp"
+#include "engine.hpp"
 #include "modulus.hpp"
 #include "residual.hpp"
 #include "timer.hpp"
@@ -41,9 +47,10 @@ class Context {
 
   Context(const MatrixType& A, const Vector& q, const Zeta<StorageIndex>& zeta, const Parameters& p, ZUpdate zu,
           const InnerSolver<StorageIndex>& a_solver, Timings& tm)
-      : A(A), q(q), zeta(zeta), p(p), zu(zu), tm(tm), a_solver_(a_solver) {}
+      : A(A), comm(comm_of(A)), q(q), zeta(zeta), p(p), zu(zu), tm(tm), a_solver_(a_solver) {}
 
   const MatrixType& A;
+  const Comm& comm;  ///< the processes that own the other rows (serial_comm(): none)
   const Vector& q;
   const Zeta<StorageIndex>& zeta;
   const Parameters& p;
@@ -57,18 +64,18 @@ class Context {
 
   void spmv(const Vector& v, Vector& out) const {
     ScopedTimer t(tm.spmv);
-    out.noalias() = A * v;
+    multiply(A, v, out);
   }
   /// out = ζ(v); clears s.zeta_ok when ζ fails. Nothing to do for an LCP. ζ is never handed a
   /// non-finite v: that is the iteration's failure, not ζ's (s.finite is cleared instead).
   void eval_zeta(Iterate& s, const Vector& v, Vector& out) const {
     if (lcp()) return;
-    if (!v.allFinite()) {
+    if (!comm.all(v.allFinite())) {
       s.finite = false;
       return;
     }
     ScopedTimer t(tm.zeta);
-    const bool ok = zeta.eval(v, out);
+    const bool ok = comm.all(zeta.eval(v, out));
     // A ζ evaluated here (Affine: finite B, c) overflowing at a finite v: the iterate ran away.
     if (!ok && zeta.kind() != ZetaKind::Functor) s.finite = false;
     else s.zeta_ok = ok;
@@ -118,14 +125,15 @@ class Context {
   }
   /// Res from the sum of squares a pass accumulated for s.z (and s.zeta_z): its square root, or
   /// Res recomputed with a scaled norm when the plain sum overflowed or underflowed.
-  double residual_norm(const ResidualSum& sum, const Iterate& s) {
+  double residual_norm(ResidualSum sum, const Iterate& s) {
+    sum.sum = comm.sum(sum.sum);
     if (sum.plain_is_accurate()) return std::sqrt(sum.sum);
     Vector Az(n());
     spmv(s.z, Az);
-    if (box) return box->box.residual(Az + q, s.z);
+    if (box) return box->box.residual(Az + q, s.z, comm);
     work_.resize(n());
     for (Eigen::Index i = 0; i < n(); ++i) work_[i] = std::min(Az[i] + q[i], lcp() ? s.z[i] : s.z[i] - s.zeta_z[i]);
-    return stable_norm(work_);
+    return comm.stable_norm(work_);
   }
   /// x⁽⁰⁾ = γ/2 (Ω1⁻¹(z0 − ζ(z0)) − Ω2⁻¹(Az0 + q)) (the inverse of x ↦ (z, w), with or without a
   /// box) and z⁽⁰⁾ from it; false when ζ(z0) failed
@@ -142,7 +150,7 @@ class Context {
     Vector Az(n());
     spmv(zs, Az);
     Az += q;
-    start_residual = box ? box->box.residual(Az, zs) : stable_norm(Az.cwiseMin(zs - s.zeta_prev));
+    start_residual = box ? box->box.residual(Az, zs, comm) : comm.stable_norm(Az.cwiseMin(zs - s.zeta_prev));
     if (std::isnan(start_residual)) start_residual = std::numeric_limits<double>::infinity();
     s.x = p.gamma / 2 * ((zs - s.zeta_prev).cwiseQuotient(p.omega1) - Az.cwiseQuotient(p.omega2));
     s.z.resize(n());

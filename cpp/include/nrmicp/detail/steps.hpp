@@ -1,6 +1,7 @@
 // nrmicp — the steps of Method 3.1, one type per kind of member (the interface is described at
 // the top of solver.hpp):
 //   SweepStep      AOR-type members, explicit z-update, row-major A: one pass over A per step
+//                  (serial only: a distributed engine runs SplittingStep, the same iterates)
 //   SplittingStep  any splitting: rhs = Ω2(|x| − x) − γ(A ẑ + q), x += Lm⁻¹ rhs (Lm factorized,
 //                  triangular or diagonal)
 //   TwoSweepStep   the two-sweep baseline: SplittingStep's rhs minus N2(|x⁽ᵏ⁾| − |x⁽ᵏ⁻¹⁾|), relaxed by θ
@@ -149,7 +150,8 @@ class SplittingStep : public StepBase {
     ScopedTimer t(ctx_.tm.inner_solve);
     sp_.solve(rhs_, dx_);
   }
-  // dx ← θ dx, x += dx, s.step = ‖x⁽ᵏ⁺¹⁾ − x⁽ᵏ⁾‖∞ as taken (0 when x is unchanged, however large dx).
+  // dx ← θ dx, x += dx, s.step = ‖x⁽ᵏ⁺¹⁾ − x⁽ᵏ⁾‖∞ as taken (0 when x is unchanged, however large dx),
+  // over every process's rows.
   void relax(Iterate& s, double theta) {
     double step = 0;
     for (Eigen::Index i = 0; i < ctx_.n(); ++i) {
@@ -159,7 +161,7 @@ class SplittingStep : public StepBase {
       step = std::max(step, std::abs(xn - s.x[i]));
       s.x[i] = xn;
     }
-    s.step = step;
+    s.step = ctx_.comm.max(step);
   }
 
   Context<MatrixType>& ctx_;

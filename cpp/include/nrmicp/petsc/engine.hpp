@@ -250,6 +250,8 @@ inline Matrix galerkin(const Matrix&, const Matrix& A, const Matrix& P) {
   return out;
 }
 inline Eigen::VectorXd diagonal(const Matrix& A) { return A.diagonal(); }
+/// The diagonal block (a view of A's own arrays): the stationary members split it (multisplitting).
+inline Matrix::Block diagonal_block(const Matrix& A) { return A.block(); }
 inline Eigen::VectorXd row_max_abs(const Matrix& A) { return A.row_max_abs(); }
 
 /// k symmetric projected Gauss–Seidel sweeps on this process's rows (detail::projected_gauss_seidel
