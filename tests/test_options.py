@@ -144,3 +144,10 @@ def test_validate_refuses_unknown_names_and_wrong_types():
         _options.validate({"maxiter": 2.5}, where="distributed.solve")
     with pytest.raises(ValueError, match="z_update must be one of"):
         _options.validate({"z_update": "implicit"}, where="distributed.solve")
+
+
+def test_validate_takes_an_option_given_as_its_default_none():
+    # tol=None and rtol=None are nrmicp.solve's defaults (the default rule), not numbers to check
+    _options.validate({"tol": None, "rtol": None, "accelerate": None}, where="distributed.solve")
+    with pytest.raises(TypeError, match="tol must be a number"):
+        _options.validate({"tol": "1e-8"}, where="distributed.solve")

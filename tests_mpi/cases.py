@@ -15,7 +15,7 @@ import nrmicp  # noqa: E402
 from nrmicp import distributed as dist  # noqa: E402
 from nrmicp.scenes.convection import convection_diffusion_obstacle  # noqa: E402
 from nrmicp.scenes.obstacle import obstacle_2d, obstacle_3d  # noqa: E402
-from problems import make_affine_icp, make_icp, make_lcp  # noqa: E402
+from problems import make_affine_icp, make_icp, make_lcp, make_obstacle_icp  # noqa: E402
 from reference_impl import residual as oracle_residual  # noqa: E402
 
 COMM = PETSc.COMM_WORLD
@@ -165,7 +165,7 @@ def _bad(kind):
             upper[-1] = pb.zeta[hi - 1] - 1.0
         kw = {"upper": upper}
     elif kind == "bad_method":
-        kw = {"method": "nrm"}
+        kw = {"method": "sor"}
     return M, q, zeta, kw
 
 
@@ -213,10 +213,36 @@ def _allgather_text(text, width=4096):
         return [bytes(r[r > 0].astype(np.uint8)).decode() for r in rows]
 
 
+#: The fuzz's stationary members beyond OPTIONS (nrm with Omega2 = diag(A), "diag": its Omega2 = I does not
+#: converge as a multisplitting where diag(A) is far from 1).
+MORE_MEMBERS = {"nrm": {"omega2": "diag"}, "nrmm": {}, "mms": {}, "two_sweep": {}}
+
+
+def _fuzz_options(extra, method, A, lo, hi):
+    """The member's options, and for the stationary members some of the serial loop's drawn by `extra`
+    (Anderson, phi, theta, the history, the stall window); this rank's rows of a diagonal."""
+    kw = dict({**OPTIONS, **MORE_MEMBERS}[method])
+    if kw.get("omega2") == "diag":
+        kw["omega2"] = A.diagonal()[lo:hi]
+    if method == "newton":
+        return kw
+    if extra.random() < 0.3:
+        kw.update(accelerate="anderson", anderson_m=int(extra.integers(1, 6)))
+    if extra.random() < 0.2 and method not in ("mms", "two_sweep"):
+        kw["phi"] = float(extra.uniform(0.0, 1.0))
+    if method == "two_sweep" and extra.random() < 0.5:
+        kw["theta"] = float(extra.uniform(0.7, 1.0))
+    kw.update(record_history=bool(extra.random() < 0.5), stall_iterations=int(extra.integers(50, 200)))
+    return kw
+
+
 def case_fuzz(examples):
     """Random small problems (np = 2): M-matrix LCPs and obstacles, P-matrix LCPs; every member
-    against serial nrmicp and the numpy oracle."""
-    rng = np.random.default_rng(int(os.environ.get("NRMICP_FUZZ_SEED", "2026")))
+    against serial nrmicp and the numpy oracle; a callback on every member, bounds on every member, the
+    stationary members with some of the serial loop's options. `rng` draws what it drew before the
+    stationary members took these options (the same Newton problems); `extra` draws the rest."""
+    seed = int(os.environ.get("NRMICP_FUZZ_SEED", "2026"))
+    rng, extra = np.random.default_rng(seed), np.random.default_rng(seed + 1)
     rows = []
     for k in range(examples):
         n = int(rng.integers(5, 60))
@@ -229,26 +255,29 @@ def case_fuzz(examples):
         q = rng.normal(size=n) * 10 ** rng.uniform(-1, 2)
         zeta = None if rng.random() < 0.5 else rng.normal(size=n)
         method = str(rng.choice(list(OPTIONS)))
+        if method != "newton" and extra.random() < 0.4:
+            method = str(extra.choice(list(MORE_MEMBERS)))
         lo, hi = split(n, rng.uniform(0.2, 1.0, SIZE).tolist())
-        polish = bool(rng.random() < 0.3)
-        # Newton takes bounds (some rows free above) and a callback (every rank's is called)
+        polish = bool(rng.random() < 0.3) and method == "newton"
+        # bounds (some rows free above) and a callback (every rank's is called)
         upper = None
-        if method == "newton" and rng.random() < 0.4:
-            upper = (np.zeros(n) if zeta is None else zeta) + rng.uniform(0.0, 2.0, n)
-            upper[rng.random(n) < 0.3] = np.inf
+        draw = rng if method == "newton" else extra
+        if draw.random() < 0.4:
+            upper = (np.zeros(n) if zeta is None else zeta) + draw.uniform(0.0, 2.0, n)
+            upper[draw.random(n) < 0.3] = np.inf
+        kw = _fuzz_options(extra, method, A, lo, hi)
         calls = []
         r = dist.solve(A[lo:hi], q[lo:hi], None if zeta is None else zeta[lo:hi], method=method, tol=1e-9,
                        maxiter=100000, polish=polish, upper=None if upper is None else upper[lo:hi],
-                       callback=(lambda k, zk, res: calls.append(k) and False) if method == "newton" else None,
-                       **OPTIONS[method])
+                       callback=lambda k, zk, res: calls.append(k) and False, **kw)
         z = dist.gather(r.z)
         if RANK == 0:
             serial = nrmicp.solve(A, q, zeta, upper=upper, method="newton", tol=1e-11, polish=True)
             g = z - (0.0 if zeta is None else zeta)
             m = np.minimum(A @ z + q, g) if upper is None else np.minimum(g, np.maximum(z - upper, A @ z + q))
             rows.append({"n": n, "method": method, "status": str(r.status), "err": float(np.max(np.abs(z - serial.z))),
-                         "res": float(np.linalg.norm(m)), "bounded": upper is not None,
-                         "called": bool(calls) or method != "newton", "scale": float(np.max(np.abs(q)))})
+                         "res": float(np.linalg.norm(m)), "bounded": upper is not None, "called": bool(calls),
+                         "options": sorted(k for k in kw if k != "omega2"), "scale": float(np.max(np.abs(q)))})
     return rows
 
 
@@ -451,33 +480,140 @@ def _gather(local, n):
 
 
 def case_options():
-    """distributed.solve's options from nrmicp.solve's table: each refused one's message, an unknown
-    name's, and what the supported ones deliver (one rank)."""
+    """distributed.solve's options from nrmicp.solve's table: each refused one's message (per member),
+    an unknown name's, and what the supported ones deliver (one rank)."""
     import nrmicp._options as table
-    other = {"scale": True, "accelerate": "anderson", "anderson_m": 3, "phi": 0.5, "theta": 0.5, "z_update": "solve",
-             "inner": "cg", "verbose": 1, "components": 2, "zeta_jacobian": lambda z: sp.eye(len(z))}
+    jac = lambda z: sp.eye(len(z))  # noqa: E731
+    refused_newton = {"scale": True, "components": 2, "zeta_jacobian": jac, "inner": "cg", "verbose": 1}
+    # options of the stationary members only: the core's Options.check refuses them for newton, naming them
+    checked_newton = {"accelerate": "anderson", "phi": 0.5, "theta": 0.5, "z_update": "explicit"}
+    refused_stationary = {"scale": True, "components": 2, "zeta_jacobian": jac, "z_update": "solve", "polish": True}
     A = sp.diags([-1.0, 4.0, -1.0], [-1, 0, 1], shape=(8, 8), format="csr")
     q = np.linspace(-1.0, 1.0, 8)
 
-    def outcome(**kw):
+    def outcome(method="newton", zeta=None, **kw):
         try:
-            dist.solve(A, q, method="newton", **kw)
+            dist.solve(A, q, zeta, method=method, **kw)
             return ["no exception", ""]
         except Exception as exc:  # noqa: BLE001 - the outcome is the test's subject
             return [type(exc).__name__, str(exc)]
-    seen = []
-    r = dist.solve(A, q, method="newton", tol=1e-12, maxiter=50, stall_iterations=7, record_history=True,
-                   callback=lambda k, z, res: seen.append(k) and False, polish=True, gamma=2.0)
-    z = dist.gather(r.z)
-    w = A @ z + q
-    return {"unsupported": sorted(dist._UNSUPPORTED), "other": sorted(other), "table": list(table.names()),
-            "refused": {name: outcome(**{name: value}) for name, value in other.items()},
+
+    def delivered(method, **kw):
+        seen = []
+        r = dist.solve(A, q, method=method, tol=1e-12, maxiter=500, stall_iterations=7, record_history=True,
+                       callback=lambda k, z, res: seen.append(k) and False, gamma=2.0, **kw)
+        z = dist.gather(r.z)
+        w = A @ z + q
+        return {"success": bool(r.success), "res": float(r.residual), "calls": len(seen),
+                "history": len(r.history["residual"]) if r.history is not None else -1,
+                "polished": "polished" in r, "min_z": float(z.min()), "min_w": float(w.min()), "zw": float(abs(z @ w))}
+    stationary = {"nrmgs anderson": dict(method="nrmgs", accelerate="anderson", anderson_m=3),
+                  "nrmaor phi": dict(method="nrmaor", alpha=1.1, beta=0.5, phi=0.5),
+                  "two_sweep theta": dict(method="two_sweep", theta=0.9),
+                  "nrm inner": dict(method="nrm", inner="eigen_lu", omega2=4.0),
+                  "nrmm verbose": dict(method="nrmm", verbose=1),
+                  "mms": dict(method="mms"), "nrmj explicit": dict(method="nrmj", z_update="explicit")}
+    return {"unsupported": sorted(set(dist._UNSUPPORTED) | set(dist._UNSUPPORTED_NEWTON)),
+            "unsupported_stationary": sorted(set(dist._UNSUPPORTED) | set(dist._UNSUPPORTED_STATIONARY)),
+            "other": sorted(refused_newton), "other_stationary": sorted(refused_stationary),
+            "table": list(table.names()),
+            "refused": {name: outcome(**{name: value}) for name, value in refused_newton.items()},
+            "checked": {name: outcome(**{name: value}) for name, value in checked_newton.items()},
+            "refused_stationary": {name: outcome("nrmgs", **{name: value}) for name, value in refused_stationary.items()},
+            "auto_solve": outcome("nrm", lambda z: 0 * z, tol=1e-10),   # nrm, Omega2 = I, an ICP: 'auto' means 'solve'
             "unknown": outcome(tolerance=1e-8),
-            "supported": {"success": bool(r.success), "res": float(r.residual), "calls": len(seen),
-                          "history": len(r.history["residual"]) if r.history is not None else -1,
-                          "polished": "polished" in r, "min_z": float(z.min()), "min_w": float(w.min()),
-                          "zw": float(abs(z @ w))},
+            "supported": delivered("newton", polish=True),
+            "supported_stationary": {name: delivered(**kw) for name, kw in stationary.items()},
             "auto": [dist.solve(A, q).method, nrmicp.solve(A, q).method]}
+
+
+#: The stationary members of the paper's family, with parameters that differ from the defaults; nrm with
+#: Omega2 = diag(A) ("diag"): its default Omega2 = I converges serially (M = A) but not as a multisplitting of
+#: Bai's matrices (diag 8: M = the diagonal blocks, |Omega2 - A| large; docs/DISTRIBUTED.md).
+FAMILY = {"nrm": {"omega2": "diag"}, "nrmm": {}, "nrmaor": {"alpha": 1.1, "beta": 0.9}, "nrmsor": {"alpha": 1.2}, "nrmgs": {},
+          "nrmj": {}}
+
+
+def family_problems():
+    """(name, A, q, zeta as nrmicp.solve takes it, this rank's zeta maker, upper or None): an LCP, a
+    constant and a callable ζ, and bounds (upper, and rows free below) — n = 64."""
+    lcp, icp, obs = make_lcp(8), make_icp(8, c=0.1), make_obstacle_icp(8)
+    s = icp.zeta(np.zeros(lcp.A.shape[0]))   # ζ(z) = 0.1 sin(z) + s, entry-wise
+    c = obs.zeta.c.copy()
+    c[::7] = -np.inf                         # rows free below (the box form's lo' = -inf)
+    upper = np.where(np.arange(len(c)) % 3 == 0, obs.zeta.c + 0.5, np.inf)
+    return [("lcp", lcp.A, lcp.q, None, lambda lo, hi: None, None),
+            ("constant", obs.A, obs.q, obs.zeta.c, lambda lo, hi: obs.zeta.c[lo:hi], None),
+            ("callable", icp.A, icp.q, icp.zeta, lambda lo, hi: (lambda z, s=s[lo:hi]: 0.1 * np.sin(z) + s), None),
+            ("bounds", obs.A, obs.q, c, lambda lo, hi: c[lo:hi], upper)]
+
+
+def _box_residual(A, q, z, zeta, upper):
+    """‖mid(z − ζ, z − u, Az + q)‖₂ in numpy (the paper's Res without upper)."""
+    w = sp.csr_matrix(A) @ z + q
+    g = z - (0.0 if zeta is None else (zeta(z) if callable(zeta) else zeta))
+    u = np.inf if upper is None else upper
+    return float(np.linalg.norm(np.minimum(g, np.maximum(z - u, w))))
+
+
+def case_family():
+    """Every stationary member of the family on every problem of family_problems, distributed and
+    serial (the same options): status, nit, z's relative difference, Res by numpy."""
+    rows = []
+    for name, A, q, zeta, dzeta, upper in family_problems():
+        A = sp.csr_matrix(A)
+        lo, hi = split(A.shape[0])
+        for method, kw in FAMILY.items():
+            kw = dict(kw, method=method, tol=1e-10, maxiter=20000, z_update="explicit")
+            omega2 = A.diagonal() if kw.get("omega2") == "diag" else None
+            mine = dict(kw, omega2=None if omega2 is None else omega2[lo:hi])
+            r = dist.solve(A[lo:hi], q[lo:hi], dzeta(lo, hi), upper=None if upper is None else upper[lo:hi], **mine)
+            z = dist.gather(r.z)
+            if RANK == 0:
+                s = nrmicp.solve(A, q, zeta, upper=upper, **dict(kw, omega2=omega2))
+                rows.append({"problem": name, "method": method, "status": str(r.status), "nit": r.nit,
+                             "serial_status": str(s.status), "serial_nit": s.nit,
+                             "err": float(np.max(np.abs(z - s.z)) / np.max(np.abs(s.z))),
+                             "res": _box_residual(A, q, z, zeta, upper), "reported": float(r.residual)})
+    return rows
+
+
+def case_hooks():
+    """The serial loop's options on PETSc: Anderson with the history and a callback, a callback that
+    stops on one rank only, the two-sweep member's theta, phi, verbose, rtol, stall_iterations."""
+    pb = make_lcp(8)
+    A = sp.csr_matrix(pb.A)
+    lo, hi = split(A.shape[0])
+    out = {}
+
+    def run(name, **kw):
+        calls = []
+        cb = kw.pop("callback", lambda k, z, res: calls.append((k, res)) and False)
+        r = dist.solve(A[lo:hi], pb.q[lo:hi], tol=kw.pop("tol", 1e-10), callback=cb, **kw)
+        z = dist.gather(r.z)
+        if RANK == 0:
+            h = r.history
+            out[name] = {"status": str(r.status), "nit": r.nit, "iterations": r.iterations, "calls": len(calls),
+                         "last_call": calls[-1][0] if calls else None, "counters": r.counters,
+                         "history": None if h is None else [int(h["iteration"][-1]), len(h["residual"])],
+                         "history_res": None if h is None else [float(v) for v in h["residual"][:3]],
+                         "call_res": [float(c[1]) for c in calls[:3]],
+                         "res": _box_residual(A, pb.q, z, None, None), "reported": float(r.residual),
+                         "target": r.criterion["target"]}
+    run("plain", method="nrmgs")
+    run("anderson", method="nrmgs", accelerate="anderson", anderson_m=3, record_history=True)
+    run("stop_on_one_rank", method="nrmgs", callback=lambda k, z, res: RANK == SIZE - 1 and k == 3)
+    run("two_sweep_theta", method="two_sweep", theta=0.8)
+    run("phi", method="nrmgs", phi=0.5)
+    run("verbose", method="nrmj", verbose=1)
+    run("rtol", method="nrmsor", alpha=1.2, tol=None, rtol=1e-8)
+    run("stall", method="nrm", omega2=0.1, maxiter=100000, stall_iterations=5, tol=1e-300)
+    if RANK == 0:
+        out["serial_anderson_nit"] = nrmicp.solve(A, pb.q, method="nrmgs", accelerate="anderson", anderson_m=3,
+                                                  tol=1e-10).nit
+        out["serial_rtol_tol"] = nrmicp.solve(A, pb.q, method="nrmsor", alpha=1.2, rtol=1e-8).criterion["target"]
+    return out
+
 
 if __name__ == "__main__":
     name, args = sys.argv[1], sys.argv[2:]
@@ -485,6 +621,6 @@ if __name__ == "__main__":
               "bad": lambda: case_bad(args[0], args[1]), "boomeramg": case_boomeramg,
               "floor": case_floor, "overshoot": case_overshoot, "sweeps": case_sweeps,
               "warm": case_warm, "units": case_units, "engine": case_engine, "options": case_options,
-              "fuzz": lambda: case_fuzz(int(args[0]))}[name]()
+              "fuzz": lambda: case_fuzz(int(args[0])), "family": case_family, "hooks": case_hooks}[name]()
     if RANK == 0:
         print("RESULT " + json.dumps(result), flush=True)

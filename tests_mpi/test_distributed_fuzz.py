@@ -1,6 +1,7 @@
 """Random small problems through the distributed entry points (np = 2, uneven partitions):
 every member against serial nrmicp and a plain numpy Res (bounds: ‖mid(z − ζ, z − u, Az + q)‖);
-Newton with bounds and a callback in some of them."""
+bounds and a callback on every member, the stationary members with Anderson, phi, theta, the
+history and the stall window drawn at random."""
 import os
 
 from conftest import mpirun
@@ -17,4 +18,5 @@ def test_distributed_fuzz():
         # a P-matrix ICP has one solution; z's error is bounded by ||A^-1|| Res (A is diagonally dominant)
         assert r["err"] < 1e-8, r
         assert r["called"], r   # the callback saw the iterates
-    assert any(r["bounded"] for r in rows)
+    assert any(r["bounded"] and r["method"] != "newton" for r in rows)
+    assert any("accelerate" in r["options"] for r in rows)

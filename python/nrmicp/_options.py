@@ -204,5 +204,5 @@ def validate(values: Mapping[str, Any], *, where: str,
             reason = f" ({why[name]})" if why[name] else ""
             raise ValueError(f"{where} cannot apply option {name}={value!r}{reason}; leave it at its default "
                              f"{opt.default!r}, or use nrmicp.solve")
-        if opt.kind in _SCALAR_KINDS:
+        if opt.kind in _SCALAR_KINDS and not _is_default(opt, value):   # (tol=None: the default, no number)
             convert(name, value)

@@ -1,4 +1,7 @@
-"""nrmicp beyond one machine: the Newton member and the AOR-type NRM members on PETSc over MPI.
+"""nrmicp beyond one machine: every member on PETSc over MPI — the Newton member (nrmicp::Newton) and
+the stationary members (nrmicp::Solver, as synchronous multisplitting), the serial library's C++ on
+the PETSc engine (nrmicp._petsc). This module is glue: argument checks and conversion, layouts, the
+call into the core.
 
 Run under ``mpirun -n P python script.py``; every rank calls :func:`solve` with the same
 arguments for its own rows. A is a petsc4py ``Mat`` (MPIAIJ; or each rank's CSR row block, a
@@ -8,8 +11,8 @@ hypre BoomerAMG, whose classical prolongations (P >= 0, read through PCHMG) are 
 of the nested iteration. Option names, their checks, the statuses and the result fields are the
 serial library's (nrmicp._api, nrmicp._core): one definition.
 
-What is distributed: everything per iteration (products, reductions, the reduced solves, ζ on
-each rank's rows). What is not: the hierarchy's set-up is hypre's (itself parallel); a callable
+What is distributed: everything per iteration (products, reductions, the reduced solves, the
+stationary members' splittings of each rank's diagonal block, ζ on each rank's rows). What is not: the hierarchy's set-up is hypre's (itself parallel); a callable
 ζ sees only the rank's own rows (an entry-wise or row-local ζ); :func:`gather` copies z to
 rank 0 (small problems only).
 """
@@ -30,29 +33,31 @@ except ImportError as exc:  # the core package needs no MPI; this module does
 
 from . import _bounds, _core, _options
 from ._newton import AUTO_AMG_MIN_N, check_polish, polish_outcome, result_fields
-from ._api import (Affine, Result, Status, _checked, _choice, _criterion, _iteration_options, _scalar, choose_method,
-                   dominance_margin,
-                   at_rounding_floor)
+from ._api import (METHODS as _ALL_METHODS, _SPLITTING, Affine, Result, Status, _Rounds, _checked, _choice, _criterion,
+                   _iteration_options, _log_final, _progress_hook, _units_parameters, at_rounding_floor,
+                   choose_method, dominance_margin)
 from ._scaling import sigma_from_logs
-from ._inputs import as_constant, as_diagonal, as_vector
+from ._inputs import as_constant, as_vector
 from ._zeta import CheckedZeta
 
 __all__ = ["solve", "gather", "METHODS", "DistributedError"]
 
-#: The distributed members: Newton, and the AOR-type NRM members as synchronous multisplitting.
-METHODS = ("newton", "nrmj", "nrmgs", "nrmsor", "nrmaor")
-#: nrmicp.solve's options that cannot apply on PETSc, and why (refused naming them unless at their defaults).
+#: The distributed members: every member of nrmicp (the stationary ones as synchronous multisplitting).
+METHODS = _ALL_METHODS
+#: nrmicp.solve's options that cannot apply on PETSc for any member, and why (refused naming them
+#: unless at their defaults).
 _UNSUPPORTED = {
     "scale": "the default rule's units scaling is the one scaling here",
-    "accelerate": "the multisplitting members are not accelerated", "anderson_m": "no acceleration here",
-    "phi": "the multisplitting members have phi = 0", "theta": "two_sweep is serial only",
-    "z_update": "the multisplitting members update z explicitly",
-    "inner": "the PETSc engine's reduced solves are its own: PETSc options -nrmicp_inner_...",
-    "verbose": "no progress lines from several ranks",
     "components": "BoomerAMG builds the hierarchy: PETSc options -nrmicp_hierarchy_pc_hypre_boomeramg_...",
     "zeta_jacobian": "the PETSc engine has no Jacobian path yet: the outer fixed point solves a callable zeta"}
-#: AOR parameters (alpha, beta) the members fix; None: the user's (default 1, beta = alpha).
-_AOR_FIXED = {"nrmj": (1.0, 0.0), "nrmgs": (1.0, 1.0)}
+#: ... for the Newton member only (the stationary members' loop takes them).
+_UNSUPPORTED_NEWTON = {
+    "inner": "the PETSc engine's reduced solves are its own: PETSc options -nrmicp_inner_...",
+    "verbose": "the Newton member on PETSc has no progress lines"}
+#: ... for the stationary members only.
+_UNSUPPORTED_STATIONARY = {
+    "z_update": "'solve' needs a factorization of the whole A; 'explicit' applies",
+    "polish": "polishing is a Newton step: use method 'newton'"}
 #: Longest error message exchanged between ranks (bytes, UTF-8).
 _MSG_LEN = 1024
 #: Exception types re-raised as themselves on every rank; others become DistributedError.
@@ -172,28 +177,27 @@ def _vec(A, arr):
     return out
 
 
-def _check_options(method, n, tol, maxiter, omega1, omega2, gamma, alpha, beta, nloc, rtol=0.0):
-    """The serial library's checks (nrmicp._api and the core's Options.check)."""
-    method = _choice(method, METHODS, "method")
-    opts = _iteration_options(_core.Options(), tol=tol, rtol=rtol, maxiter=maxiter, z_update="auto", accelerate="none",
-                              anderson_m=5, theta=1.0, record_history=False, stall_iterations=100)
+def _core_options(o, method, nloc, it):
+    """The core's Options from nrmicp.solve's options `o` (this rank's rows of the diagonals; tol and
+    rtol as _criterion resolved them in `it`), checked by the serial library's code (the one table,
+    nrmicp._options, and the core's Options.check), and the options that cannot apply to this member
+    on PETSc refused naming them."""
+    refused = dict(_UNSUPPORTED_NEWTON if method == "newton" else _UNSUPPORTED_STATIONARY)
+    if method != "newton" and o["z_update"] in ("explicit", "auto"):
+        refused.pop("z_update")   # ('solve': below, with what 'auto' resolves to)
+    _options.validate({k: o[k] for k in refused}, where="distributed.solve", unsupported=refused)
+    opts = _core.Options()
     opts.method = getattr(_core.Method, method)
-    opts.gamma = _scalar(gamma, "gamma")
-    if method in _AOR_FIXED and (alpha is not None or beta is not None):
-        raise ValueError(f"method {method!r} fixes alpha and beta; use 'nrmaor' or 'nrmsor' to set them")
-    opts.alpha = math.nan if alpha is None else _scalar(alpha, "alpha")
-    opts.beta = math.nan if beta is None else _scalar(beta, "beta")
-    _checked(opts, n)
-    w1 = as_diagonal(omega1, nloc, "omega1", positive=True)
-    w2 = as_diagonal(omega2, nloc, "omega2", positive=True)
-    return method, w1, w2
+    _options.fill(opts, {k: o[k] for k in _SPLITTING}, nloc)
+    _iteration_options(opts, **{**{k: o[k] for k in _options.names("solve")}, "tol": it["tol"], "rtol": it["rtol"]})
+    return _checked(opts, nloc)
 
 
 class _Zeta:
-    """ζ on this rank's rows: kind 0 none, 1 constant Vec c, 2 Affine (B Mat, c Vec), 3 callable."""
+    """ζ on this rank's rows: kind 0 none, 1 constant c, 2 Affine (B Mat, c), 3 callable."""
 
     def __init__(self, zeta, A, comm):
-        """Local checks only; make() creates the vectors (collective)."""
+        """Local checks only."""
         self.comm, self.B, self.c, self.fn = comm, None, None, None
         n = A.getSize()[0]
         if zeta is None:
@@ -219,24 +223,6 @@ class _Zeta:
                              f"rank's rows = {r[i]})")
         return r
 
-    def make(self, A):
-        if self.c is not None:
-            self.c = _vec(A, self.c)
-        return self
-
-    def __call__(self, z, out):
-        """out = ζ(z); collective: a failure on any rank raises on every rank."""
-        if self.kind == 0:
-            out.set(0.0)
-        elif self.kind == 1:
-            self.c.copy(out)
-        elif self.kind == 2:
-            self.B.multAdd(z, self.c, out)
-        else:
-            r = _collective(self.comm, self._checked, z.getArray(readonly=True))
-            out.setArray(r)
-        return out
-
     def core_args(self, A):
         """(kind, c, fn) for the PETSc engine: this rank's c; a callable (or an affine ζ, as its product
         B z + c) as a CheckedZeta of this rank's rows whose every call is collective (a failure on any
@@ -245,39 +231,18 @@ class _Zeta:
         if self.kind == 0:
             return kinds.none, None, None
         if self.kind == 1:
-            return kinds.constant, np.array(self.c.getArray(readonly=True)), None
-        zv, out = A.createVecRight(), A.createVecLeft()
+            return kinds.constant, self.c, None
+        zv, out, c = A.createVecRight(), A.createVecLeft(), _vec(A, self.c) if self.kind == 2 else None
 
         def affine(z):
             zv.setArray(z)
-            self.B.multAdd(zv, self.c, out)
+            self.B.multAdd(zv, c, out)
             return np.array(out.getArray(readonly=True))
         local = affine if self.kind == 2 else (lambda z: _collective(self.comm, self._checked, z))
         return kinds.functor, None, CheckedZeta(local, A.getLocalSize()[0])
 
 
-# ----------------------------------------------------------------------------- the pieces
-def _abs_mat(A):
-    """|A| entry-wise, in A's layout (built for a floor test: at most a few a solve)."""
-    indptr, cols, vals = A.getValuesCSR()
-    return PETSc.Mat().createAIJ(size=A.getSizes(), csr=(indptr, cols, np.abs(vals)), comm=A.getComm())
-
-
-def _rounding_level(A, q, z, zt):
-    """The serial member's rounding level of Res (detail/newton_level.hpp):
-    eps (‖|A||z| + |q|‖ + ‖|z| + |ζ(z)|‖); zt = ζ(z), None for ζ = 0."""
-    absA = _abs_mat(A)
-    za = z.copy()
-    za.abs()
-    t = z.duplicate()
-    absA.mult(za, t)
-    t.setArray(t.getArray(readonly=True) + np.abs(q.getArray(readonly=True)))
-    if zt is not None:
-        za.setArray(za.getArray(readonly=True) + np.abs(zt.getArray(readonly=True)))
-    absA.destroy()
-    return float(np.finfo(float).eps * (t.norm() + za.norm()))
-
-
+# ----------------------------------------------------------------------------- the hierarchy
 #: Options with this prefix tune the nesting hierarchy's BoomerAMG (e.g. -nrmicp_hierarchy_pc_hypre_boomeramg_P_max 4).
 _HIERARCHY_PREFIX = "nrmicp_hierarchy_"
 
@@ -319,141 +284,29 @@ def _scoped_options(prefix, values):
             opts.delValue(k)
 
 
-class _AOR:
-    """An AOR-type member as synchronous multisplitting: this rank's left matrix
-    T = αΩ2 + (D − βL_loc)Ω1 + αφΩ1 (L_loc: the strictly lower part of A's diagonal block, so one
-    rank is the serial member exactly, and nrmj is Jacobi on any number of ranks); the rest of A
-    enters through PETSc's product (Jacobi across ranks)."""
-
-    def __init__(self, A, alpha, beta, omega1, omega2, gamma):
-        lo, hi = A.getOwnershipRange()
-        indptr, cols, vals = A.getValuesCSR()
-        nloc = hi - lo
-        d = A.getDiagonal().getArray().copy()
-        bad = ~(d > 0)
-        if np.any(bad):
-            i = int(np.flatnonzero(bad)[0])
-            raise ValueError(f"A's diagonal must be positive for the modulus members (Omega2 = diag(A), the AOR "
-                             f"sweep divides by it); A[{lo + i}, {lo + i}] = {d[i]}")
-        self.w1 = np.ones(nloc) if omega1 is None else omega1
-        self.w2 = d if omega2 is None else omega2
-        self.alpha, self.gamma = alpha, gamma
-        rows = np.repeat(np.arange(nloc), np.diff(indptr))
-        lower = (cols >= lo) & (cols < lo + rows)  # strictly lower, inside this rank's block
-        SL = sp.csr_matrix((vals[lower] * self.w1[cols[lower] - lo], (rows[lower], cols[lower] - lo)),
-                           shape=(nloc, nloc))
-        self.K = (sp.diags(d * self.w1) + beta * SL).tocsr()
-        self.T = (sp.diags(alpha * self.w2 + d * self.w1) + beta * SL).tocsr()
-        self.diagonal = beta == 0 or SL.nnz == 0
-        self.Tdiag = alpha * self.w2 + d * self.w1
-        if not self.diagonal:
-            self._lower_solver()
-
-    def _lower_solver(self):
-        """The local forward substitution by PETSc (ILU(0) of a lower-triangular T is T itself)."""
-        T = self.T.tocsr()
-        T.sort_indices()
-        nloc = T.shape[0]
-        self._T = PETSc.Mat().createAIJ(size=(nloc, nloc), csr=(T.indptr.astype(PETSc.IntType),
-                                        T.indices.astype(PETSc.IntType), T.data), comm=PETSc.COMM_SELF)
-        self._ksp = PETSc.KSP().create(PETSc.COMM_SELF)
-        self._ksp.setOperators(self._T)
-        self._ksp.setType("preonly")
-        self._ksp.getPC().setType("ilu")
-        self._r, self._x = self._T.createVecs()
-
-    def start(self, g, w):
-        """x with g = Ω1(|x|+x)/γ, w = Ω2(|x|−x)/γ for a complementary (g, w) ≥ 0 (a start z)."""
-        return 0.5 * self.gamma * (np.maximum(g, 0) / self.w1 - np.maximum(w, 0) / self.w2)
-
-    def sweep(self, x, zt, Av_of):
-        """x_{k+1} from x_k and ζ(z_k) (zt); Av_of(v) returns A v + γ q's local rows."""
-        v = self.w1 * (x + np.abs(x)) + self.gamma * zt
-        r = self.K @ x + self.alpha * self.w2 * np.abs(x) - self.alpha * Av_of(v)
-        if self.diagonal:
-            return r / self.Tdiag
-        self._r.setArray(r)
-        self._ksp.solve(self._r, self._x)
-        return self._x.getArray().copy()
-
-    def z_of(self, x, zt):
-        return zt + self.w1 * (np.abs(x) + x) / self.gamma
-
-
-def _icp_residual(A, q, zeta, z, w, g, zt, upper=None):
-    """Res(z) = ‖min(Az + q, z − ζ(z))‖ (w, g, zt = ζ(z) filled); with this rank's upper bounds,
-    ‖mid(z − ζ(z), z − upper, w)‖ (the serial nrmicp.residual)."""
-    A.multAdd(z, q, w)
-    zeta(z, zt)
-    z.copy(g)
-    g.axpy(-1.0, zt)
-    m = w.duplicate()
-    wa, ga = w.getArray(readonly=True), g.getArray(readonly=True)
-    if upper is not None:
-        wa = np.maximum(z.getArray(readonly=True) - upper, wa)
-    m.setArray(np.minimum(wa, ga))
-    return m.norm()
-
-
-def _stationary(A, q, zeta, member, z, tol, maxiter, stats):
-    """Sweeps of an AOR-type member on ICP(q, A, ζ) from z (modified in place: the best iterate).
-    Returns (Res, iterations, status)."""
-    w, g, zt, v = z.duplicate(), z.duplicate(), z.duplicate(), z.duplicate()
-    Av = z.duplicate()
-    res = _icp_residual(A, q, zeta, z, w, g, zt)
-    x = member.start(g.getArray(readonly=True), w.getArray(readonly=True))
-    best = (res, z.copy(), 0)
-    gq = member.gamma
-
-    def Av_of(arr):
-        v.setArray(arr)
-        A.mult(v, Av)
-        return Av.getArray(readonly=True) + gq * q.getArray(readonly=True)
-
-    status, k = Status.MAX_ITERATIONS, 0
-    while k < maxiter:
-        if res < tol:
-            status = Status.CONVERGED
-            break
-        x = member.sweep(x, zt.getArray(readonly=True), Av_of)
-        z.setArray(member.z_of(x, zt.getArray(readonly=True)))
-        k += 1
-        res = _icp_residual(A, q, zeta, z, w, g, zt)
-        if not math.isfinite(res):
-            status = Status.DIVERGED
-            break
-        if res < best[0]:
-            best = (res, z.copy(), k)
-    if res < tol:
-        status = Status.CONVERGED
-    stats["sweeps"] = stats.get("sweeps", 0) + k
-    best[1].copy(z)
-    return best[0], best[2], status, k
-
-
 # ----------------------------------------------------------------------------- the entry points
-def _prepare(A, q, zeta, x0, comm, method, tol, maxiter, omega1, omega2, gamma, alpha, beta, hierarchy, rtol=0.0):
-    """Every check, with every rank's failure raised on all ranks; returns the PETSc objects."""
+def _prepare(A, q, zeta, x0, comm, o, it):
+    """Every check, with every rank's failure raised on all ranks: (Am, method, core Options, this
+    rank's q and x0, ζ)."""
     A_in = _collective(comm, _check_mat, A)
     Am = _as_mat(A_in, comm) if sp.issparse(A_in) else A_in
     n, nloc = Am.getSize()[0], Am.getLocalSize()[0]
+    method = o["method"]
     if isinstance(method, str) and method.lower() == "auto":
-        method = _auto_method(Am, {"hierarchy": hierarchy, "alpha": alpha, "beta": beta}, comm)
+        method = _auto_method(Am, o, comm)
 
     def local():
-        m, w1, w2 = _check_options(method, n, tol, maxiter, omega1, omega2, gamma, alpha, beta, nloc, rtol)
+        m = _choice(method, METHODS, "method")
+        opts = _core_options(o, m, nloc, it)
+        hierarchy = o["hierarchy"]
         if m != "newton" and hierarchy not in (None, "amg", "auto"):
             raise ValueError(f"hierarchy is the nested iteration of method 'newton'; got {hierarchy!r}")
         if m == "newton" and not (hierarchy in (None, "amg", "auto") or isinstance(hierarchy, (list, tuple))):
             raise ValueError(f"hierarchy must be 'amg', None or a list of PETSc prolongations; got {hierarchy!r}")
         qa = _local(q, Am, "q")
         xa = None if x0 is None else _local(x0, Am, "x0")
-        zf = _Zeta(zeta, Am, comm)
-        if m != "newton" and zf.kind == 1 and np.any(np.isneginf(zf.c)):
-            raise ValueError(f"zeta: -inf entries (rows free below) are solved by method 'newton' in "
-                             f"nrmicp.distributed, got method {m!r}")
-        return m, w1, w2, qa, xa, zf
-    m, w1, w2, qa, xa, zf = _collective(comm, local)
+        return m, opts, qa, xa, _Zeta(zeta, Am, comm)
+    m, opts, qa, xa, zf = _collective(comm, local)
     d = Am.getDiagonal()
 
     def diagonal():
@@ -464,7 +317,20 @@ def _prepare(A, q, zeta, x0, comm, method, tol, maxiter, omega1, omega2, gamma, 
             raise ValueError(f"A's diagonal must be positive (method {m!r} divides by it); "
                              f"A[{lo + i}, {lo + i}] = {da[i]}")
     _collective(comm, diagonal)
-    return Am, m, w1, w2, _vec(Am, qa), None if xa is None else _vec(Am, xa), zf.make(Am)
+    return Am, m, opts, qa, xa, zf
+
+
+def _z_update_applies(opts, method, zeta_kind):
+    """The stationary members' z-update on PETSc is 'explicit': 'solve' (asked, or what 'auto' means
+    for these options) needs a factorization of the whole A — refused naming z_update."""
+    icp = zeta_kind not in (0, 1)
+    asked = opts.z_update
+    resolved = (_core.resolved_z_update(opts.method, opts.omega2.size > 0, icp) if asked == _core.ZUpdate.auto
+                else asked.name)
+    if resolved == "solve":
+        raise ValueError(f"distributed.solve cannot apply z_update='solve' (what 'auto' means for method "
+                         f"{method!r}{' on an ICP with omega2 = I' if method == 'nrm' else ''}): it needs a "
+                         "factorization of the whole A; pass z_update='explicit'")
 
 
 def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
@@ -477,12 +343,16 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     (entry-wise or row-local ζ only). method: 'newton' — the serial library's Newton member itself
     (nrmicp::Newton on the PETSc engine, nrmicp._petsc), nested over hypre BoomerAMG's prolongations
     with hierarchy='amg', cold with None, or over a list of PETSc prolongation Mats, finest first; an
-    affine ζ runs its outer fixed point — or 'nrmj', 'nrmgs', 'nrmsor', 'nrmaor' (synchronous
-    multisplitting). upper (method 'newton'): z ≤ upper, as in :func:`nrmicp.solve`. callback(k, z, res)
-    sees this rank's rows of z; returning True on any rank stops every rank.
+    affine ζ runs its outer fixed point — or a stationary member ('nrm', 'nrmm', 'nrmaor', 'nrmsor',
+    'nrmgs', 'nrmj', 'mms', 'two_sweep'): the serial loop (nrmicp::Solver on the PETSc engine) as
+    synchronous multisplitting, each rank splitting its diagonal block (on one rank, the serial
+    member's iterates; 'nrmj' takes them on any number). upper: z ≤ upper, as in :func:`nrmicp.solve`.
+    callback(k, z, res) sees this rank's rows of z; returning True on any rank stops every rank.
     ``options`` are :func:`nrmicp.solve`'s, with its defaults, checked by the same code (one table:
-    nrmicp._options); those that cannot apply on PETSc (``_UNSUPPORTED``: scale, accelerate, anderson_m,
-    phi, theta, z_update, inner, verbose, components, zeta_jacobian) raise a ValueError naming them.
+    nrmicp._options); those that cannot apply on PETSc raise a ValueError naming them:
+    ``_UNSUPPORTED`` (scale, components, zeta_jacobian), for 'newton' also ``_UNSUPPORTED_NEWTON``
+    (inner, verbose), for the stationary members ``_UNSUPPORTED_STATIONARY`` (z_update 'solve',
+    polish). verbose prints rank 0's progress lines.
     method='auto' is nrmicp.solve's rule on every rank's rows; hierarchy='auto' is 'amg' from
     n = 4096 on (BoomerAMG: no pyamg needed).
     tol and rtol both None is nrmicp.solve's default rule (units-free Res_E, rtol 1e-10), applied by
@@ -490,46 +360,47 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     Returns a :class:`nrmicp.Result` on every rank, with ``z`` and ``w`` as PETSc Vecs
     (:func:`gather` copies one to rank 0). A failure on any rank raises on every rank.
     """
+    from . import _petsc
     comm = comm or (A.getComm() if isinstance(A, PETSc.Mat) else PETSc.COMM_WORLD)
     _collective(comm, lambda: _options.validate(options, where="distributed.solve", unsupported=_UNSUPPORTED))
     o = {**_options.defaults(), **options}
-    method, tol, rtol, maxiter, x0, hierarchy = (o[k] for k in ("method", "tol", "rtol", "maxiter", "x0", "hierarchy"))
-    omega1, omega2, gamma, alpha, beta = (o[k] for k in ("omega1", "omega2", "gamma", "alpha", "beta"))
-    polish, callback, record_history = o["polish"], o["callback"], o["record_history"]
     t_start = time.perf_counter()
-    it, units = _criterion({"tol": tol, "rtol": rtol})
-    Am, m, w1, w2, qv, z0, zf = _prepare(A, q, zeta, x0, comm, method, it["tol"], maxiter, omega1, omega2,
-                                         gamma, alpha, beta, hierarchy, it["rtol"])
+    it, units = _criterion({"tol": o["tol"], "rtol": o["rtol"]})
+    Am, m, opts, qa, xa, zf = _prepare(A, q, zeta, o["x0"], comm, o, it)
+    o["method"] = m
     ua = _upper(upper, Am, zf, comm, m)
-    A_user, q_user = Am, qv
+    A_user, q_user = Am, qa
     if units:   # the iteration runs on σA, σq: its Res is the units-free Res_E
         sigma = _units_sigma(Am)
-        Am, qv = Am.copy(), qv.copy()
+        Am, qa = Am.copy(), sigma * qa
         Am.scale(sigma)
-        qv.scale(sigma)
-        w2 = None if w2 is None else sigma * w2
-    polish = bool(_collective(comm, lambda: check_polish(polish)))
+        _units_parameters(opts, m, sigma, Am.getLocalSize()[0])
+    if m != "newton":
+        _collective(comm, _z_update_applies, opts, m, zf.kind)
+    kind, c, fn = zf.core_args(Am)
+    problem = (kind, c, fn, ua)
+    if opts.rtol > 0:   # the absolute target, on the problem the core iterates (Options::target of Res(0))
+        opts.tol = opts.target(_petsc.measure(Am.handle, qa, *problem, np.zeros_like(qa))["residual"])
+        opts.rtol = 0.0
     if m == "newton":
-        z, res, status, message, tol, fields = _newton(Am, qv, zf, z0, ua, hierarchy, it, maxiter, w1, w2, gamma,
-                                                       polish, callback, record_history, o["stall_iterations"], comm)
+        za, res, status, message, fields = _newton(_petsc, Am, qa, problem, xa, opts, o, comm)
     else:
-        tol = _target(Am, qv, zf, it["tol"], it["rtol"])
-        t_iter = time.perf_counter()
-        z, res, status, nit, iterations = _multisplitting(Am, qv, zf, z0, m, tol, maxiter, w1, w2, gamma,
-                                                          alpha, beta, {})
-        message = _core.status_message(int(status))
-        fields = dict(nit=int(nit), iterations=int(iterations), history=None, inner="none", counters={},
-                      timings={"setup": t_iter - t_start, "iterations": time.perf_counter() - t_iter})
-    criterion = {"measure": "units" if units else "paper", "target": float(tol), "value": float(res)}
-    w, g, zt = z.duplicate(), z.duplicate(), z.duplicate()
-    if units:
-        status, message = at_rounding_floor(status, message, res, tol, lambda: _rounding_level(Am, qv, z, zf(z, zt)))
-        res = _icp_residual(A_user, q_user, zf, z, w, g, zt, ua)   # the paper's Res, and w, in the user's units
+        za, res, status, message, fields = _stationary(_petsc, Am, qa, problem, xa, opts, o, comm, units)
+    criterion = {"measure": "units" if units else "paper", "target": float(opts.tol), "value": float(res)}
+    if units:   # the paper's Res, and w, in the user's units
+        status, message = at_rounding_floor(status, message, res, opts.tol, lambda: _petsc.measure(
+            Am.handle, qa, *problem, za, rounding=True)["rounding_level"])
+        got = _petsc.measure(A_user.handle, q_user, *problem, za)
+        res, wa = got["residual"], got["w"]
     else:
-        Am.multAdd(z, qv, w)
+        wa = fields.pop("w")
+    fields.pop("w", None)
     fields["timings"]["total"] = time.perf_counter() - t_start
-    return Result(z=z, w=w, success=status == Status.CONVERGED, status=Status(status), message=message,
-                  residual=float(res), criterion=criterion, method=m, ranks=comm.getSize(), **fields)
+    r = Result(z=_vec(A_user, za), w=_vec(A_user, wa), success=status == Status.CONVERGED, status=Status(status),
+               message=message, residual=float(res), criterion=criterion, method=m, ranks=comm.getSize(), **fields)
+    if opts.verbose > 0 and comm.getRank() == 0:
+        _log_final(m, r, fields["timings"]["total"])
+    return r
 
 
 def _auto_method(Am, options, comm):
@@ -542,19 +413,66 @@ def _auto_method(Am, options, comm):
 
 
 def _upper(upper, Am, zf, comm, method):
-    """This rank's rows of the upper bound (None: none); method 'newton' only."""
+    """This rank's rows of the upper bound (None: none). A -inf entry of a constant ζ on any rank
+    (a free row) makes every rank's problem a box problem: upper +inf where none is given."""
     if upper is None:
-        return None
+        free = zf.kind == 1 and _flag_max(comm, float(np.any(np.isneginf(zf.c)))) > 0
+        return np.full(Am.getLocalSize()[0], np.inf) if free and method != "newton" else None
 
     def local():
-        if method != "newton":
-            raise ValueError(f"upper: bounds are solved by method 'newton' in nrmicp.distributed, got method {method!r}")
         u = _local(upper, Am, "upper", scalar_ok=True, infinite=1)
         kind = (_core.ZetaKind.none, _core.ZetaKind.constant, _core.ZetaKind.affine, _core.ZetaKind.functor)[zf.kind]
-        c = None if zf.c is None or zf.kind != 1 else np.array(zf.c.getArray(readonly=True))
-        _bounds.check(kind, c, u, method, None)
+        _bounds.check(kind, zf.c if zf.kind == 1 else None, u, method, None)
         return u
     return _collective(comm, local)
+
+
+def _stationary(_petsc, Am, qa, problem, xa, opts, o, comm, units):
+    """A stationary member: nrmicp::Solver on the PETSc engine (nrmicp._petsc), the serial loop with
+    its every rule, driven by the serial layer's rounds (_api._Rounds: Res of z re-measured where the
+    core iterated another problem — a constant ζ's shifted LCP, the default rule's σA — and re-solved
+    with a tighter tolerance when it misses tol). Returns (z, Res, status, message, the result's other
+    fields)."""
+    t0 = time.perf_counter()
+    core = _collective(comm, lambda: _petsc.Solver(Am.handle, opts))
+    t_iter = time.perf_counter()
+    kind, c, fn, ua = problem
+    solver = _AsSerialSolver(core, o["method"], len(qa), comm.getRank() == 0)
+    measure = _Measure(_petsc, Am, qa, problem, units) if units or kind == _core.ZetaKind.constant else None
+    it = {**{k: o[k] for k in _options.names("solve")}, "tol": opts.tol, "rtol": 0.0}
+    rounds = _Rounds(solver, (qa, kind, c, ua, fn), it, None, {}, measure, xa)
+    rounds.cb = o["callback"]   # (distributed's callback(k, z, res), each rank's rows)
+    rounds.run(xa, opts.tol)
+    status, message = rounds.status(rounds.res, opts.tol)
+    timings = dict(rounds.timings, setup=t_iter - t0 + rounds.timings["setup"])
+    fields = dict(nit=int(rounds.nit), iterations=int(rounds.done_iters), history=rounds.history(),
+                  inner=rounds.best_d["inner"], counters=rounds.counters, timings=timings, w=rounds.w)
+    return rounds.z, rounds.res, Status(status), message, fields
+
+
+class _AsSerialSolver:
+    """A _petsc.Solver as _api._Rounds drives a serial Solver (its core's solve, method, n, no scaling);
+    the progress lines are rank 0's."""
+
+    def __init__(self, core, method, nloc, rank0):
+        self._core, self._petsc_core, self.method, self.n, self.rank0 = self, core, method, nloc, rank0
+        self._dr = self._dc = None
+
+    def solve(self, q, kind, c, upper, fn, x0, callback, options, progress=None):
+        return self._petsc_core.solve(q, kind, c, fn, upper, x0, callback, options, progress if self.rank0 else None)
+
+
+class _Measure:
+    """(w, Res) of z on the problem the core iterates, every rank's rows (_api._OriginalResidual's
+    part that _Rounds reads; ``weights``: the default rule's, for its label Res_E)."""
+
+    def __init__(self, _petsc, Am, qa, problem, units):
+        self._petsc, self.Am, self.qa, self.problem = _petsc, Am, qa, problem
+        self.weights = (None, None) if units else None
+
+    def __call__(self, z):
+        d = self._petsc.measure(self.Am.handle, self.qa, *self.problem, z)
+        return d["w"], d["residual"]
 
 
 def _prolongations(Am, hierarchy, comm):
@@ -568,55 +486,33 @@ def _prolongations(Am, hierarchy, comm):
     return [], [], None
 
 
-def _newton(Am, qv, zf, z0, ua, hierarchy, it, maxiter, w1, w2, gamma, polish, callback, record_history, stall, comm):
+def _newton(_petsc, Am, qa, problem, xa, opts, o, comm):
     """The Newton member: nrmicp::Newton on the PETSc engine (nrmicp._petsc), its every decision the
-    serial member's. Returns (z, Res, status, message, tol, the result's other fields)."""
-    from . import _petsc
+    serial member's. Returns (z, Res, status, message, the result's other fields)."""
     t0 = time.perf_counter()
-    Ps, As, keep = _prolongations(Am, hierarchy, comm)
-    o = _core.Options()
-    o.method, o.tol, o.rtol, o.maxiter, o.gamma = _core.Method.newton, it["tol"], it["rtol"], maxiter, float(gamma)
-    o.record_history, o.stall_iterations = bool(record_history), int(stall)
-    if w1 is not None:
-        o.omega1 = w1
-    if w2 is not None:
-        o.omega2 = w2
-    core = _collective(comm, lambda: _petsc.Newton(Am.handle, o, [P.handle for P in Ps],
+    polish = bool(_collective(comm, lambda: check_polish(o["polish"])))
+    Ps, As, keep = _prolongations(Am, o["hierarchy"], comm)
+    core = _collective(comm, lambda: _petsc.Newton(Am.handle, opts, [P.handle for P in Ps],
                                                    [C.handle for C in As] if len(As) == len(Ps) else []))
     t_iter = time.perf_counter()
-    kind, c, fn = zf.core_args(Am)
-    args = (np.array(qv.getArray(readonly=True)), kind, c, fn, ua)
-    x0 = None if z0 is None else np.array(z0.getArray(readonly=True))
-    d = core.solve(*args, x0, callback, o)
-    tol = _target_of(o, Am, qv, zf, ua)
-    z_arr, res, status, message = d["z"], d["residual"], Status(d["status"]), d["message"]
+    args = (qa, *problem)
+    d = core.solve(*args, xa, o["callback"], opts)
+    z, res, status, message, w = d["z"], d["residual"], Status(d["status"]), d["message"], d["w"]
     polished = None
     if polish:
-        p = core.polish(*args, z_arr, tol)
+        p = core.polish(*args, z, opts.tol)
         polished = p["residual"] < res
         if polished:
-            z_arr, res = p["z"], p["residual"]
-        status, message = polish_outcome(status, message, res, tol, polished, p)
+            z, res, w = p["z"], p["residual"], p["w"]
+        status, message = polish_outcome(status, message, res, opts.tol, polished, p)
         status = Status(status)
-    z = _vec(Am, z_arr)
-    report = core.hierarchy
     fields = dict(nit=int(d["nit"]), iterations=int(d["iterations"]), inner=core.inner, counters=dict(d["counters"]),
                   history=d["history"], timings={"setup": t_iter - t0, "iterations": time.perf_counter() - t_iter},
-                  **result_fields(d, report))
+                  w=w, **result_fields(d, core.hierarchy))
     if polish:
         fields["polished"] = polished
     del keep
-    return z, res, status, message, tol, fields
-
-
-def _target_of(o, Am, qv, zf, ua):
-    """The absolute target the core resolved from tol and rtol (Options::target on the bounded Res(0))."""
-    if not o.rtol > 0:
-        return o.tol
-    z = qv.duplicate()
-    z.set(0.0)
-    w, g, zt = z.duplicate(), z.duplicate(), z.duplicate()
-    return o.target(_icp_residual(Am, qv, zf, z, w, g, zt, ua))
+    return z, res, status, message, fields
 
 
 def _units_sigma(Am):
@@ -627,42 +523,6 @@ def _units_sigma(Am):
     logs.setArray(np.log2(np.where(a > 0, a, 1.0)))
     count.setArray((a > 0).astype(float))
     return sigma_from_logs(float(logs.sum()), int(round(count.sum())))
-
-
-def _target(Am, qv, zf, tol, rtol):
-    """The absolute target of the problem the iteration runs on: the core's rule (Options::target)
-    on Res(0) = ‖min(q, −ζ(0))‖₂."""
-    if not rtol > 0:
-        return tol
-    zero, zt = qv.duplicate(), qv.duplicate()
-    zero.set(0.0)
-    zf(zero, zt)
-    m = qv.duplicate()
-    m.setArray(np.minimum(qv.getArray(readonly=True), -zt.getArray(readonly=True)))
-    opts = _core.Options()
-    opts.tol, opts.rtol = tol, rtol
-    return opts.target(m.norm())
-
-
-def _start(Am, z0):
-    """z0, or zeros in A's layout."""
-    if z0 is not None:
-        return z0.copy()
-    z = Am.createVecLeft()
-    z.set(0.0)
-    return z
-
-
-def _multisplitting(Am, qv, zf, z0, m, tol, maxiter, w1, w2, gamma, alpha, beta, stats):
-    """A stationary member as the synchronous multisplitting: (z, Res, status, nit, iterations)."""
-    a, b = _AOR_FIXED.get(m, (None, None))
-    a = a if a is not None else (1.0 if alpha is None else float(alpha))
-    b = b if b is not None else (a if beta is None else float(beta))
-    member = _AOR(Am, a, b, w1, w2, float(gamma))
-    z = _start(Am, z0)
-    res, nit, status, iterations = _stationary(Am, qv, zf, member, z, tol, maxiter, stats)
-    return z, res, status, nit, iterations
-
 
 def gather(v):
     """A distributed Vec as one numpy array on rank 0 (None on the other ranks); collective."""
