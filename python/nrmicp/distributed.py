@@ -387,14 +387,12 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     else:
         za, res, status, message, fields = _stationary(_petsc, Am, qa, problem, xa, opts, o, comm, units)
     criterion = {"measure": "units" if units else "paper", "target": float(opts.tol), "value": float(res)}
+    wa = fields.pop("w")
     if units:   # the paper's Res, and w, in the user's units
         status, message = at_rounding_floor(status, message, res, opts.tol, lambda: _petsc.measure(
             Am.handle, qa, *problem, za, rounding=True)["rounding_level"])
         got = _petsc.measure(A_user.handle, q_user, *problem, za)
         res, wa = got["residual"], got["w"]
-    else:
-        wa = fields.pop("w")
-    fields.pop("w", None)
     fields["timings"]["total"] = time.perf_counter() - t_start
     r = Result(z=_vec(A_user, za), w=_vec(A_user, wa), success=status == Status.CONVERGED, status=Status(status),
                message=message, residual=float(res), criterion=criterion, method=m, ranks=comm.getSize(), **fields)
