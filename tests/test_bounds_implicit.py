@@ -292,3 +292,22 @@ def test_a_callable_upper_returning_inf_or_a_list_is_accepted():
     res = nrmicp.solve(A, q, None, upper=lambda z: up, tol=1e-12)
     assert res.success
     np.testing.assert_allclose(res.z, ref.z, rtol=0, atol=1e-12)
+
+
+# ---- the scene: a two-sided membrane under a ceiling that sags where the membrane heats it ------
+
+
+@pytest.mark.parametrize("hierarchy", ["geometric", "amg", None])
+def test_heated_two_sided_membrane_agrees_with_its_exact_fixed_point(hierarchy):
+    from nrmicp import scenes
+
+    p = scenes.build("two_sided_heated_2d", "small")   # m = 31, n = 961
+    h = p.prolongations() if hierarchy == "geometric" else hierarchy
+    res = p.solve(method="newton", hierarchy=h, tol=1e-11)
+    assert res.success, res.message
+    assert rel_err(res.z, p.z_exact) < AGREE
+    u = p.upper(res.z)
+    assert np.max(p.reference["ceiling"] - u) > 1e-3   # the ceiling did sag
+    assert_mcp_at(p.A, p.q, res.z, p.zeta, u, res.active_mask, tol=1e-8)
+    assert (res.active_mask == 1).sum() > 0 and (res.active_mask == -1).sum() > 0   # touches both
+    assert p.residual(res.z) == pytest.approx(res.residual, rel=1e-6, abs=1e-12)
