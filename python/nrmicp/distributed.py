@@ -478,7 +478,8 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     (nrmicp::Newton on the PETSc engine, nrmicp._petsc), nested over hypre BoomerAMG's prolongations
     with hierarchy='amg', cold with None, or over a list of PETSc prolongation Mats, finest first; an
     affine ζ runs its outer fixed point — or 'nrmj', 'nrmgs', 'nrmsor', 'nrmaor' (synchronous
-    multisplitting). upper (method 'newton'): z ≤ upper, as in :func:`nrmicp.solve`. callback(k, z, res)
+    multisplitting). upper (method 'newton'): z ≤ upper, as in :func:`nrmicp.solve`, constant only (an Affine or callable upper
+    raises NotImplementedError). callback(k, z, res)
     sees this rank's rows of z; returning True on any rank stops every rank.
     ``options`` are :func:`nrmicp.solve`'s, with its defaults, checked by the same code (one table:
     nrmicp._options); those that cannot apply on PETSc (``_UNSUPPORTED``: scale, accelerate, anderson_m,
@@ -547,6 +548,10 @@ def _upper(upper, Am, zf, comm, method):
         return None
 
     def local():
+        if callable(upper) or isinstance(upper, Affine):   # (the core would take it; the glue's Res does not)
+            raise NotImplementedError("upper: an implicit upper bound (Affine or callable) is solved by nrmicp.solve "
+                                      "only; nrmicp.distributed.solve takes a constant upper (a number, this rank's "
+                                      "rows or a Vec)")
         if method != "newton":
             raise ValueError(f"upper: bounds are solved by method 'newton' in nrmicp.distributed, got method {method!r}")
         u = _local(upper, Am, "upper", scalar_ok=True, infinite=1)

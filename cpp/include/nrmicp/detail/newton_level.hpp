@@ -364,6 +364,11 @@ class NewtonLevel {
     ScopedTimer t(timings().zeta);
     return zeta.eval(v, zv);
   }
+  /// u(v) of an implicit upper bound into uv, timed as ζ is; false when u failed (Zeta::eval_upper).
+  bool eval_upper(const Zeta<StorageIndex>& zeta, const Vector& v, Vector& uv) const {
+    ScopedTimer t(timings().zeta);
+    return zeta.eval_upper(v, uv);
+  }
   Result sweep(const Vector& q, const RowMatrix* B, const Vector* c, const Vector& z0, int sweeps, double tol) {
     using Z = Zeta<StorageIndex>;
     if constexpr (Engine<MatrixType>::serial) return sweep(q, B ? Z::affine(*B, *c) : Z::none(), z0, sweeps, tol);

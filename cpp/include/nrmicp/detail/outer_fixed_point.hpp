@@ -1,6 +1,8 @@
-// nrmicp — the Newton member on a callable ζ without a Jacobian: the outer fixed point
+// nrmicp — the Newton member on a callable ζ without a Jacobian, or on bounds that depend on z
+// (an affine ζ or an implicit upper bound u with bounds): the outer fixed point
 //
-//   z ← S(ζ(z)),   S(ψ) = the solution of the obstacle problem z ≥ ψ (Newton, newton_run.hpp),
+//   z ← S(ζ(z), u(z)),   S(ψ, υ) = the solution of the box problem ψ ≤ z ≤ υ (Newton, newton_run.hpp;
+//                       υ none: the obstacle problem z ≥ ψ),
 //
 // as a step of the family's loop (solver.hpp), so that the one Monitor (detail/stopping.hpp)
 // decides when it stops, keeps its history and best iterate and calls the callback. Each inner
@@ -29,17 +31,22 @@
 namespace nrmicp::detail {
 
 /// `Run` (detail::NewtonRun) provides, each counted in its tally:
-///   Result obstacle(const Vector& psi, const Vector* z, bool first, double tol)
-///                                                         the inner solve S(ψ) from z (null: from
+///   Frozen                                                the bounds frozen at one z (ζ(z), and u(z)
+///                                                         when u is implicit), constructible from n,
+///                                                         with swap
+///   Result obstacle(const Frozen& b, const Vector* z, bool first, double tol)
+///                                                         the inner solve S(b) from z (null: from
 ///                                                         z = ψ) to Res < tol (0: a settled active
 ///                                                         set); the first one may start nested
-///   double icp_residual(const Vector& v, Vector& zv)      Res of the ICP at v, ζ(v) in zv (NaN: ζ failed)
+///   double icp_residual(const Vector& v, Frozen& b)       Res of the ICP at v, the bounds at v in b
+///                                                         (NaN: ζ or u failed)
 ///   Result sweep(const Vector& z0, int sweeps)            a run of the fallback member
 ///   int sweeps_spent() const, int sweep_budget() const
 template <typename Run>
 class OuterFixedPoint {
  public:
   using Vector = Eigen::VectorXd;
+  using Frozen = typename Run::Frozen;
 
   /// From z (`given`: z is the user's start; else the inner solve starts as the problem's own).
   /// `memory`: Anderson's (0: the plain fixed point); `forcing`: the inner solves' (0: exact).
@@ -113,7 +120,8 @@ class OuterFixedPoint {
   void give_up() { end_ = StepEnd{runs_.give_up(run_.sweeps_spent()), {}}; }
 
   Run& run_;
-  Vector z_, psi_, psi_new_;  // z, ζ(z), ζ of the trial
+  Vector z_;
+  Frozen psi_, psi_new_;  // the bounds frozen at z, at the trial
   bool given_, first_ = true;
   double r_;
   NonMonotone test_;
