@@ -269,6 +269,27 @@ def case_boomeramg():
             "left_all": sorted(k for k in PETSc.Options().getAll() if k.startswith("nrmicp"))}
 
 
+def case_dense():
+    """The rule for an aggressive first level (distributed._dense_first_level) against what it predicts:
+    whether hypre's classical first coarse level (agg_nl 0, the user's option winning) holds more nonzeros
+    than A; and the first level of the hierarchy the rule picks."""
+    from nrmicp.scenes.finite_elements import fe_obstacle
+    out = {}
+    for name, pb in (("3d", obstacle_3d(15, exact=False)), ("2d", obstacle_2d(63, exact=False)),
+                     ("p1", fe_obstacle("P1", 3))):
+        A = sp.csr_matrix(pb.A)
+        M = mat(A, *split(A.shape[0]))
+        nnz = lambda C: C.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"]  # noqa: E731
+        hier = PETSc.Options("nrmicp_hierarchy_")
+        hier["pc_hypre_boomeramg_agg_nl"] = 0
+        classical = dist._hierarchy(M, COMM, "case_dense_c_")[1][0]
+        hier.delValue("pc_hypre_boomeramg_agg_nl")
+        chosen = dist._hierarchy(M, COMM, "case_dense_r_")[1][0]
+        out[name] = {"rule": bool(dist._dense_first_level(M, COMM)), "classical": nnz(classical) / A.nnz,
+                     "chosen": nnz(chosen) / A.nnz}
+    return out
+
+
 def case_floor():
     """tol far below Res's rounding level: the Newton member stops at the floor, says so and
     names it (the serial member's rule and message), on the obstacle and an affine ICP."""
@@ -507,7 +528,7 @@ def case_options():
 if __name__ == "__main__":
     name, args = sys.argv[1], sys.argv[2:]
     result = {"agreement": lambda: case_agreement(), "partition": case_partition,
-              "bad": lambda: case_bad(args[0], args[1]), "boomeramg": case_boomeramg,
+              "bad": lambda: case_bad(args[0], args[1]), "boomeramg": case_boomeramg, "dense": case_dense,
               "floor": case_floor, "overshoot": case_overshoot, "sweeps": case_sweeps,
               "warm": case_warm, "units": case_units, "engine": lambda: case_engine(*args), "options": case_options,
               "fuzz": lambda: case_fuzz(int(args[0]))}[name]()

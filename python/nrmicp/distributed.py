@@ -76,6 +76,16 @@ def _flag_max(comm, value: float) -> float:
     return out
 
 
+def _flag_sum(comm, value: float) -> float:
+    """sum over ranks of one float (as _flag_max)."""
+    v = PETSc.Vec().createMPI((1, PETSc.DECIDE), comm=comm)
+    v.setValue(v.getOwnershipRange()[0], value)
+    v.assemble()
+    out = v.sum()
+    v.destroy()
+    return out
+
+
 def _agree(comm, exc: BaseException | None) -> None:
     """Every rank calls this after a step that may fail on some ranks only. When any rank
     failed, every rank raises the same exception (type and message of the lowest failing rank,
@@ -282,12 +292,37 @@ def _rounding_level(A, q, z, zt):
 _HIERARCHY_PREFIX = "nrmicp_hierarchy_"
 
 
+#: hypre's options for one aggressive first level (2 paths, multipass weights, at most 4 a row), taken where
+#: classical coarsening's first level would hold more nonzeros than A (_dense_first_level).
+_AGGRESSIVE = {"agg_nl": 1, "agg_num_paths": 2, "P_max": 4}
+#: A's distance-two neighbourhoods more than this many times its rows' (A²'s nonzeros over A's) on a stencil of
+#: at most _SPARSE_STENCIL nonzeros a row: 7-point 3D grids (3.5); not 5-point 2D grids (2.6), P1 triangles
+#: (2.7) or P2 (4.1 but 11.4 a row), whose classical first levels are sparser than A (docs/MEASUREMENTS.md).
+_DENSE_GROWTH = 3.0
+_SPARSE_STENCIL = 8.0
+
+
+def _dense_first_level(A, comm, sample=2000) -> bool:
+    """Whether BoomerAMG's classical first coarse level would be denser than A, judged by A's
+    neighbourhood growth on up to `sample` evenly spaced rows of each rank's diagonal block (every
+    rank decides alike: sums over ranks)."""
+    indptr, indices, data = A.getDiagonalBlock().getValuesCSR()
+    m = len(indptr) - 1
+    B = sp.csr_matrix((np.ones(len(indices)), indices, indptr), shape=(m, m))
+    S = B[np.unique(np.linspace(0, m - 1, min(m, sample)).astype(int))] if m else B
+    rows, first, second = (_flag_sum(comm, float(v)) for v in (S.shape[0], S.nnz, (S @ B).nnz))
+    return first > 0 and first / rows <= _SPARSE_STENCIL and second / first > _DENSE_GROWTH
+
+
 def _hierarchy(A, comm, prefix):
     """hypre BoomerAMG's classical prolongations and its Galerkin operators PᵀAP, finest first
-    (A excluded), read through PCHMG. PCMG's smoothers are never applied here: Richardson without
+    (A excluded), read through PCHMG, with one aggressive first level where a classical one would be
+    denser than A (_dense_first_level). PCMG's smoothers are never applied here: Richardson without
     a preconditioner spares their set-up (Chebyshev's eigenvalue estimates: docs/MEASUREMENTS.md)."""
     ours = {"pc_hmg_reuse_interpolation": True, "hmg_inner_pc_type": "hypre",
             "mg_levels_ksp_type": "richardson", "mg_levels_pc_type": "none"}
+    if _dense_first_level(A, comm):
+        ours.update({"hmg_inner_pc_hypre_boomeramg_" + k: v for k, v in _AGGRESSIVE.items()})
     # the user's -nrmicp_hierarchy_pc_hypre_boomeramg_... options reach hypre's set-up
     ours.update({"hmg_inner_" + k[len(_HIERARCHY_PREFIX):]: v for k, v in PETSc.Options().getAll().items()
                  if k.startswith(_HIERARCHY_PREFIX)})
