@@ -61,3 +61,27 @@ def test_expanding_zeta_ends_honestly():
     err = float(np.linalg.norm(np.minimum(p.A @ r.z + p.q, r.z - zeta(r.z))))
     assert err == pytest.approx(r.residual, rel=1e-6, abs=1e-12)
     assert r.success == (err < 1e-8)
+
+
+@pytest.mark.parametrize("n", [255, 511])
+def test_a_change_of_units_of_a_and_q_changes_no_decision_under_the_default_rule(n):
+    # A, q multiplied by s leave z and the outer map z -> S(zeta(z)) unchanged. Before, the outer
+    # steps were judged by Res, which weighs w (A's units) against z - zeta(z): at n = 511 every good
+    # outer step on sigma*A looked worse than z = 0 and the solve ended MAX_ITERATIONS 6e-3 off
+    p = scenes.thermoforming_1d(n, exact=False)
+    runs = [nrmicp.solve(s * p.A, s * p.q, p.zeta, method="newton") for s in (1e-4, 1.0, 1e4)]
+    ref = runs[1].z
+    for r in runs:
+        assert r.status == nrmicp.Status.CONVERGED, r.message
+        assert r.fallback_sweeps == 0  # the outer steps contract: no sweeps of the fallback member
+        assert np.max(np.abs(r.z - ref)) <= 1e-8 * np.max(np.abs(ref))
+        assert abs(r.outer_iterations - runs[1].outer_iterations) <= 1, [x.outer_iterations for x in runs]
+
+
+def test_default_rule_solves_thermoforming_511_to_the_plain_fixed_point_of_exact_obstacle_solves():
+    p = scenes.thermoforming_1d(511)  # z_exact: numpy's fixed point of exact obstacle solves (scenes/_exact.py)
+    r = nrmicp.solve(p.A, p.q, p.zeta)
+    assert r.success and r.method == "newton", r.message
+    assert np.max(np.abs(r.z - p.z_exact)) <= 1e-10 * np.max(np.abs(p.z_exact))
+    assert complementarity(p.A, p.q, p.zeta, r.z) < 1e-6  # (A ~ 1/h²: w's rounding alone is ~1e-9)
+    assert r.outer_iterations <= 10

@@ -338,13 +338,14 @@ def choose_method(A: sp.csr_matrix, options: dict, margin=None) -> str:
 
 def _outer_hint(solver, measure) -> str:
     """Advice for a newton solve on a callable ζ without Jacobian (the outer fixed point) that failed
-    under the default rule: on σA its steps can stall where on A itself they do not (a known limit,
-    docs/SPEC.md "The default stopping rule"); the paper's tol iterates on A."""
+    under the default rule: its target, 1e-10 of Res_E(0), may lie below what ζ's own evaluation
+    resolves (a ζ that solves an ill-conditioned problem inside: docs/MEASUREMENTS.md, "The outer
+    fixed point in z's units"); tol or rtol sets a target of the user's own."""
     if solver.method != "newton" or solver.scale != "units" or measure.weights is None \
             or measure.kind != ZetaKind.functor:
         return ""
-    return ("; the default rule iterates on sigma*A, where the outer fixed point on a callable zeta can stall "
-            "(thermoforming 1D, n >= 511): pass tol (the paper's Res, e.g. tol=1e-8), which iterates on A itself")
+    return ("; the default target (Res_E below 1e-10 of its value at z = 0) may lie below what zeta itself resolves "
+            "(the outer steps stopped contracting): pass tol (the paper's Res, e.g. tol=1e-8) or rtol")
 
 
 def _member_hint(A: sp.csr_matrix, method: str) -> str:
