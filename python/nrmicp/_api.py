@@ -735,14 +735,15 @@ class _OriginalResidual:
         return _bounds.active_mask(z, w, g, self.upper)
 
     def rounding_level(self, z) -> float:
-        """ε (‖d_r(|A||z| + |q|)‖₂ + ‖(|z| + |z − g|)/d_c‖₂): what double precision can resolve of
-        Res_E at z (the Newton member's floor, newton_level.hpp, in the default rule's measure)."""
+        """ε ‖t‖₂, t the rounding of each row's term of Res_E at z (_bounds.term_rounding: d_r(|A||z| + |q|)
+        where it is d_r w, (|z| + |ζ(z)|)/d_c where it is g/d_c): what double precision can resolve of Res_E
+        (the Newton member's floor, newton_level.hpp, in the default rule's measure)."""
         dr, dc = self.weights
+        w, g = self._wg(z)
         with np.errstate(over="ignore", invalid="ignore"):
-            t = dr * (abs(self.A) @ np.abs(z) + np.abs(self.qv))
-            zeta = np.abs(z - self._wg(z)[1])
-            u = (np.abs(z) + np.where(np.isfinite(zeta), zeta, 0.0)) / dc   # a -inf bound adds no rounding
-        return float(np.finfo(float).eps * (_norm(t) + _norm(u)))
+            tw = dr * (abs(self.A) @ np.abs(z) + np.abs(self.qv))
+            t = _bounds.term_rounding(tw, z / dc, dr * w, g / dc, None if self.upper is None else self.upper / dc)
+        return float(np.finfo(float).eps * _norm(t))
 
 
 #: The default rule accepts a Res_E within this factor of its rounding level: the Newton member's

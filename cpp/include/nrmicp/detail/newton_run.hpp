@@ -602,6 +602,10 @@ struct NewtonRun<MatrixType>::Outer {
     return inner;
   }
   double icp_residual(const Vector& v, Vector& zv) { return run.levels_.finest->icp_residual(q, zeta, v, zv, w, run.upper_); }
+  double rounding_level(const Vector& v, const Vector& zv) const {
+    return run.levels_.finest->rounding_level(v, q, v - zv, w, run.upper_);
+  }
+  double tol() const { return run.o_.tol; }
   /// (none with an upper bound: the fallback member has no box; the outer loop then ends at its best iterate)
   Result sweep(const Vector& z0, int sweeps) {
     if (run.upper_.size()) {

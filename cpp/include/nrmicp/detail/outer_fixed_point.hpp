@@ -16,6 +16,8 @@
 // it was mixed from; else the plain G of that iterate replaces it and the memory is cleared. A plain
 // step whose ‖G − z‖ fails the non-monotone test hands over to runs of the fallback member on the
 // whole ICP from the best iterate by Res (SweepRuns, as a level's loop does: detail/globalization.hpp).
+// A move that meets Res's rounding floor (met_floor, the rule of a level's loop, with the level row by
+// row) ends the solve STAGNATED with floor_message, which the default rule takes for converged.
 #pragma once
 
 #include "../result.hpp"
@@ -40,6 +42,9 @@ namespace nrmicp::detail {
 ///                                                         z = ψ) to Res < tol (0: a settled active
 ///                                                         set); the first one may start nested
 ///   double icp_residual(const Vector& v, Vector& zv)      Res of the ICP at v, ζ(v) in zv (NaN: ζ failed)
+///   double rounding_level(const Vector& v, const Vector& zv)  the rounding level of Res at the v of the
+///                                                         last icp_residual (ζ(v) = zv)
+///   double tol() const                                    the solve's tol
 ///   Result sweep(const Vector& z0, int sweeps)            a run of the fallback member
 ///   int sweeps_spent() const, int sweep_budget() const, const Comm& comm() const
 template <typename Run>
@@ -64,6 +69,7 @@ class OuterFixedPoint {
   /// One outer step: G(z), which judges how z was reached, then the next iterate (Anderson's mix,
   /// or G(z)); or a run of the fallback member when a plain step is not acceptable.
   void move_x(Iterate&) {
+    if (floor_end_) return void(end_ = floor_end_);  // (after the Monitor has looked at the iterate that met it)
     Result inner = run_.obstacle(psi_, given_ || !first_ ? &z_ : nullptr, first_, 0.0);
     first_ = false;
     const double f = run_.comm().stable_norm(inner.z - z_);  // ‖G(z) − z‖, z's units
@@ -99,7 +105,7 @@ class OuterFixedPoint {
     f_from_ = f;
     z_.swap(mixed_z_);
     psi_.swap(psi_new_);
-    r_ = r;
+    judge_floor(r);
     mixed_ = true;
     return true;
   }
@@ -116,9 +122,21 @@ class OuterFixedPoint {
     if (std::isnan(r)) return void(r_ = r);
     z_.swap(v);
     psi_.swap(psi_new_);
+    judge_floor(r);
+  }
+  /// z (Res r, just made from the iterate of Res r_) met Res's rounding floor: the next move ends the solve.
+  void judge_floor(double r) {
+    double level = 0;
+    if (met_floor(r_, r, run_.tol(), [&] { return level = run_.rounding_level(z_, psi_); }))
+      floor_end_ = StepEnd{Status::Stagnated,
+                           floor_message(std::min(best_r_, r), run_.tol(), level,
+                                         "an outer step did not halve Res, within " + to_text(kFloorFactor) +
+                                         "x of its rounding level before and after it")};
     r_ = r;
   }
+
   void fall_back() {
+    if (best_at_floor()) return;
     const int k = runs_.next(run_.sweeps_spent());
     if (!k) return give_up();
     const Result sw = run_.sweep(best_z_, k);
@@ -128,6 +146,18 @@ class OuterFixedPoint {
     judged_ = false;  // the sweeps' iterate is no outer step: its ‖G − z‖ starts the test afresh
     aa_.reset();  // the differences before the sweeps describe another stretch of the map
     if (r_ < best_r_) { best_z_ = z_; best_r_ = r_; }
+  }
+  /// The best iterate's Res is within kFloorFactor of its rounding level: the steps that no longer
+  /// contract are rounding's, and no sweeps bring Res lower; the solve ends there with floor_message.
+  bool best_at_floor() {
+    Vector zeta_best(best_z_.size());
+    const double r = run_.icp_residual(best_z_, zeta_best);  // (w of the best iterate, for its level)
+    const double level = run_.rounding_level(best_z_, zeta_best);
+    if (!(std::max(r, best_r_) <= kFloorFactor * level)) return false;
+    end_ = StepEnd{Status::Stagnated, floor_message(best_r_, run_.tol(), level,
+                                                    "the outer steps stopped contracting, the best iterate's Res within " +
+                                                    to_text(kFloorFactor) + "x of its rounding level")};
+    return true;
   }
   void give_up() { end_ = StepEnd{runs_.give_up(run_.sweeps_spent()), {}}; }
 
@@ -147,7 +177,7 @@ class OuterFixedPoint {
   double f_from_ = kNone;   // ‖G − z‖ of the iterate z was mixed from
   bool accelerate_;
   long long rejections_ = 0;
-  std::optional<StepEnd> end_;
+  std::optional<StepEnd> end_, floor_end_;
 };
 
 }  // namespace nrmicp::detail
