@@ -339,13 +339,14 @@ def choose_method(A: sp.csr_matrix, options: dict, margin=None) -> str:
 
 def _outer_hint(solver, measure) -> str:
     """Advice for a newton solve on a callable ζ without Jacobian (the outer fixed point) that failed
-    under the default rule: on σA its steps can stall where on A itself they do not (a known limit,
-    docs/SPEC.md "The default stopping rule"); the paper's tol iterates on A."""
+    under the default rule: its target, 1e-10 of Res_E(0), may lie below what ζ's own evaluation
+    resolves (a ζ that solves an ill-conditioned problem inside: docs/MEASUREMENTS.md, "The outer
+    fixed point in z's units"); tol or rtol sets a target of the user's own."""
     if solver.method != "newton" or solver.scale != "units" or measure.weights is None \
             or measure.kind != ZetaKind.functor:
         return ""
-    return ("; the default rule iterates on sigma*A, where the outer fixed point on a callable zeta can stall "
-            "(thermoforming 1D, n >= 511): pass tol (the paper's Res, e.g. tol=1e-8), which iterates on A itself")
+    return ("; the default target (Res_E below 1e-10 of its value at z = 0) may lie below what zeta itself resolves "
+            "(the outer steps stopped contracting): pass tol (the paper's Res, e.g. tol=1e-8) or rtol")
 
 
 def _member_hint(A: sp.csr_matrix, method: str) -> str:
@@ -735,14 +736,15 @@ class _OriginalResidual:
         return _bounds.active_mask(z, *self._wg(z))
 
     def rounding_level(self, z) -> float:
-        """ε (‖d_r(|A||z| + |q|)‖₂ + ‖(|z| + |z − g|)/d_c‖₂): what double precision can resolve of
-        Res_E at z (the Newton member's floor, newton_level.hpp, in the default rule's measure)."""
+        """ε ‖t‖₂, t the rounding of each row's term of Res_E at z (_bounds.term_rounding: d_r(|A||z| + |q|)
+        where it is d_r w, (|z| + |ζ(z)|)/d_c where it is g/d_c): what double precision can resolve of Res_E
+        (the Newton member's floor, newton_level.hpp, in the default rule's measure)."""
         dr, dc = self.weights
+        w, g = self._wg(z)
         with np.errstate(over="ignore", invalid="ignore"):
-            t = dr * (abs(self.A) @ np.abs(z) + np.abs(self.qv))
-            zeta = np.abs(z - self._wg(z)[1])
-            u = (np.abs(z) + np.where(np.isfinite(zeta), zeta, 0.0)) / dc   # a -inf bound adds no rounding
-        return float(np.finfo(float).eps * (_norm(t) + _norm(u)))
+            tw = dr * (abs(self.A) @ np.abs(z) + np.abs(self.qv))
+            t = _bounds.term_rounding(tw, z / dc, dr * w, g / dc, None if self.upper is None else self.upper / dc)
+        return float(np.finfo(float).eps * _norm(t))
 
 
 #: The default rule accepts a Res_E within this factor of its rounding level: the Newton member's

@@ -274,18 +274,24 @@ def _abs_mat(A):
 
 
 def _rounding_level(A, q, z, zt):
-    """The serial member's rounding level of Res (detail/newton_level.hpp):
-    eps (‖|A||z| + |q|‖ + ‖|z| + |ζ(z)|‖); zt = ζ(z), None for ζ = 0."""
+    """The serial member's rounding level of Res (detail/newton_level.hpp): eps ‖t‖, t the rounding of
+    each row's term of Res (_bounds.term_rounding); zt = ζ(z), None for ζ = 0."""
     absA = _abs_mat(A)
     za = z.copy()
     za.abs()
     t = z.duplicate()
     absA.mult(za, t)
-    t.setArray(t.getArray(readonly=True) + np.abs(q.getArray(readonly=True)))
-    if zt is not None:
-        za.setArray(za.getArray(readonly=True) + np.abs(zt.getArray(readonly=True)))
     absA.destroy()
-    return float(np.finfo(float).eps * (t.norm() + za.norm()))
+    w = z.duplicate()
+    A.multAdd(z, q, w)
+    zl = z.getArray(readonly=True)
+    g = zl - zt.getArray(readonly=True) if zt is not None else zl
+    t.setArray(_bounds.term_rounding(t.getArray(readonly=True) + np.abs(q.getArray(readonly=True)), zl,
+                                     w.getArray(readonly=True), g, None))
+    level = float(np.finfo(float).eps * t.norm())
+    for v in (za, t, w):
+        v.destroy()
+    return level
 
 
 #: Options with this prefix tune the nesting hierarchy's BoomerAMG (e.g. -nrmicp_hierarchy_pc_hypre_boomeramg_P_max 4).

@@ -34,6 +34,15 @@ inline double bounded_residual(const Eigen::VectorXd& w, const Eigen::VectorXd& 
   return comm.stable_norm((above > g.array()).select(above.max(-g.array()), g.array().min(above.max(w.array()))).matrix());
 }
 
+/// The rounding error of row i's term of bounded_residual, over ε: of w_i = (Az + q)_i, `tw` (the row
+/// of |A||z| + |q|), where the term is w_i; of g_i = z_i − ζ_i(z), |z_i| + |ζ_i(z)|, where it is g_i; of
+/// z_i − u_i, |z_i| + |u_i|, where it is that; the larger of tw and g's on a tie w_i = g_i.
+inline double term_rounding(double tw, double w, double g, double z, const Eigen::VectorXd& upper, Eigen::Index i) {
+  const double tg = std::abs(z) + std::abs(z - g);
+  if (upper.size() && z - upper[i] > w) return g < z - upper[i] ? tg : std::abs(z) + std::abs(upper[i]);
+  return w < g ? tw : g < w ? tg : std::max(tw, tg);
+}
+
 /// z = y + s of the box problem in y = z − s (hi: its upper bounds, empty for none), a row on its
 /// upper bound exactly `upper` ((u − s) + s may miss u by an ulp).
 inline Eigen::VectorXd unshift(const Eigen::VectorXd& y, const Eigen::VectorXd& s, const Eigen::VectorXd& hi,

@@ -219,9 +219,6 @@ struct NewtonTuning {
   /// The outer fixed point on a callable ζ without its Jacobian (detail::OuterFixedPoint): Anderson's
   /// memory on the outer map z ↦ S(ζ(z)) (docs/MEASUREMENTS.md, "The outer fixed point, accelerated").
   static constexpr int outer_memory = 3;
-  /// Its inner obstacle solves stop at this fraction of the outer iterate's Res (inexact while the
-  /// outer map still moves; exact, to a settled set, once Res is near tol: the inner loop settles first).
-  static constexpr double outer_forcing = 0.1;
   /// The semismooth loop's outer steps (solve_semismooth) are used while their obstacle solve's Res is
   /// below this fraction of the ICP's Res where it started (else the obstacle problem was not solved:
   /// an LCP of a matrix that is no P-matrix may have no solution the steps find).
@@ -448,8 +445,7 @@ class NewtonRun {
     const Vector z_start = z0 ? *z0 : Vector::Zero(n);
     Outer outer{*this, q, zeta, {}, Vector(n)};
     Iterate s;
-    OuterFixedPoint<Outer> step(outer, z_start, z0 != nullptr, s, NewtonTuning::outer_memory,
-                                NewtonTuning::outer_forcing);
+    OuterFixedPoint<Outer> step(outer, z_start, z0 != nullptr, s, NewtonTuning::outer_memory);
     Result out;
     static const Vector no_shift;
     Monitor monitor(o_, hooks_.callback, hooks_.poll, hooks_.progress, no_shift, out, n);
@@ -657,6 +653,10 @@ struct NewtonRun<MatrixType>::Outer {
            " rows (by up to " + to_text(comm().max(most)) + "), where no z lies between them (each outer step took " +
            "upper(z) as the lower bound there)";
   }
+  double rounding_level(const Vector& v, const Frozen& b) const {
+    return run.levels_.finest->rounding_level(v, q, v - b.lower, w, upper(b));
+  }
+  double tol() const { return run.o_.tol; }
   /// (none with an upper bound: the fallback member has no box; the outer loop then ends at its best iterate)
   Result sweep(const Vector& z0, int sweeps) {
     if (zeta.bounded()) {
