@@ -740,10 +740,10 @@ class _OriginalResidual:
         where it is d_r w, (|z| + |ζ(z)|)/d_c where it is g/d_c): what double precision can resolve of Res_E
         (the Newton member's floor, newton_level.hpp, in the default rule's measure)."""
         dr, dc = self.weights
-        w, g = self._wg(z)
+        w, g, u = self._wg(z)
         with np.errstate(over="ignore", invalid="ignore"):
             tw = dr * (abs(self.A) @ np.abs(z) + np.abs(self.qv))
-            t = _bounds.term_rounding(tw, z / dc, dr * w, g / dc, None if self.upper is None else self.upper / dc)
+            t = _bounds.term_rounding(tw, z / dc, dr * w, g / dc, None if u is None else u / dc)
         return float(np.finfo(float).eps * _norm(t))
 
 
