@@ -15,6 +15,10 @@ Problems:
     OPENBLAS_NUM_THREADS=1 python benchmarks/qvi_outer.py
     OPENBLAS_NUM_THREADS=1 python benchmarks/qvi_outer.py --achp 63 255 --thermo2d 31 63
     OPENBLAS_NUM_THREADS=1 python benchmarks/qvi_outer.py --achp 1023 4095 --thermo2d --tol default --messages
+    OPENBLAS_NUM_THREADS=1 python benchmarks/qvi_outer.py --obstacle
+
+--obstacle adds the CPU s of one obstacle solve of the same size (the same A, q, method and tol, zeta frozen
+at the answer's zeta(z) as a constant obstacle) and the QVI's CPU over it.
 
 Run it against two builds with PYTHONPATH to compare them. Every answer is checked in numpy:
 err = ||min(A z + q, z - zeta(z))||_inf, measured independently of the solver's Res.
@@ -97,13 +101,21 @@ def check(A, q, zeta, z):
     return float(np.max(np.abs(np.minimum(A @ z + q, z - zeta(z)))))
 
 
-def run(label, n, A, q, zeta, tol=1e-8, messages=False, **kw):
+def run(label, n, A, q, zeta, tol=1e-8, messages=False, obstacle=False, **kw):
+    tols = {} if tol is None else {"tol": tol}
     t0 = time.process_time()
-    r = nrmicp.solve(A, q, zeta, method="newton", **({} if tol is None else {"tol": tol}), **kw)
+    r = nrmicp.solve(A, q, zeta, method="newton", **tols, **kw)
     cpu = time.process_time() - t0
     err = check(A, q, zeta, r.z)
+    extra = ""
+    if obstacle:   # one obstacle solve of the same size: zeta frozen at zeta(z*)
+        psi = np.array(zeta(r.z))
+        t0 = time.process_time()
+        nrmicp.solve(A, q, psi, method="newton", **tols, **kw)
+        cpu_obstacle = time.process_time() - t0
+        extra = f" {cpu_obstacle:.3f} | {cpu / cpu_obstacle:.1f} |"
     print(f"| {label} | {n:,} | {r.outer_iterations} | {r.linear_solves} | {r.fallback_sweeps} | {r.status.name} | "
-          f"{r.residual:.1e} | {err:.1e} | {cpu:.2f} |", flush=True)
+          f"{r.residual:.1e} | {err:.1e} | {cpu:.3f} |{extra}", flush=True)
     if messages:
         print(f"|   | {r.message} |", flush=True)
     return r
@@ -115,10 +127,13 @@ def main(argv=None):
     ap.add_argument("--thermo2d", type=int, nargs="*", default=[31, 63, 127], help="2D grid sides m (n = m^2)")
     ap.add_argument("--tol", default="1e-8", help="tol of every solve ('default': the default stopping rule)")
     ap.add_argument("--messages", action="store_true", help="print each solve's message under its row")
+    ap.add_argument("--obstacle", action="store_true", help="also one obstacle solve of the same size (zeta frozen)")
     args = ap.parse_args(argv)
-    kw = {"tol": None if args.tol == "default" else float(args.tol), "messages": args.messages}
-    print("| problem | n | outer steps | linear solves | fallback sweeps | status | Res | numpy err | CPU s |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    kw = {"tol": None if args.tol == "default" else float(args.tol), "messages": args.messages,
+          "obstacle": args.obstacle}
+    extra = (" obstacle CPU s | QVI / obstacle |", "---|---|") if args.obstacle else ("", "")
+    print("| problem | n | outer steps | linear solves | fallback sweeps | status | Res | numpy err | CPU s |" + extra[0])
+    print("|---|---|---|---|---|---|---|---|---|" + extra[1])
     for n in args.achp:
         run("ACHP-style 1D", n, *achp_problem(n)[:3], **kw)
     strong = {"kappa": 2.0, "delta": 1.0}

@@ -103,11 +103,21 @@ def test_qvi_operator_table():
 
 def test_qvi_outer_table():
     # the thermoforming QVIs without a Jacobian (benchmarks/qvi_outer.py), on its smallest sizes
-    rows = table_rows(run("qvi_outer.py", "--achp", "63", "--thermo2d", "15"))
+    rows = table_rows(run("qvi_outer.py", "--achp", "63", "--thermo2d", "15", "--obstacle"))
     assert [r[0] for r in rows] == ["ACHP-style 1D", "thermoforming_2d", "thermoforming_2d κ=2 δ=1",
                                     "thermoforming_2d κ=2 δ=1, hierarchy 'auto'"]
     for r in rows:
         assert r[5] == "CONVERGED" and float(r[7]) < 1e-8, r  # the numpy complementarity check
+        assert float(r[9]) >= 0 and float(r[10]) > 0, r       # the frozen obstacle's CPU s, the ratio
+
+
+def test_qvi_units_table():
+    # a change of units on QVIs (benchmarks/qvi_units.py): every rule converges to numpy's reference
+    rows = table_rows(run("qvi_units.py", "--thermo", "63", "--achp", "63", "--scales", "1e4"))
+    assert [(r[0], r[2]) for r in rows] == [(p, rule) for p in ("thermoforming_1d", "ACHP-style 1D")
+                                            for rule in ("default", "tol 1e-8", "default, s = 10000")]
+    for r in rows:
+        assert r[3] == "CONVERGED" and float(r[8]) < 1e-6, r  # the relative error against the reference
 
 
 def test_bounds_table():

@@ -55,7 +55,8 @@ CORRUPTIONS = [
     ("zeta_jacobian", "wrong shape"), ("zeta_jacobian", "returns a string"), ("zeta_jacobian", "not callable"),
     ("zeta_jacobian", "raises"), ("zeta_jacobian", "for a stationary method"),
     ("upper", "nan"), ("upper", "-inf"), ("upper", "wrong length"), ("upper", "below lower"), ("upper", "complex"),
-    ("upper", "callable"), ("upper", "with an implicit zeta on a stationary method"),
+    ("upper", "callable returns nan"), ("upper", "callable returns -inf"), ("upper", "Affine of wrong shape"),
+    ("upper", "implicit on a stationary method"), ("upper", "with an implicit zeta on a stationary method"),
     ("zeta", "+inf lower with upper"), ("zeta_jacobian", "with bounds"),
     ("zeta_jacobian", "operator of wrong shape"), ("zeta_jacobian", "complex operator"),
     ("zeta_jacobian", "matvec of wrong length"), ("zeta_jacobian", "matvec returns nan"),
@@ -102,9 +103,10 @@ JACOBIAN_FORMATS = ["csr", "dia", "coo", "csc", "dense", "operator"]
 WRONG_JACOBIANS = {"negated": -1.0, "10x": 10.0, "zero": 0.0}
 HIERARCHIES = [None, "auto", "amg", "list", "dense list"]
 #: Every (method, ζ kind, hierarchy) the valid cases run; the hierarchy is 'newton''s argument.
-#: Bounds (issue 36), the Newton member's only: 'upper' (ζ None, an upper bound) and 'box' (a constant
-#: ζ with -inf entries for rows free below, and an upper bound or none): random_bounds.
-BOUNDED_KINDS = ["upper", "box"]
+#: Bounds (issue 36), the Newton member's only: 'upper' (ζ None, an upper bound), 'box' (a constant
+#: ζ with -inf entries for rows free below, and an upper bound or none): random_bounds; 'implicit
+#: upper' (box's ζ and an upper bound u(z), an Affine or a callable): random_implicit_upper.
+BOUNDED_KINDS = ["upper", "box", "implicit upper"]
 COMBOS = ([(m, z, None) for m in STATIONARY for z in ZETA_KINDS]
           + [("newton", z, h) for z in ZETA_KINDS + BOUNDED_KINDS for h in HIERARCHIES])
 
@@ -203,11 +205,13 @@ def build_case(seed, method, zkind, hierarchy=None, corrupt=None):
             wrong = np.random.default_rng([seed, 37])   # issue 37's draw, a stream of its own
             if not corrupt and wrong.uniform() < 0.3:
                 jacobian = str(wrong.choice(list(WRONG_JACOBIANS)))
-    upper = None
+    upper = upper_ref = None
     if zkind in BOUNDED_KINDS:   # bounds (issue 36), from a stream of their own
-        c, upper = random_bounds(np.random.default_rng([seed, 36]), n, c if zkind == "box" else None)
+        c, upper = random_bounds(np.random.default_rng([seed, 36]), n, c if zkind != "upper" else None)
+    if zkind == "implicit upper":
+        upper, upper_ref = random_implicit_upper(np.random.default_rng([seed, 36, 1]), n, c, upper)
     return dict(A=A, q=q, zkind=zkind, c=c, B=B, x0=x0, opts=opts, corrupt=corrupt, rng=rng, jacobian=jacobian,
-                upper=upper)
+                upper=upper, upper_ref=upper_ref)
 
 
 def random_bounds(rng, n, c):
@@ -230,13 +234,28 @@ def random_bounds(rng, n, c):
     return c, upper
 
 
+def random_implicit_upper(rng, n, c, upper):
+    """(upper to pass, the test's own u) of the kind 'implicit upper': random_bounds' constant upper
+    bound u0 (None: 1 above the finite lower bound c) moved with z, u(z) = u0 + Bz (an Affine) or
+    u0 + 0.1 tanh(Bz) (a callable), B >= 0 sparse with ‖B‖∞ <= 0.3; +inf rows stay unbounded."""
+    u0 = np.where(np.isfinite(c), c, 0.0) + 1.0 if upper is None else np.broadcast_to(upper, (n,)).astype(float)
+    B = sp.csr_matrix(sp.random(n, n, density=min(1.0, 3.0 / n), random_state=rng))
+    B = sp.csr_matrix(sp.diags(0.3 / np.maximum(B.sum(axis=1).A1, 1.0)) @ B)
+    B.sort_indices()
+    if rng.integers(2):
+        return nrmicp.Affine(B, u0), lambda z: B @ z + u0
+    f = lambda z: u0 + 0.1 * np.tanh(B @ z)  # noqa: E731
+    return f, f
+
+
 def corrupt_case(seed, corrupt):
     """A valid case of a method the corrupted argument belongs to (or, for '... on a stationary
     method', one it does not), then corrupted."""
     rng = np.random.default_rng(seed)
     name, how = corrupt
     if name in ("hierarchy", "zeta_jacobian", "upper") or how == "+inf lower with upper":
-        stationary = how in ("for a stationary method", "with an implicit zeta on a stationary method")
+        stationary = how in ("for a stationary method", "with an implicit zeta on a stationary method",
+                             "implicit on a stationary method")
         method = str(rng.choice(STATIONARY)) if stationary else "newton"
     elif name in ("omega1", "phi"):
         method = str(rng.choice(["nrm", "nrmgs", "nrmj", "nrmsor", "nrmaor"]))
@@ -282,7 +301,7 @@ def make_zeta(zkind, c, B):
     """(zeta to pass, the test's own ζ for the oracle)."""
     if zkind == "none":
         return None, lambda z: np.zeros_like(z)
-    if zkind in ("constant", "box"):
+    if zkind in ("constant", "box", "implicit upper"):
         return c, lambda z: c
     if zkind == "upper":
         return None, lambda z: np.zeros_like(z)
@@ -370,7 +389,10 @@ def apply_corruption(case, zeta):
         lower = case["c"] if case["zkind"] == "constant" else np.zeros(n)
         ok = lower + 1.0
         case["upper"] = {"nan": np.r_[ok[:-1], np.nan], "-inf": np.r_[-np.inf, ok[1:]], "wrong length": np.ones(n + 1),
-                         "below lower": ok - 2.0, "complex": ok + 0j, "callable": lambda z: ok,
+                         "below lower": ok - 2.0, "complex": ok + 0j, "callable returns nan": lambda z: np.r_[ok[:-1], np.nan],
+                         "callable returns -inf": lambda z: np.r_[-np.inf, ok[1:]],
+                         "Affine of wrong shape": nrmicp.Affine(sp.eye(n + 1, format="csr"), ok),
+                         "implicit on a stationary method": lambda z: ok,
                          "with an implicit zeta on a stationary method": ok}[how]
     elif how == "with bounds":   # a zeta_jacobian with ζ constant and an upper bound
         case["upper"] = case["c"] + 1.0
@@ -416,14 +438,19 @@ def _writes_into_z(z):
 
 def oracle_residual(A, q, z, zeta_ref, upper=None):
     """Res(z) from the original data in numpy, and a bound on the rounding in computing it. With
-    `upper` (a number or a vector, +inf: none), Res = ‖mid(z − ζ, z − upper, w)‖₂ = ‖min(z − ζ,
-    max(z − upper, w))‖₂; a -inf in ζ is a row free below (z − ζ = +inf)."""
+    `upper` (a number or a vector, +inf: none; an implicit one's at z), Res = ‖mid(z − ζ, z − upper, w)‖₂
+    = ‖min(z − ζ, max(z − upper, w))‖₂, but max(z − upper, ζ − z) where the bounds cross (ζ > upper:
+    no z satisfies both); a -inf in ζ is a row free below (z − ζ = +inf)."""
     Ad = A.toarray()
     with np.errstate(over="ignore", invalid="ignore"):  # an overflowing Az + q is Res = inf
         w = Ad @ z + q
         zz = zeta_ref(z)
         g = z - zz
-        res = stable_norm(np.minimum(w, g) if upper is None else np.minimum(g, np.maximum(z - upper, w)))
+        if upper is None:
+            terms = np.minimum(w, g)
+        else:
+            terms = np.where(zz > upper, np.maximum(z - upper, zz - z), np.minimum(g, np.maximum(z - upper, w)))
+        res = stable_norm(terms)
         slack = 64 * EPS * stable_norm(np.abs(Ad) @ np.abs(z) + np.abs(q) + np.abs(z) + finite_abs(zz) + finite_abs(upper))
     return res, slack
 
@@ -504,10 +531,12 @@ def check_case(case):
     assert isinstance(res.status, nrmicp.Status)
     event(f"valid input: {res.status.name}")
     assert np.all(np.isfinite(res.z)), res.message
+    if case.get("upper_ref") is not None:   # an implicit upper bound: its vector at the returned z
+        upper = case["upper_ref"](res.z)
     true_res, slack = oracle_residual(A, q, res.z, zeta_ref, None if upper is None else np.asarray(upper, float))
     bounded = case["zkind"] in BOUNDED_KINDS
     if bounded:
-        assert_in_bounds(res.z, case["c"] if case["zkind"] == "box" else 0.0, upper, true_res + slack)
+        assert_in_bounds(res.z, 0.0 if case["zkind"] == "upper" else case["c"], upper, true_res + slack)
         assert res.active_mask.dtype == np.int8 and res.active_mask.shape == res.z.shape
     if np.isfinite(res.residual) and np.isfinite(true_res):  # the reported Res is the returned z's
         assert abs(res.residual - true_res) <= slack + 1e-10 * true_res, (res.residual, true_res, res.message)
@@ -521,6 +550,7 @@ def check_case(case):
             REACHED["converged"][opts["method"]] += 1
             REACHED["bounded"]["converged"] += bounded
             REACHED["bounded"]["n >= 100"] += bounded and A.shape[0] >= 100
+            REACHED["bounded"]["implicit upper"] += case["zkind"] == "implicit upper"
             REACHED["n_converged"][opts["method"]].append(A.shape[0])
     return res
 
@@ -549,7 +579,7 @@ def test_fuzz_corrupt(corrupt, seed):
 MIN_CONVERGED = {m: 10 for m in STATIONARY} | {"newton": 80}
 MIN_LARGEST_N = 100
 #: Oracle-checked converged solves with bounds (upper, or -inf in zeta), and those with n >= 100.
-MIN_BOUNDED = {"converged": 15, "n >= 100": 5}
+MIN_BOUNDED = {"converged": 15, "n >= 100": 5, "implicit upper": 5}
 
 
 def test_fuzz_coverage():

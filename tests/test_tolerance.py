@@ -30,8 +30,10 @@ def degenerate_lcp(m=31, scale=1e8):
 
 
 def rounding_level(A, q, z):
-    """ε (‖|A||z| + |q|‖ + ‖z‖): the size of the rounding error of w = Az + q and g = z."""
-    return EPS * (np.linalg.norm(abs(A) @ np.abs(z) + np.abs(q)) + np.linalg.norm(z))
+    """ε ‖t‖, t_i the rounding error of the term min(w_i, z_i) takes: (|A||z| + |q|)_i where it is w_i
+    = (Az + q)_i, |z_i| where it is z_i, the larger on a tie."""
+    w, tw = A @ z + q, abs(A) @ np.abs(z) + np.abs(q)
+    return EPS * np.linalg.norm(np.where(w < z, tw, np.where(z < w, np.abs(z), np.maximum(tw, np.abs(z)))))
 
 
 @pytest.mark.parametrize("hierarchy", [None, "amg"])

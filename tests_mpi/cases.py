@@ -298,6 +298,27 @@ def case_boomeramg():
             "left_all": sorted(k for k in PETSc.Options().getAll() if k.startswith("nrmicp"))}
 
 
+def case_dense():
+    """The rule for an aggressive first level (distributed._dense_first_level) against what it predicts:
+    whether hypre's classical first coarse level (agg_nl 0, the user's option winning) holds more nonzeros
+    than A; and the first level of the hierarchy the rule picks."""
+    from nrmicp.scenes.finite_elements import fe_obstacle
+    out = {}
+    for name, pb in (("3d", obstacle_3d(15, exact=False)), ("2d", obstacle_2d(63, exact=False)),
+                     ("p1", fe_obstacle("P1", 3))):
+        A = sp.csr_matrix(pb.A)
+        M = mat(A, *split(A.shape[0]))
+        nnz = lambda C: C.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"]  # noqa: E731
+        hier = PETSc.Options("nrmicp_hierarchy_")
+        hier["pc_hypre_boomeramg_agg_nl"] = 0
+        classical = dist._hierarchy(M, COMM, "case_dense_c_")[1][0]
+        hier.delValue("pc_hypre_boomeramg_agg_nl")
+        chosen = dist._hierarchy(M, COMM, "case_dense_r_")[1][0]
+        out[name] = {"rule": bool(dist._dense_first_level(M, COMM)), "classical": nnz(classical) / A.nnz,
+                     "chosen": nnz(chosen) / A.nnz}
+    return out
+
+
 def case_floor():
     """tol far below Res's rounding level: the Newton member stops at the floor, says so and
     names it (the serial member's rule and message), on the obstacle and an affine ICP."""
@@ -420,12 +441,36 @@ def engine_problems():
     return out
 
 
-def case_engine():
+def golden_problems():
+    """The golden master's Newton cases (tests/golden/newton.py) that fit a PETSc matrix: its obstacle
+    scenes with their own hierarchy or none, ζ none / constant / callable (an entry-wise callable: each
+    rank evaluates its rows), tol 1e-8 and 1e-10. (name, A, q, zeta, zeta, upper, Ps, tol)."""
+    from nrmicp import scenes
+    built = {"obstacle_1d": scenes.obstacle_1d(127), "obstacle_2d_31": obstacle_2d(31, exact=False),
+             "obstacle_2d_16": obstacle_2d(16, exact=False), "obstacle_3d": obstacle_3d(11, exact=False),
+             "convection": convection_diffusion_obstacle(31, exact=False),
+             "american_put": scenes.american_put(n_space=256, exact=False)}
+    out = []
+    for name, p in built.items():
+        psi = np.asarray(p.zeta, dtype=float)
+        zetas = {"none": (None, p.q + p.A @ psi), "const": (psi, p.q),
+                 "callable": (lambda z, psi=psi: psi.copy(), p.q)}
+        for hname, Ps in (("none", None), ("geom", p.prolongations() or None)):
+            if hname == "geom" and Ps is None:
+                continue
+            for zname, (zeta, q) in zetas.items():
+                for tol in (1e-8, 1e-10):
+                    out.append((f"{name}/{hname}/{zname}/tol{tol}", p.A, q, zeta, zeta, None, Ps, tol))
+    return out
+
+
+def case_engine(which="engine"):
     """The one Newton driver on the PETSc engine (nrmicp._petsc) against the serial member with the
     same prolongations: status, finest steps, z."""
     from nrmicp import _core, _petsc
     rows = []
-    for name, A, q, zeta, zl, upper, Ps in engine_problems():
+    problems = ([(*p, 1e-9) for p in engine_problems()] if which == "engine" else golden_problems())
+    for name, A, q, zeta, zl, upper, Ps, tol in problems:
         A = sp.csr_matrix(A)
         n = A.shape[0]
         lo, hi = split(n)
@@ -437,9 +482,9 @@ def case_engine():
             f = c
         o = _core.Options()
         o.method = _core.Method.newton
-        o.tol = 1e-9
+        o.tol = tol
         it = _core.SolveOptions()
-        it.tol, it.maxiter = 1e-9, 200
+        it.tol, it.maxiter = tol, 200
         if zeta is None:
             kind, c, fn = _core.ZetaKind.none, None, None
         elif callable(zeta):
@@ -454,10 +499,11 @@ def case_engine():
         out = {"case": name, "status": int(r["status"]), "steps": list(r["newton"].level_steps), "inner": core.inner}
         if RANK == 0:
             s = nrmicp.solve(A, q, zeta=zeta, upper=upper, method="newton", hierarchy=list(Ps) if Ps else None,
-                             tol=1e-9, maxiter=200, scale=None)
+                             tol=tol, maxiter=200, scale=None)
             out.update(serial_status=int(s.status), serial_steps=list(s.level_steps),
                        err=float(np.max(np.abs(z - s.z)) / max(np.max(np.abs(s.z)), 1e-300)),
-                       res=float(oracle_residual(A, q, z, zeta) if upper is None else s.residual))
+                       res=float(oracle_residual(A, q, z, zeta) if upper is None else s.residual),
+                       serial_res=float(s.residual), tol=tol)
         rows.append(out)
     return rows
 
@@ -618,9 +664,9 @@ def case_hooks():
 if __name__ == "__main__":
     name, args = sys.argv[1], sys.argv[2:]
     result = {"agreement": lambda: case_agreement(), "partition": case_partition,
-              "bad": lambda: case_bad(args[0], args[1]), "boomeramg": case_boomeramg,
+              "bad": lambda: case_bad(args[0], args[1]), "boomeramg": case_boomeramg, "dense": case_dense,
               "floor": case_floor, "overshoot": case_overshoot, "sweeps": case_sweeps,
-              "warm": case_warm, "units": case_units, "engine": case_engine, "options": case_options,
+              "warm": case_warm, "units": case_units, "engine": lambda: case_engine(*args), "options": case_options,
               "fuzz": lambda: case_fuzz(int(args[0])), "family": case_family, "hooks": case_hooks}[name]()
     if RANK == 0:
         print("RESULT " + json.dumps(result), flush=True)

@@ -46,6 +46,15 @@ def test_the_hierarchys_boomeramg_options_reach_it_and_leave_nothing_behind():
     assert out["left_all"] == [], out                    # nothing of ours or the user's stays behind
 
 
+@pytest.mark.parametrize("np_", [1, 2])
+def test_an_aggressive_first_level_where_a_classical_one_is_denser_than_a(np_):
+    out = mpirun(np_, "dense")
+    for name, r in out.items():
+        assert r["rule"] == (r["classical"] > 1.0), (name, r)   # the rule predicts hypre's classical first level
+        assert r["chosen"] <= 1.0, (name, r)                       # the hierarchy taken is no denser than A there
+    assert out["3d"]["rule"] and not out["2d"]["rule"] and not out["p1"]["rule"], out
+
+
 def test_newton_stops_at_the_rounding_floor_and_names_it():
     out = mpirun(2, "floor")
     for name in ("obstacle", "affine"):

@@ -188,12 +188,6 @@ struct CallableJacobian {
 
 // ζ from the Python layer's (kind, c, B, fn): none, constant c, Affine(B, c) or a callable
 // (with its Jacobian when given).
-/// ζ with the upper bound `upper` (None: none).
-template <typename I>
-nrmicp::Zeta<I> with_upper(nrmicp::Zeta<I> zeta, const py::object& upper) {
-  return upper.is_none() ? zeta : zeta.with_upper(to_vector(upper.cast<py::array>(), "upper"));
-}
-
 template <typename I>
 nrmicp::Zeta<I> make_zeta(Eigen::Index n, nrmicp::ZetaKind kind, py::object zeta_c, py::object b_indptr,
                           py::object b_indices, py::object b_data, py::object zeta_fn,
@@ -217,6 +211,18 @@ nrmicp::Zeta<I> make_zeta(Eigen::Index n, nrmicp::ZetaKind kind, py::object zeta
     }
   }
   throw py::value_error("unknown zeta kind");
+}
+
+/// ζ with the upper bound `upper`: None (none), a float64 vector (constant), or an implicit one as
+/// make_zeta's arguments (kind, c, B-indptr, B-indices, B-data, fn) from _bounds.core_upper (n: its
+/// length; an engine that takes no implicit upper bound passes none).
+template <typename I>
+nrmicp::Zeta<I> with_upper(nrmicp::Zeta<I> zeta, const py::object& upper, Eigen::Index n = -1) {
+  if (upper.is_none()) return zeta;
+  if (!py::isinstance<py::tuple>(upper)) return zeta.with_upper(to_vector(upper.cast<py::array>(), "upper"));
+  if (n < 0) throw py::value_error("upper: an implicit upper bound (Affine or callable) is not available here");
+  const py::tuple t = upper.cast<py::tuple>();
+  return zeta.with_upper(make_zeta<I>(n, t[0].cast<nrmicp::ZetaKind>(), t[1], t[2], t[3], t[4], t[5]));
 }
 
 using CoreCallback = std::function<bool(int, const Eigen::VectorXd&, double)>;

@@ -68,7 +68,7 @@ class PyCore {
     std::optional<Eigen::VectorXd> z0v;
     if (!z0.is_none()) z0v = to_vector(z0.cast<py::array>(), "x0");
     const auto zeta =
-        with_upper(make_zeta<I>(n, zeta_kind, zeta_c, b_indptr, b_indices, b_data, zeta_fn, zeta_jacobian), upper);
+        with_upper(make_zeta<I>(n, zeta_kind, zeta_c, b_indptr, b_indices, b_data, zeta_fn, zeta_jacobian), upper, n);
     const auto cb = make_callback(callback);
     const auto report = make_progress(progress);
     nrmicp::Result r =
@@ -157,7 +157,7 @@ class PyNewton : public PyCore<I, nrmicp::Newton<CsrMap<I>>> {
                   py::object upper) {
     const Eigen::Index n = this->A_.A.rows();
     Eigen::VectorXd qv = to_vector(q, "q"), zv = to_vector(z, "z");
-    const auto zeta = with_upper(make_zeta<I>(n, zeta_kind, zeta_c, b_indptr, b_indices, b_data, zeta_fn), upper);
+    const auto zeta = with_upper(make_zeta<I>(n, zeta_kind, zeta_c, b_indptr, b_indices, b_data, zeta_fn), upper, n);
     nrmicp::Result r = without_gil([&] { return this->core_->polish(qv, zeta, zv, tol); });
     return result_dict(r, false);
   }

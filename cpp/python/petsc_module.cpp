@@ -124,7 +124,7 @@ py::dict measure(std::uintptr_t A, py::array q, nrmicp::ZetaKind kind, py::objec
   py::dict d;
   d["residual"] = level.icp_residual(qv, zeta, zv, zeta_z, w, zeta.upper());
   d["w"] = py::array_t<double>(w.size(), w.data());
-  if (rounding) d["rounding_level"] = level.rounding_level(zv, qv, zv - zeta_z);
+  if (rounding) d["rounding_level"] = level.rounding_level(zv, qv, zv - zeta_z, w, zeta.upper());
   return d;
 }
 

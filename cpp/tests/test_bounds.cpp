@@ -153,3 +153,68 @@ TEST_CASE("bad bounds are refused by Zeta::check with std::invalid_argument nami
   CHECK_THROWS_WITH_AS(newton.solve(q, Zeta<int>::functor(zero, jacobian).with_upper(Vec::Ones(n))),
                        doctest::Contains("Jacobian"), std::invalid_argument);
 }
+
+// An implicit upper bound u(z) = c + Bz (Zeta::with_upper(Zeta::affine(B, c)), issue 36): the outer
+// fixed point, each outer step the box problem with u frozen at its z. c is chosen so that the known
+// solution's upper bound is p.upper: z* solves lower ≤ z ≤ c + Bz (B ≥ 0 with row sums 0.2 makes the
+// outer map a contraction on Bai's M-matrix).
+TEST_CASE("an affine upper bound finds the known solution; the same map as a functor agrees") {
+  const RowMat A = testing::bai<int, Eigen::RowMajor>(9, 4.0, false);
+  const Eigen::Index n = A.rows();
+  const BoxProblem p = box_problem(A);
+  Zeta<int>::RowMatrix B(n, n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    B.insert(i, i) = 0.1;
+    B.insert(i, (i + 1) % n) = 0.1;
+  }
+  B.makeCompressed();
+  const Vec c = p.upper - B * p.z;  // (+inf rows stay unbounded)
+  Options o;
+  o.tol = 1e-11;
+  const Newton<RowMat> newton(A, o);
+  const Result r = newton.solve(p.q, Zeta<int>::constant(p.lower).with_upper(Zeta<int>::affine(B, c)));
+  CHECK(r.status == Status::Converged);
+  CHECK((r.z - p.z).lpNorm<Eigen::Infinity>() < 1e-10);
+  CHECK(r.newton.outer_iterations >= 2);
+  BoxProblem at_z = p;
+  at_z.upper = c + B * r.z;  // the conditions with u at the returned z
+  check_box_conditions(A, at_z, r.z, 1e-10);
+  const auto u = [&](const double* z, double* out, Eigen::Index k) {
+    Eigen::Map<Vec>(out, k) = B * Eigen::Map<const Vec>(z, k) + c;
+    return true;
+  };
+  const Result f = newton.solve(p.q, Zeta<int>::constant(p.lower).with_upper(Zeta<int>::functor(u)));
+  CHECK(f.status == Status::Converged);
+  CHECK((f.z - r.z).lpNorm<Eigen::Infinity>() < 1e-12);
+}
+
+TEST_CASE("an implicit upper bound: crossing bounds are no success; u failing is ZetaFailed; the stationary members refuse it") {
+  const RowMat A = testing::bai<int, Eigen::RowMajor>(4, 4.0, true);
+  const Eigen::Index n = A.rows();
+  const Vec q = Vec::LinSpaced(n, -2.0, 2.0);
+  Zeta<int>::RowMatrix B(n, n);
+  for (Eigen::Index i = 0; i < n; ++i) B.insert(i, i) = 0.1;
+  B.makeCompressed();
+  Options o;
+  o.maxiter = 30;
+  const Newton<RowMat> newton(A, o);
+  // z ≥ 0 and z ≤ −1 + 0.1 z: no z lies between; Res keeps the crossing, the message says so
+  const Result cross = newton.solve(q, Zeta<int>::none().with_upper(Zeta<int>::affine(B, Vec::Constant(n, -1.0))));
+  CHECK(cross.status != Status::Converged);
+  CHECK(cross.residual > 0.5);
+  CHECK(cross.message.find("cross") != std::string::npos);
+  const auto nan_u = [](const double*, double* out, Eigen::Index k) {
+    std::fill(out, out + k, std::numeric_limits<double>::quiet_NaN());
+    return true;
+  };
+  const Result failed = newton.solve(q, Zeta<int>::none().with_upper(Zeta<int>::functor(nan_u)));
+  CHECK(failed.status == Status::ZetaFailed);
+  CHECK(failed.message.find("upper(z)") != std::string::npos);
+  Options so;
+  so.method = Method::NRMGS;
+  CHECK_THROWS_WITH_AS(Solver<RowMat>(A, so).solve(q, Zeta<int>::none().with_upper(Zeta<int>::affine(B, Vec::Ones(n)))),
+                       doctest::Contains("nrmicp::Newton"), std::invalid_argument);
+  const Zeta<int>::RowMatrix wrong(n + 1, n + 1);
+  CHECK_THROWS_WITH_AS(newton.solve(q, Zeta<int>::none().with_upper(Zeta<int>::affine(wrong, Vec::Ones(n + 1)))),
+                       doctest::Contains("upper"), std::invalid_argument);
+}

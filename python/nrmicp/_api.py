@@ -189,8 +189,9 @@ def _make_zeta(zeta, n):
 
 
 def _make_upper(upper, n):
-    """``upper=`` checked -> None or a vector (+inf: no bound there)."""
-    return _bounds.as_upper(upper, n, implicit=isinstance(upper, Affine) or callable(upper))
+    """``upper=`` checked -> None, a vector (+inf: no bound there) or an implicit upper bound
+    (_bounds.ImplicitUpper: an Affine or a callable)."""
+    return _bounds.as_upper(upper, n, (upper.B, upper.c) if isinstance(upper, Affine) else None)
 
 
 def _scale_choice(scale):
@@ -338,13 +339,14 @@ def choose_method(A: sp.csr_matrix, options: dict, margin=None) -> str:
 
 def _outer_hint(solver, measure) -> str:
     """Advice for a newton solve on a callable ζ without Jacobian (the outer fixed point) that failed
-    under the default rule: on σA its steps can stall where on A itself they do not (a known limit,
-    docs/SPEC.md "The default stopping rule"); the paper's tol iterates on A."""
+    under the default rule: its target, 1e-10 of Res_E(0), may lie below what ζ's own evaluation
+    resolves (a ζ that solves an ill-conditioned problem inside: docs/MEASUREMENTS.md, "The outer
+    fixed point in z's units"); tol or rtol sets a target of the user's own."""
     if solver.method != "newton" or solver.scale != "units" or measure.weights is None \
             or measure.kind != ZetaKind.functor:
         return ""
-    return ("; the default rule iterates on sigma*A, where the outer fixed point on a callable zeta can stall "
-            "(thermoforming 1D, n >= 511): pass tol (the paper's Res, e.g. tol=1e-8), which iterates on A itself")
+    return ("; the default target (Res_E below 1e-10 of its value at z = 0) may lie below what zeta itself resolves "
+            "(the outer steps stopped contracting): pass tol (the paper's Res, e.g. tol=1e-8) or rtol")
 
 
 def _member_hint(A: sp.csr_matrix, method: str) -> str:
@@ -556,7 +558,7 @@ class Solver:
             return res
         core_kw = _newton.jacobian_argument(zeta_jacobian, self, kind, self._dc)
         if us is not None:
-            core_kw["upper"] = us if self._dr is None else us / self._dc
+            core_kw["upper"] = _bounds.core_upper(us, self._index_dtype, None if self._dr is None else self._dc)
         checked = None if fn is None else CheckedZeta(fn, n)  # read-only input, checked output: one per solve
         problem, z0s = self._core_problem(qv, z0, kind, c, B, checked)
         measure = _OriginalResidual(self.A, qv, kind, c, B, checked, self._units_weights() if units else None, us)
@@ -692,7 +694,7 @@ class _OriginalResidual:
         self.A, self.qv, self.kind, self.c, self.B, self.checked = A, qv, kind, c, B, checked
         self.weights, self.upper = weights, upper
         self.bounded = _bounds.is_bounded(c if kind == ZetaKind.constant else None, upper)
-        self._last = None   # (z, w, g) of the last call: the paper's Res of the returned z calls no ζ again
+        self._last = None   # (z, w, g, u) of the last call: the paper's Res of the returned z calls no ζ, u again
 
     def infeasibility(self) -> str:
         """The message part naming a row that makes the problem evidently infeasible, or "" (always
@@ -712,36 +714,37 @@ class _OriginalResidual:
         return z - self.checked(z)  # on a read-only copy: ζ never sees (or writes into) the result
 
     def _wg(self, z):
-        """(w, g) at z, from the last call's when z is the same array (a user ζ is called once)."""
+        """(w, g, u) at z (u: the upper bound's vector there, or None), from the last call's when z is
+        the same array (a user ζ or upper is called once)."""
         if self._last is None or self._last[0] is not z:
-            self._last = (z, self.A @ z + self.qv, self._g(z))
-        return self._last[1], self._last[2]
+            self._last = (z, self.A @ z + self.qv, self._g(z), _bounds.upper_at(self.upper, z))
+        return self._last[1:]
 
     def __call__(self, z, weighted=True):
-        w, g = self._wg(z)
+        w, g, u = self._wg(z)
         if not (np.all(np.isfinite(w)) and np.all(np.isfinite(z))):
             return w, math.inf   # an overflowing Az + q is no certificate: min(w, g) is blind to w = +inf
         if self.weights is None or not weighted:
-            return w, _norm(_bounds.residual_terms(z, w, g, self.upper))
+            return w, _norm(_bounds.residual_terms(z, w, g, u))
         dr, dc = self.weights
         with np.errstate(over="ignore", invalid="ignore"):
-            r = _norm(_bounds.residual_terms(z / dc, dr * w, g / dc, None if self.upper is None else self.upper / dc))
+            r = _norm(_bounds.residual_terms(z / dc, dr * w, g / dc, None if u is None else u / dc))
         return w, r if r == r else math.inf   # a factor beyond float range (inf · 0): no certificate
 
     def active_mask(self, z):
         """scipy's active_mask of z (_bounds.active_mask)."""
-        w, g = self._wg(z)
-        return _bounds.active_mask(z, w, g, self.upper)
+        return _bounds.active_mask(z, *self._wg(z))
 
     def rounding_level(self, z) -> float:
-        """ε (‖d_r(|A||z| + |q|)‖₂ + ‖(|z| + |z − g|)/d_c‖₂): what double precision can resolve of
-        Res_E at z (the Newton member's floor, newton_level.hpp, in the default rule's measure)."""
+        """ε ‖t‖₂, t the rounding of each row's term of Res_E at z (_bounds.term_rounding: d_r(|A||z| + |q|)
+        where it is d_r w, (|z| + |ζ(z)|)/d_c where it is g/d_c): what double precision can resolve of Res_E
+        (the Newton member's floor, newton_level.hpp, in the default rule's measure)."""
         dr, dc = self.weights
+        w, g, u = self._wg(z)
         with np.errstate(over="ignore", invalid="ignore"):
-            t = dr * (abs(self.A) @ np.abs(z) + np.abs(self.qv))
-            zeta = np.abs(z - self._wg(z)[1])
-            u = (np.abs(z) + np.where(np.isfinite(zeta), zeta, 0.0)) / dc   # a -inf bound adds no rounding
-        return float(np.finfo(float).eps * (_norm(t) + _norm(u)))
+            tw = dr * (abs(self.A) @ np.abs(z) + np.abs(self.qv))
+            t = _bounds.term_rounding(tw, z / dc, dr * w, g / dc, None if u is None else u / dc)
+        return float(np.finfo(float).eps * _norm(t))
 
 
 #: The default rule accepts a Res_E within this factor of its rounding level: the Newton member's
@@ -933,7 +936,7 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
         array (valid only during the call); exceptions it raises reach the caller unchanged.
         ζ returning an array of the wrong shape or dtype raises TypeError/ValueError; ζ
         returning NaN or Inf raises ValueError (the core's status ZETA_FAILED).
-    upper : None, float or array_like (n,), optional
+    upper : None, float, array_like (n,), Affine or callable, optional
         An upper bound: solve the mixed complementarity problem ζ ≤ z ≤ upper (PATH's and PETSc's
         convention): w = Az + q ≥ 0 where z = ζ, w ≤ 0 where z = upper, w = 0 strictly between.
         ``+inf`` entries: no upper bound there; with ``zeta`` ``-inf`` too, the row is free (w = 0).
@@ -942,6 +945,12 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
         which converges where the LCP form does; 'auto' chooses as without bounds); an Affine or
         callable ζ with ``upper``: method 'newton' (the outer fixed point, no ``zeta_jacobian``;
         'auto' picks it); lower > upper anywhere is a ValueError naming both.
+        An implicit upper bound u(z) — ``Affine(B, c)`` (u = Bz + c, evaluated in C++) or a callable
+        returning a length-n float vector (numbers or +inf, never NaN or -inf: a ValueError naming
+        ``upper``) — is method 'newton''s ('auto' picks it): its outer fixed point solves the box
+        ζ(z_k) ≤ z ≤ u(z_k) frozen at each outer step's z_k; where the frozen bounds cross the upper
+        one wins, and a returned z at which ζ(z) > u(z) is not a success (the message says so).
+        Res and ``active_mask`` take u at the returned z.
         ``result.active_mask`` says where z is at a bound.
     method : {'auto', 'nrm', 'nrmm', 'nrmaor', 'nrmsor', 'nrmgs', 'nrmj', 'mms', 'two_sweep', 'newton'}, default 'auto'
         ``'auto'`` (default): ``'nrmgs'`` when every row of A is diagonally dominant by at least
@@ -1106,8 +1115,9 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
     options = _options.pick(locals())   # the options, as given
     t0 = time.perf_counter()
     if isinstance(method, str) and method.lower() == "auto" and (
-            zeta_jacobian is not None or (upper is not None and (callable(zeta) or isinstance(zeta, Affine)))):
-        options["method"] = "newton"   # a ζ Jacobian, and an implicit ζ with upper, are newton's only (known here)
+            zeta_jacobian is not None or callable(upper) or isinstance(upper, Affine) or
+            (upper is not None and (callable(zeta) or isinstance(zeta, Affine)))):
+        options["method"] = "newton"   # a ζ Jacobian, an implicit upper, an implicit ζ with upper: newton's only
     # Bounds take choose_method's rule as they are: nrmgs's box form contracts as its LCP form does
     # (m(x) is 1-Lipschitz as |x| is, detail/modulus.hpp), so a row-dominant A needs as few sweeps.
     s = Solver(A, **_options.pick(options, "setup", "solve"))

@@ -81,6 +81,16 @@ def _flag_max(comm, value: float) -> float:
     return out
 
 
+def _flag_sum(comm, value: float) -> float:
+    """sum over ranks of one float (as _flag_max)."""
+    v = PETSc.Vec().createMPI((1, PETSc.DECIDE), comm=comm)
+    v.setValue(v.getOwnershipRange()[0], value)
+    v.assemble()
+    out = v.sum()
+    v.destroy()
+    return out
+
+
 def _agree(comm, exc: BaseException | None) -> None:
     """Every rank calls this after a step that may fail on some ranks only. When any rank
     failed, every rank raises the same exception (type and message of the lowest failing rank,
@@ -247,12 +257,37 @@ class _Zeta:
 _HIERARCHY_PREFIX = "nrmicp_hierarchy_"
 
 
+#: hypre's options for one aggressive first level (2 paths, multipass weights, at most 4 a row), taken where
+#: classical coarsening's first level would hold more nonzeros than A (_dense_first_level).
+_AGGRESSIVE = {"agg_nl": 1, "agg_num_paths": 2, "P_max": 4}
+#: A's distance-two neighbourhoods more than this many times its rows' (A²'s nonzeros over A's) on a stencil of
+#: at most _SPARSE_STENCIL nonzeros a row: 7-point 3D grids (3.5); not 5-point 2D grids (2.6), P1 triangles
+#: (2.7) or P2 (4.1 but 11.4 a row), whose classical first levels are sparser than A (docs/MEASUREMENTS.md).
+_DENSE_GROWTH = 3.0
+_SPARSE_STENCIL = 8.0
+
+
+def _dense_first_level(A, comm, sample=2000) -> bool:
+    """Whether BoomerAMG's classical first coarse level would be denser than A, judged by A's
+    neighbourhood growth on up to `sample` evenly spaced rows of each rank's diagonal block (every
+    rank decides alike: sums over ranks)."""
+    indptr, indices, data = A.getDiagonalBlock().getValuesCSR()
+    m = len(indptr) - 1
+    B = sp.csr_matrix((np.ones(len(indices)), indices, indptr), shape=(m, m))
+    S = B[np.unique(np.linspace(0, m - 1, min(m, sample)).astype(int))] if m else B
+    rows, first, second = (_flag_sum(comm, float(v)) for v in (S.shape[0], S.nnz, (S @ B).nnz))
+    return first > 0 and first / rows <= _SPARSE_STENCIL and second / first > _DENSE_GROWTH
+
+
 def _hierarchy(A, comm, prefix):
     """hypre BoomerAMG's classical prolongations and its Galerkin operators PᵀAP, finest first
-    (A excluded), read through PCHMG. PCMG's smoothers are never applied here: Richardson without
+    (A excluded), read through PCHMG, with one aggressive first level where a classical one would be
+    denser than A (_dense_first_level). PCMG's smoothers are never applied here: Richardson without
     a preconditioner spares their set-up (Chebyshev's eigenvalue estimates: docs/MEASUREMENTS.md)."""
     ours = {"pc_hmg_reuse_interpolation": True, "hmg_inner_pc_type": "hypre",
             "mg_levels_ksp_type": "richardson", "mg_levels_pc_type": "none"}
+    if _dense_first_level(A, comm):
+        ours.update({"hmg_inner_pc_hypre_boomeramg_" + k: v for k, v in _AGGRESSIVE.items()})
     # the user's -nrmicp_hierarchy_pc_hypre_boomeramg_... options reach hypre's set-up
     ours.update({"hmg_inner_" + k[len(_HIERARCHY_PREFIX):]: v for k, v in PETSc.Options().getAll().items()
                  if k.startswith(_HIERARCHY_PREFIX)})
@@ -346,7 +381,8 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     affine ζ runs its outer fixed point — or a stationary member ('nrm', 'nrmm', 'nrmaor', 'nrmsor',
     'nrmgs', 'nrmj', 'mms', 'two_sweep'): the serial loop (nrmicp::Solver on the PETSc engine) as
     synchronous multisplitting, each rank splitting its diagonal block (on one rank, the serial
-    member's iterates; 'nrmj' takes them on any number). upper: z ≤ upper, as in :func:`nrmicp.solve`.
+    member's iterates; 'nrmj' takes them on any number). upper: z ≤ upper, as in :func:`nrmicp.solve`, constant
+    only (an Affine or callable upper raises NotImplementedError).
     callback(k, z, res) sees this rank's rows of z; returning True on any rank stops every rank.
     ``options`` are :func:`nrmicp.solve`'s, with its defaults, checked by the same code (one table:
     nrmicp._options); those that cannot apply on PETSc raise a ValueError naming them:
@@ -418,6 +454,10 @@ def _upper(upper, Am, zf, comm, method):
         return np.full(Am.getLocalSize()[0], np.inf) if free and method != "newton" else None
 
     def local():
+        if callable(upper) or isinstance(upper, Affine):   # (the core would take it; the glue's Res does not)
+            raise NotImplementedError("upper: an implicit upper bound (Affine or callable) is solved by nrmicp.solve "
+                                      "only; nrmicp.distributed.solve takes a constant upper (a number, this rank's "
+                                      "rows or a Vec)")
         u = _local(upper, Am, "upper", scalar_ok=True, infinite=1)
         kind = (_core.ZetaKind.none, _core.ZetaKind.constant, _core.ZetaKind.affine, _core.ZetaKind.functor)[zf.kind]
         _bounds.check(kind, zf.c if zf.kind == 1 else None, u, method, None)

@@ -10,7 +10,9 @@
 // and x⁺ is recovered by the start formula x = γ/2 (Ω1⁻¹ g − Ω2⁻¹ w). For an LCP this is the
 // primal–dual active-set method; on each piece F is affine, so the step is exact there. With
 // bounds (Zeta::with_upper, or a constant ζ with −∞ entries) the obstacle path solves the box
-// problem ζ ≤ z ≤ u, each row at its lower bound, at its upper one or inactive (detail/box.hpp).
+// problem ζ ≤ z ≤ u, each row at its lower bound, at its upper one or inactive (detail/box.hpp);
+// bounds that depend on z (an affine or callable ζ with u, an implicit u(z)) the outer fixed point,
+// each outer step that box problem with the bounds frozen at its z (detail/outer_fixed_point.hpp).
 //
 // The structure: the step runs in the family's loop (detail::loop, solver.hpp) with the family's
 // stopping Monitor, like every member's step.
@@ -260,6 +262,7 @@ class Newton {
     detail::NewtonRun<MatrixType> run(levels_, resolved, hooks, nest, zeta.upper());
     const auto t_iterations = std::chrono::steady_clock::now();
     Result r = [&] {
+      if (zeta.implicit_upper()) return run.solve_outer_fixed_point(q, zeta, z0);  // its steps freeze u(z) too
       switch (zeta.kind()) {
         case ZetaKind::None: return run.solve_obstacle(q, Vector(), z0, nest);  // ψ = 0
         case ZetaKind::Constant: return run.solve_obstacle(q, zeta.c(), z0, nest);

@@ -155,6 +155,9 @@ class Solver {
     resolve_tolerance(o, q, zeta, comm());
     Result r;
     if (zeta.bounded()) {
+      if (zeta.implicit_upper())
+        throw std::invalid_argument("Solver: an implicit upper bound (affine or functor) is solved by the Newton member "
+                                    "(nrmicp::Newton, its outer fixed point); the modulus members take a constant upper bound");
       if (zeta.kind() == ZetaKind::Affine || zeta.kind() == ZetaKind::Functor)
         throw std::invalid_argument("Solver: an affine or functor zeta with an upper bound is solved by the Newton member "
                                     "(nrmicp::Newton, its outer fixed point); the modulus members take bounds with zeta "

@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <functional>
 #include <limits>
+#include <memory>
 #include <stdexcept>
 #include <string>
 
@@ -91,11 +92,35 @@ class Zeta {
   /// Every member solves it for ζ none or constant: the Newton member, and the modulus members in
   /// their box form (detail/modulus.hpp); an affine or functor ζ with u only the Newton member (its
   /// outer fixed point, without a Jacobian: check()).
-  Zeta with_upper(Vector u) const { Zeta t = *this; t.upper_ = std::move(u); return t; }
+  Zeta with_upper(Vector u) const { Zeta t = *this; t.upper_ = std::move(u); t.upper_map_.reset(); return t; }
+  /// This ζ with the upper bound u(z) given as a map of the same four kinds: none (no upper bound),
+  /// constant (as with_upper(c)), affine u(z) = Bz + c (evaluated in C++) or a functor (an implicit
+  /// obstacle from above; +∞ entries: no bound on that row). An affine or functor u is implicit: the
+  /// Newton member solves it by its outer fixed point, each outer step on the box frozen at its z
+  /// (detail/outer_fixed_point.hpp); the modulus members refuse it (Solver::solve).
+  Zeta with_upper(const Zeta& u) const {
+    if (u.kind_ == ZetaKind::None) return with_upper(Vector());
+    if (u.kind_ == ZetaKind::Constant) return with_upper(u.c_);
+    Zeta t = *this;
+    t.upper_.resize(0);
+    t.upper_map_ = std::make_shared<const Zeta>(u);
+    return t;
+  }
+  /// The constant upper bound (empty: none, or an implicit one: implicit_upper()).
   const Vector& upper() const { return upper_; }
-  /// An upper bound, or a constant ζ with a −∞ entry.
+  /// An upper bound that depends on z (affine or functor): eval_upper at each z.
+  bool implicit_upper() const { return static_cast<bool>(upper_map_); }
+  /// An upper bound (constant or implicit), or a constant ζ with a −∞ entry.
   bool bounded() const {
-    return upper_.size() > 0 || (kind_ == ZetaKind::Constant && (c_.array() == -std::numeric_limits<double>::infinity()).any());
+    return upper_.size() > 0 || implicit_upper() ||
+           (kind_ == ZetaKind::Constant && (c_.array() == -std::numeric_limits<double>::infinity()).any());
+  }
+  /// out = u(z): the constant upper bound (empty: none), or the implicit one at z. False when u failed
+  /// or gave NaN or −∞ somewhere (+∞ is no bound on that row).
+  bool eval_upper(const Vector& z, Vector& out) const {
+    if (!upper_map_) { out = upper_; return true; }
+    if (!upper_map_->apply(z, out)) return false;
+    return !(out.array().isNaN() || out.array() == -std::numeric_limits<double>::infinity()).any();
   }
 
   ZetaKind kind() const { return kind_; }
@@ -110,34 +135,43 @@ class Zeta {
 
   /// Checks the sizes against n; throws std::invalid_argument naming the mismatch.
   void check(Eigen::Index n) const {
-    if ((kind_ == ZetaKind::Constant || kind_ == ZetaKind::Affine) && c_.size() != n)
-      throw std::invalid_argument("Zeta: c has length " + std::to_string(c_.size()) + ", expected n = " + std::to_string(n));
-    if (kind_ == ZetaKind::Affine && B_.rows() != n)
-      throw std::invalid_argument("Zeta: B has " + std::to_string(B_.rows()) + " rows, expected n = " + std::to_string(n));
-    if (kind_ == ZetaKind::Functor && !f_) throw std::invalid_argument("Zeta: empty functor");
+    check_map(n, "Zeta");
+    if (upper_map_) upper_map_->check_map(n, "Zeta: upper");
     if (bounded()) check_bounds(n);
   }
 
   /// out = ζ(z). Returns false when ζ failed or produced non-finite values.
   bool eval(const Vector& z, Vector& out) const {
-    switch (kind_) {
-      case ZetaKind::None: out.setZero(z.size()); return true;
-      case ZetaKind::Constant: out = c_; return true;
-      case ZetaKind::Affine: out.noalias() = B_ * z; out += c_; break;
-      case ZetaKind::Functor:
-        out.resize(z.size());
-        if (!f_(z.data(), out.data(), z.size())) return false;
-        break;
-    }
-    return out.allFinite();
+    if (!apply(z, out)) return false;
+    return kind_ == ZetaKind::None || kind_ == ZetaKind::Constant || out.allFinite();
   }
 
  private:
   explicit Zeta(ZetaKind k) : kind_(k) {}
+  /// out = the map at z, unchecked (eval: ζ's rule, eval_upper: u's); false when the functor failed.
+  bool apply(const Vector& z, Vector& out) const {
+    switch (kind_) {
+      case ZetaKind::None: out.setZero(z.size()); return true;
+      case ZetaKind::Constant: out = c_; return true;
+      case ZetaKind::Affine: out.noalias() = B_ * z; out += c_; return true;
+      case ZetaKind::Functor: out.resize(z.size()); return f_(z.data(), out.data(), z.size());
+    }
+    return false;
+  }
+  /// The map's sizes against n (`what` names it in the message).
+  void check_map(Eigen::Index n, const std::string& what) const {
+    if ((kind_ == ZetaKind::Constant || kind_ == ZetaKind::Affine) && c_.size() != n)
+      throw std::invalid_argument(what + ": c has length " + std::to_string(c_.size()) + ", expected n = " + std::to_string(n));
+    if (kind_ == ZetaKind::Affine && B_.rows() != n)
+      throw std::invalid_argument(what + ": B has " + std::to_string(B_.rows()) + " rows, expected n = " + std::to_string(n));
+    if (kind_ == ZetaKind::Functor && !f_) throw std::invalid_argument(what + ": empty functor");
+  }
   void check_bounds(Eigen::Index n) const {
     if (kind_ == ZetaKind::Functor && j_)
       throw std::invalid_argument("Zeta: an upper bound with a Jacobian of zeta is not supported (the semismooth Newton "
                                   "step has no box); leave the Jacobian out");
+    if (upper_map_ && upper_map_->j_)
+      throw std::invalid_argument("Zeta: an implicit upper bound takes no Jacobian (the outer fixed point freezes it)");
     if (upper_.size() && upper_.size() != n)
       throw std::invalid_argument("Zeta: upper has length " + std::to_string(upper_.size()) + ", expected n = " +
                                   std::to_string(n));
@@ -152,6 +186,7 @@ class Zeta {
   }
   ZetaKind kind_;
   Vector upper_;
+  std::shared_ptr<const Zeta> upper_map_;  // an implicit upper bound u(z) (affine or functor), or null
   Vector c_;
   RowMatrix B_;
   Functor f_;
@@ -165,8 +200,9 @@ double residual_at_zero(const Eigen::VectorXd& q, const Zeta<StorageIndex>& zeta
                         const detail::Comm& comm = detail::serial_comm()) {
   Eigen::VectorXd zeta0;
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(q.size());
-  if (!comm.all(zeta.eval(zero, zeta0))) return std::numeric_limits<double>::quiet_NaN();
-  return detail::bounded_residual(q, -zeta0, zero, zeta.upper(), comm);  // with bounds: ‖mid(−ζ(0), −u, q)‖
+  Eigen::VectorXd upper0;
+  if (!comm.all(zeta.eval(zero, zeta0) && zeta.eval_upper(zero, upper0))) return std::numeric_limits<double>::quiet_NaN();
+  return detail::bounded_residual(q, -zeta0, zero, upper0, comm);  // with bounds: ‖mid(−ζ(0), −u(0), q)‖
 }
 
 /// `o` with its relative tolerance resolved for this problem: tol = target(Res(0)), rtol = 0.

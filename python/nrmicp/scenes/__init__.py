@@ -161,10 +161,11 @@ class Problem:
         Nodes per axis (x first, the fastest in the ordering) when the unknowns are the
         interior nodes of a uniform tensor grid; None otherwise. :meth:`prolongations`
         builds the geometric hierarchy from it.
-    upper : ndarray or None
+    upper : ndarray, callable or None
         An upper bound (+inf where there is none): the scene is the mixed complementarity
         problem ζ ≤ z ≤ upper (``nrmicp.solve``'s ``upper=``; ζ a constant that may hold -inf,
-        where z is free below). None: the ICP above.
+        where z is free below); a callable u(z) is an implicit upper bound (method 'newton').
+        None: the ICP above.
     """
 
     name: str
@@ -201,8 +202,10 @@ class Problem:
         w, g = self.parts(z)
         if self.upper is None:
             return float(np.linalg.norm(np.minimum(w, g)))
-        with np.errstate(invalid="ignore"):   # z − ζ = +inf where ζ = −inf: min picks the other term
-            return float(np.linalg.norm(np.minimum(g, np.maximum(np.asarray(z) - self.upper, w))))
+        from .._bounds import residual_terms   # (crossed implicit bounds: its rule)
+
+        upper = self.upper(z) if callable(self.upper) else self.upper
+        return float(np.linalg.norm(residual_terms(np.asarray(z, dtype=float), w, g, upper)))
 
     def prolongations(self):
         """The scene's geometric hierarchy for ``hierarchy=`` (nested iteration), or None.
@@ -240,7 +243,7 @@ from .impulse import impulse_control  # noqa: E402
 from .american import american_put, american_put_price, binomial_american_put  # noqa: E402
 from .finite_elements import fe_obstacle  # noqa: E402  (scikit-fem is imported when a scene is built)
 from .unstructured import contact_disk_p1  # noqa: E402
-from .two_sided import two_sided_membrane_1d, two_sided_membrane_2d  # noqa: E402
+from .two_sided import two_sided_membrane_1d, two_sided_membrane_2d, two_sided_membrane_heated_2d  # noqa: E402
 from .elastic_contact import elastic_contact  # noqa: E402  (scikit-fem is imported when a scene is built)
 from .game import binomial_game_put, game_put, game_put_price  # noqa: E402
 

@@ -17,7 +17,8 @@ number of blocks for p_matrix_cycling, the refinements r for elastic contact (P1
 + 1); P2 at r has P1's n at r + 1, so the two have the same n at every size).
 
 The box scenes (an upper bound or free unknowns; ``Problem.upper`` or ζ with -inf) are the last
-five: the two-sided membranes, elastic contact P1/P2 and the game put.
+six: the two-sided membranes, elastic contact P1/P2, the game put and the heated two-sided membrane
+(its upper bound moves with the solution: an implicit upper bound).
 """
 from __future__ import annotations
 
@@ -28,19 +29,21 @@ import scipy.sparse as sp
 NAMES = ("bai_sym_lcp", "bai_nonsym_lcp", "bai_sym_icp", "bai_nonsym_icp", "bai_sym_affine",
          "obstacle_1d", "obstacle_2d", "obstacle_3d", "convection_obstacle", "p_matrix_cycling",
          "thermoforming_1d", "thermoforming_2d", "impulse_control", "american_put", "contact_disk_p1",
-         "two_sided_1d", "two_sided_2d", "elastic_contact_p1", "elastic_contact_p2", "game_put")
+         "two_sided_1d", "two_sided_2d", "elastic_contact_p1", "elastic_contact_p2", "game_put",
+         "two_sided_heated_2d")
 
 _PARAMS = ("bai", "obstacle_1d", "obstacle_2d", "obstacle_3d", "convection_obstacle", "p_matrix_cycling",
            "thermoforming_1d", "thermoforming_2d", "impulse_control", "american_put", "contact_disk_p1",
-           "two_sided_1d", "two_sided_2d", "elastic_contact_p1", "elastic_contact_p2", "game_put")
+           "two_sided_1d", "two_sided_2d", "elastic_contact_p1", "elastic_contact_p2", "game_put",
+           "two_sided_heated_2d")
 SIZES = {
-    "tiny":      dict(zip(_PARAMS, (8, 63, 8, 6, 8, 4, 63, 8, 33, 100, 64, 63, 7, 3, 2, 100))),
-    "small":     dict(zip(_PARAMS, (64, 255, 32, 12, 32, 64, 255, 32, 65, 1600, 1024, 255, 31, 5, 4, 1600))),
-    "medium":    dict(zip(_PARAMS, (128, 1023, 64, 20, 64, 256, 1023, 64, 129, 3200, 4096, 1023, 63, 6, 5, 3200))),
+    "tiny":      dict(zip(_PARAMS, (8, 63, 8, 6, 8, 4, 63, 8, 33, 100, 64, 63, 7, 3, 2, 100, 7))),
+    "small":     dict(zip(_PARAMS, (64, 255, 32, 12, 32, 64, 255, 32, 65, 1600, 1024, 255, 31, 5, 4, 1600, 31))),
+    "medium":    dict(zip(_PARAMS, (128, 1023, 64, 20, 64, 256, 1023, 64, 129, 3200, 4096, 1023, 63, 6, 5, 3200, 63))),
     "large":     dict(zip(_PARAMS, (256, 4095, 128, 32, 128, 1024, 4095, 128, 255, 6400, 16384, 4095, 127, 7, 6,
-                                    6400))),
+                                    6400, 127))),
     "realistic": dict(zip(_PARAMS, (512, 65535, 511, 47, 511, 4096, 65535, 127, 1023, 3200, 131072, 65535, 511, 8, 7,
-                                    3200))),
+                                    3200, 511))),
 }
 
 
@@ -56,7 +59,7 @@ def build(name: str, size: str = "small", *, exact=None):
     exact discrete solution (None: the scene's default; False saves the reference solve)."""
     from . import (american_put, bai, contact_disk_p1, convection_diffusion_obstacle, elastic_contact, game_put,
                    impulse_control, obstacle_1d, obstacle_2d, obstacle_3d, p_matrix_cycling, thermoforming_1d,
-                   thermoforming_2d, two_sided_membrane_1d, two_sided_membrane_2d)
+                   thermoforming_2d, two_sided_membrane_1d, two_sided_membrane_2d, two_sided_membrane_heated_2d)
 
     if name not in NAMES:
         raise ValueError(f"unknown scene {name!r}; choose from {', '.join(NAMES)}")
@@ -77,7 +80,7 @@ def build(name: str, size: str = "small", *, exact=None):
                 "convection_obstacle": convection_diffusion_obstacle, "thermoforming_1d": thermoforming_1d,
                 "thermoforming_2d": thermoforming_2d, "impulse_control": impulse_control,
                 "contact_disk_p1": contact_disk_p1, "two_sided_1d": two_sided_membrane_1d,
-                "two_sided_2d": two_sided_membrane_2d}
+                "two_sided_2d": two_sided_membrane_2d, "two_sided_heated_2d": two_sided_membrane_heated_2d}
     return builders[name](m, **kw)
 
 

@@ -26,7 +26,8 @@ from . import Problem
 from ._exact import solve_exact_box
 from ._operators import grid_1d, grid_2d, neg_laplacian_1d, neg_laplacian_2d
 
-__all__ = ["two_sided_membrane_1d", "two_sided_membrane_1d_exact", "two_sided_membrane_2d"]
+__all__ = ["two_sided_membrane_1d", "two_sided_membrane_1d_exact", "two_sided_membrane_2d",
+           "two_sided_membrane_heated_2d"]
 
 _MODELS = ("linear elastic membrane (small deflections)", "two rigid plates, unilateral contact on both sides")
 _OMITS = ("large-deflection nonlinearity", "friction and adhesion", "dynamics", "deformable plates")
@@ -106,3 +107,64 @@ def two_sided_membrane_2d(m: int, load: float = 50.0, lower: float = -0.3, upper
         description=f"membrane between plates at {lower} and {upper}, f = {load} sin(2 pi x) sin(pi y), 5-point FD "
                     f"on {m}x{m} (box problem)",
         models=_MODELS, omits=_OMITS, lipschitz=0.0, grid=(m, m))
+
+
+def _sagging_ceiling(L, ceiling: float, kappa: float, delta: float, ell: float):
+    """u(z) = ceiling − κ (I − δL)⁻¹ s(ceiling − z), s(d) = 1/(1 + (d/ℓ)²): the upper plate sags toward
+    the membrane where the membrane, close below it, heats it (thermoforming's mould law, from above).
+    (I − δL) is factorized once; each call returns a fresh array."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    lu = spla.splu(sp.csc_matrix(sp.identity(L.shape[0]) + delta * L))
+
+    def upper(z):
+        gap = (ceiling - np.asarray(z, dtype=float)) / ell
+        return ceiling - kappa * lu.solve(1.0 / (1.0 + gap * gap))
+
+    return upper
+
+
+def two_sided_membrane_heated_2d(m: int, load: float = 50.0, lower: float = -0.3, ceiling: float = 0.25,
+                                 kappa: float = 0.05, delta: float = 0.01, ell: float = 0.2, exact=None) -> Problem:
+    """:func:`two_sided_membrane_2d` under a ceiling that moves with the solution ("thermoforming from
+    above"): the upper plate sags by κ (I − δΔ_h)⁻¹ s(ceiling − u), s(d) = 1/(1 + (d/ℓ)²), toward the
+    membrane where the membrane comes close to it (the thermoforming scene's mould law, mirrored). An
+    implicit upper bound: ``upper`` is the callable u(z) (``nrmicp.solve(..., upper=problem.upper)``,
+    method 'newton''s outer fixed point). Lipschitz constant of u (∞-norm): κ·3√3/(8ℓ) (0.162 with the
+    defaults), a contraction, so the problem has one solution; ``z_exact`` is that fixed point of exact
+    box solves (policy iteration) when ``exact`` is True (default: n ≤ 5,000).
+    """
+    if not lower < 0.0 < ceiling:
+        raise ValueError(f"need lower < 0 < ceiling, got lower={lower}, ceiling={ceiling}")
+    if not (kappa >= 0 and delta >= 0 and ell > 0 and kappa * 3.0 * np.sqrt(3.0) / (8.0 * ell) < 1.0):
+        raise ValueError(f"need kappa >= 0, delta >= 0, ell > 0 and kappa 3 sqrt(3) / (8 ell) < 1 (a contraction); "
+                         f"got {kappa}, {delta}, {ell}")
+    A = neg_laplacian_2d(m)
+    X, Y = grid_2d(m)
+    q = -load * np.sin(2.0 * np.pi * X) * np.sin(np.pi * Y)
+    lo = np.full(m * m, float(lower))
+    upper = _sagging_ceiling(A, ceiling, kappa, delta, ell)
+    if exact is None:
+        exact = m * m <= 5_000
+    z_exact = _exact_fixed_point(A, q, lo, upper) if exact else None
+    lip = kappa * 3.0 * np.sqrt(3.0) / (8.0 * ell)
+    return Problem(
+        name=f"two_sided_membrane_heated_2d(m={m})", A=A, q=q, zeta=lo, upper=upper, z_exact=z_exact,
+        reference={"x": X, "y": Y, "h": 1.0 / (m + 1), "ceiling": ceiling, "kappa": kappa, "delta": delta,
+                   "ell": ell, "upper_lipschitz": float(lip)},
+        description=f"membrane between a plate at {lower} and a ceiling at {ceiling} that sags toward it where "
+                    f"heated, f = {load} sin(2 pi x) sin(pi y), 5-point FD on {m}x{m} (implicit upper bound)",
+        models=_MODELS + ("the ceiling sags where the membrane heats it (nonlocal, implicit upper bound)",),
+        omits=_OMITS + ("transient heating (steady state only)",), lipschitz=0.0, grid=(m, m))
+
+
+def _exact_fixed_point(A, q, lower, upper_fn, tol=1e-14, maxiter=200):
+    """The fixed point z = S(u(z)) of exact box solves (solve_exact_box), u a contraction."""
+    z = solve_exact_box(A, q, lower, upper_fn(np.zeros(A.shape[0])))
+    for _ in range(maxiter):
+        new = solve_exact_box(A, q, lower, upper_fn(z), z0=z)
+        step, z = np.max(np.abs(new - z)), new
+        if step <= tol * max(1.0, np.max(np.abs(z))):
+            return z
+    raise RuntimeError(f"the exact outer fixed point did not settle in {maxiter} steps")

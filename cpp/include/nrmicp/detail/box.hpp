@@ -22,12 +22,25 @@
 namespace nrmicp::detail {
 
 /// Res = ‖mid(z − ζ, z − u, w)‖₂ = ‖min(g, max(z − u, w))‖₂ (g = z − ζ(z)) of an ICP with the upper
-/// bound u (empty: none, the paper's Res).
+/// bound u (empty: none, the paper's Res). A row whose bounds cross (ζ > u, i.e. z − u > g: bounds
+/// that depend on z) has no point between them, and there min(g, max(z − u, w)) would be 0 at z = ζ:
+/// its term is max(z − u, ζ − z) instead, the larger violation of the two bounds (at least (ζ − u)/2),
+/// so that Res vanishes only at a z that satisfies both (docs/SPEC.md, "Bounds").
 /// `comm`: the processes that own the other rows (detail/comm.hpp).
 inline double bounded_residual(const Eigen::VectorXd& w, const Eigen::VectorXd& g, const Eigen::VectorXd& z,
                                const Eigen::VectorXd& upper, const Comm& comm = serial_comm()) {
   if (upper.size() == 0) return comm.stable_norm(w.cwiseMin(g));
-  return comm.stable_norm(g.cwiseMin((z - upper).cwiseMax(w)));
+  const auto above = (z - upper).array();
+  return comm.stable_norm((above > g.array()).select(above.max(-g.array()), g.array().min(above.max(w.array()))).matrix());
+}
+
+/// The rounding error of row i's term of bounded_residual, over ε: of w_i = (Az + q)_i, `tw` (the row
+/// of |A||z| + |q|), where the term is w_i; of g_i = z_i − ζ_i(z), |z_i| + |ζ_i(z)|, where it is g_i; of
+/// z_i − u_i, |z_i| + |u_i|, where it is that; the larger of tw and g's on a tie w_i = g_i.
+inline double term_rounding(double tw, double w, double g, double z, const Eigen::VectorXd& upper, Eigen::Index i) {
+  const double tg = std::abs(z) + std::abs(z - g);
+  if (upper.size() && z - upper[i] > w) return g < z - upper[i] ? tg : std::abs(z) + std::abs(upper[i]);
+  return w < g ? tw : g < w ? tg : std::max(tw, tg);
 }
 
 /// z = y + s of the box problem in y = z − s (hi: its upper bounds, empty for none), a row on its

@@ -51,6 +51,77 @@ Eigen::Map<const Eigen::SparseMatrix<double, Eigen::RowMajor, typename M::Storag
                                      K.valuePtr());
 }
 
+/// The Galerkin operators updated by a fine K's changed entries: K_{l+1} += P_lᵀ ΔK_l P_l level by
+/// level, each level's changed entries the next one's ΔK. Written once for both engines: a level's
+/// P and K_{l+1} are row-major compressed views (Eigen matrices, or Maps over a PETSc SeqAIJ Mat's
+/// arrays), given by the callables of apply.
+template <typename StorageIndex>
+class GalerkinUpdate {
+ public:
+  using Changes = std::vector<Change<StorageIndex>>;
+
+  /// The most changed entries of K (of `nnz`) that apply takes as an update: each costs about
+  /// as much as 5 entries of the full product (a search in C's row per term; docs/MEASUREMENTS.md,
+  /// "`GalerkinOperators::max_changes` = nnz / 8").
+  static std::size_t max_changes(Eigen::Index nnz) { return static_cast<std::size_t>(nnz / 8); }
+
+  /// K_1, ..., K_levels updated for `changes` of a fine K with `nnz` stored entries; `P(l)` gives
+  /// P_l, `C(l)` K_{l+1} (writable values). False (some levels updated, the rest not: recompute
+  /// them all) when there are too many changes or a term falls outside a level's pattern.
+  template <typename PAt, typename CAt>
+  bool apply(const Changes& changes, Eigen::Index nnz, std::size_t levels, PAt&& P, CAt&& C) {
+    if (changes.size() > max_changes(nnz)) return false;
+    const Changes* in = &changes;
+    for (std::size_t l = 0; l < levels; ++l) {
+      Changes& out = level_changes_[l % 2];
+      auto&& c = C(l);
+      if (!add_change(P(l), *in, c, out)) return false;
+      in = &out;
+    }
+    return true;
+  }
+
+ private:
+  /// C += Pᵀ ΔK P, ΔK given by its changed entries (`in`); `out` gets C's changed entries. The
+  /// terms are added to C's values in place; a touched position's value before the update is kept
+  /// in `out` and its change is the difference (no dense sum per position of C: docs/MEASUREMENTS.md,
+  /// "The algebraic hierarchy on grids", Memory). False when a term falls outside C's pattern (C then
+  /// partly updated).
+  template <typename PMatrix, typename CMatrix>
+  bool add_change(const PMatrix& P, const Changes& in, CMatrix& C, Changes& out) {
+    const StorageIndex *po = P.outerIndexPtr(), *pi = P.innerIndexPtr(), *co = C.outerIndexPtr(),
+                       *ci = C.innerIndexPtr();
+    const double* pv = P.valuePtr();
+    double* cv = C.valuePtr();
+    listed_.resize(static_cast<std::size_t>(C.nonZeros()), false);  // all false between calls
+    out.clear();                                                      // (row, position, value before)
+    bool inside = true;
+    for (const auto& change : in) {
+      for (StorageIndex a = po[change.row]; a < po[change.row + 1] && inside; ++a)
+        for (StorageIndex b = po[change.col]; b < po[change.col + 1]; ++b) {
+          const StorageIndex* begin = ci + co[pi[a]];
+          const StorageIndex* end = ci + co[pi[a] + 1];
+          const StorageIndex* at = std::lower_bound(begin, end, pi[b]);
+          if (at == end || *at != pi[b]) { inside = false; break; }
+          const auto p = static_cast<std::size_t>(at - ci);
+          if (!listed_[p]) { listed_[p] = true; out.push_back({pi[a], static_cast<StorageIndex>(p), cv[p]}); }
+          cv[p] += pv[a] * change.delta * pv[b];
+        }
+      if (!inside) break;
+    }
+    for (auto& change : out) {   // col holds the position, delta the value before, until here
+      const auto p = static_cast<std::size_t>(change.col);
+      change.delta = cv[p] - change.delta;
+      change.col = ci[p];
+      listed_[p] = false;
+    }
+    return inside;
+  }
+
+  Changes level_changes_[2];              // scratch of apply
+  std::vector<bool> listed_;              // scratch of add_change: a position of C is in its list
+};
+
 /// K_1, ..., K_L of a fine K (given row-major) on the hierarchy's P_l, R_l.
 template <typename StorageIndex>
 class GalerkinOperators {
@@ -64,10 +135,8 @@ class GalerkinOperators {
     K_.resize(levels_);
   }
 
-  /// The most changed entries of K (of `nnz`) that form applies as an update: each costs about
-  /// as much as 5 entries of the full product (a search in C's row per term; docs/MEASUREMENTS.md,
-  /// "`GalerkinOperators::max_changes` = nnz / 8").
-  static std::size_t max_changes(Eigen::Index nnz) { return static_cast<std::size_t>(nnz / 8); }
+  /// GalerkinUpdate::max_changes.
+  static std::size_t max_changes(Eigen::Index nnz) { return GalerkinUpdate<StorageIndex>::max_changes(nnz); }
 
   std::size_t levels() const { return levels_; }
   /// P_l, R_l of coarse level l + 1 (l = 0: the one below the fine level).
@@ -140,53 +209,10 @@ class GalerkinOperators {
     C.swap(formed);   // Eigen 3.4's SparseMatrix has no move assignment: = would copy
   }
 
-  /// The operators updated level by level for K's changed entries. False (some levels updated, the
-  /// rest not: form then recomputes them all) when there are too many changes or a term falls
-  /// outside a level's pattern.
+  /// The operators updated level by level for K's changed entries (GalerkinUpdate::apply).
   bool update(const Changes& changes) {
-    if (changes.size() > max_changes(fine_pattern_)) return false;
-    const Changes* in = &changes;
-    for (std::size_t l = 0; l < levels_; ++l) {
-      Changes& out = level_changes_[l % 2];
-      if (!add_change(grid_[l].P, *in, K_[l], out)) return false;
-      in = &out;
-    }
-    return true;
-  }
-
-  /// C += Pᵀ ΔK P, ΔK given by its changed entries (`in`); `out` gets C's changed entries. The
-  /// terms are added to C's values in place; a touched position's value before the update is kept
-  /// in `out` and its change is the difference (no dense sum per position of C: docs/MEASUREMENTS.md,
-  /// "The algebraic hierarchy on grids", Memory). False when a term falls outside C's pattern (C then
-  /// partly updated).
-  bool add_change(const RowMatrix& P, const Changes& in, RowMatrix& C, Changes& out) {
-    const StorageIndex *po = P.outerIndexPtr(), *pi = P.innerIndexPtr(), *co = C.outerIndexPtr(),
-                       *ci = C.innerIndexPtr();
-    const double* pv = P.valuePtr();
-    double* cv = C.valuePtr();
-    listed_.resize(static_cast<std::size_t>(C.nonZeros()), false);  // all false between calls
-    out.clear();                                                      // (row, position, value before)
-    bool inside = true;
-    for (const auto& change : in) {
-      for (StorageIndex a = po[change.row]; a < po[change.row + 1] && inside; ++a)
-        for (StorageIndex b = po[change.col]; b < po[change.col + 1]; ++b) {
-          const StorageIndex* begin = ci + co[pi[a]];
-          const StorageIndex* end = ci + co[pi[a] + 1];
-          const StorageIndex* at = std::lower_bound(begin, end, pi[b]);
-          if (at == end || *at != pi[b]) { inside = false; break; }
-          const auto p = static_cast<std::size_t>(at - ci);
-          if (!listed_[p]) { listed_[p] = true; out.push_back({pi[a], static_cast<StorageIndex>(p), cv[p]}); }
-          cv[p] += pv[a] * change.delta * pv[b];
-        }
-      if (!inside) break;
-    }
-    for (auto& change : out) {   // col holds the position, delta the value before, until here
-      const auto p = static_cast<std::size_t>(change.col);
-      change.delta = cv[p] - change.delta;
-      change.col = ci[p];
-      listed_[p] = false;
-    }
-    return inside;
+    return update_.apply(changes, fine_pattern_, levels_, [this](std::size_t l) -> const RowMatrix& { return grid_[l].P; },
+                         [this](std::size_t l) -> RowMatrix& { return K_[l]; });
   }
 
   Level<StorageIndex>* grid_;             // the levels below: prolongations, restrictions, A_l
@@ -195,8 +221,7 @@ class GalerkinOperators {
   Eigen::Index fine_pattern_ = -1;        // nonzeros of the K the patterns were formed for
   bool borrow_;                           // the hierarchy's A_l are freed while the V-cycle works
   bool lent_ = false;                     // ... and are now (restore forms them again)
-  Changes level_changes_[2];              // scratch of update
-  std::vector<bool> listed_;              // scratch of add_change: a position of C is in its list
+  GalerkinUpdate<StorageIndex> update_;   // the update by K's changed entries
   std::vector<StorageIndex> position_;    // scratch of product_values
 };
 

@@ -71,6 +71,17 @@ inline constexpr int kSmoothingSweeps = 2;
 /// as the floor (Globalized::at_rounding_level), above it as a poor Jacobian's (JacobianCheck).
 inline constexpr double kSlowStep = 0.5;
 
+/// A step from Res r_old to r above tol met Res's rounding floor: it did not reduce Res by kSlowStep,
+/// and Res before and after it are within kFloorFactor of the rounding level (`level()`, computed only
+/// then). Both: a step that leaves the floor band has moved the active set (a non-monotone step) and
+/// the iteration goes on (docs/MEASUREMENTS.md, "The rounding floor judged before and after a step").
+/// The rule of a level's Newton loop (Globalized) and of the outer fixed point.
+template <typename Level>
+bool met_floor(double r_old, double r, double tol, Level level) {
+  if (r < tol || r < kSlowStep * r_old) return false;
+  return std::max(r, r_old) <= kFloorFactor * level();
+}
+
 /// A callable ζ's `zeta_jacobian` that does not deliver. With ζ's derivative, Newton solves an
 /// active set that has settled in one step (ζ affine) or converges superlinearly on it; with a poor
 /// one, each step on the set contracts only as the outer fixed point does, and a wrong one makes Res
@@ -118,11 +129,13 @@ class JacobianCheck {
   int slow_ = 0, grew_ = 0;
 };
 
-/// The message of a Newton loop that settled at Res's rounding floor above tol.
-inline std::string floor_message(double best, double tol, double floor) {
-  return "stagnated: Res reached its rounding floor (the active set has settled and a further Newton step does not "
-         "reduce Res): best Res " + to_text(best) + " >= tol " + to_text(tol) +
-         ", rounding level eps (||A||z| + |q||| + ||z| + |zeta(z)||) = " + to_text(floor) + "; returning the best iterate";
+/// The message of a Newton loop that settled at Res's rounding floor above tol (`why`: the evidence,
+/// the level's loop's by default).
+inline std::string floor_message(double best, double tol, double floor,
+                                 const std::string& why = "the active set has settled and a further Newton step does not reduce Res") {
+  return "stagnated: Res reached its rounding floor (" + why + "): best Res " + to_text(best) + " >= tol " + to_text(tol) +
+         ", rounding level eps ||t|| (t_i: |A||z| + |q| where Res takes w_i, |z| + |zeta(z)| where it takes "
+         "z_i - zeta_i(z)) = " + to_text(floor) + "; returning the best iterate";
 }
 
 /// A settled set (or a z that stood still) far above the rounding level: no floor to blame, another
@@ -287,7 +300,7 @@ class Globalized {
     const double r_old = plain_.residual();
     accept(r, h, still);
     const bool slow = !(r < ctl_.solve.tol) && !(r < kSlowStep * r_old) && !still_;
-    if (slow) at_floor_ = at_rounding_level(std::max(r, r_old));
+    if (slow) at_floor_ = met_floor(r_old, r, ctl_.solve.tol, [&] { return floor_ = plain_.rounding_level(); });
     if constexpr (!Plain::set_fixes_step) {
       bool judged = !(r < ctl_.solve.tol) && jacobian_.slow(r, r_old) && !still_ && !at_floor_;
       if (judged && !slow) judged = !at_rounding_level(std::max(r, r_old));  // (slow: at_floor_ says it)
@@ -320,11 +333,7 @@ class Globalized {
     const std::size_t active = plain_.active_count(inactive_);
     return active > 0 && static_cast<double>(plain_.trial_active_count()) > kOvershootGrowth * static_cast<double>(active);
   }
-  // Res before a step that did not halve it, and after it, are within kFloorFactor of the rounding
-  // level of Res. Both: a step that leaves the floor band has moved the active set (a non-monotone
-  // step, accepted) and Newton goes on: judged on the Res before it alone, a solve with a few points
-  // of its active set still wrong stopped short (docs/MEASUREMENTS.md, "The rounding floor judged
-  // before and after a step").
+  // Res r is within kFloorFactor of its rounding level (the floor band of met_floor).
   bool at_rounding_level(double r) {
     floor_ = plain_.rounding_level();
     return r <= kFloorFactor * floor_;

@@ -324,14 +324,22 @@ class NewtonLevel {
     return comm_.stable_norm(w.cwiseMin(v - zv));
   }
 
-  /// The rounding level of Res at z: ε (‖|A||z| + |q|‖₂ + ‖|z| + |ζ(z)|‖₂), the size of the rounding
-  /// error in w = Az + q and g = z − ζ(z) (ζ(z) = z − g), below which no step brings Res.
-  double rounding_level(const Vector& z, const Vector& q, const Vector& g) const {
+  /// The rounding level of Res at z: ε ‖t‖₂, t_i the rounding of the term Res takes in row i
+  /// (term_rounding: |A||z| + |q| where it is w_i = (Az + q)_i, |z_i| + |ζ_i(z)| where it is
+  /// g_i = z_i − ζ_i(z)), below which no step brings Res. Row by row, not the two parts' sums: a Res
+  /// made of w's entries alone is not floored by z's size (docs/MEASUREMENTS.md, "The rounding level
+  /// row by row"). `upper`: the bound of bounded_residual (empty: none).
+  double rounding_level(const Vector& z, const Vector& q, const Vector& g, const Vector& w,
+                        const Vector& upper = Vector()) const {
     ScopedTimer timer(timings().spmv);
     Vector t = q.cwiseAbs();
     abs_multiply_add(A_, z.cwiseAbs(), t);
-    constexpr double eps = std::numeric_limits<double>::epsilon();
-    return eps * (comm_.stable_norm(t) + comm_.stable_norm(z.cwiseAbs() + (z - g).cwiseAbs()));
+    for (Eigen::Index i = 0; i < t.size(); ++i) t[i] = term_rounding(t[i], w[i], g[i], z[i], upper, i);
+    return std::numeric_limits<double>::epsilon() * comm_.stable_norm(t);
+  }
+  /// The same for the box problem lo ≤ y ≤ hi (Box::residual's terms).
+  double rounding_level(const Vector& y, const Vector& q, const Box& box, const Vector& w) const {
+    return box.lo.size() ? rounding_level(y, q, y - box.lo, w, box.hi) : rounding_level(y, q, y, w, box.hi);
   }
 
   /// The active-set test (Ω1/Ω2 of this level) and the bookkeeping of sets.
@@ -363,6 +371,11 @@ class NewtonLevel {
   bool eval_zeta(const Zeta<StorageIndex>& zeta, const Vector& v, Vector& zv) const {
     ScopedTimer t(timings().zeta);
     return zeta.eval(v, zv);
+  }
+  /// u(v) of an implicit upper bound into uv, timed as ζ is; false when u failed (Zeta::eval_upper).
+  bool eval_upper(const Zeta<StorageIndex>& zeta, const Vector& v, Vector& uv) const {
+    ScopedTimer t(timings().zeta);
+    return zeta.eval_upper(v, uv);
   }
   Result sweep(const Vector& q, const RowMatrix* B, const Vector* c, const Vector& z0, int sweeps, double tol) {
     using Z = Zeta<StorageIndex>;

@@ -219,9 +219,6 @@ struct NewtonTuning {
   /// The outer fixed point on a callable ζ without its Jacobian (detail::OuterFixedPoint): Anderson's
   /// memory on the outer map z ↦ S(ζ(z)) (docs/MEASUREMENTS.md, "The outer fixed point, accelerated").
   static constexpr int outer_memory = 3;
-  /// Its inner obstacle solves stop at this fraction of the outer iterate's Res (inexact while the
-  /// outer map still moves; exact, to a settled set, once Res is near tol: the inner loop settles first).
-  static constexpr double outer_forcing = 0.1;
   /// The semismooth loop's outer steps (solve_semismooth) are used while their obstacle solve's Res is
   /// below this fraction of the ICP's Res where it started (else the obstacle problem was not solved:
   /// an LCP of a matrix that is no P-matrix may have no solution the steps find).
@@ -246,10 +243,11 @@ class ObstacleSolver {
   /// `nest`: start from the nested solution. `report`: this is the problem being solved (history,
   /// callback), not an inner one. `set` (optional): the inactive set to start from, replaced by the final one.
   /// z ≤ upper too; ψ and upper may be −∞ resp. +∞ in places (ShiftedBounds: the box problem in y).
-  /// tol, maxiter < 0: the solve's.
+  /// tol, maxiter < 0: the solve's. `upper` (optional): this problem's upper bounds in place of the
+  /// solve's (an implicit upper bound frozen at an outer step's z).
   Result solve(const Vector& q, const Vector& psi, const Vector* z0, bool nest, double tol, int maxiter, bool report,
-               std::vector<char>* set) {
-    const ShiftedBounds bounds(psi, upper_, false);
+               std::vector<char>* set, const Vector* upper = nullptr) {
+    const ShiftedBounds bounds(psi, upper ? *upper : upper_, false);
     const Box& box = bounds.box;
     const bool shifted = bounds.shifted();
     Vector shifted_q;
@@ -417,8 +415,9 @@ class NewtonRun {
 
   /// The obstacle problem z ≥ ψ (ObstacleSolver::solve; tol, maxiter < 0: the solve's).
   Result solve_obstacle(const Vector& q, const Vector& psi, const Vector* z0, bool nest, double tol = -1,
-                        int maxiter = -1, bool report = true, std::vector<char>* set = nullptr) {
-    return obstacle_.solve(q, psi, z0, nest, tol, maxiter, report, set);
+                        int maxiter = -1, bool report = true, std::vector<char>* set = nullptr,
+                        const Vector* upper = nullptr) {
+    return obstacle_.solve(q, psi, z0, nest, tol, maxiter, report, set, upper);
   }
 
   /// ζ(z) = Bz + c: Newton on the full system, from the obstacle problem with ψ = ζ(z0) (or
@@ -437,15 +436,16 @@ class NewtonRun {
     return tally_.finish(out, out.z, q);
   }
 
-  /// A callable ζ: the outer fixed point z ← S(ζ(z)) as a step of the family's loop, its
-  /// iterates numbered by the Newton steps taken (nit).
+  /// A callable ζ, or bounds that depend on z (an affine ζ with an upper bound, an implicit upper
+  /// bound): the outer fixed point z ← S(ζ(z), u(z)) as a step of the family's loop, its iterates
+  /// numbered by the Newton steps taken (nit). Bounds that cross at the answer are reported in its
+  /// message (Outer::crossing).
   Result solve_outer_fixed_point(const Vector& q, const Z& zeta, const Vector* z0) {
     const Eigen::Index n = q.size();
     const Vector z_start = z0 ? *z0 : Vector::Zero(n);
     Outer outer{*this, q, zeta, {}, Vector(n)};
     Iterate s;
-    OuterFixedPoint<Outer> step(outer, z_start, z0 != nullptr, s, NewtonTuning::outer_memory,
-                                NewtonTuning::outer_forcing);
+    OuterFixedPoint<Outer> step(outer, z_start, z0 != nullptr, s, NewtonTuning::outer_memory);
     Result out;
     static const Vector no_shift;
     Monitor monitor(o_, hooks_.callback, hooks_.poll, hooks_.progress, no_shift, out, n);
@@ -454,6 +454,10 @@ class NewtonRun {
     loop(step, s, monitor);
     monitor.finish(z_start);
     tally_.take_history(out);
+    if (out.status == Status::ZetaFailed && outer.upper_failed)
+      out.message += "; upper(z) failed or returned NaN or -inf";
+    else if (out.status != Status::Converged && zeta.bounded())
+      out.message += outer.crossing(out.z);
     return tally_.finish(out.z, out.residual, out.status, std::move(out.message), q);
   }
 
@@ -589,26 +593,73 @@ class NewtonRun {
 /// fallback's sweeps, counted in the run's tally.
 template <typename MatrixType>
 struct NewtonRun<MatrixType>::Outer {
+  /// The bounds an outer step freezes at its z: ζ(z), and u(z) when the upper bound is implicit
+  /// (else empty: the run's constant one).
+  struct Frozen {
+    Vector lower, upper;
+    explicit Frozen(Eigen::Index n) : lower(n) {}
+    void swap(Frozen& o) { lower.swap(o.lower); upper.swap(o.upper); }
+  };
   NewtonRun& run;
   const Vector& q;
   const Z& zeta;
   std::vector<char> set;  // the last inner solve's inactive set: the next one starts from it
   Vector w, capped;
+  bool upper_failed = false;  // an implicit u(z) failed (the Monitor ends the solve: ZETA_FAILED)
   const Comm& comm() const { return run.comm(); }
-  /// The inner obstacle problem, solved to Res < tol (0: to a settled active set). Without z,
-  /// it starts at y = 0 (z = ψ) rather than at z = 0 (docs/MEASUREMENTS.md, "The outer fixed
-  /// point's inner solves").
-  /// With an upper bound u the inner problem is min(ψ, u) ≤ z ≤ u (ζ(z) above u has no z between).
-  Result obstacle(const Vector& psi, const Vector* z, bool first, double tol) {
-    const Vector& lower = run.upper_.size() ? (capped = psi.cwiseMin(run.upper_)) : psi;
-    Result inner = run.solve_obstacle(q, lower, z, first && run.nest_, tol, run.o_.maxiter - run.tally_.nit(), false, &set);
+  /// The upper bound of the box frozen in b (empty: none).
+  const Vector& upper(const Frozen& b) const { return zeta.implicit_upper() ? b.upper : run.upper_; }
+  /// The inner box problem, solved to Res < tol (0: to a settled active set). Without z, it starts
+  /// at y = 0 (z = ψ) rather than at z = 0 (docs/MEASUREMENTS.md, "The outer fixed point's inner
+  /// solves").
+  /// Where the frozen bounds cross (ζ(z) > u(z)) the inner problem takes u as both bounds there,
+  /// min(ζ, u) ≤ z ≤ u: the upper bound wins. The box then always has a point, so every outer step
+  /// is defined and its Newton member's rules apply unchanged; Res keeps the crossing on those rows
+  /// (bounded_residual's term max(z − u, ζ − z) > 0), so a z where the bounds cross by more than tol is
+  /// never declared converged (crossing() says why in the message).
+  Result obstacle(const Frozen& b, const Vector* z, bool first, double tol) {
+    const Vector& u = upper(b);
+    const Vector& lower = u.size() ? (capped = b.lower.cwiseMin(u)) : b.lower;
+    Result inner = run.solve_obstacle(q, lower, z, first && run.nest_, tol, run.o_.maxiter - run.tally_.nit(), false,
+                                      &set, &u);
     run.tally_.outer_step();
     return inner;
   }
-  double icp_residual(const Vector& v, Vector& zv) { return run.levels_.finest->icp_residual(q, zeta, v, zv, w, run.upper_); }
+  /// Res of the mixed problem at v with the bounds at v (an implicit u evaluated there, timed as ζ is).
+  double icp_residual(const Vector& v, Frozen& b) {
+    auto& level = *run.levels_.finest;
+    if (zeta.implicit_upper()) {
+      if (!comm().all(v.allFinite())) return std::numeric_limits<double>::infinity();  // a runaway, as for ζ
+      upper_failed = !comm().all(level.eval_upper(zeta, v, b.upper));
+      if (upper_failed) return std::numeric_limits<double>::quiet_NaN();
+    }
+    return level.icp_residual(q, zeta, v, b.lower, w, upper(b));
+  }
+  /// The message part saying where ζ(z) > u(z) at z, every process's rows counted ("" where none
+  /// do): no z satisfies both bounds on those rows.
+  std::string crossing(const Vector& z) {
+    Frozen b(z.size());
+    if (!std::isfinite(icp_residual(z, b))) return "";  // (a runaway z, or ζ or u failed: said elsewhere)
+    const Vector& u = upper(b);
+    double count = 0, most = 0;
+    for (Eigen::Index i = 0; i < u.size(); ++i)
+      if (b.lower[i] > u[i]) {
+        count += 1;
+        most = std::max(most, b.lower[i] - u[i]);
+      }
+    count = comm().sum(count);
+    if (count == 0) return "";
+    return "; the bounds cross at the returned z: zeta(z) > upper(z) on " + std::to_string(static_cast<long long>(count)) +
+           " rows (by up to " + to_text(comm().max(most)) + "), where no z lies between them (each outer step took " +
+           "upper(z) as the lower bound there)";
+  }
+  double rounding_level(const Vector& v, const Frozen& b) const {
+    return run.levels_.finest->rounding_level(v, q, v - b.lower, w, upper(b));
+  }
+  double tol() const { return run.o_.tol; }
   /// (none with an upper bound: the fallback member has no box; the outer loop then ends at its best iterate)
   Result sweep(const Vector& z0, int sweeps) {
-    if (run.upper_.size()) {
+    if (zeta.bounded()) {
       Result none;
       none.z = z0;
       none.residual = std::numeric_limits<double>::infinity();

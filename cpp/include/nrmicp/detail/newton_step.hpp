@@ -189,7 +189,9 @@ class NewtonStep {
   /// Whether the inner solve is iterative (a forcing loosens it; a direct solve is exact).
   bool iterative() { return lin_.system().iterative(); }
   /// The rounding level of Res at z (NewtonLevel::rounding_level).
-  double rounding_level() const { return level_.rounding_level(z_, lin_.q, g()); }
+  double rounding_level() const {
+    return lin_.box ? level_.rounding_level(z_, lin_.q, *lin_.box, w_) : level_.rounding_level(z_, lin_.q, g(), w_);
+  }
   /// The trial z⁺ did not move beyond rounding (only ties g ≈ w ≈ 0 changed sides).
   bool trial_still() const {
     const Comm& comm = level_.comm();

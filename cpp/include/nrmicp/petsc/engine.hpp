@@ -17,6 +17,7 @@
 #include "../result.hpp"
 #include "../solver.hpp"
 #include "../zeta.hpp"
+#include "galerkin.hpp"
 
 #include <petscksp.h>
 
@@ -333,6 +334,7 @@ class System {
   ~System() {
     KSPDestroy(&ksp_);
     KSPDestroy(&ssor_);
+    galerkin_.reset();
     VecDestroy(&bv_);
     VecDestroy(&zv_);
     MatDestroy(&K_);
@@ -347,6 +349,7 @@ class System {
       if (!detail::inactive_state(inactive[i])) active_.push_back(static_cast<PetscInt>(A_.row_offset() + i));
     check(MatZeroRowsColumns(K_, static_cast<PetscInt>(active_.size()), active_.data(), 1.0, nullptr, nullptr),
           "MatZeroRowsColumns");
+    if (galerkin_ && galerkin_->form(K_)) coarse_operators();
     check(KSPSetOperators(ksp_, K_, K_), "KSPSetOperators");
     if (ssor_) check(KSPSetOperators(ssor_, K_, K_), "KSPSetOperators");
     inactive_ = inactive;
@@ -436,6 +439,9 @@ class System {
     }
     KSPSetOptionsPrefix(ksp_, "nrmicp_inner_");
     check(KSPSetFromOptions(ksp_), "KSPSetFromOptions");
+    PetscBool mg = PETSC_FALSE;
+    if (mg_) PetscObjectTypeCompare(reinterpret_cast<PetscObject>(mg_), PCMG, &mg);
+    if (!mg) galerkin_.reset();  // -nrmicp_inner_pc_type chose another preconditioner
   }
   /// The hierarchy below holds more than `kGalerkinComplexity` times this level's nonzeros (3D, P1
   /// elements): each step's Galerkin operators PᵀKP of every level cost more than a BoomerAMG set-up on
@@ -481,13 +487,18 @@ class System {
     check(e, "KSPSetFromOptions");
   }
   /// The serial V-cycle (detail/multigrid.hpp) in PETSc's PCMG: the hierarchy's P's, Galerkin operators
-  /// PᵀKP of each step's K, one forward Gauss–Seidel sweep before the coarse correction and one
-  /// backward after (symmetric: CG applies), LU on the coarsest level.
+  /// PᵀKP of each step's K (GalerkinOperators: updated by K's change, as the serial engine's), one
+  /// forward Gauss–Seidel sweep before the coarse correction and one backward after (symmetric: CG
+  /// applies), LU on the coarsest level.
   void multigrid(PC pc) {
     const PetscInt L = static_cast<PetscInt>(below_.levels) + 1;
     check(PCSetType(pc, PCMG), "PCSetType");
     check(PCMGSetLevels(pc, L, nullptr), "PCMGSetLevels");
-    check(PCMGSetGalerkin(pc, PC_MG_GALERKIN_BOTH), "PCMGSetGalerkin");
+    check(PCMGSetGalerkin(pc, PC_MG_GALERKIN_NONE), "PCMGSetGalerkin");
+    std::vector<Mat> P;
+    for (std::size_t l = 0; l < below_.levels; ++l) P.push_back(below_.level[l].P.get());
+    galerkin_ = std::make_unique<GalerkinOperators>(std::move(P), A_.comm().size() == 1);
+    mg_ = pc;
     for (PetscInt l = 1; l < L; ++l) {
       check(PCMGSetInterpolation(pc, l, below_.level[L - 1 - l].P.get()), "PCMGSetInterpolation");
       smoother(pc, l, true);
@@ -499,6 +510,20 @@ class System {
     KSPSetType(coarse, KSPPREONLY);
     KSPGetPC(coarse, &cpc);
     PCSetType(cpc, A_.comm().size() > 1 ? PCREDUNDANT : PCLU);
+  }
+  /// PCMG's coarse levels take the Galerkin operators (new Mats after their first form).
+  void coarse_operators() {
+    const std::size_t L = below_.levels + 1;
+    for (std::size_t k = 0; k + 1 < L; ++k) {  // K_{k+1} is PCMG's level L − 2 − k (0: the coarsest)
+      const PetscInt l = static_cast<PetscInt>(L - 2 - k);
+      Mat C = galerkin_->K(k);
+      KSP s;
+      check(PCMGGetSmoother(mg_, l, &s), "PCMGGetSmoother");
+      check(KSPSetOperators(s, C, C), "KSPSetOperators");
+      if (l == 0) continue;  // the coarse solve has no up smoother
+      check(PCMGGetSmootherUp(mg_, l, &s), "PCMGGetSmootherUp");
+      check(KSPSetOperators(s, C, C), "KSPSetOperators");
+    }
   }
   static void smoother(PC pc, PetscInt l, bool down) {
     KSP s;
@@ -517,6 +542,8 @@ class System {
   KSP ksp_ = nullptr, ssor_ = nullptr;
   Vec bv_ = nullptr, zv_ = nullptr;
   Mat K_ = nullptr;
+  std::unique_ptr<GalerkinOperators> galerkin_;  // PCMG's coarse operators (multigrid)
+  PC mg_ = nullptr;
   std::vector<PetscInt> active_;
   std::vector<char> inactive_;
   bool iterative_ = false, lu_ = false, symmetric_ = false;

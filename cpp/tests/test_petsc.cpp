@@ -1,0 +1,195 @@
+// The Newton member from C++ on the PETSc engine (nrmicp/petsc.hpp), run by ctest under mpiexec on
+// 1 and 2 processes: the same nrmicp::Newton over a distributed Mat takes the serial member's
+// decisions (status, finest steps within 1, z to 1e-8) and its answer meets the complementarity
+// conditions row by row — a 2D obstacle cold and nested (bilinear prolongations) and a two-sided box.
+#include "common.hpp"
+
+#include <nrmicp/petsc.hpp>
+
+#define DOCTEST_CONFIG_IMPLEMENT
+#include <doctest/doctest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <vector>
+
+using namespace nrmicp;
+
+namespace {
+using RowMat = testing::SpMat<int, Eigen::RowMajor>;
+using Vec = Eigen::VectorXd;
+
+int rank_of() { int r = 0; MPI_Comm_rank(PETSC_COMM_WORLD, &r); return r; }
+int size_of() { int s = 1; MPI_Comm_size(PETSC_COMM_WORLD, &s); return s; }
+
+/// [lo, hi) of this process among n rows (contiguous blocks, PETSc's split).
+std::pair<int, int> split(int n) {
+  const int p = size_of(), r = rank_of(), base = n / p, extra = n % p;
+  const int lo = r * base + std::min(r, extra);
+  return {lo, lo + base + (r < extra ? 1 : 0)};
+}
+
+/// B's rows [lo, hi) as a distributed AIJ Mat (columns split as `cols` would be).
+Mat to_petsc(const RowMat& B) {
+  const auto [lo, hi] = split(static_cast<int>(B.rows()));
+  const auto [clo, chi] = split(static_cast<int>(B.cols()));
+  std::vector<PetscInt> ia{0}, ja;
+  std::vector<PetscScalar> va;
+  for (int i = lo; i < hi; ++i) {
+    for (RowMat::InnerIterator it(B, i); it; ++it) { ja.push_back(it.index()); va.push_back(it.value()); }
+    ia.push_back(static_cast<PetscInt>(ja.size()));
+  }
+  Mat M;
+  REQUIRE(MatCreate(PETSC_COMM_WORLD, &M) == 0);
+  REQUIRE(MatSetSizes(M, hi - lo, chi - clo, B.rows(), B.cols()) == 0);
+  REQUIRE(MatSetType(M, MATAIJ) == 0);
+  REQUIRE(MatSeqAIJSetPreallocationCSR(M, ia.data(), ja.data(), va.data()) == 0);  // the one of M's type acts
+  REQUIRE(MatMPIAIJSetPreallocationCSR(M, ia.data(), ja.data(), va.data()) == 0);
+  REQUIRE(MatAssemblyBegin(M, MAT_FINAL_ASSEMBLY) == 0);
+  REQUIRE(MatAssemblyEnd(M, MAT_FINAL_ASSEMBLY) == 0);
+  return M;
+}
+
+Vec rows_of(const Vec& v) {
+  const auto [lo, hi] = split(static_cast<int>(v.size()));
+  return v.segment(lo, hi - lo);
+}
+
+/// The 5-point −Δ_h on the m × m interior grid of (0, 1)², h = 1/(m + 1).
+RowMat laplacian(int m) {
+  const double h2 = 1.0 / ((m + 1.0) * (m + 1.0));
+  std::vector<Eigen::Triplet<double>> t;
+  for (int j = 0; j < m; ++j)
+    for (int i = 0; i < m; ++i) {
+      const int r = j * m + i;
+      t.emplace_back(r, r, 4.0 / h2);
+      if (i > 0) t.emplace_back(r, r - 1, -1.0 / h2);
+      if (i + 1 < m) t.emplace_back(r, r + 1, -1.0 / h2);
+      if (j > 0) t.emplace_back(r, r - m, -1.0 / h2);
+      if (j + 1 < m) t.emplace_back(r, r + m, -1.0 / h2);
+    }
+  RowMat A(m * m, m * m);
+  A.setFromTriplets(t.begin(), t.end());
+  return A;
+}
+
+/// Bilinear interpolation from the (m − 1)/2 grid to the m grid (m odd), 2D.
+RowMat bilinear(int m) {
+  const int mc = (m - 1) / 2;
+  std::vector<Eigen::Triplet<double>> t;
+  for (int J = 0; J < mc; ++J)
+    for (int I = 0; I < mc; ++I)
+      for (int dj = -1; dj <= 1; ++dj)
+        for (int di = -1; di <= 1; ++di) {
+          const int i = 2 * I + 1 + di, j = 2 * J + 1 + dj;
+          t.emplace_back(j * m + i, J * mc + I, (di ? 0.5 : 1.0) * (dj ? 0.5 : 1.0));
+        }
+  RowMat P(m * m, mc * mc);
+  P.setFromTriplets(t.begin(), t.end());
+  return P;
+}
+
+struct Case {
+  RowMat A;
+  Vec q, lower, upper;  // upper empty: one-sided
+  std::vector<RowMat> P;
+};
+
+/// A membrane over ψ = 0.1 − |x − ½|² under the load f (and below ψ + 0.15 when two-sided).
+Case membrane(int m, double f, bool two_sided, int levels) {
+  Case c{laplacian(m), Vec(m * m), Vec(m * m), Vec(), {}};
+  const double h = 1.0 / (m + 1.0);
+  for (int j = 0; j < m; ++j)
+    for (int i = 0; i < m; ++i) {
+      const double x = (i + 1) * h - 0.5, y = (j + 1) * h - 0.5;
+      c.lower[j * m + i] = 0.1 - x * x - y * y;
+      c.q[j * m + i] = -f * (x > 0 ? 1.0 : -1.0);
+    }
+  if (two_sided) c.upper = c.lower.array() + 0.15;
+  for (int l = 0, k = m; l < levels; ++l, k = (k - 1) / 2) c.P.push_back(bilinear(k));
+  return c;
+}
+
+/// The MCP conditions at z (this process's rows): lower ≤ z ≤ upper, w ≥ 0 at lower, ≤ 0 at upper, 0 between.
+void check_conditions(const Case& c, const Vec& z_all, double tol) {
+  const Vec w = c.A * z_all + c.q;
+  const auto [lo, hi] = split(static_cast<int>(z_all.size()));
+  const double scale = tol * (1.0 + w.cwiseAbs().maxCoeff());
+  for (int i = lo; i < hi; ++i) {
+    const double up = c.upper.size() ? c.upper[i] : HUGE_VAL;
+    CHECK(z_all[i] >= c.lower[i] - tol);
+    CHECK(z_all[i] <= up + tol);
+    const bool at_lower = z_all[i] - c.lower[i] <= 1e-9, at_upper = up - z_all[i] <= 1e-9;
+    if (!at_lower && !at_upper) CHECK(std::abs(w[i]) <= scale);
+    if (at_lower && !at_upper) CHECK(w[i] >= -scale);
+    if (at_upper && !at_lower) CHECK(w[i] <= scale);
+  }
+}
+
+/// Every process's rows of v, on every process.
+Vec gather(const Vec& local, Eigen::Index n) {
+  const int p = size_of();
+  std::vector<int> counts(p), displs(p);
+  const int mine = static_cast<int>(local.size());
+  MPI_Allgather(&mine, 1, MPI_INT, counts.data(), 1, MPI_INT, PETSC_COMM_WORLD);
+  for (int r = 1; r < p; ++r) displs[r] = displs[r - 1] + counts[r - 1];
+  Vec all(n);
+  MPI_Allgatherv(local.data(), mine, MPI_DOUBLE, all.data(), counts.data(), displs.data(), MPI_DOUBLE, PETSC_COMM_WORLD);
+  return all;
+}
+
+void run(const Case& c, const char* what) {
+  INFO(what << " on " << size_of() << " processes");
+  Options o;
+  o.method = Method::Newton;
+  o.tol = 1e-9;
+  Zeta<int> zs = Zeta<int>::constant(c.lower);
+  if (c.upper.size()) zs = zs.with_upper(c.upper);
+  const Result serial = Newton<RowMat>(c.A, o, c.P).solve(c.q, zs);
+
+  Mat A = to_petsc(c.A);
+  std::vector<petsc::Matrix> P;
+  for (const RowMat& p : c.P) {
+    Mat M = to_petsc(p);
+    P.emplace_back(M);
+    MatDestroy(&M);  // the engine's Matrix holds its own reference
+  }
+  Result r;
+  {
+    const petsc::Matrix Am(A);
+    Zeta<PetscInt> zd = Zeta<PetscInt>::constant(rows_of(c.lower));
+    if (c.upper.size()) zd = zd.with_upper(rows_of(c.upper));
+    r = Newton<petsc::Matrix>(Am, o, P).solve(rows_of(c.q), zd);
+  }
+  MatDestroy(&A);
+  const Vec z = gather(r.z, c.A.rows());
+  CHECK(serial.status == Status::Converged);
+  CHECK(r.status == serial.status);
+  CHECK(r.residual < 1e-9);
+  REQUIRE(r.newton.level_steps.size() == serial.newton.level_steps.size());
+  CHECK(std::abs(r.newton.level_steps[0] - serial.newton.level_steps[0]) <= 1);
+  CHECK((z - serial.z).lpNorm<Eigen::Infinity>() <= 1e-8 * serial.z.lpNorm<Eigen::Infinity>());
+  check_conditions(c, z, 1e-8);
+}
+}  // namespace
+
+TEST_CASE("the Newton member on PETSc takes the serial decisions: obstacle cold") {
+  run(membrane(31, 0.0, false, 0), "obstacle cold");
+}
+
+TEST_CASE("the Newton member on PETSc takes the serial decisions: obstacle nested") {
+  run(membrane(63, 0.0, false, 3), "obstacle nested");
+}
+
+TEST_CASE("the Newton member on PETSc takes the serial decisions: two-sided box, nested") {
+  run(membrane(63, 20.0, true, 3), "two-sided nested");
+}
+
+// Its own main: doctest runs between PetscInitialize and PetscFinalize (MPI's lifetime).
+int main(int argc, char** argv) {
+  if (PetscInitialize(&argc, &argv, nullptr, nullptr)) return 1;
+  doctest::Context context(argc, argv);
+  const int failed = context.run();
+  PetscFinalize();
+  return failed;
+}
