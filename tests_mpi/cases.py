@@ -372,6 +372,29 @@ def case_sweeps():
 
 
 
+def case_one_sided_contact():
+    """A box problem whose rows at a nonzero bound lie on one rank only (z pushed up to its upper bound
+    0.3 on the first rows, held at 0 on the rest): the Newton step moves those bounds' columns to the
+    right-hand side with a product with A, which every rank must take part in (it deadlocked when each
+    rank decided by its own rows); cold and nested."""
+    n = 29
+    A = sp.diags([-np.ones(n - 1), 2.5 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1], format="csr")
+    q = np.where(np.arange(n) < 6, -1.0, 1.0)
+    upper = np.full(n, 0.3)
+    lo, hi = split(n)
+    out = {}
+    for h in (None, "amg"):
+        r = dist.solve(A[lo:hi], q[lo:hi], None, upper=upper[lo:hi], method="newton", hierarchy=h, tol=1e-10)
+        z = dist.gather(r.z)
+        if RANK == 0:
+            w = A @ z + q
+            out[str(h)] = {"status": str(r.status), "at_upper": int(np.sum(z >= 0.3 - 1e-12)),
+                           "violation": float(max(-z.min(), z.max() - 0.3, 0.0)),
+                           "sign": float(max(-w[z <= 1e-12].min(initial=0), w[z >= 0.3 - 1e-12].max(initial=0),
+                                             np.abs(w[(z > 1e-12) & (z < 0.3 - 1e-12)]).max(initial=0)))}
+    return out
+
+
 def case_warm():
     """The next time step of the 2D obstacle (a load of 0.5) from the last solution: it replaces the
     nested start (no coarse level solved), as in the serial member; zeros nest, and ones (Res small,
@@ -666,7 +689,7 @@ if __name__ == "__main__":
     result = {"agreement": lambda: case_agreement(), "partition": case_partition,
               "bad": lambda: case_bad(args[0], args[1]), "boomeramg": case_boomeramg, "dense": case_dense,
               "floor": case_floor, "overshoot": case_overshoot, "sweeps": case_sweeps,
-              "warm": case_warm, "units": case_units, "engine": lambda: case_engine(*args), "options": case_options,
+              "warm": case_warm, "one_sided_contact": case_one_sided_contact, "units": case_units, "engine": lambda: case_engine(*args), "options": case_options,
               "fuzz": lambda: case_fuzz(int(args[0])), "family": case_family, "hooks": case_hooks}[name]()
     if RANK == 0:
         print("RESULT " + json.dumps(result), flush=True)

@@ -171,3 +171,12 @@ def test_the_default_rule_does_not_depend_on_units(np_):
         assert r["status"] == "CONVERGED" and r["criterion"] == "units", (np_, key, r)
         assert r["err"] < 1e-6, (np_, key, r)
         assert r["res_is_papers"], (np_, key, r)
+
+
+@pytest.mark.parametrize("np_", [2, 3])
+def test_rows_at_a_nonzero_bound_on_one_rank_only_do_not_deadlock(np_):
+    out = mpirun(np_, "one_sided_contact", timeout=120)
+    for h, r in out.items():
+        assert r["status"] == "CONVERGED", (np_, h, r)
+        assert r["at_upper"] == 6, (np_, h, r)   # the six pushed rows, and no other
+        assert r["violation"] <= 1e-12 and r["sign"] <= 1e-9, (np_, h, r)

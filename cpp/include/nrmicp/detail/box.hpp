@@ -81,18 +81,23 @@ inline bool inactive_state(char s) { return s == kInactive; }
 
 struct Box {
   using Vector = Eigen::VectorXd;
-  Vector lo, hi;  ///< empty: 0 resp. +∞ on every row
+  Vector lo, hi;  ///< read only where has_lo resp. has_hi: else 0 resp. +∞ on every row
+  /// Whether lo, hi hold the bounds: the same on every process (a process may own no rows of a
+  /// coarse level, where an empty vector cannot tell "no bound" from "no rows": every collective
+  /// operation below is taken or skipped by these flags alike on all processes).
+  bool has_lo = false, has_hi = false;
 
-  bool empty() const { return lo.size() == 0 && hi.size() == 0; }
-  /// This box with both vectors of length n (0 and +∞ where they were empty).
+  bool empty() const { return !has_lo && !has_hi; }
+  /// This box with both vectors of length n (0 and +∞ where it had none).
   Box full(Eigen::Index n) const {
     Box b;
-    b.lo = lo.size() ? lo : Vector::Zero(n);
-    b.hi = hi.size() ? hi : Vector::Constant(n, std::numeric_limits<double>::infinity());
+    b.lo = has_lo ? lo : Vector::Zero(n);
+    b.hi = has_hi ? hi : Vector::Constant(n, std::numeric_limits<double>::infinity());
+    b.has_lo = b.has_hi = true;
     return b;
   }
-  double lower(Eigen::Index i) const { return lo.size() ? lo[i] : 0.0; }
-  double upper(Eigen::Index i) const { return hi.size() ? hi[i] : std::numeric_limits<double>::infinity(); }
+  double lower(Eigen::Index i) const { return has_lo ? lo[i] : 0.0; }
+  double upper(Eigen::Index i) const { return has_hi ? hi[i] : std::numeric_limits<double>::infinity(); }
   double clamp(Eigen::Index i, double v) const { return std::min(upper(i), std::max(lower(i), v)); }
   /// The state of row i at y_i, w_i with the active-set weight r = Ω1/Ω2: x = y − r w below lo is at
   /// the lower bound, above hi at the upper one, else inactive (ties inactive: ActiveSetTest::active_set).
@@ -104,7 +109,7 @@ struct Box {
   double bound(char s, Eigen::Index i) const { return s == kAtUpper ? upper(i) : lower(i); }
   /// Res = ‖mid(y − lo, y − hi, w)‖₂, without overflow or underflow (bounded_residual with g = y − lo).
   double residual(const Vector& w, const Vector& y, const Comm& comm = serial_comm()) const {
-    return lo.size() ? bounded_residual(w, y - lo, y, hi, comm) : bounded_residual(w, y, y, hi, comm);
+    return has_lo ? bounded_residual(w, y - lo, y, hi, comm) : bounded_residual(w, y, y, hi, comm);  // (hi is empty without has_hi)
   }
   /// y projected onto the box, in place.
   void project(Vector& y) const {
@@ -124,9 +129,11 @@ struct Box {
     if (empty()) return {};
     constexpr double inf = std::numeric_limits<double>::infinity();
     Box c;
-    if (lo.size()) c.lo = inject_bounds(P, lo, -inf);
-    if (hi.size()) c.hi = inject_bounds(P, hi, inf);
-    if (c.hi.size()) c.hi = c.hi.cwiseMax(c.lo.size() ? c.lo : Vector::Zero(P.cols()));  // two rows' bounds may cross
+    c.has_lo = has_lo;
+    c.has_hi = has_hi;
+    if (has_lo) c.lo = inject_bounds(P, lo, -inf);
+    if (has_hi) c.hi = inject_bounds(P, hi, inf);
+    if (has_hi) c.hi = c.hi.cwiseMax(has_lo ? c.lo : Vector::Zero(P.cols()));  // two rows' bounds may cross
     return c;
   }
 
@@ -142,11 +149,11 @@ struct Box {
     if (!empty()) {
       constexpr double inf = std::numeric_limits<double>::infinity();
       Vector below = y, above;
-      if (cb.lo.size()) multiply(P, Vector(yc - lower_vector(cb, yc.size())), below);
-      if (cb.hi.size()) multiply(P, Vector((cb.hi - yc).cwiseMin(std::numeric_limits<double>::max())), above);
+      if (cb.has_lo) multiply(P, Vector(yc - lower_vector(cb, yc.size())), below);
+      if (cb.has_hi) multiply(P, Vector((cb.hi - yc).cwiseMin(std::numeric_limits<double>::max())), above);
       for (Eigen::Index i = 0; i < y.size(); ++i) {
         const double s = std::isfinite(lower(i)) ? below[i] : inf;
-        const double t = above.size() && std::isfinite(upper(i)) ? above[i] : inf;
+        const double t = cb.has_hi && std::isfinite(upper(i)) ? above[i] : inf;
         if (t < s) y[i] = upper(i) - t;
         else if (s < inf) y[i] = lower(i) + s;
       }
@@ -158,7 +165,7 @@ struct Box {
  private:
   /// lo of `b` with its −∞ entries as 0 (their rows are free: the distance to them is not used).
   static Vector lower_vector(const Box& b, Eigen::Index n) {
-    if (!b.lo.size()) return Vector::Zero(n);
+    if (!b.has_lo) return Vector::Zero(n);
     return b.lo.unaryExpr([](double v) { return std::isfinite(v) ? v : 0.0; });
   }
 };
@@ -171,28 +178,34 @@ struct ShiftedBounds {
   Box box;
 
   /// `shift` false (the Newton member's choice): a problem with bounds is not shifted at all, its box
-  /// is ψ ≤ z ≤ u itself. A shift by ψ where ψ is finite and by 0 on the free rows makes y jump
+  /// is ψ ≤ z ≤ u itself. `comm`: whether there are bounds is decided over every process's rows. A shift by ψ where ψ is finite and by 0 on the free rows makes y jump
   /// between them (elastic contact: the bounded normal displacements next to free ones), a rough y
   /// the coarse levels cannot represent (docs/MEASUREMENTS.md, "Box problems"). The modulus members
   /// keep the shift (their lo' = γ lo/(2Ω1) is then 0 or −∞: detail/modulus.hpp).
-  ShiftedBounds(const Eigen::VectorXd& psi, const Eigen::VectorXd& upper, bool shift = true) {
+  ShiftedBounds(const Eigen::VectorXd& psi, const Eigen::VectorXd& upper, bool shift = true,
+                const Comm& comm = serial_comm()) {
     constexpr double inf = std::numeric_limits<double>::infinity();
-    const bool free_below = psi.size() && (psi.array() == -inf).any();
-    if (!free_below && upper.size() == 0) { s = psi; return; }
+    const bool free_below = comm.max(psi.size() && (psi.array() == -inf).any() ? 1.0 : 0.0) > 0;
+    const bool has_upper = comm.max(upper.size() ? 1.0 : 0.0) > 0;
+    if (!free_below && !has_upper) { s = psi; return; }
     if (!shift) {
       box.lo = psi;
       box.hi = upper;
+      box.has_lo = comm.max(psi.size() ? 1.0 : 0.0) > 0;
+      box.has_hi = has_upper;
       return;
     }
     const Eigen::Index n = std::max(psi.size(), upper.size());
     s.resize(n);
     if (free_below) box.lo = Eigen::VectorXd::Zero(n);
-    if (upper.size()) box.hi.resize(n);
+    if (has_upper) box.hi.resize(n);
+    box.has_lo = free_below;
+    box.has_hi = has_upper;
     for (Eigen::Index i = 0; i < n; ++i) {
       const double l = psi.size() ? psi[i] : 0.0, u = upper.size() ? upper[i] : inf;
       s[i] = std::isfinite(l) ? l : std::isfinite(u) ? u : 0.0;
       if (free_below && !std::isfinite(l)) box.lo[i] = -inf;
-      if (upper.size()) box.hi[i] = u - s[i];
+      if (has_upper) box.hi[i] = u - s[i];
     }
   }
   bool shifted() const { return s.size() > 0; }

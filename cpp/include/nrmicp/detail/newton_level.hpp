@@ -339,7 +339,7 @@ class NewtonLevel {
   }
   /// The same for the box problem lo ≤ y ≤ hi (Box::residual's terms).
   double rounding_level(const Vector& y, const Vector& q, const Box& box, const Vector& w) const {
-    return box.lo.size() ? rounding_level(y, q, y - box.lo, w, box.hi) : rounding_level(y, q, y, w, box.hi);
+    return box.has_lo ? rounding_level(y, q, y - box.lo, w, box.hi) : rounding_level(y, q, y, w, box.hi);
   }
 
   /// The active-set test (Ω1/Ω2 of this level) and the bookkeeping of sets.
@@ -385,8 +385,8 @@ class NewtonLevel {
   /// The fallback on a box problem (y ∈ [lo, hi]): the fallback member's box form (detail/modulus.hpp).
   Result sweep(const Vector& q, const Box& box, const Vector& y0, int sweeps, double tol) {
     using Z = Zeta<StorageIndex>;
-    const Z lower = box.lo.size() ? Z::constant(box.lo) : Z::none();
-    return sweep(q, box.hi.size() ? lower.with_upper(box.hi) : lower, y0, sweeps, tol);
+    const Z lower = box.has_lo ? Z::constant(box.lo) : Z::none();
+    return sweep(q, box.has_hi ? lower.with_upper(box.hi) : lower, y0, sweeps, tol);
   }
 
  private:

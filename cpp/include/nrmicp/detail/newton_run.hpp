@@ -247,7 +247,7 @@ class ObstacleSolver {
   /// solve's (an implicit upper bound frozen at an outer step's z).
   Result solve(const Vector& q, const Vector& psi, const Vector* z0, bool nest, double tol, int maxiter, bool report,
                std::vector<char>* set, const Vector* upper = nullptr) {
-    const ShiftedBounds bounds(psi, upper ? *upper : upper_, false);
+    const ShiftedBounds bounds(psi, upper ? *upper : upper_, false, comm());
     const Box& box = bounds.box;
     const bool shifted = bounds.shifted();
     Vector shifted_q;
