@@ -305,6 +305,107 @@ struct Hierarchy {
   Hierarchy below() const { return levels ? Hierarchy{level + 1, levels - 1, depth + 1} : *this; }
 };
 
+/// The serial V-cycle (detail/multigrid.hpp) in PETSc's PCMG, set up on `pc` over the hierarchy below a
+/// level: its P's, the Galerkin operators PᵀKP of each step's K (GalerkinOperators: updated by K's change,
+/// as the serial engine's), one forward Gauss–Seidel sweep before the coarse correction and one backward
+/// after (symmetric: CG applies), LU on the coarsest level (redundant on several processes).
+class VCycle {
+ public:
+  VCycle(PC pc, const Hierarchy& below, int processes) : below_(below), mg_(pc) {
+    const PetscInt L = static_cast<PetscInt>(below_.levels) + 1;
+    check(PCSetType(pc, PCMG), "PCSetType");
+    check(PCMGSetLevels(pc, L, nullptr), "PCMGSetLevels");
+    check(PCMGSetGalerkin(pc, PC_MG_GALERKIN_NONE), "PCMGSetGalerkin");
+    std::vector<Mat> P;
+    for (std::size_t l = 0; l < below_.levels; ++l) P.push_back(below_.level[l].P.get());
+    galerkin_ = std::make_unique<GalerkinOperators>(std::move(P), processes == 1);
+    for (PetscInt l = 1; l < L; ++l) {
+      check(PCMGSetInterpolation(pc, l, below_.level[L - 1 - l].P.get()), "PCMGSetInterpolation");
+      smoother(pc, l, true);
+      smoother(pc, l, false);
+    }
+    KSP coarse;
+    PC cpc;
+    check(PCMGGetCoarseSolve(pc, &coarse), "PCMGGetCoarseSolve");
+    KSPSetType(coarse, KSPPREONLY);
+    KSPGetPC(coarse, &cpc);
+    PCSetType(cpc, processes > 1 ? PCREDUNDANT : PCLU);
+  }
+  VCycle(const VCycle&) = delete;
+  VCycle& operator=(const VCycle&) = delete;
+  /// Whether PCMG is still the preconditioner (the user's options may have chosen another).
+  bool in_use() const {
+    PetscBool mg = PETSC_FALSE;
+    PetscObjectTypeCompare(reinterpret_cast<PetscObject>(mg_), PCMG, &mg);
+    return mg;
+  }
+  /// The coarse operators of the step's K (updated by its change where GalerkinOperators can).
+  void update(Mat K) {
+    if (galerkin_->form(K)) coarse_operators();
+  }
+
+ private:
+  /// PCMG's coarse levels take the Galerkin operators (new Mats after their first form).
+  void coarse_operators() {
+    const std::size_t L = below_.levels + 1;
+    for (std::size_t k = 0; k + 1 < L; ++k) {  // K_{k+1} is PCMG's level L − 2 − k (0: the coarsest)
+      const PetscInt l = static_cast<PetscInt>(L - 2 - k);
+      Mat C = galerkin_->K(k);
+      KSP s;
+      check(PCMGGetSmoother(mg_, l, &s), "PCMGGetSmoother");
+      check(KSPSetOperators(s, C, C), "KSPSetOperators");
+      if (l == 0) continue;  // the coarse solve has no up smoother
+      check(PCMGGetSmootherUp(mg_, l, &s), "PCMGGetSmootherUp");
+      check(KSPSetOperators(s, C, C), "KSPSetOperators");
+    }
+  }
+  static void smoother(PC pc, PetscInt l, bool down) {
+    KSP s;
+    PC p;
+    check(down ? PCMGGetSmootherDown(pc, l, &s) : PCMGGetSmootherUp(pc, l, &s), "PCMGGetSmoother");
+    KSPSetType(s, KSPRICHARDSON);
+    KSPSetTolerances(s, PETSC_DEFAULT, PETSC_DEFAULT, PETSC_DEFAULT, 1);
+    KSPSetNormType(s, KSP_NORM_NONE);
+    KSPGetPC(s, &p);
+    PCSetType(p, PCSOR);
+    PCSORSetSymmetric(p, down ? SOR_LOCAL_FORWARD_SWEEP : SOR_LOCAL_BACKWARD_SWEEP);
+  }
+
+  Hierarchy below_;
+  PC mg_;
+  std::unique_ptr<GalerkinOperators> galerkin_;
+};
+
+/// Where the hierarchy's coarse operators outweigh a level's matrix by more than this, BoomerAMG
+/// replaces the V-cycle (costly_galerkin).
+inline constexpr double kGalerkinComplexity = 1.3;
+
+/// Sums of the hierarchy's nonzeros (MAT_GLOBAL_SUM: every process decides alike).
+inline double nonzeros(const Matrix& M) {
+  MatInfo info;
+  check(MatGetInfo(M.get(), MAT_GLOBAL_SUM, &info), "MatGetInfo");
+  return info.nz_used;
+}
+inline bool costly_below(const Hierarchy& h, double own) {
+  double below = 0;
+  for (std::size_t l = 0; l < h.levels; ++l) below += nonzeros(h.level[l].A);
+  return below > kGalerkinComplexity * own;
+}
+/// The hierarchy below holds more than `kGalerkinComplexity` times this level's nonzeros (3D, P1
+/// elements): each step's Galerkin operators PᵀKP of every level cost more than a BoomerAMG set-up on
+/// K with aggressive coarsening (docs/MEASUREMENTS.md, "The PETSc engine's reduced solves").
+/// A coarse level also when any coarse level above it is (the levels it reaches by `depth`): the bottom
+/// of a dense hierarchy is small against its own level but not cheap (3D: PtAP with dense P's).
+inline bool costly_galerkin(const Hierarchy& below, const Matrix& A) {
+  if (costly_below(below, nonzeros(A))) return true;
+  for (std::size_t up = 1; up < below.depth; ++up) {
+    const Level* above = below.level - 1 - up;  // a coarse level above this one (this level's A is level[-1].A)
+    const Hierarchy from{const_cast<Level*>(above + 1), below.levels + up, below.depth - up};
+    if (costly_below(from, nonzeros(above->A))) return true;
+  }
+  return false;
+}
+
 /// The reduced system of a Newton step (detail::ActiveSetSystem's PETSc form) for the (shifted) LCP
 /// and the box problem: K = A with the active rows and columns replaced by the identity's
 /// (MatZeroRowsColumns: K stays symmetric where A is), solved by KSP — CG (symmetric A) or BiCGSTAB
@@ -324,7 +425,7 @@ class System {
     symmetric_ = A.symmetric();
     check(KSPCreate(A.comm().get(), &ksp_), "KSPCreate");
     configure();
-    if (!finest && iterative_ && costly_galerkin()) ssor_first();
+    if (!finest && iterative_ && costly_galerkin(below_, A_)) ssor_first();
     // the solves' vectors, their arrays the driver's (VecPlaceArray): no 8 MB a million rows per solve
     check(VecCreateMPIWithArray(A.comm().get(), 1, A.rows(), PETSC_DECIDE, nullptr, &bv_), "VecCreateMPIWithArray");
     check(VecDuplicate(bv_, &zv_), "VecDuplicate");
@@ -334,7 +435,7 @@ class System {
   ~System() {
     KSPDestroy(&ksp_);
     KSPDestroy(&ssor_);
-    galerkin_.reset();
+    vcycle_.reset();
     VecDestroy(&bv_);
     VecDestroy(&zv_);
     MatDestroy(&K_);
@@ -349,7 +450,7 @@ class System {
       if (!detail::inactive_state(inactive[i])) active_.push_back(static_cast<PetscInt>(A_.row_offset() + i));
     check(MatZeroRowsColumns(K_, static_cast<PetscInt>(active_.size()), active_.data(), 1.0, nullptr, nullptr),
           "MatZeroRowsColumns");
-    if (galerkin_ && galerkin_->form(K_)) coarse_operators();
+    if (vcycle_) vcycle_->update(K_);
     check(KSPSetOperators(ksp_, K_, K_), "KSPSetOperators");
     if (ssor_) check(KSPSetOperators(ssor_, K_, K_), "KSPSetOperators");
     inactive_ = inactive;
@@ -375,9 +476,6 @@ class System {
   /// The SSOR tries' iterations before BoomerAMG takes over (more did not pay: docs/MEASUREMENTS.md,
   /// "The PETSc engine's reduced solves").
   static constexpr int ssor_iterations = 30;
-  /// Where the hierarchy's coarse operators outweigh this level's matrix by more than this, BoomerAMG
-  /// replaces the V-cycle (costly_galerkin).
-  static constexpr double kGalerkinComplexity = 1.3;
   /// "lu", or the Krylov method and the preconditioner ("cg+mg", "bicgstab+hypre", ...).
   const char* inner_name() const {
     PC pc;
@@ -434,38 +532,12 @@ class System {
       if (A_.comm().size() > 1) PCFactorSetMatSolverType(pc, MATSOLVERMUMPS);  // PETSc's own LU is serial
     } else {
       PC pc = krylov(ksp_);
-      if (costly_galerkin()) return boomeramg(pc);
-      multigrid(pc);
+      if (costly_galerkin(below_, A_)) return boomeramg(pc);
+      vcycle_ = std::make_unique<VCycle>(pc, below_, A_.comm().size());
     }
     KSPSetOptionsPrefix(ksp_, "nrmicp_inner_");
     check(KSPSetFromOptions(ksp_), "KSPSetFromOptions");
-    PetscBool mg = PETSC_FALSE;
-    if (mg_) PetscObjectTypeCompare(reinterpret_cast<PetscObject>(mg_), PCMG, &mg);
-    if (!mg) galerkin_.reset();  // -nrmicp_inner_pc_type chose another preconditioner
-  }
-  /// The hierarchy below holds more than `kGalerkinComplexity` times this level's nonzeros (3D, P1
-  /// elements): each step's Galerkin operators PᵀKP of every level cost more than a BoomerAMG set-up on
-  /// K with aggressive coarsening (docs/MEASUREMENTS.md, "The PETSc engine's reduced solves").
-  /// A coarse level also when any coarse level above it is (the levels it reaches by `depth`): the bottom
-  /// of a dense hierarchy is small against its own level but not cheap (3D: PtAP with dense P's).
-  bool costly_galerkin() const {
-    if (costly_below(below_, nonzeros(A_))) return true;
-    for (std::size_t up = 1; up < below_.depth; ++up) {
-      const Level* above = below_.level - 1 - up;  // a coarse level above this one (this level's A is level[-1].A)
-      const Hierarchy from{const_cast<Level*>(above + 1), below_.levels + up, below_.depth - up};
-      if (costly_below(from, nonzeros(above->A))) return true;
-    }
-    return false;
-  }
-  static bool costly_below(const Hierarchy& h, double own) {
-    double below = 0;
-    for (std::size_t l = 0; l < h.levels; ++l) below += nonzeros(h.level[l].A);
-    return below > kGalerkinComplexity * own;
-  }
-  static double nonzeros(const Matrix& M) {
-    MatInfo info;
-    check(MatGetInfo(M.get(), MAT_GLOBAL_SUM, &info), "MatGetInfo");
-    return info.nz_used;
+    if (vcycle_ && !vcycle_->in_use()) vcycle_.reset();  // -nrmicp_inner_pc_type chose another preconditioner
   }
   /// BoomerAMG on each step's K: HMIS coarsening, ext+i interpolation (at most 4 weights a row), one
   /// aggressive level — defaults for this KSP only; the user's -nrmicp_inner_ options win.
@@ -486,64 +558,13 @@ class System {
     for (const char* name : set) PetscOptionsClearValue(nullptr, name);  // (nothing of ours stays behind)
     check(e, "KSPSetFromOptions");
   }
-  /// The serial V-cycle (detail/multigrid.hpp) in PETSc's PCMG: the hierarchy's P's, Galerkin operators
-  /// PᵀKP of each step's K (GalerkinOperators: updated by K's change, as the serial engine's), one
-  /// forward Gauss–Seidel sweep before the coarse correction and one backward after (symmetric: CG
-  /// applies), LU on the coarsest level.
-  void multigrid(PC pc) {
-    const PetscInt L = static_cast<PetscInt>(below_.levels) + 1;
-    check(PCSetType(pc, PCMG), "PCSetType");
-    check(PCMGSetLevels(pc, L, nullptr), "PCMGSetLevels");
-    check(PCMGSetGalerkin(pc, PC_MG_GALERKIN_NONE), "PCMGSetGalerkin");
-    std::vector<Mat> P;
-    for (std::size_t l = 0; l < below_.levels; ++l) P.push_back(below_.level[l].P.get());
-    galerkin_ = std::make_unique<GalerkinOperators>(std::move(P), A_.comm().size() == 1);
-    mg_ = pc;
-    for (PetscInt l = 1; l < L; ++l) {
-      check(PCMGSetInterpolation(pc, l, below_.level[L - 1 - l].P.get()), "PCMGSetInterpolation");
-      smoother(pc, l, true);
-      smoother(pc, l, false);
-    }
-    KSP coarse;
-    PC cpc;
-    check(PCMGGetCoarseSolve(pc, &coarse), "PCMGGetCoarseSolve");
-    KSPSetType(coarse, KSPPREONLY);
-    KSPGetPC(coarse, &cpc);
-    PCSetType(cpc, A_.comm().size() > 1 ? PCREDUNDANT : PCLU);
-  }
-  /// PCMG's coarse levels take the Galerkin operators (new Mats after their first form).
-  void coarse_operators() {
-    const std::size_t L = below_.levels + 1;
-    for (std::size_t k = 0; k + 1 < L; ++k) {  // K_{k+1} is PCMG's level L − 2 − k (0: the coarsest)
-      const PetscInt l = static_cast<PetscInt>(L - 2 - k);
-      Mat C = galerkin_->K(k);
-      KSP s;
-      check(PCMGGetSmoother(mg_, l, &s), "PCMGGetSmoother");
-      check(KSPSetOperators(s, C, C), "KSPSetOperators");
-      if (l == 0) continue;  // the coarse solve has no up smoother
-      check(PCMGGetSmootherUp(mg_, l, &s), "PCMGGetSmootherUp");
-      check(KSPSetOperators(s, C, C), "KSPSetOperators");
-    }
-  }
-  static void smoother(PC pc, PetscInt l, bool down) {
-    KSP s;
-    PC p;
-    check(down ? PCMGGetSmootherDown(pc, l, &s) : PCMGGetSmootherUp(pc, l, &s), "PCMGGetSmoother");
-    KSPSetType(s, KSPRICHARDSON);
-    KSPSetTolerances(s, PETSC_DEFAULT, PETSC_DEFAULT, PETSC_DEFAULT, 1);
-    KSPSetNormType(s, KSP_NORM_NONE);
-    KSPGetPC(s, &p);
-    PCSetType(p, PCSOR);
-    PCSORSetSymmetric(p, down ? SOR_LOCAL_FORWARD_SWEEP : SOR_LOCAL_BACKWARD_SWEEP);
-  }
 
   Matrix A_;
   Hierarchy below_;
   KSP ksp_ = nullptr, ssor_ = nullptr;
   Vec bv_ = nullptr, zv_ = nullptr;
   Mat K_ = nullptr;
-  std::unique_ptr<GalerkinOperators> galerkin_;  // PCMG's coarse operators (multigrid)
-  PC mg_ = nullptr;
+  std::unique_ptr<VCycle> vcycle_;  // PCMG's set-up and coarse operators (when it preconditions)
   std::vector<PetscInt> active_;
   std::vector<char> inactive_;
   bool iterative_ = false, lu_ = false, symmetric_ = false;
