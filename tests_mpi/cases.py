@@ -267,16 +267,22 @@ def case_fuzz(examples):
             upper[draw.random(n) < 0.3] = np.inf
         kw = _fuzz_options(extra, method, A, lo, hi)
         calls = []
+        local_upper = None if upper is None else upper[lo:hi]
+        if upper is not None and method == "newton" and extra.random() < 0.3:   # an implicit upper u(z) ≥ upper
+            base, local_base = upper.copy(), upper[lo:hi].copy()
+            upper = lambda z, b=base: b + 0.05 * (1.0 + np.sin(z))  # noqa: E731
+            local_upper = lambda z, b=local_base: b + 0.05 * (1.0 + np.sin(z))  # noqa: E731
         r = dist.solve(A[lo:hi], q[lo:hi], None if zeta is None else zeta[lo:hi], method=method, tol=1e-9,
-                       maxiter=100000, polish=polish, upper=None if upper is None else upper[lo:hi],
+                       maxiter=100000, polish=polish and not callable(upper), upper=local_upper,
                        callback=lambda k, zk, res: calls.append(k) and False, **kw)
         z = dist.gather(r.z)
         if RANK == 0:
-            serial = nrmicp.solve(A, q, zeta, upper=upper, method="newton", tol=1e-11, polish=True)
+            serial = nrmicp.solve(A, q, zeta, upper=upper, method="newton", tol=1e-11, polish=not callable(upper))
             g = z - (0.0 if zeta is None else zeta)
-            m = np.minimum(A @ z + q, g) if upper is None else np.minimum(g, np.maximum(z - upper, A @ z + q))
+            u = upper(z) if callable(upper) else upper
+            m = np.minimum(A @ z + q, g) if upper is None else np.minimum(g, np.maximum(z - u, A @ z + q))
             rows.append({"n": n, "method": method, "status": str(r.status), "err": float(np.max(np.abs(z - serial.z))),
-                         "res": float(np.linalg.norm(m)), "bounded": upper is not None, "called": bool(calls),
+                         "res": float(np.linalg.norm(m)), "bounded": upper is not None, "implicit": callable(upper), "called": bool(calls),
                          "options": sorted(k for k in kw if k != "omega2"), "scale": float(np.max(np.abs(q)))})
     return rows
 
@@ -393,6 +399,41 @@ def case_one_sided_contact():
                            "sign": float(max(-w[z <= 1e-12].min(initial=0), w[z >= 0.3 - 1e-12].max(initial=0),
                                              np.abs(w[(z > 1e-12) & (z < 0.3 - 1e-12)]).max(initial=0)))}
     return out
+
+
+def case_implicit_upper():
+    """An implicit upper bound on the PETSc engine (the one driver's outer fixed point): a membrane
+    pushed up under a ceiling u(z) = 0.25 + 0.1 sin z (callable, this rank's rows) and u(z) = 0.1 z +
+    0.25 (Affine with a PETSc B), against nrmicp.solve with the same bound; a stationary member refused."""
+    pb = obstacle_2d(31, exact=False)
+    A = sp.csr_matrix(pb.A)
+    n = A.shape[0]
+    lo, hi = split(n)
+    q = pb.q - 40.0
+    B = sp.csr_matrix(0.1 * sp.eye(n))
+    uppers = {"callable": (lambda z: 0.25 + 0.1 * np.sin(z), lambda z: 0.25 + 0.1 * np.sin(z)),
+              "affine": (nrmicp.Affine(B, np.full(n, 0.25)), dist_affine(B, 0.25, lo, hi))}
+    out = {}
+    for name, (serial_u, local_u) in uppers.items():
+        r = dist.solve(A[lo:hi], q[lo:hi], pb.zeta[lo:hi], upper=local_u, method="newton", hierarchy="amg", tol=1e-10)
+        z = dist.gather(r.z)
+        if RANK == 0:
+            s = nrmicp.solve(A, q, pb.zeta, upper=serial_u, method="newton", tol=1e-10)
+            u = B @ z + 0.25 if name == "affine" else 0.25 + 0.1 * np.sin(z)
+            out[name] = {"status": str(r.status), "serial_status": str(s.status), "res": float(r.residual),
+                         "err": float(np.max(np.abs(z - s.z))), "at_upper": int(np.sum(z >= u - 1e-12)),
+                         "above": float(np.max(z - u))}
+    try:
+        dist.solve(A[lo:hi], q[lo:hi], pb.zeta[lo:hi], upper=uppers["callable"][1], method="nrmgs")
+        out["nrmgs"] = "solved"
+    except ValueError as exc:
+        out["nrmgs"] = str(exc)
+    return out
+
+
+def dist_affine(B, c, lo, hi):
+    """nrmicp.Affine(B, c) with B as a PETSc Mat in the split's row layout."""
+    return nrmicp.Affine(mat(sp.csr_matrix(B), lo, hi), np.full(hi - lo, c))
 
 
 def case_warm():
@@ -689,7 +730,7 @@ if __name__ == "__main__":
     result = {"agreement": lambda: case_agreement(), "partition": case_partition,
               "bad": lambda: case_bad(args[0], args[1]), "boomeramg": case_boomeramg, "dense": case_dense,
               "floor": case_floor, "overshoot": case_overshoot, "sweeps": case_sweeps,
-              "warm": case_warm, "one_sided_contact": case_one_sided_contact, "units": case_units, "engine": lambda: case_engine(*args), "options": case_options,
+              "warm": case_warm, "one_sided_contact": case_one_sided_contact, "implicit_upper": case_implicit_upper, "units": case_units, "engine": lambda: case_engine(*args), "options": case_options,
               "fuzz": lambda: case_fuzz(int(args[0])), "family": case_family, "hooks": case_hooks}[name]()
     if RANK == 0:
         print("RESULT " + json.dumps(result), flush=True)

@@ -180,3 +180,14 @@ def test_rows_at_a_nonzero_bound_on_one_rank_only_do_not_deadlock(np_):
         assert r["status"] == "CONVERGED", (np_, h, r)
         assert r["at_upper"] == 6, (np_, h, r)   # the six pushed rows, and no other
         assert r["violation"] <= 1e-12 and r["sign"] <= 1e-9, (np_, h, r)
+
+
+@pytest.mark.parametrize("np_", [1, 2])
+def test_an_implicit_upper_bound_runs_the_serial_outer_fixed_point(np_):
+    out = mpirun(np_, "implicit_upper")
+    for name in ("callable", "affine"):
+        r = out[name]
+        assert r["status"] == r["serial_status"] == "CONVERGED", (np_, name, r)
+        assert r["err"] < 1e-8 and r["res"] < 1e-10, (np_, name, r)
+        assert r["at_upper"] > 100 and r["above"] <= 1e-12, (np_, name, r)   # the ceiling is met, never crossed
+    assert "solved by method 'newton'" in out["nrmgs"] and "upper" in out["nrmgs"]

@@ -1,6 +1,6 @@
 """Random small problems through the distributed entry points (np = 2, uneven partitions):
 every member against serial nrmicp and a plain numpy Res (bounds: ‖mid(z − ζ, z − u, Az + q)‖);
-bounds and a callback on every member, the stationary members with Anderson, phi, theta, the
+bounds (an implicit upper too, on newton) and a callback on every member, the stationary members with Anderson, phi, theta, the
 history and the stall window drawn at random."""
 import os
 

@@ -59,15 +59,16 @@ class PyPetscNewton {
     const Eigen::VectorXd qv = to_vector(q, "q");
     std::optional<Eigen::VectorXd> z0;
     if (!x0.is_none()) z0 = to_vector(x0.cast<py::array>(), "x0");
-    const auto zeta = with_upper(zeta_of(kind, zeta_c, zeta_fn), upper);
+    const auto zeta = with_upper(zeta_of(kind, zeta_c, zeta_fn), upper, qv.size());
     const auto cb = make_callback(callback);
     const nrmicp::Result r = core_.solve(qv, zeta, z0 ? &*z0 : nullptr, cb, {}, &it);
     return result_dict(r, it.record_history);
   }
   py::dict polish(py::array q, nrmicp::ZetaKind kind, py::object zeta_c, py::object zeta_fn, py::object upper,
                   py::array z, double tol) {
-    const auto zeta = with_upper(zeta_of(kind, zeta_c, zeta_fn), upper);
-    return result_dict(core_.polish(to_vector(q, "q"), zeta, to_vector(z, "z"), tol), false);
+    const Eigen::VectorXd qv = to_vector(q, "q");
+    const auto zeta = with_upper(zeta_of(kind, zeta_c, zeta_fn), upper, qv.size());
+    return result_dict(core_.polish(qv, zeta, to_vector(z, "z"), tol), false);
   }
   int levels() const { return core_.levels(); }
   py::dict hierarchy() const {
@@ -95,7 +96,7 @@ class PyPetscSolver {
     const Eigen::VectorXd qv = to_vector(q, "q");
     std::optional<Eigen::VectorXd> z0;
     if (!x0.is_none()) z0 = to_vector(x0.cast<py::array>(), "x0");
-    const auto zeta = with_upper(zeta_of(kind, zeta_c, zeta_fn), upper);
+    const auto zeta = with_upper(zeta_of(kind, zeta_c, zeta_fn), upper, qv.size());
     const nrmicp::Result r =
         core_.solve(qv, zeta, z0 ? &*z0 : nullptr, make_callback(callback), {}, &it, make_progress(progress));
     return result_dict(r, it.record_history);
@@ -108,7 +109,7 @@ class PyPetscSolver {
   nrmicp::Solver<Matrix> core_;
 };
 
-/// w = Az + q and Res(z) of ICP(q, A, ζ) (with `upper`: the bounded Res), every process's rows
+/// w = Az + q and Res(z) of ICP(q, A, ζ) (with `upper`: the bounded Res, an implicit one at z), every process's rows
 /// together; with `rounding`, also Res's rounding level at z (the Newton member's floor,
 /// detail::NewtonLevel::rounding_level). For the distributed entry point's re-measures: its target
 /// (Res at z = 0), the paper's Res in the user's units, the default rule's floor.
@@ -119,12 +120,13 @@ py::dict measure(std::uintptr_t A, py::array q, nrmicp::ZetaKind kind, py::objec
   o.method = nrmicp::Method::Newton;
   const nrmicp::detail::NewtonLevel<Matrix> level(M, o);
   const Eigen::VectorXd qv = to_vector(q, "q"), zv = to_vector(z, "z");
-  const Zeta zeta = with_upper(zeta_of(kind, zeta_c, zeta_fn), upper);
-  Eigen::VectorXd w, zeta_z;
+  const Zeta zeta = with_upper(zeta_of(kind, zeta_c, zeta_fn), upper, qv.size());
+  Eigen::VectorXd w, zeta_z, u;
+  if (!zeta.eval_upper(zv, u)) throw py::value_error("upper(z) failed (or gave NaN or -inf) at the returned z");
   py::dict d;
-  d["residual"] = level.icp_residual(qv, zeta, zv, zeta_z, w, zeta.upper());
+  d["residual"] = level.icp_residual(qv, zeta, zv, zeta_z, w, u);
   d["w"] = py::array_t<double>(w.size(), w.data());
-  if (rounding) d["rounding_level"] = level.rounding_level(zv, qv, zv - zeta_z, w, zeta.upper());
+  if (rounding) d["rounding_level"] = level.rounding_level(zv, qv, zv - zeta_z, w, u);
   return d;
 }
 

@@ -206,8 +206,9 @@ def _core_options(o, method, nloc, it):
 class _Zeta:
     """ζ on this rank's rows: kind 0 none, 1 constant c, 2 Affine (B Mat, c), 3 callable."""
 
-    def __init__(self, zeta, A, comm):
-        """Local checks only."""
+    def __init__(self, zeta, A, comm, name="zeta", c_infinite=0):
+        """Local checks only; `name` in the messages (an Affine upper bound: "upper", its c may hold
+        +inf: c_infinite=1)."""
         self.comm, self.B, self.c, self.fn = comm, None, None, None
         n = A.getSize()[0]
         if zeta is None:
@@ -215,11 +216,11 @@ class _Zeta:
         elif isinstance(zeta, Affine):
             self.kind = 2
             if not isinstance(zeta.B, PETSc.Mat):
-                raise TypeError(f"zeta.B must be a petsc4py Mat in A's layout, got {type(zeta.B).__name__}")
+                raise TypeError(f"{name}.B must be a petsc4py Mat in A's layout, got {type(zeta.B).__name__}")
             if zeta.B.getSize() != (n, n) or zeta.B.getOwnershipRange() != A.getOwnershipRange():
-                raise ValueError(f"zeta.B must be ({n}, {n}) with A's row layout, got {zeta.B.getSize()} "
+                raise ValueError(f"{name}.B must be ({n}, {n}) with A's row layout, got {zeta.B.getSize()} "
                                  f"rows {zeta.B.getOwnershipRange()}")
-            self.B, self.c = zeta.B, _local(zeta.c, A, "zeta.c", scalar_ok=True)
+            self.B, self.c = zeta.B, _local(zeta.c, A, f"{name}.c", scalar_ok=True, infinite=c_infinite)
         elif callable(zeta):
             self.kind, self.fn = 3, CheckedZeta(zeta, A.getLocalSize()[0])
         else:
@@ -381,8 +382,9 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     affine ζ runs its outer fixed point — or a stationary member ('nrm', 'nrmm', 'nrmaor', 'nrmsor',
     'nrmgs', 'nrmj', 'mms', 'two_sweep'): the serial loop (nrmicp::Solver on the PETSc engine) as
     synchronous multisplitting, each rank splitting its diagonal block (on one rank, the serial
-    member's iterates; 'nrmj' takes them on any number). upper: z ≤ upper, as in :func:`nrmicp.solve`, constant
-    only (an Affine or callable upper raises NotImplementedError).
+    member's iterates; 'nrmj' takes them on any number). upper: z ≤ upper, as in :func:`nrmicp.solve`: a constant,
+    or an implicit upper bound ('newton' only; its outer fixed point) — :class:`nrmicp.Affine` (B a petsc4py
+    Mat in A's layout) or a callable of this rank's rows, as zeta.
     callback(k, z, res) sees this rank's rows of z; returning True on any rank stops every rank.
     ``options`` are :func:`nrmicp.solve`'s, with its defaults, checked by the same code (one table:
     nrmicp._options); those that cannot apply on PETSc raise a ValueError naming them:
@@ -454,15 +456,29 @@ def _upper(upper, Am, zf, comm, method):
         return np.full(Am.getLocalSize()[0], np.inf) if free and method != "newton" else None
 
     def local():
-        if callable(upper) or isinstance(upper, Affine):   # (the core would take it; the glue's Res does not)
-            raise NotImplementedError("upper: an implicit upper bound (Affine or callable) is solved by nrmicp.solve "
-                                      "only; nrmicp.distributed.solve takes a constant upper (a number, this rank's "
-                                      "rows or a Vec)")
-        u = _local(upper, Am, "upper", scalar_ok=True, infinite=1)
         kind = (_core.ZetaKind.none, _core.ZetaKind.constant, _core.ZetaKind.affine, _core.ZetaKind.functor)[zf.kind]
+        if callable(upper) or isinstance(upper, Affine):   # an implicit upper: the core's outer fixed point
+            _bounds.check(kind, None, _bounds.ImplicitUpper(_core.ZetaKind.functor), method, None)
+            return _implicit_upper(upper, Am, comm)
+        u = _local(upper, Am, "upper", scalar_ok=True, infinite=1)
         _bounds.check(kind, zf.c if zf.kind == 1 else None, u, method, None)
         return u
     return _collective(comm, local)
+
+
+def _implicit_upper(upper, Am, comm):
+    """An Affine (B a petsc4py Mat in A's layout) or callable upper bound as the core's implicit one
+    (make_zeta's tuple: a functor of this rank's rows, each call collective, its values checked as
+    nrmicp.solve checks them: _bounds.CheckedUpper)."""
+    nloc = Am.getLocalSize()[0]
+    if isinstance(upper, Affine):
+        u = _Zeta(upper, Am, comm, name="upper", c_infinite=1)   # (c's +inf: no bound on that row)
+        fn = u.core_args(Am)[2]
+    else:
+        checked = _bounds.CheckedUpper(upper, nloc)
+        fn = CheckedZeta(lambda z: _collective(comm, checked, z), nloc)
+    fn.what = "upper(z)"
+    return (_core.ZetaKind.functor, None, None, None, None, fn)
 
 
 def _stationary(_petsc, Am, qa, problem, xa, opts, o, comm, units):
