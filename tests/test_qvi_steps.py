@@ -57,6 +57,20 @@ def test_impulse_control_with_its_jacobian_takes_as_many_newton_steps_at_every_n
     assert max(calls) <= 6 and max(calls) - min(calls) <= 1, calls  # the cold policy iteration: 8 / 13 / 33
 
 
+def test_impulse_control_steps_with_a_hierarchy_are_those_without():
+    # From n = 1,000 inner 'auto' solves with the hierarchy; a step's system took BiCGSTAB with a V-cycle of A,
+    # which does not precondition its rows z_i − z_j*(i) (j* far off): 20 Newton steps at n = 1,601, not 6
+    p = scenes.impulse_control(1601)
+    steps = []
+    for hierarchy in (None, "amg"):
+        jacobian = impulse_jacobian(p)
+        r = nrmicp.solve(p.A, p.q, p.zeta, method="newton", tol=1e-8, hierarchy=hierarchy, zeta_jacobian=jacobian)
+        assert r.success, r.message
+        assert np.max(np.abs(r.z - p.z_exact)) < 1e-7 * np.max(np.abs(p.z_exact))
+        steps.append(jacobian.calls)
+    assert steps[1] <= steps[0] + 1, steps
+
+
 @pytest.mark.parametrize("form", ["sparse", "operator"])
 def test_sin_zeta_takes_as_many_newton_steps_at_every_n(form):
     steps = []

@@ -106,7 +106,7 @@ struct SemismoothLinearization {
       K.lcp = &level.lcp_system();
       return true;
     }
-    K.sparse = level.affine_system(J.matrix, &Timings::factorization);
+    K.sparse = level.affine_system(J.matrix, &Timings::factorization, true);
     return true;
   }
   /// A diagonal ∂ζ(z) = diag(d) with d ≠ 1 (a local ζ, ζ(z)_i = f_i(z_i)): an active row of the step
