@@ -111,6 +111,16 @@ def test_qvi_outer_table():
         assert float(r[9]) >= 0 and float(r[10]) > 0, r       # the frozen obstacle's CPU s, the ratio
 
 
+def test_qvi_scaling_table():
+    # issue 37's remaining QVI targets (benchmarks/qvi_scaling.py), on its smallest sizes
+    rows = table_rows(run("qvi_scaling.py", "--impulse", "101", "--sin", "31"))
+    assert [r[0] for r in rows] == ["impulse control, with zeta'", "impulse control, without zeta'",
+                                    "ψ + 0.2 sin z, zeta' sparse", "ψ + 0.2 sin z, zeta' operator"]
+    for r in rows:
+        assert r[7] == "CONVERGED" and float(r[9]) < 1e-8, r  # the numpy check (impulse: against policy iteration)
+    assert 1 <= int(rows[0][2]) <= 6 and all(1 <= int(r[2]) <= 3 for r in rows[2:]), rows
+
+
 def test_qvi_units_table():
     # a change of units on QVIs (benchmarks/qvi_units.py): every rule converges to numpy's reference
     rows = table_rows(run("qvi_units.py", "--thermo", "63", "--achp", "63", "--scales", "1e4"))

@@ -400,3 +400,17 @@ def test_verbose_reports_every_newton_path_ending_with_the_result_message(zkind,
     assert res.message.split(";")[0] in lines[-1]
     if zkind != "callable+jacobian":  # a repeated active set ends only the fixed-system paths
         assert "the active set has settled" in lines[-1]
+
+
+def test_a_step_rejected_at_the_rounding_floor_ends_there_without_sweeps():
+    # A constant ζ with its (zero) Jacobian, tol below what double precision resolves: the start, an
+    # exact obstacle solve, is at the floor; its Newton step lost to rounding and was rejected, and the
+    # fallback's sweeps ended STAGNATED "Res stopped decreasing" instead of at the floor
+    problem = scenes.american_put(n_space=256, exact=False)
+    psi, n = np.asarray(problem.zeta), problem.n
+    res = nrmicp.solve(problem.A, problem.q, lambda z: psi, method="newton", tol=1e-16, hierarchy=None,
+                       zeta_jacobian=lambda z: sp.csr_matrix((n, n)))
+    assert res.status == nrmicp.Status.STAGNATED and "rounding floor" in res.message, res.message
+    assert res.fallback_sweeps == 0
+    w = problem.A @ res.z + problem.q
+    assert np.linalg.norm(np.minimum(w, res.z - psi)) < 1e-9 * np.linalg.norm(problem.q)

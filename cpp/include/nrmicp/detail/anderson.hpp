@@ -64,6 +64,13 @@ class Anderson {
 
   /// Forget the differences (after a rejected step); the last (x, f) pair is kept.
   void reset() { count_ = 0; head_ = 0; }
+  /// Forget the differences, then record (x, f) (a rejected mix and its step): the memory restarts
+  /// from the one difference between the last pair and it, both exact samples of the map.
+  void restart(const Vector& x, const Vector& f) {
+    reset();
+    Vector unused;
+    step(x, f, unused);
+  }
   /// The differences the last step mixed (0: it was the plain step x + f).
   int size() const { return count_; }
 

@@ -350,6 +350,8 @@ class Globalized {
   }
   // Sweeps of the fallback member from the best iterate (SweepRuns).
   void fall_back() {
+    // a step rejected while the best Res is at its rounding level lost to rounding: no sweeps bring Res lower
+    if (at_rounding_level(best_r_)) return settle();
     const int k = runs_.next(sweeps_);
     if (!k) return give_up();
     const Result fr = plain_.sweep(best_z_, k, ctl_.solve.tol);

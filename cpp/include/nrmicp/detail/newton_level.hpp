@@ -275,9 +275,13 @@ class NewtonLevel {
   }
   /// A system of the affine ICP (ζ = Bz + c), its V-cycle on copies of the hierarchy's operators;
   /// its time goes to `phase` (setup for a fixed ζ, factorization for a step's linearization).
-  std::unique_ptr<System> affine_system(const RowMatrix& B, double Timings::*phase) {
+  /// `direct_unless_cg`: factorized unless inner = cg asks for the Krylov solve (a step's ∂ζ(z) that
+  /// couples distant rows, which a V-cycle of A does not precondition: docs/MEASUREMENTS.md,
+  /// "A nonlocal sparse ζ′").
+  std::unique_ptr<System> affine_system(const RowMatrix& B, double Timings::*phase, bool direct_unless_cg = false) {
     restore_hierarchy();
     ScopedTimer t(timings().*phase);
+    if (direct_unless_cg && options_.inner != Inner::CG) return std::make_unique<System>(A_, &B, options_.inner, decltype(below_){});
     return std::make_unique<System>(A_, &B, options_.inner, below_);
   }
   const char* inner_name() const { return lcp_system_ ? lcp_system_->inner_name() : "none"; }

@@ -15,7 +15,9 @@
 // with z − ζ(z) (z's): on σA (the default rule's units) Res(0) is the small load ‖σq‖ and every
 // good outer step looked worse than z = 0 (docs/MEASUREMENTS.md, "The outer fixed point in z's
 // units"). A mixed iterate is kept when the next inner solve shows ‖G − z‖ below that of the iterate
-// it was mixed from; else the plain G of that iterate replaces it and the memory is cleared. A plain
+// it was mixed from; else, when it is nearly as low (kReuseMix), its own G (that inner solve's
+// answer) is the next iterate, a plain step from it, the memory restarting from the two iterates'
+// pairs, or the plain G of the iterate it was mixed from, the memory cleared. A plain
 // step whose ‖G − z‖ fails the non-monotone test hands over to runs of the fallback member on the
 // whole ICP from the best iterate by Res (SweepRuns, as a level's loop does: detail/globalization.hpp).
 // A move that meets Res's rounding floor (met_floor, the rule of a level's loop, with the level row by
@@ -82,7 +84,7 @@ class OuterFixedPoint {
     const double f = run_.comm().stable_norm(inner.z - z_);  // ‖G(z) − z‖, z's units
     if (mixed_) {
       mixed_ = false;
-      if (!(f < f_from_)) return reject_mix();
+      if (!(f < f_from_)) return reject_mix(inner.z, f);
     } else if (judged_ && !test_.acceptable(f)) {
       return fall_back();
     }
@@ -116,13 +118,25 @@ class OuterFixedPoint {
     mixed_ = true;
     return true;
   }
-  /// The mixed iterate did not lower ‖G − z‖: the plain step from the iterate it was mixed from.
-  void reject_mix() {
-    aa_.reset();
+  /// The mixed iterate did not lower ‖G − z‖ (it is f): the plain step from it, to its G = `plain`,
+  /// which the inner solve that judged it computed, when f is within kReuseMix of the iterate it was
+  /// mixed from (the memory then restarts from both pairs); else the plain step from that iterate,
+  /// G of it, the memory cleared (an inner solve more: docs/MEASUREMENTS.md, "A rejected mix's own step").
+  void reject_mix(Vector& plain, double f) {
     ++rejections_;
-    take(plain_);
+    if (f <= kReuseMix * f_from_) {
+      aa_.restart(z_, plain - z_);
+      take(plain);
+    } else {
+      aa_.reset();
+      take(plain_);
+    }
     if (r_ < best_r_) { best_z_ = z_; best_r_ = r_; }
   }
+  /// A rejected mix whose ‖G − z‖ is at most this factor of its origin's is as good a point to step
+  /// from, and its step is known (impulse control's rejected mixes: 1.03; the hard cases' 2–17, from
+  /// which the step did worse: docs/MEASUREMENTS.md, "A rejected mix's own step").
+  static constexpr double kReuseMix = 1.1;
   /// The plain step to v = G(z) (z stays when ζ fails at v: the Monitor ends the solve).
   void take(Vector& v) {
     const double r = run_.icp_residual(v, psi_new_);

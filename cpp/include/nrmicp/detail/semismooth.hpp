@@ -37,23 +37,26 @@ struct SemismoothLinearization {
   using Sparse = ActiveSetSystem<StorageIndex>;
   static constexpr bool set_fixes_step = false;
 
-  /// The reduced system of this step, of either form (the interface NewtonStep uses).
+  /// The reduced system of this step, of either form (the interface NewtonStep uses): a sparse ∂ζ(z)
+  /// its own system on the union pattern, or (diagonal) the level's LCP system; or matrix-free.
   struct System {
     std::unique_ptr<Sparse> sparse;
+    Sparse* lcp = nullptr;  ///< the level's LCP system, for a diagonal ∂ζ(z) (sparse then empty)
     MatrixFreeSystem<MatrixType> matrix_free;
     bool is_matrix_free = false;
+    Sparse& assembled() { return sparse ? *sparse : *lcp; }
     bool factorize(const std::vector<char>& inactive) {
-      return is_matrix_free ? matrix_free.factorize(inactive) : sparse->factorize(inactive);
+      return is_matrix_free ? matrix_free.factorize(inactive) : assembled().factorize(inactive);
     }
     int solve(const Vector& b, Vector& z, double target) {
-      return is_matrix_free ? matrix_free.solve(b, z, target) : sparse->solve(b, z, target);
+      return is_matrix_free ? matrix_free.solve(b, z, target) : assembled().solve(b, z, target);
     }
-    bool iterative() const { return is_matrix_free || sparse->iterative(); }
+    bool iterative() { return is_matrix_free || assembled().iterative(); }
   };
 
   /// `record`: where the linearizations record (outlives this).
   SemismoothLinearization(Level& level, const Vector& q, const Zeta<StorageIndex>& zeta, SemismoothRecord& record)
-      : level(level), q(q), zeta(zeta), record(record), K{nullptr, MatrixFreeSystem<MatrixType>(level, record)} {}
+      : level(level), q(q), zeta(zeta), record(record), K{nullptr, nullptr, MatrixFreeSystem<MatrixType>(level, record)} {}
 
   Level& level;
   const Vector& q;
@@ -97,7 +100,26 @@ struct SemismoothLinearization {
       return true;
     }
     c = zeta_z - J.matrix * z;
-    K.sparse = level.affine_system(J.matrix, &Timings::factorization);
+    K.lcp = nullptr;
+    if (decoupled()) {
+      K.sparse.reset();
+      K.lcp = &level.lcp_system();
+      return true;
+    }
+    K.sparse = level.affine_system(J.matrix, &Timings::factorization, true);
+    return true;
+  }
+  /// A diagonal ∂ζ(z) = diag(d) with d ≠ 1 (a local ζ, ζ(z)_i = f_i(z_i)): an active row of the step
+  /// fixes z⁺_i = c_i / (1 − d_i) alone, so the step is the LCP's on that bound (c becomes it), on the
+  /// level's LCP system: analysed once, symmetric where A is (CG on the hierarchy), where the union
+  /// pattern's system is built each step and nonsymmetric (BiCGSTAB; docs/MEASUREMENTS.md, "A diagonal ζ′").
+  bool decoupled() {
+    const auto& B = J.matrix;
+    for (Eigen::Index i = 0; i < B.outerSize(); ++i)
+      for (typename Zeta<StorageIndex>::RowMatrix::InnerIterator it(B, i); it; ++it)
+        if (it.index() != i || it.value() == 1.0) return false;
+    const Vector d = B.diagonal();
+    c = c.cwiseQuotient((1.0 - d.array()).matrix());
     return true;
   }
   System& system() { return K; }
@@ -128,6 +150,18 @@ struct SemismoothLinearization {
   void rhs(const std::vector<char>& set, Vector& b) const {
     for (Eigen::Index i = 0; i < b.size(); ++i)
       b[i] = inactive_state(set[i]) ? (K.is_matrix_free ? minus_w[i] : -q[i]) : c[i];
+    if (K.lcp) move_bound_columns(set, b);
+  }
+  /// The LCP system has no active columns on the inactive rows: their part A_ℐ𝒜 z⁺_𝒜 moves to the
+  /// right-hand side (as FixedLinearization::rhs does for a box's bounds).
+  void move_bound_columns(const std::vector<char>& set, Vector& b) const {
+    Vector t = Vector::Zero(b.size()), At(b.size());
+    for (Eigen::Index i = 0; i < b.size(); ++i)
+      if (!inactive_state(set[i])) t[i] = b[i];
+    ScopedTimer timer(level.timings().spmv);
+    multiply(level.matrix(), t, At);
+    for (Eigen::Index i = 0; i < b.size(); ++i)
+      if (inactive_state(set[i])) b[i] -= At[i];
   }
   /// The active set of the step from z: the one of the outer step S(ζ(z)) when `predict` is given
   /// (NewtonRun::solve_semismooth); false: the test x ≥ 0 on z decides.
