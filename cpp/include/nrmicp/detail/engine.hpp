@@ -27,6 +27,9 @@ class Solver;
 
 namespace nrmicp::detail {
 
+/// A reduced system's Krylov solve without an absolute target stops at ‖b − Kz‖ ≤ this × ‖b‖ (both engines).
+inline constexpr double kKrylovRtol = 1e-12;
+
 template <typename StorageIndex>
 class ActiveSetSystem;
 template <typename StorageIndex>

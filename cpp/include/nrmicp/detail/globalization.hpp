@@ -188,6 +188,11 @@ struct NewtonControl {
   double forcing = 0;
   double first_forcing = 0;
   double repeat_trust = std::numeric_limits<double>::infinity();
+  /// A loop to a settled set (solve.tol 0) inside a solve to this tol (an outer fixed point's inner
+  /// solve): its linear solves reach ‖b − Kz‖ ≤ settled_tol / 10 where the inner solver's own relative
+  /// stop would leave more (an h⁻²-scaled A's large ‖b‖: docs/MEASUREMENTS.md, "The outer fixed point
+  /// at its floor"). 0: the inner solver's own stop.
+  double settled_tol = 0;
   int sweep_budget = 0;       ///< fallback sweeps allowed in all (0: no fallback)
   /// Non-null: the loop is solve_semismooth's, and *outer_steps says whether outer steps place its
   /// steps (each step's active set is then its outer step's, an outer step follows it and its
@@ -282,7 +287,7 @@ class Globalized {
     // Loose only where a repeat is recognized (a set fixes the step): the repeat is then solved to repeat_tol().
     const double forcing = repeat || !Plain::set_fixes_step ? 0.0 : plain_.steps() == 0 ? ctl_.first_forcing : ctl_.forcing;
     loose_ = forcing > 0 && plain_.iterative();
-    double r = plain_.solve(inactive_, repeat ? repeat_tol() : ctl_.solve.tol, forcing);
+    double r = plain_.solve(inactive_, repeat ? repeat_tol() : ctl_.solve.tol, forcing, ctl_.settled_tol);
     bool damped = false;
     if constexpr (Plain::set_fixes_step)
       if (overshoots()) { r = plain_.damp(kOvershootDamping); damped = true; }

@@ -21,6 +21,7 @@
 // solves (Eigen's solvers allocate theirs per solve).
 #pragma once
 
+#include "engine.hpp"
 #include "galerkin.hpp"
 #include "vcycle.hpp"
 
@@ -95,7 +96,7 @@ class MultigridKrylov {
   /// coarse levels for a fraction of the iterate's Res (a start needs no more). CG's recursive
   /// residual keeps falling below the rounding floor of the true one, so any target is reached;
   /// if the true residual cannot follow, the Newton loop ends with its active set settled.
-  static constexpr double rtol = 1e-12;
+  static constexpr double rtol = kKrylovRtol;
   static constexpr int default_max_iterations = 500;
 
   /// The hierarchy must outlive this object. `symmetric`: the systems K given to setup are

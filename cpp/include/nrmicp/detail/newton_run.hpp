@@ -292,6 +292,7 @@ class ObstacleSolver {
     NewtonControl c;
     c.solve = o_;
     c.solve.tol = tol;
+    c.settled_tol = o_.tol;
     c.solve.maxiter = maxiter;
     c.solve.record_history = report && o_.record_history;
     c.solve.verbose = report ? o_.verbose : 0;

@@ -137,13 +137,16 @@ class NewtonStep {
   /// The trial iterate z⁺ of the piece `inactive` (after factorize); its Res. The one inner solve
   /// of the Newton member: an iterative one (inner = cg) starts from z and stops at tol / 10, or
   /// at `forcing` × Res(z) if that is larger (inexact Newton; NewtonControl::forcing).
-  double solve(const std::vector<char>& inactive, double tol, double forcing = 0) {
+  double solve(const std::vector<char>& inactive, double tol, double forcing = 0, double settled_tol = 0) {
     Vector& rhs = w_new_;  // w⁺ is written after the solve: its storage holds the right-hand side
     lin_.rhs(inactive, rhs);
     z_new_ = z_;
+    double target = std::max(0.1 * tol, forcing * r_);
+    if (target == 0 && settled_tol > 0 && lin_.system().iterative())  // (NewtonControl::settled_tol)
+      target = std::min(kKrylovRtol * level_.comm().stable_norm(rhs), 0.1 * settled_tol);
     {
       ScopedTimer t(level_.timings().inner_solve);
-      inner_iterations_ += lin_.system().solve(rhs, z_new_, std::max(0.1 * tol, forcing * r_));
+      inner_iterations_ += lin_.system().solve(rhs, z_new_, target);
     }
     ++solves_;
     ++steps_;

@@ -493,7 +493,7 @@ class System {
   /// to `its`); whether it converged.
   bool run(KSP ksp, Vec bv, Vec zv, double target, int cap, int& its) const {
     if (!lu_)
-      check(KSPSetTolerances(ksp, target > 0 ? 1e-300 : 1e-12, target > 0 ? target : 0.0, PETSC_DEFAULT, cap),
+      check(KSPSetTolerances(ksp, target > 0 ? 1e-300 : detail::kKrylovRtol, target > 0 ? target : 0.0, PETSC_DEFAULT, cap),
             "KSPSetTolerances");
     check(KSPSolve(ksp, bv, zv), "KSPSolve");
     KSPConvergedReason reason;
