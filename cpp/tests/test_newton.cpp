@@ -810,7 +810,7 @@ struct ScriptedStep {
   std::size_t active_count(const std::vector<char>& set) const {
     return set.size() - static_cast<std::size_t>(std::count(set.begin(), set.end(), nrmicp::detail::kInactive));
   }
-  double solve(const std::vector<char>&, double tol, double forcing) {
+  double solve(const std::vector<char>&, double tol, double forcing, double = 0) {
     forcings.push_back(forcing);
     tols.push_back(tol);
     return trials[static_cast<std::size_t>(k++)];
