@@ -22,21 +22,8 @@ import scipy.sparse.linalg as spla
 
 import nrmicp
 from nrmicp import scenes
-
-
-def impulse_jacobian(problem):
-    """∂ζ of impulse control, ζ(z)_i = max_{j≥i}(z_j − c x_j) + c x_i − K: row i picks the first
-    maximizer j*(i) (tests/test_newton.py's, from the scene's formula)."""
-    x, c = problem.reference["x"], problem.reference["prop"]
-    n, idx = x.size, np.arange(x.size)
-
-    def jacobian(z):
-        v = z - c * x
-        best = np.maximum.accumulate(v[::-1])[::-1]
-        first = np.minimum.accumulate(np.where(v == best, idx, n)[::-1])[::-1]
-        return sp.csr_matrix((np.ones(n), (idx, first)), shape=(n, n))
-
-    return jacobian
+from nrmicp.scenes.impulse import impulse_zeta_jacobian as impulse_jacobian
+from qvi_operator import counted  # benchmarks/: the one call counter
 
 
 def sin_problem(m: int):
@@ -53,15 +40,6 @@ def sin_problem(m: int):
 
     return (pb.A, pb.q, (lambda z: psi + 0.2 * np.sin(z)),
             {"sparse": sparse_jacobian, "operator": operator_jacobian}, pb.prolongations())
-
-
-def counted(f):
-    """f, counting its calls in .calls."""
-    def g(*a):
-        g.calls += 1
-        return f(*a)
-    g.calls = 0
-    return g
 
 
 def run(label, n, A, q, zeta, jac, err, tol, **kw):

@@ -11,6 +11,7 @@ import pytest
 import scipy.sparse as sp
 
 import nrmicp
+from nrmicp.scenes.impulse import impulse_zeta_jacobian as impulse_jacobian  # noqa: F401 (also tests/golden, test_qvi_steps)
 from reference_impl import residual as reference_residual, units_residual
 from nrmicp import scenes
 from nrmicp.scenes import solve_exact_obstacle
@@ -22,21 +23,6 @@ import test_hard_cases as hard
 
 def err(res, problem):
     return float(np.abs(res.z - problem.z_exact).max())
-
-
-def impulse_jacobian(problem):
-    """∂ζ of the impulse-control ζ(z)_i = max_{j≥i}(z_j − c x_j) + c x_i − K: row i picks the
-    first maximizer j*(i) (a selection matrix). Written here from the scene's formula."""
-    x, c = problem.reference["x"], problem.reference["prop"]
-    n, idx = x.size, np.arange(x.size)
-
-    def jacobian(z):
-        v = z - c * x
-        best = np.maximum.accumulate(v[::-1])[::-1]
-        first = np.minimum.accumulate(np.where(v == best, idx, n)[::-1])[::-1]
-        return sp.csr_matrix((np.ones(n), (idx, first)), shape=(n, n))
-
-    return jacobian
 
 
 SCENES = {

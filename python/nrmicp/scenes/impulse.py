@@ -115,6 +115,22 @@ def solve_exact_impulse(A, q, x, cost: float, prop: float, maxiter: int = 500) -
     raise RuntimeError(f"solve_exact_impulse: policy iteration did not settle in {maxiter} steps")
 
 
+def impulse_zeta_jacobian(problem: Problem):
+    """∂ζ of an :func:`impulse_control` problem's ζ(z)_i = max_{j≥i}(z_j − c x_j) + c x_i − K, for
+    ``zeta_jacobian``: row i picks the first maximizer j*(i) (a selection matrix, an element of the
+    generalized Jacobian)."""
+    x, c = problem.reference["x"], problem.reference["prop"]
+    n, idx = x.size, np.arange(x.size)
+
+    def jacobian(z):
+        v = z - c * x
+        best = np.maximum.accumulate(v[::-1])[::-1]
+        first = np.minimum.accumulate(np.where(v == best, idx, n)[::-1])[::-1]
+        return sp.csr_matrix((np.ones(n), (idx, first)), shape=(n, n))
+
+    return jacobian
+
+
 def impulse_control(n: int, cost: float = 0.1, prop: float = 0.2, rho: float = 0.1,
                     sigma: float = 0.3, b: float = -0.5, exact: bool = True) -> Problem:
     """Impulse-control QVI (see the module docstring) on n nodes of [0, 1].
