@@ -73,20 +73,20 @@ class DistributedError(RuntimeError):
 # ----------------------------------------------------------------------------- collectives
 def _flag_max(comm, value: float) -> float:
     """max over ranks of one float (a one-entry-per-rank Vec: PETSc's own allreduce)."""
-    v = PETSc.Vec().createMPI((1, PETSc.DECIDE), comm=comm)
-    v.setValue(v.getOwnershipRange()[0], value)
-    v.assemble()
-    out = v.max()[1]
-    v.destroy()
-    return out
+    return _reduce(comm, value, lambda v: v.max()[1])
 
 
 def _flag_sum(comm, value: float) -> float:
     """sum over ranks of one float (as _flag_max)."""
+    return _reduce(comm, value, lambda v: v.sum())
+
+
+def _reduce(comm, value: float, op) -> float:
+    """op of the Vec holding each rank's `value` in its one entry."""
     v = PETSc.Vec().createMPI((1, PETSc.DECIDE), comm=comm)
     v.setValue(v.getOwnershipRange()[0], value)
     v.assemble()
-    out = v.sum()
+    out = op(v)
     v.destroy()
     return out
 
@@ -571,12 +571,11 @@ def _newton(_petsc, Am, qa, problem, xa, opts, o, comm):
 
 def _units_sigma(Am):
     """The default rule's σ (nrmicp._scaling.units_factor) from global sums over the diagonal."""
-    d = Am.getDiagonal()
-    a = np.abs(d.getArray(readonly=True))
-    logs, count = d.duplicate(), d.duplicate()
-    logs.setArray(np.log2(np.where(a > 0, a, 1.0)))
-    count.setArray((a > 0).astype(float))
-    return sigma_from_logs(float(logs.sum()), int(round(count.sum())))
+    a = np.abs(Am.getDiagonal().getArray(readonly=True))
+    comm = Am.getComm()
+    logs = _flag_sum(comm, float(np.sum(np.log2(a[a > 0]))))
+    return sigma_from_logs(logs, int(round(_flag_sum(comm, float(np.count_nonzero(a > 0))))))
+
 
 def gather(v):
     """A distributed Vec as one numpy array on rank 0 (None on the other ranks); collective."""

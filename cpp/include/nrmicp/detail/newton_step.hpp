@@ -63,7 +63,7 @@ struct FixedLinearization {
       b[i] = inactive_state(s) ? -q[i] : box ? box->bound(s, i) : c ? (*c)[i] : 0.0;
       bounded = bounded || (box && !inactive_state(s) && b[i] != 0);
     }
-    if (!level.comm().max(bounded ? 1.0 : 0.0)) return;  // (every process multiplies, or none)
+    if (!box || !level.comm().max(bounded ? 1.0 : 0.0)) return;  // (every process multiplies, or none)
     Vector t = Vector::Zero(b.size());
     for (Eigen::Index i = 0; i < b.size(); ++i)
       if (!inactive_state(set[i])) t[i] = b[i];
