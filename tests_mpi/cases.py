@@ -154,6 +154,11 @@ def _bad(kind):
             if last:
                 raise RuntimeError("zeta failed here")
             return np.zeros_like(z)
+    elif kind == "callback_raises":   # the user's callback fails on the last rank in its second call
+        def callback(k, z, res):
+            if last and k >= 2:
+                raise RuntimeError("callback failed here")
+        kw = {"callback": callback}
     elif kind == "zeta_nan":
         def zeta(z):
             return np.full_like(z, np.nan if last else 0.0)

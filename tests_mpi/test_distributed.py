@@ -120,6 +120,7 @@ BAD = {
     "zero_diagonal": ("ValueError", "diagonal must be positive"),
     "nan_q": ("ValueError", "q has a non-finite entry"),
     "zeta_raises": ("RuntimeError", "zeta failed here"),
+    "callback_raises": ("RuntimeError", "callback failed here"),
     "zeta_nan": ("ValueError", "NaN or Inf"),
     "bad_option": ("ValueError", "tol"),
     "bad_method": ("ValueError", "method must be one of"),

@@ -19,6 +19,7 @@ rank 0 (small problems only).
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 import time
 
@@ -402,6 +403,8 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     comm = comm or (A.getComm() if isinstance(A, PETSc.Mat) else PETSc.COMM_WORLD)
     _collective(comm, lambda: _options.validate(options, where="distributed.solve", unsupported=_UNSUPPORTED))
     o = {**_options.defaults(), **options}
+    if o["callback"] is not None:   # each call collective: a failure on one rank raises on all, no rank left waiting
+        o["callback"] = functools.partial(_collective, comm, o["callback"])
     t_start = time.perf_counter()
     it, units = _criterion({"tol": o["tol"], "rtol": o["rtol"]})
     Am, m, opts, qa, xa, zf = _prepare(A, q, zeta, o["x0"], comm, o, it)
