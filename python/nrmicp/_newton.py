@@ -30,6 +30,10 @@ def _has_pyamg() -> bool:
     return True
 
 
+#: polish's target in both entry points: the steps go on to the rounding floor, whatever the member's tol.
+POLISH_TOL = np.finfo(float).tiny
+
+
 def check_polish(polish) -> bool:
     if not isinstance(polish, (bool, np.bool_)):
         raise TypeError(f"polish must be True or False, got {polish!r}")
@@ -157,8 +161,7 @@ def polish(solver, problem, z, res, original_residual, dc):
     built = time.perf_counter() - t0   # the polisher's set-up on first use (else a few µs)
     z0 = z / dc if dc is not None else z
     qs, kind, cs, bp, bi, bd, fns = problem
-    # tol = tiny: the step is taken whatever the member's tol
-    d = core.polish(qs, kind, cs, bp, bi, bd, fns, np.ascontiguousarray(z0), np.finfo(float).tiny)
+    d = core.polish(qs, kind, cs, bp, bi, bd, fns, np.ascontiguousarray(z0), POLISH_TOL)
     d["timings"]["setup"] += built
     zp = d["z"] * dc if dc is not None else d["z"]
     wp, rp = original_residual(zp)

@@ -33,7 +33,7 @@ except ImportError as exc:  # the core package needs no MPI; this module does
                       f"(make mpideps installs them on Debian); {exc}") from exc
 
 from . import _bounds, _core, _options
-from ._newton import AUTO_AMG_MIN_N, check_polish, polish_outcome, result_fields
+from ._newton import AUTO_AMG_MIN_N, POLISH_TOL, check_polish, polish_outcome, result_fields
 from ._api import (METHODS as _ALL_METHODS, _SPLITTING, Affine, Result, Status, _Rounds, _checked, _choice, _criterion,
                    _iteration_options, _log_final, _progress_hook, _units_parameters, at_rounding_floor,
                    choose_method, dominance_margin)
@@ -557,7 +557,7 @@ def _newton(_petsc, Am, qa, problem, xa, opts, o, comm):
     z, res, status, message, w = d["z"], d["residual"], Status(d["status"]), d["message"], d["w"]
     polished = None
     if polish:
-        p = core.polish(*args, z, opts.tol)
+        p = core.polish(*args, z, POLISH_TOL)
         polished = p["residual"] < res
         if polished:
             z, res, w = p["z"], p["residual"], p["w"]
