@@ -1,9 +1,11 @@
 """nrmicp.distributed against PETSc's SNES VI (vinewtonrsls), one invocation for both sides.
 
-    python benchmarks/distributed/bench.py [--m2 1023] [--m3 99] [--dims 2 3] [--ranks 1 2] [--cold-max-n 300000]
-                                           [--out rows.jsonl]
+    python benchmarks/distributed/bench.py [--m2 1023] [--m3 99] [--dims 2 3] [--fe P2:5] [--ranks 1 2]
+                                           [--cold-max-n 300000] [--out rows.jsonl]
 
-For each scene (2D obstacle m², 3D obstacle m³) and each rank count it runs, under mpirun:
+For each scene (2D obstacle m², 3D obstacle m³, and with --fe the finite-element obstacle
+nrmicp.scenes.fe_obstacle(element, refinements): no grid, so no grid-sequencing peer) and each rank
+count it runs, under mpirun:
   ours   nrmicp.distributed.solve(method='newton', hierarchy='amg'), tol 1e-8 (this file, --worker)
   cold   vinewtonrsls from u = 0, CG + hypre BoomerAMG (vi_gridseq.c without grid sequencing)
   gs     vinewtonrsls with DMDA grid sequencing (vi_gridseq.c, -snes_grid_sequence k; it needs a grid)
@@ -31,6 +33,16 @@ def mpirun(np_):
     return cmd
 
 
+def _scene(dim, m):
+    """The obstacle problem of a worker's scene: dim 2 or 3 (grids, m a side) or an element 'P1'/'P2'
+    (fe_obstacle, m refinements)."""
+    from nrmicp.scenes.finite_elements import fe_obstacle
+    from nrmicp.scenes.obstacle import obstacle_2d, obstacle_3d
+    if dim in ("P1", "P2"):
+        return fe_obstacle(dim, m, exact=False)
+    return (obstacle_2d if dim == "2" else obstacle_3d)(m, exact=False)
+
+
 def worker(dim, m, log):
     """One solve by nrmicp.distributed; rank 0 prints RESULT json."""
     import petsc4py
@@ -39,9 +51,8 @@ def worker(dim, m, log):
     import scipy.sparse as sp
     from petsc4py import PETSc
     from nrmicp import distributed as dist
-    from nrmicp.scenes.obstacle import obstacle_2d, obstacle_3d
     comm = PETSc.COMM_WORLD
-    pb = (obstacle_2d if dim == 2 else obstacle_3d)(m, exact=False)
+    pb = _scene(dim, m)
     A = sp.csr_matrix(pb.A)
     n = A.shape[0]
     rank, size = comm.getRank(), comm.getSize()
@@ -116,7 +127,9 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--m2", type=int, default=1023)
     ap.add_argument("--m3", type=int, default=99)
-    ap.add_argument("--dims", type=int, nargs="+", default=[2, 3], choices=[2, 3])
+    ap.add_argument("--dims", type=int, nargs="*", default=[2, 3], choices=[2, 3])
+    ap.add_argument("--fe", nargs="*", default=[], metavar="ELEMENT:REFINEMENTS",
+                    help="finite-element obstacles, e.g. P2:5 (n = 523,265)")
     ap.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--cold-max-n", type=int, default=300_000, help="run the cold peer only up to this n")
     ap.add_argument("--python", default=sys.executable)
@@ -128,12 +141,15 @@ def main():
     subprocess.run(["mpicc", "-O2", "-o", exe, os.path.join(HERE, "vi_gridseq.c")] + flags, check=True)
     rows = []
     out = open(a.out, "w") if a.out else None
-    for dim, m in ((d, a.m2 if d == 2 else a.m3) for d in a.dims):
-        n = m ** dim
+    scenes = [(str(d), a.m2 if d == 2 else a.m3) for d in a.dims] + [(e, int(r)) for e, r in (f.split(":") for f in a.fe)]
+    for dim, m in scenes:
+        grid = dim in ("2", "3")
         for np_ in a.ranks:
-            row = {"scene": f"obstacle_{dim}d m={m}", "n": n, "np": np_, "ours": run_ours(a.python, dim, m, np_),
-                   "gs": run_peer(exe, dim, m, np_, True)}
-            row["cold"] = run_peer(exe, dim, m, np_, False) if n <= a.cold_max_n else None
+            ours = run_ours(a.python, dim, m, np_)
+            name = f"obstacle_{dim}d m={m}" if grid else f"fe_obstacle {dim} r={m}"
+            row = {"scene": name, "n": ours["n"], "np": np_, "ours": ours,
+                   "gs": run_peer(exe, int(dim), m, np_, True) if grid else None}
+            row["cold"] = run_peer(exe, int(dim), m, np_, False) if grid and row["n"] <= a.cold_max_n else None
             rows.append(row)
             print(f"done: {row['scene']}, np {np_}", file=sys.stderr, flush=True)
             if out:   # row by row: partial results survive
@@ -147,16 +163,17 @@ def main():
     for r in rows:
         o, c, g = r["ours"], r["cold"], r["gs"]
         steps = sum(o["level_steps"])
-        cold = f"{c['finest']}, {c['cpu']:.2f}, {c['seconds']:.2f}" if c else "not run (n > --cold-max-n)"
+        cold = f"{c['finest']}, {c['cpu']:.2f}, {c['seconds']:.2f}" if c else "not run (n > --cold-max-n)" if g else "no grid"
+        gs = f"{g['finest']}, {g['cpu']:.2f}, {g['seconds']:.2f}" if g else "no grid"
         se = o["serial"]
         serial = f"{se['finest']}, {se['cpu']:.2f}, {se['seconds']:.2f}" if se else "–"
         print(f"| {r['scene']} | {r['n']:,} | {r['np']} | {serial} | {o['finest']}, {o['cpu']:.2f}, {o['seconds']:.2f} | {cold} | "
-              f"{g['finest']}, {g['cpu']:.2f}, {g['seconds']:.2f} | {o['messages'] / r['np'] / steps:.0f} | "
+              f"{gs} | {o['messages'] / r['np'] / steps:.0f} | "
               f"{o['bytes'] / r['np'] / steps:.3g} | {o['reductions'] / steps:.0f} |")
 
 
 if __name__ == "__main__":
     if len(sys.argv) > 1 and sys.argv[1] == "--worker":
-        worker(int(sys.argv[2]), int(sys.argv[3]), sys.argv[4])
+        worker(sys.argv[2], int(sys.argv[3]), sys.argv[4])
     else:
         main()
