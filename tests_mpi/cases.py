@@ -310,23 +310,24 @@ def case_boomeramg():
 
 
 def case_dense():
-    """The rule for an aggressive first level (distributed._dense_first_level) against what it predicts:
-    whether hypre's classical first coarse level (agg_nl 0, the user's option winning) holds more nonzeros
-    than A; and the first level of the hierarchy the rule picks."""
+    """The 'amg' hierarchy's rule (nrmicp/petsc/hierarchy.hpp) against hypre's classical hierarchy (any
+    -nrmicp_hierarchy_ option replaces the rule: agg_nl 0 gives hypre's classical set-up): each one's first
+    coarse operator, its rows and its nonzeros over A's."""
+    from nrmicp import _petsc
     from nrmicp.scenes.finite_elements import fe_obstacle
     out = {}
     for name, pb in (("3d", obstacle_3d(15, exact=False)), ("2d", obstacle_2d(63, exact=False)),
                      ("p1", fe_obstacle("P1", 3))):
         A = sp.csr_matrix(pb.A)
         M = mat(A, *split(A.shape[0]))
-        nnz = lambda C: C.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"]  # noqa: E731
         hier = PETSc.Options("nrmicp_hierarchy_")
         hier["pc_hypre_boomeramg_agg_nl"] = 0
-        classical = dist._hierarchy(M, COMM, "case_dense_c_")[1][0]
+        classical = _petsc.amg_levels(M.handle)
         hier.delValue("pc_hypre_boomeramg_agg_nl")
-        chosen = dist._hierarchy(M, COMM, "case_dense_r_")[1][0]
-        out[name] = {"rule": bool(dist._dense_first_level(M, COMM)), "classical": nnz(classical) / A.nnz,
-                     "chosen": nnz(chosen) / A.nnz}
+        chosen = _petsc.amg_levels(M.handle)
+        out[name] = {"classical": classical["nonzeros"][0] / A.nnz, "classical_rows": classical["rows"][0],
+                     "chosen": chosen["nonzeros"][0] / A.nnz, "chosen_rows": chosen["rows"][0],
+                     "levels": len(chosen["rows"]) + 1}
     return out
 
 
@@ -562,7 +563,7 @@ def case_engine(which="engine"):
         else:
             kind, c, fn = _core.ZetaKind.constant, np.array(zeta[lo:hi], dtype=float), None
         up = None if upper is None else np.array(upper[lo:hi], dtype=float)
-        core = _petsc.Newton(M.handle, o, [P.handle for P in mats], [])
+        core = _petsc.Newton(M.handle, o, [P.handle for P in mats])
         r = core.solve(np.array(q[lo:hi], dtype=float), kind, c, fn, up, None, None, it)
         z = _gather(r["z"], n)
         out = {"case": name, "status": int(r["status"]), "steps": list(r["newton"].level_steps), "inner": core.inner}

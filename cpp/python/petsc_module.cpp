@@ -45,14 +45,21 @@ Zeta zeta_of(nrmicp::ZetaKind kind, py::object c, py::object fn) {
   throw py::value_error("zeta: an affine zeta is not available on the PETSc engine");
 }
 
-/// The Newton member over a PETSc Mat: set up once (the hierarchy's Galerkin operators), solved
+/// The nesting hierarchy: BoomerAMG's (nrmicp/petsc/hierarchy.hpp) when `amg`, else the given prolongations.
+nrmicp::petsc::AmgHierarchy hierarchy_of(const Matrix& A, const std::vector<std::uintptr_t>& prolongations, bool amg) {
+  if (amg) return nrmicp::petsc::amg_hierarchy(A);
+  return {from_handles(prolongations, "prolongations"), {}};
+}
+
+/// The Newton member over a PETSc Mat: set up once (the hierarchy, its Galerkin operators), solved
 /// with this process's rows of q, ζ and x0.
 class PyPetscNewton {
  public:
-  PyPetscNewton(std::uintptr_t A, const nrmicp::Options& o, const std::vector<std::uintptr_t>& prolongations,
-                const std::vector<std::uintptr_t>& coarse)
-      : A_(from_handle(A, "A")), core_(A_, o, from_handles(prolongations, "prolongations"),
-                                       from_handles(coarse, "coarse_operators")) {}
+  PyPetscNewton(std::uintptr_t A, const nrmicp::Options& o, const std::vector<std::uintptr_t>& prolongations, bool amg)
+      : A_(from_handle(A, "A")), levels_(hierarchy_of(A_, prolongations, amg)),
+        core_(A_, o, levels_.prolongations, levels_.coarse_operators) {
+    levels_ = {};  // (the core holds what it uses)
+  }
 
   py::dict solve(py::array q, nrmicp::ZetaKind kind, py::object zeta_c, py::object zeta_fn, py::object upper,
                  py::object x0, py::object callback, const nrmicp::SolveOptions& it) {
@@ -82,6 +89,7 @@ class PyPetscNewton {
 
  private:
   Matrix A_;
+  nrmicp::petsc::AmgHierarchy levels_;
   Core core_;
 };
 
@@ -130,15 +138,31 @@ py::dict measure(std::uintptr_t A, py::array q, nrmicp::ZetaKind kind, py::objec
   return d;
 }
 
+/// The 'amg' hierarchy of A (nrmicp/petsc/hierarchy.hpp), built and let go: each coarse operator's rows and
+/// nonzeros, finest first (sums over every process), for the tests and the measurements.
+py::dict amg_levels(std::uintptr_t A) {
+  const nrmicp::petsc::AmgHierarchy h = nrmicp::petsc::amg_hierarchy(from_handle(A, "A"));
+  py::list rows, nonzeros;
+  for (const Matrix& C : h.coarse_operators) {
+    PetscInt n;
+    nrmicp::petsc::check(MatGetSize(C.get(), &n, nullptr), "MatGetSize");
+    rows.append(n);
+    nonzeros.append(nrmicp::petsc::hierarchy_detail::global_nonzeros(C.get()));
+  }
+  py::dict d;
+  d["rows"] = rows;
+  d["nonzeros"] = nonzeros;
+  return d;
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_petsc, m) {
   m.doc() = "nrmicp's Newton and stationary members on the PETSc engine (used by nrmicp.distributed)";
   py::module_::import("nrmicp._core");  // Options, SolveOptions, ZetaKind, NewtonStats: the core's types
   py::class_<PyPetscNewton>(m, "Newton")
-      .def(py::init<std::uintptr_t, const nrmicp::Options&, const std::vector<std::uintptr_t>&,
-                    const std::vector<std::uintptr_t>&>(),
-           py::arg("A"), py::arg("options"), py::arg("prolongations"), py::arg("coarse_operators"))
+      .def(py::init<std::uintptr_t, const nrmicp::Options&, const std::vector<std::uintptr_t>&, bool>(),
+           py::arg("A"), py::arg("options"), py::arg("prolongations"), py::arg("amg") = false)
       .def("solve", &PyPetscNewton::solve, py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("zeta_fn"),
            py::arg("upper"), py::arg("x0"), py::arg("callback"), py::arg("options"))
       .def("polish", &PyPetscNewton::polish, py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("zeta_fn"),
@@ -153,6 +177,8 @@ PYBIND11_MODULE(_petsc, m) {
            py::arg("upper"), py::arg("x0"), py::arg("callback"), py::arg("options"), py::arg("progress") = py::none())
       .def_property_readonly("inner", &PyPetscSolver::inner)
       .def("setup_timings", &PyPetscSolver::setup_timings);
+  m.def("amg_levels", &amg_levels, py::arg("A"),
+        "{'rows', 'nonzeros'} of the 'amg' hierarchy's coarse operators, finest first (built and let go).");
   m.def("measure", &measure, py::arg("A"), py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("zeta_fn"),
         py::arg("upper"), py::arg("z"), py::arg("rounding") = false,
         "{'w', 'residual'[, 'rounding_level']} of z: w = Az + q and Res(z) over every process's rows.");

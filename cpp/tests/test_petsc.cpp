@@ -1,7 +1,8 @@
 // The Newton member from C++ on the PETSc engine (nrmicp/petsc.hpp), run by ctest under mpiexec on
 // 1 and 2 processes: the same nrmicp::Newton over a distributed Mat takes the serial member's
 // decisions (status, finest steps within 1, z to 1e-8) and its answer meets the complementarity
-// conditions row by row — a 2D obstacle cold and nested (bilinear prolongations) and a two-sided box.
+// conditions row by row — a 2D obstacle cold and nested (bilinear prolongations) and a two-sided box —
+// and the 'amg' hierarchy built from A alone (nrmicp/petsc/hierarchy.hpp) on a 2D and a 3D obstacle.
 #include "common.hpp"
 
 #include <nrmicp/petsc.hpp>
@@ -11,6 +12,7 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <vector>
 
 using namespace nrmicp;
@@ -171,7 +173,95 @@ void run(const Case& c, const char* what) {
   CHECK((z - serial.z).lpNorm<Eigen::Infinity>() <= 1e-8 * serial.z.lpNorm<Eigen::Infinity>());
   check_conditions(c, z, 1e-8);
 }
+/// The 7-point −Δ_h on the m³ interior grid of (0, 1)³ and the obstacle ψ = 0.1 − |x − ½|² (no load).
+Case obstacle_3d(int m) {
+  const double h = 1.0 / (m + 1.0), h2 = h * h;
+  const int n = m * m * m;
+  std::vector<Eigen::Triplet<double>> t;
+  Case c{RowMat(n, n), Vec::Zero(n), Vec(n), Vec(), {}};
+  for (int k = 0; k < m; ++k)
+    for (int j = 0; j < m; ++j)
+      for (int i = 0; i < m; ++i) {
+        const int r = (k * m + j) * m + i;
+        const double x = (i + 1) * h - 0.5, y = (j + 1) * h - 0.5, w = (k + 1) * h - 0.5;
+        c.lower[r] = 0.1 - x * x - y * y - w * w;
+        t.emplace_back(r, r, 6.0 / h2);
+        const int step[3] = {1, m, m * m}, at[3] = {i, j, k};
+        for (int d = 0; d < 3; ++d) {
+          if (at[d] > 0) t.emplace_back(r, r - step[d], -1.0 / h2);
+          if (at[d] + 1 < m) t.emplace_back(r, r + step[d], -1.0 / h2);
+        }
+      }
+  c.A.setFromTriplets(t.begin(), t.end());
+  return c;
+}
+
+/// ‖C − PᵀAP‖_F / ‖C‖_F (PETSc's PtAP, an independent product).
+double galerkin_defect(Mat A, Mat P, Mat C) {
+  Mat G;
+  REQUIRE(MatPtAP(A, P, MAT_INITIAL_MATRIX, 2.0, &G) == 0);
+  PetscReal nc = 0, nd = 0;
+  MatNorm(C, NORM_FROBENIUS, &nc);
+  REQUIRE(MatAXPY(G, -1.0, C, DIFFERENT_NONZERO_PATTERN) == 0);
+  MatNorm(G, NORM_FROBENIUS, &nd);
+  MatDestroy(&G);
+  return nd / nc;
+}
+
+/// Whether the options database holds an option whose name starts with -nrmicp.
+bool options_left() {
+  char* all = nullptr;
+  PetscOptionsGetAll(nullptr, &all);
+  const bool left = all && std::strstr(all, "-nrmicp");
+  PetscFree(all);
+  return left;
+}
+
+/// The 'amg' hierarchy (nrmicp/petsc/hierarchy.hpp) from A alone: Galerkin levels, the first no denser
+/// than kFoldDensity × A, nothing left in the options database; the Newton member nested over it meets
+/// the complementarity conditions and the serial cold solve's z, in few finest steps.
+void run_amg(const Case& c, const char* what) {
+  INFO(what << " on " << size_of() << " processes");
+  Options o;
+  o.method = Method::Newton;
+  o.tol = 1e-9;
+  const Result serial = Newton<RowMat>(c.A, o).solve(c.q, Zeta<int>::constant(c.lower));
+  Mat A = to_petsc(c.A);
+  Result r;
+  {
+    const petsc::Matrix Am(A);
+    const petsc::AmgHierarchy h = petsc::amg_hierarchy(Am);
+    CHECK_FALSE(options_left());
+    REQUIRE(h.prolongations.size() >= 2);
+    REQUIRE(h.coarse_operators.size() == h.prolongations.size());
+    CHECK(petsc::hierarchy_detail::global_nonzeros(h.coarse_operators[0].get()) <=
+          petsc::kFoldDensity * static_cast<double>(c.A.nonZeros()));
+    Mat finer = A;
+    for (std::size_t l = 0; l < h.prolongations.size(); ++l) {
+      CHECK(galerkin_defect(finer, h.prolongations[l].get(), h.coarse_operators[l].get()) < 1e-12);
+      finer = h.coarse_operators[l].get();
+    }
+    r = Newton<petsc::Matrix>(Am, o, h.prolongations, h.coarse_operators).solve(rows_of(c.q),
+                                                                                Zeta<PetscInt>::constant(rows_of(c.lower)));
+  }
+  MatDestroy(&A);
+  const Vec z = gather(r.z, c.A.rows());
+  CHECK(r.status == Status::Converged);
+  CHECK(r.residual < 1e-9);
+  CHECK(r.newton.level_steps.size() > 2);
+  CHECK(r.newton.level_steps[0] <= 5);
+  CHECK((z - serial.z).lpNorm<Eigen::Infinity>() <= 1e-8 * serial.z.lpNorm<Eigen::Infinity>());
+  check_conditions(c, z, 1e-8);
+}
 }  // namespace
+
+TEST_CASE("the 'amg' hierarchy from A alone: 2D obstacle (a classical first level)") {
+  run_amg(membrane(63, 0.0, false, 0), "amg 2D");
+}
+
+TEST_CASE("the 'amg' hierarchy from A alone: 3D obstacle (a dense first level folded)") {
+  run_amg(obstacle_3d(15), "amg 3D");
+}
 
 TEST_CASE("the Newton member on PETSc takes the serial decisions: obstacle cold") {
   run(membrane(31, 0.0, false, 0), "obstacle cold");

@@ -7,8 +7,8 @@ Run under ``mpirun -n P python script.py``; every rank calls :func:`solve` with 
 arguments for its own rows. A is a petsc4py ``Mat`` (MPIAIJ; or each rank's CSR row block, a
 scipy matrix of shape (n_local, n)), q a petsc4py ``Vec`` with A's row layout (or each rank's
 rows as a numpy array). The heavy work is PETSc's: products, PtAP, KSP (CG / BiCGSTAB) with
-hypre BoomerAMG, whose classical prolongations (P >= 0, read through PCHMG) are the hierarchy
-of the nested iteration. Option names, their checks, the statuses and the result fields are the
+hypre BoomerAMG, whose prolongations are the hierarchy of the nested iteration (hierarchy='amg':
+built by the core, nrmicp/petsc/hierarchy.hpp; PETSc options -nrmicp_hierarchy_... replace its rule). Option names, their checks, the statuses and the result fields are the
 serial library's (nrmicp._api, nrmicp._core): one definition.
 
 What is distributed: everything per iteration (products, reductions, the reduced solves, the
@@ -18,7 +18,6 @@ rank 0 (small problems only).
 """
 from __future__ import annotations
 
-import contextlib
 import functools
 import math
 import time
@@ -254,73 +253,6 @@ class _Zeta:
         return kinds.functor, None, CheckedZeta(local, A.getLocalSize()[0])
 
 
-# ----------------------------------------------------------------------------- the hierarchy
-#: Options with this prefix tune the nesting hierarchy's BoomerAMG (e.g. -nrmicp_hierarchy_pc_hypre_boomeramg_P_max 4).
-_HIERARCHY_PREFIX = "nrmicp_hierarchy_"
-
-
-#: hypre's options for one aggressive first level (2 paths, multipass weights, at most 4 a row), taken where
-#: classical coarsening's first level would hold more nonzeros than A (_dense_first_level).
-_AGGRESSIVE = {"agg_nl": 1, "agg_num_paths": 2, "P_max": 4}
-#: A's distance-two neighbourhoods more than this many times its rows' (A²'s nonzeros over A's) on a stencil of
-#: at most _SPARSE_STENCIL nonzeros a row: 7-point 3D grids (3.5); not 5-point 2D grids (2.6), P1 triangles
-#: (2.7) or P2 (4.1 but 11.4 a row), whose classical first levels are sparser than A (docs/MEASUREMENTS.md).
-_DENSE_GROWTH = 3.0
-_SPARSE_STENCIL = 8.0
-
-
-def _dense_first_level(A, comm, sample=2000) -> bool:
-    """Whether BoomerAMG's classical first coarse level would be denser than A, judged by A's
-    neighbourhood growth on up to `sample` evenly spaced rows of each rank's diagonal block (every
-    rank decides alike: sums over ranks)."""
-    indptr, indices, data = A.getDiagonalBlock().getValuesCSR()
-    m = len(indptr) - 1
-    B = sp.csr_matrix((np.ones(len(indices)), indices, indptr), shape=(m, m))
-    S = B[np.unique(np.linspace(0, m - 1, min(m, sample)).astype(int))] if m else B
-    rows, first, second = (_flag_sum(comm, float(v)) for v in (S.shape[0], S.nnz, (S @ B).nnz))
-    return first > 0 and first / rows <= _SPARSE_STENCIL and second / first > _DENSE_GROWTH
-
-
-def _hierarchy(A, comm, prefix):
-    """hypre BoomerAMG's classical prolongations and its Galerkin operators PᵀAP, finest first
-    (A excluded), read through PCHMG, with one aggressive first level where a classical one would be
-    denser than A (_dense_first_level). PCMG's smoothers are never applied here: Richardson without
-    a preconditioner spares their set-up (Chebyshev's eigenvalue estimates: docs/MEASUREMENTS.md)."""
-    ours = {"pc_hmg_reuse_interpolation": True, "hmg_inner_pc_type": "hypre",
-            "mg_levels_ksp_type": "richardson", "mg_levels_pc_type": "none"}
-    if _dense_first_level(A, comm):
-        ours.update({"hmg_inner_pc_hypre_boomeramg_" + k: v for k, v in _AGGRESSIVE.items()})
-    # the user's -nrmicp_hierarchy_pc_hypre_boomeramg_... options reach hypre's set-up
-    ours.update({"hmg_inner_" + k[len(_HIERARCHY_PREFIX):]: v for k, v in PETSc.Options().getAll().items()
-                 if k.startswith(_HIERARCHY_PREFIX)})
-    pc = PETSc.PC().create(comm)
-    pc.setOptionsPrefix(prefix)
-    pc.setOperators(A)
-    pc.setType("hmg")
-    with _scoped_options(prefix, ours):
-        pc.setFromOptions()
-        pc.setUp()
-    L = pc.getMGLevels()
-    Ps = [pc.getMGInterpolation(l) for l in range(L - 1, 0, -1)]
-    As = [pc.getMGSmoother(l).getOperators()[0] for l in range(L - 2, -1, -1)]
-    return Ps, As, pc
-
-
-@contextlib.contextmanager
-def _scoped_options(prefix, values):
-    """PETSc options `values` under `prefix` while the block runs, then removed (the options
-    database outlives the solve); an entry the user set already wins and stays."""
-    opts = PETSc.Options(prefix)
-    ours = [k for k in values if not opts.hasName(k)]
-    for k in ours:
-        opts[k] = values[k]
-    try:
-        yield
-    finally:
-        for k in ours:
-            opts.delValue(k)
-
-
 # ----------------------------------------------------------------------------- the entry points
 def _prepare(A, q, zeta, x0, comm, o, it):
     """Every check, with every rank's failure raised on all ranks: (Am, method, core Options, this
@@ -532,25 +464,15 @@ class _Measure:
         return d["w"], d["residual"]
 
 
-def _prolongations(Am, hierarchy, comm):
-    """The nesting hierarchy's prolongations and their Galerkin operators (None: formed by the core)
-    as PETSc Mats, and what keeps them alive (hypre's PC)."""
-    if hierarchy == "amg" or (hierarchy == "auto" and Am.getSize()[0] >= AUTO_AMG_MIN_N):
-        Ps, As, pc = _hierarchy(Am, comm, f"nrmicp_{id(Am)}_")
-        return Ps, As, pc
-    if isinstance(hierarchy, (list, tuple)):
-        return list(hierarchy), [], None
-    return [], [], None
-
-
 def _newton(_petsc, Am, qa, problem, xa, opts, o, comm):
     """The Newton member: nrmicp::Newton on the PETSc engine (nrmicp._petsc), its every decision the
     serial member's. Returns (z, Res, status, message, the result's other fields)."""
     t0 = time.perf_counter()
     polish = bool(_collective(comm, lambda: check_polish(o["polish"])))
-    Ps, As, keep = _prolongations(Am, o["hierarchy"], comm)
-    core = _collective(comm, lambda: _petsc.Newton(Am.handle, opts, [P.handle for P in Ps],
-                                                   [C.handle for C in As] if len(As) == len(Ps) else []))
+    h = o["hierarchy"]   # 'amg': built by the core (nrmicp/petsc/hierarchy.hpp)
+    amg = h == "amg" or (h == "auto" and Am.getSize()[0] >= AUTO_AMG_MIN_N)
+    Ps = [P.handle for P in h] if isinstance(h, (list, tuple)) else []
+    core = _collective(comm, lambda: _petsc.Newton(Am.handle, opts, Ps, amg))
     t_iter = time.perf_counter()
     args = (qa, *problem)
     d = core.solve(*args, xa, o["callback"], opts)
@@ -568,7 +490,6 @@ def _newton(_petsc, Am, qa, problem, xa, opts, o, comm):
                   w=w, **result_fields(d, core.hierarchy))
     if polish:
         fields["polished"] = polished
-    del keep
     return z, res, status, message, fields
 
 

@@ -4,5 +4,6 @@
 #pragma once
 
 #include "petsc/engine.hpp"
+#include "petsc/hierarchy.hpp"
 #include "newton.hpp"
 #include "solver.hpp"
