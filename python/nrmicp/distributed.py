@@ -34,7 +34,7 @@ except ImportError as exc:  # the core package needs no MPI; this module does
 from . import _bounds, _core, _options
 from ._newton import AUTO_AMG_MIN_N, POLISH_TOL, check_polish, polish_outcome, result_fields
 from ._api import (METHODS as _ALL_METHODS, _SPLITTING, Affine, Result, Status, _Rounds, _checked, _choice, _criterion,
-                   _iteration_options, _log_final, _progress_hook, _units_parameters, at_rounding_floor,
+                   _iteration_options, _log_final, _units_parameters, at_rounding_floor,
                    choose_method, dominance_margin)
 from ._scaling import sigma_from_logs
 from ._inputs import as_constant, as_vector
@@ -259,7 +259,7 @@ def _prepare(A, q, zeta, x0, comm, o, it):
     rank's q and x0, ζ)."""
     A_in = _collective(comm, _check_mat, A)
     Am = _as_mat(A_in, comm) if sp.issparse(A_in) else A_in
-    n, nloc = Am.getSize()[0], Am.getLocalSize()[0]
+    nloc = Am.getLocalSize()[0]
     method = o["method"]
     if isinstance(method, str) and method.lower() == "auto":
         method = _auto_method(Am, o, comm)
