@@ -32,6 +32,7 @@ except ImportError as exc:  # the core package needs no MPI; this module does
                       f"(make mpideps installs them on Debian); {exc}") from exc
 
 from . import _bounds, _core, _options
+from ._mpi import DistributedError, collective as _collective, flag_max as _flag_max, flag_sum as _flag_sum
 from ._newton import AUTO_AMG_MIN_N, POLISH_TOL, check_polish, polish_outcome, result_fields
 from ._api import (METHODS as _ALL_METHODS, _SPLITTING, Affine, Result, Status, _Rounds, _checked, _choice, _criterion,
                    _iteration_options, _log_final, _units_parameters, at_rounding_floor,
@@ -58,74 +59,6 @@ _UNSUPPORTED_NEWTON = {
 _UNSUPPORTED_STATIONARY = {
     "z_update": "'solve' needs a factorization of the whole A; 'explicit' applies",
     "polish": "polishing is a Newton step: use method 'newton'"}
-#: Longest error message exchanged between ranks (bytes, UTF-8).
-_MSG_LEN = 1024
-#: Exception types re-raised as themselves on every rank; others become DistributedError.
-_KNOWN = {e.__name__: e for e in (ValueError, TypeError, ZeroDivisionError, FloatingPointError,
-                                  ArithmeticError, RuntimeError, KeyError, IndexError, MemoryError)}
-
-
-class DistributedError(RuntimeError):
-    """An exception of a type this module does not re-create, raised on one rank; every rank
-    raises it with the original type's name and message."""
-
-
-# ----------------------------------------------------------------------------- collectives
-def _flag_max(comm, value: float) -> float:
-    """max over ranks of one float (a one-entry-per-rank Vec: PETSc's own allreduce)."""
-    return _reduce(comm, value, lambda v: v.max()[1])
-
-
-def _flag_sum(comm, value: float) -> float:
-    """sum over ranks of one float (as _flag_max)."""
-    return _reduce(comm, value, lambda v: v.sum())
-
-
-def _reduce(comm, value: float, op) -> float:
-    """op of the Vec holding each rank's `value` in its one entry."""
-    v = PETSc.Vec().createMPI((1, PETSc.DECIDE), comm=comm)
-    v.setValue(v.getOwnershipRange()[0], value)
-    v.assemble()
-    out = op(v)
-    v.destroy()
-    return out
-
-
-def _agree(comm, exc: BaseException | None) -> None:
-    """Every rank calls this after a step that may fail on some ranks only. When any rank
-    failed, every rank raises the same exception (type and message of the lowest failing rank,
-    prefixed 'rank r: '); else returns. Collective: no rank is left waiting."""
-    if not _flag_max(comm, 0.0 if exc is None else 1.0):
-        return
-    size = comm.getSize()
-    buf = np.zeros(_MSG_LEN)
-    if exc is not None:
-        text = f"{type(exc).__name__}\x01{exc}".encode("utf-8")[: _MSG_LEN - 1]
-        buf[: len(text)] = np.frombuffer(text, dtype=np.uint8)
-    v = PETSc.Vec().createMPI((_MSG_LEN, PETSc.DECIDE), comm=comm)
-    v.setArray(buf)
-    scatter, out = PETSc.Scatter.toAll(v)
-    scatter.scatter(v, out, PETSc.InsertMode.INSERT, PETSc.ScatterMode.FORWARD)
-    rows = out.getArray().reshape(size, _MSG_LEN)
-    for r in range(size):
-        if rows[r, 0]:
-            raw = bytes(rows[r][rows[r] > 0].astype(np.uint8)).decode("utf-8", "replace")
-            name, _, msg = raw.partition("\x01")
-            cls = _KNOWN.get(name)
-            err = cls(f"rank {r}: {msg}") if cls else DistributedError(f"rank {r}: {name}: {msg}")
-            raise err from exc
-
-
-def _collective(comm, fn, *args):
-    """fn(*args) on every rank; an exception on any rank is raised on all (see _agree)."""
-    try:
-        out, exc = fn(*args), None
-    except Exception as e:  # noqa: BLE001 - re-raised on every rank by _agree
-        out, exc = None, e
-    _agree(comm, exc)
-    return out
-
-
 # ----------------------------------------------------------------------------- inputs
 def _check_mat(A):
     """A's local checks: a square AIJ Mat with equal row and column layouts, or a scipy row block

@@ -1,0 +1,73 @@
+"""Agreement between the ranks of a PETSc communicator, for nrmicp.distributed: one-float reductions,
+and exceptions raised on some ranks only re-raised alike on every rank (no rank left waiting in a
+collective call the failing ranks never reach)."""
+from __future__ import annotations
+
+import numpy as np
+from petsc4py import PETSc
+
+#: Longest error message exchanged between ranks (bytes, UTF-8).
+_MSG_LEN = 1024
+#: Exception types re-raised as themselves on every rank; others become DistributedError.
+_KNOWN = {e.__name__: e for e in (ValueError, TypeError, ZeroDivisionError, FloatingPointError,
+                                  ArithmeticError, RuntimeError, KeyError, IndexError, MemoryError)}
+
+
+class DistributedError(RuntimeError):
+    """An exception of a type this module does not re-create, raised on one rank; every rank
+    raises it with the original type's name and message."""
+
+
+def flag_max(comm, value: float) -> float:
+    """max over ranks of one float (a one-entry-per-rank Vec: PETSc's own allreduce)."""
+    return _reduce(comm, value, lambda v: v.max()[1])
+
+
+def flag_sum(comm, value: float) -> float:
+    """sum over ranks of one float (as flag_max)."""
+    return _reduce(comm, value, lambda v: v.sum())
+
+
+def _reduce(comm, value: float, op) -> float:
+    """op of the Vec holding each rank's `value` in its one entry."""
+    v = PETSc.Vec().createMPI((1, PETSc.DECIDE), comm=comm)
+    v.setValue(v.getOwnershipRange()[0], value)
+    v.assemble()
+    out = op(v)
+    v.destroy()
+    return out
+
+
+def agree(comm, exc: BaseException | None) -> None:
+    """Every rank calls this after a step that may fail on some ranks only. When any rank
+    failed, every rank raises the same exception (type and message of the lowest failing rank,
+    prefixed 'rank r: '); else returns. Collective: no rank is left waiting."""
+    if not flag_max(comm, 0.0 if exc is None else 1.0):
+        return
+    size = comm.getSize()
+    buf = np.zeros(_MSG_LEN)
+    if exc is not None:
+        text = f"{type(exc).__name__}\x01{exc}".encode("utf-8")[: _MSG_LEN - 1]
+        buf[: len(text)] = np.frombuffer(text, dtype=np.uint8)
+    v = PETSc.Vec().createMPI((_MSG_LEN, PETSc.DECIDE), comm=comm)
+    v.setArray(buf)
+    scatter, out = PETSc.Scatter.toAll(v)
+    scatter.scatter(v, out, PETSc.InsertMode.INSERT, PETSc.ScatterMode.FORWARD)
+    rows = out.getArray().reshape(size, _MSG_LEN)
+    for r in range(size):
+        if rows[r, 0]:
+            raw = bytes(rows[r][rows[r] > 0].astype(np.uint8)).decode("utf-8", "replace")
+            name, _, msg = raw.partition("\x01")
+            cls = _KNOWN.get(name)
+            err = cls(f"rank {r}: {msg}") if cls else DistributedError(f"rank {r}: {name}: {msg}")
+            raise err from exc
+
+
+def collective(comm, fn, *args):
+    """fn(*args) on every rank; an exception on any rank is raised on all (see agree)."""
+    try:
+        out, exc = fn(*args), None
+    except Exception as e:  # noqa: BLE001 - re-raised on every rank by agree
+        out, exc = None, e
+    agree(comm, exc)
+    return out
