@@ -1,7 +1,9 @@
 // The Newton member from C++ on the PETSc engine (nrmicp/petsc.hpp), run by ctest under mpiexec on
 // 1 and 2 processes: the same nrmicp::Newton over a distributed Mat takes the serial member's
 // decisions (status, finest steps within 1, z to 1e-8) and its answer meets the complementarity
-// conditions row by row — a 2D obstacle cold and nested (bilinear prolongations) and a two-sided box.
+// conditions row by row — a 2D obstacle cold and nested (bilinear prolongations) and a two-sided box;
+// and the engine's own parts that split rows between processes: the Galerkin operators' update by K's
+// changed entries (against P_lᵀ⋯KP_l computed here) and the symmetry check (against the serial rule).
 #include "common.hpp"
 
 #include <nrmicp/petsc.hpp>
@@ -9,6 +11,7 @@
 #define DOCTEST_CONFIG_IMPLEMENT
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <vector>
@@ -183,6 +186,107 @@ TEST_CASE("the Newton member on PETSc takes the serial decisions: obstacle neste
 
 TEST_CASE("the Newton member on PETSc takes the serial decisions: two-sided box, nested") {
   run(membrane(63, 20.0, true, 3), "two-sided nested");
+}
+
+namespace {
+/// This process's rows of a Mat against the same rows of a dense reference: max |M − ref| over every
+/// process, relative to max |ref| (an entry of ref that M does not store counts in full).
+double relative_difference(Mat M, const Eigen::MatrixXd& ref) {
+  PetscInt lo, hi;
+  MatGetOwnershipRange(M, &lo, &hi);
+  double d[2] = {0, ref.cwiseAbs().maxCoeff()};
+  for (PetscInt i = lo; i < hi; ++i) {
+    Eigen::RowVectorXd row = ref.row(i);
+    PetscInt k;
+    const PetscInt* cols;
+    const PetscScalar* vals;
+    MatGetRow(M, i, &k, &cols, &vals);
+    for (PetscInt p = 0; p < k; ++p) row[cols[p]] -= vals[p];
+    MatRestoreRow(M, i, &k, &cols, &vals);
+    d[0] = std::max(d[0], row.cwiseAbs().maxCoeff());
+  }
+  MPI_Allreduce(MPI_IN_PLACE, d, 2, MPI_DOUBLE, MPI_MAX, PETSC_COMM_WORLD);
+  return d[0] / d[1];
+}
+
+/// K(i, j) += v on the Mat (its owner's call) and on the serial copy, (i, j) stored in both.
+void add_entry(Mat K, RowMat& Ks, int i, int j, double v) {
+  Ks.coeffRef(i, j) += v;
+  PetscInt lo, hi;
+  MatGetOwnershipRange(K, &lo, &hi);
+  if (i >= lo && i < hi) MatSetValue(K, i, j, v, ADD_VALUES);
+}
+
+/// The Galerkin chain P_lᵀ ⋯ P_0ᵀ K P_0 ⋯ P_l computed here (Eigen, dense coarse levels), and the
+/// engine's operators checked against it.
+void check_operators(const petsc::GalerkinOperators& G, const RowMat& K, const std::vector<RowMat>& P) {
+  Eigen::MatrixXd C = Eigen::MatrixXd(K);
+  for (std::size_t l = 0; l < P.size(); ++l) {
+    const Eigen::MatrixXd Pl = Eigen::MatrixXd(P[l]);
+    C = Pl.transpose() * C * Pl;
+    CHECK(relative_difference(G.K(l), C) <= 1e-13);
+  }
+}
+}  // namespace
+
+TEST_CASE("the PETSc engine's Galerkin operators follow K's changed entries: updated as recomputed") {
+  INFO("on " << size_of() << " processes");
+  const int m = 31, n = m * m;
+  // a nonsymmetric K on a 2D grid (the upwind part couples rows held by different processes)
+  RowMat Ks = laplacian(m);
+  for (int r = m; r < n; ++r) Ks.coeffRef(r, r - m) -= 0.3 * (m + 1.0) * (m + 1.0);
+  std::vector<RowMat> P{bilinear(31), bilinear(15), bilinear(7)};
+  Mat K = to_petsc(Ks);
+  std::vector<Mat> Pm;
+  for (const RowMat& p : P) Pm.push_back(to_petsc(p));
+  {
+    petsc::GalerkinOperators G(Pm);
+    CHECK(G.form(K));  // formed
+    check_operators(G, Ks, P);
+    // a few changed entries, several of them coupling rows on both sides of the processes' split
+    const int mid = n / 2;
+    const int at[][2] = {{mid, mid}, {mid - 1, mid}, {mid, mid - 1}, {mid - 1, mid - 1 + m}, {mid + 2, mid + 2 - m}, {5, 6}};
+    for (int k = 0; k < 6; ++k) add_entry(K, Ks, at[k][0], at[k][1], 0.37 * (k + 1) * (m + 1.0) * (m + 1.0));
+    MatAssemblyBegin(K, MAT_FINAL_ASSEMBLY);
+    MatAssemblyEnd(K, MAT_FINAL_ASSEMBLY);
+    CHECK_FALSE(G.form(K));
+    CHECK(G.updated());
+    check_operators(G, Ks, P);
+    // many changed entries (every row scaled): recomputed
+    MatScale(K, 1.5);
+    Ks *= 1.5;
+    G.form(K);
+    CHECK_FALSE(G.updated());
+    check_operators(G, Ks, P);
+  }
+  for (Mat& p : Pm) MatDestroy(&p);
+  MatDestroy(&K);
+}
+
+TEST_CASE("the PETSc engine's symmetry check is the serial rule: ||M - M^T||_F <= 1e-14 ||M||_F") {
+  INFO("on " << size_of() << " processes");
+  const int m = 15, n = m * m, i = n / 2, j = n / 2 + m;  // (i, j): rows on both sides of the split
+  const RowMat L = laplacian(m);
+  const double threshold = 1e-14 * L.norm() / std::sqrt(2.0);  // one entry off by this: at the bound
+  for (double off : {0.0, 0.5 * threshold, 2 * threshold}) {
+    RowMat M = L;
+    M.coeffRef(i, j) += off;
+    const Eigen::MatrixXd D = Eigen::MatrixXd(M);
+    const bool expected = (D - D.transpose()).norm() <= 1e-14 * D.norm();
+    CHECK(expected == (off < threshold));
+    Mat A = to_petsc(M);
+    CHECK(petsc::is_symmetric(A) == expected);
+    MatDestroy(&A);
+  }
+  // an entry whose mirror is not stored: symmetric when it is 0, not when it is not
+  for (double v : {0.0, 1.0}) {
+    RowMat M = L;
+    M.insert(3, n - 2) = v;
+    M.makeCompressed();
+    Mat A = to_petsc(M);
+    CHECK(petsc::is_symmetric(A) == (v == 0.0));
+    MatDestroy(&A);
+  }
 }
 
 // Its own main: doctest runs between PetscInitialize and PetscFinalize (MPI's lifetime).

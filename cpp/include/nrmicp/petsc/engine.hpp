@@ -18,6 +18,7 @@
 #include "../solver.hpp"
 #include "../zeta.hpp"
 #include "galerkin.hpp"
+#include "symmetric.hpp"
 
 #include <petscksp.h>
 
@@ -133,12 +134,8 @@ class Matrix {
     VecDestroy(&v);
     return d;
   }
-  /// Whether A is symmetric (to rounding).
-  bool symmetric() const {
-    PetscBool sym = PETSC_FALSE;
-    check(MatIsSymmetric(get(), 1e-14, &sym), "MatIsSymmetric");
-    return sym == PETSC_TRUE;
-  }
+  /// Whether A is symmetric to rounding: the serial engine's rule (petsc/symmetric.hpp). Collective.
+  bool symmetric() const { return is_symmetric(get()); }
 
  private:
   static void copy_out(Vec v, Eigen::VectorXd& d) {
@@ -318,7 +315,7 @@ class VCycle {
     check(PCMGSetGalerkin(pc, PC_MG_GALERKIN_NONE), "PCMGSetGalerkin");
     std::vector<Mat> P;
     for (std::size_t l = 0; l < below_.levels; ++l) P.push_back(below_.level[l].P.get());
-    galerkin_ = std::make_unique<GalerkinOperators>(std::move(P), processes == 1);
+    galerkin_ = std::make_unique<GalerkinOperators>(std::move(P));
     for (PetscInt l = 1; l < L; ++l) {
       check(PCMGSetInterpolation(pc, l, below_.level[L - 1 - l].P.get()), "PCMGSetInterpolation");
       smoother(pc, l, true);
