@@ -3,7 +3,8 @@
 // decisions (status, finest steps within 1, z to 1e-8) and its answer meets the complementarity
 // conditions row by row — a 2D obstacle cold and nested (bilinear prolongations) and a two-sided box;
 // and the engine's own parts that split rows between processes: the Galerkin operators' update by K's
-// changed entries (against P_lᵀ⋯KP_l computed here) and the symmetry check (against the serial rule).
+// changed entries (against P_lᵀ⋯KP_l computed here), the symmetry check (against the serial rule) and
+// |A| v (against the dense product).
 #include "common.hpp"
 
 #include <nrmicp/petsc.hpp>
@@ -287,6 +288,29 @@ TEST_CASE("the PETSc engine's symmetry check is the serial rule: ||M - M^T||_F <
     CHECK(petsc::is_symmetric(A) == (v == 0.0));
     MatDestroy(&A);
   }
+}
+
+TEST_CASE("the PETSc engine's |A| v adds every row's |a_ij| v_j, the other processes' columns included") {
+  INFO("on " << size_of() << " processes");
+  const int m = 15, n = m * m;
+  RowMat Ks = laplacian(m);
+  for (int r = m; r < n; ++r) Ks.coeffRef(r, r - m) -= 3.0;  // nonsymmetric, some entries change sign
+  Ks.coeffRef(2, n - 3) = -7.0;                              // a coupling to the last rows
+  Ks.makeCompressed();
+  Eigen::VectorXd v(n), start(n);
+  for (int i = 0; i < n; ++i) { v[i] = std::sin(1.0 + i); start[i] = std::cos(2.0 * i); }
+  const Eigen::VectorXd expected = start + Eigen::MatrixXd(Ks).cwiseAbs() * v;
+  Mat K = to_petsc(Ks);
+  {
+    const petsc::Matrix A(K);
+    Eigen::VectorXd out = rows_of(start);
+    abs_multiply_add(A, rows_of(v), out);
+    CHECK((out - rows_of(expected)).lpNorm<Eigen::Infinity>() <= 1e-12 * expected.lpNorm<Eigen::Infinity>());
+    out = rows_of(start);
+    abs_multiply_add(A, rows_of(v), out);  // (the gather of the other processes' columns, formed once, again)
+    CHECK((out - rows_of(expected)).lpNorm<Eigen::Infinity>() <= 1e-12 * expected.lpNorm<Eigen::Infinity>());
+  }
+  MatDestroy(&K);
 }
 
 // Its own main: doctest runs between PetscInitialize and PetscFinalize (MPI's lifetime).

@@ -94,10 +94,12 @@ class Matrix {
     check(VecResetArray(s.x), "VecResetArray");
     check(VecResetArray(s.y), "VecResetArray");
   }
-  /// out += |A| v (|A| formed on first use).
+  /// out += |A| v, read off A's own rows (a copy |A| cost more than the products: it was 10% of a
+  /// nested solve, docs/MEASUREMENTS.md); the off-diagonal block's columns of v from their owners.
   void abs_multiply_add(const Eigen::VectorXd& v, Eigen::VectorXd& out) const {
-    if (!s_->abs) s_->abs = std::make_unique<Matrix>(absolute());
-    s_->abs->multiply(v, out, true);
+    const Eigen::VectorXd ghost = s_->ghosts(v);
+    const LocalRows rows(get(), false);
+    rows.for_each_local([&](PetscInt i, bool off, PetscInt c, double a) { out[i] += std::abs(a) * (off ? ghost[c] : v[c]); });
   }
   /// The diagonal block (this process's rows and columns; the whole matrix on one process), a view
   /// valid while this Matrix lives and its values do not change.
@@ -144,34 +146,13 @@ class Matrix {
     std::copy_n(a, d.size(), d.data());
     VecRestoreArrayRead(v, &a);
   }
-  /// |A| entry-wise (a copy of A with its values' absolute values).
-  Matrix absolute() const {
-    Mat B;
-    check(MatDuplicate(get(), MAT_COPY_VALUES, &B), "MatDuplicate");
-    Mat parts[2] = {B, nullptr};
-    PetscBool mpi = PETSC_FALSE;
-    PetscObjectTypeCompare(reinterpret_cast<PetscObject>(B), MATMPIAIJ, &mpi);
-    if (mpi) check(MatMPIAIJGetSeqAIJ(B, &parts[0], &parts[1], nullptr), "MatMPIAIJGetSeqAIJ");
-    for (Mat part : parts) {
-      if (!part) continue;
-      PetscScalar* a;
-      check(MatSeqAIJGetArray(part, &a), "MatSeqAIJGetArray");
-      MatInfo info;
-      MatGetInfo(part, MAT_LOCAL, &info);
-      for (PetscInt k = 0; k < static_cast<PetscInt>(info.nz_used); ++k) a[k] = std::abs(a[k]);
-      MatSeqAIJRestoreArray(part, &a);
-    }
-    Matrix out(B);
-    MatDestroy(&B);  // out holds its own reference
-    return out;
-  }
-
   struct State {
     Mat A = nullptr;
     Vec x = nullptr, y = nullptr;  // work vectors whose arrays are the driver's (VecPlaceArray)
     PetscInt m = 0, n = 0, lo = 0;
     std::unique_ptr<MpiComm> comm;
-    std::unique_ptr<Matrix> abs;
+    VecScatter gather = nullptr;  // v's entries at the off-diagonal block's columns (ghosts), formed on first use
+    Vec ghost = nullptr;
     Mat Ad = nullptr;  // the diagonal block, its CSR arrays open while the State lives
     const PetscInt *ia = nullptr, *ja = nullptr;
     const PetscScalar* va = nullptr;
@@ -186,6 +167,39 @@ class Matrix {
       check(PetscObjectGetComm(reinterpret_cast<PetscObject>(A), &c), "PetscObjectGetComm");
       comm = std::make_unique<MpiComm>(c);
       check(MatCreateVecs(A, &x, &y), "MatCreateVecs");
+    }
+    /// v (this process's columns) at the off-diagonal block's columns (empty without that block).
+    Eigen::VectorXd ghosts(const Eigen::VectorXd& v) {
+      if (!gather && !scatter_ghosts()) return {};
+      check(VecPlaceArray(x, v.data()), "VecPlaceArray");
+      check(VecScatterBegin(gather, x, ghost, INSERT_VALUES, SCATTER_FORWARD), "VecScatterBegin");
+      check(VecScatterEnd(gather, x, ghost, INSERT_VALUES, SCATTER_FORWARD), "VecScatterEnd");
+      check(VecResetArray(x), "VecResetArray");
+      PetscInt k;
+      const PetscScalar* g;
+      VecGetLocalSize(ghost, &k);
+      check(VecGetArrayRead(ghost, &g), "VecGetArrayRead");
+      Eigen::VectorXd out = Eigen::Map<const Eigen::VectorXd>(g, k);
+      VecRestoreArrayRead(ghost, &g);
+      return out;
+    }
+    /// The scatter of ghosts (false on a SeqAIJ Mat: none).
+    bool scatter_ghosts() {
+      PetscBool mpi = PETSC_FALSE;
+      PetscObjectTypeCompare(reinterpret_cast<PetscObject>(A), MATMPIAIJ, &mpi);
+      if (!mpi) return false;
+      Mat Ad, Ao;
+      const PetscInt* columns;
+      PetscInt k;
+      check(MatMPIAIJGetSeqAIJ(A, &Ad, &Ao, &columns), "MatMPIAIJGetSeqAIJ");
+      check(MatGetSize(Ao, nullptr, &k), "MatGetSize");
+      IS is;
+      check(ISCreateGeneral(PETSC_COMM_SELF, k, columns, PETSC_COPY_VALUES, &is), "ISCreateGeneral");
+      check(VecCreateSeq(PETSC_COMM_SELF, k, &ghost), "VecCreateSeq");
+      const PetscErrorCode e = VecScatterCreate(x, is, ghost, nullptr, &gather);
+      ISDestroy(&is);
+      check(e, "VecScatterCreate");
+      return true;
     }
     void open_block() {
       check(MatGetDiagonalBlock(A, &Ad), "MatGetDiagonalBlock");
@@ -206,7 +220,8 @@ class Matrix {
       }
       VecDestroy(&x);
       VecDestroy(&y);
-      abs.reset();
+      VecScatterDestroy(&gather);
+      VecDestroy(&ghost);
       MatDestroy(&A);
     }
   };
