@@ -230,38 +230,100 @@ void check_operators(const petsc::GalerkinOperators& G, const RowMat& K, const s
 }
 }  // namespace
 
-TEST_CASE("the PETSc engine's Galerkin operators follow K's changed entries: updated as recomputed") {
-  INFO("on " << size_of() << " processes");
-  const int m = 31, n = m * m;
-  // a nonsymmetric K on a 2D grid (the upwind part couples rows held by different processes)
-  RowMat Ks = laplacian(m);
-  for (int r = m; r < n; ++r) Ks.coeffRef(r, r - m) -= 0.3 * (m + 1.0) * (m + 1.0);
+namespace {
+/// A nonsymmetric K on a 2D grid (the upwind part couples rows held by different processes) and
+/// three bilinear prolongations.
+struct GalerkinCase {
+  int m = 31, n = 31 * 31;
+  RowMat K = laplacian(31);
   std::vector<RowMat> P{bilinear(31), bilinear(15), bilinear(7)};
-  Mat K = to_petsc(Ks);
-  std::vector<Mat> Pm;
-  for (const RowMat& p : P) Pm.push_back(to_petsc(p));
-  {
-    petsc::GalerkinOperators G(Pm);
-    CHECK(G.form(K));  // formed
-    check_operators(G, Ks, P);
-    // a few changed entries, several of them coupling rows on both sides of the processes' split
+  GalerkinCase() {
+    for (int r = m; r < n; ++r) K.coeffRef(r, r - m) -= 0.3 * (m + 1.0) * (m + 1.0);
+  }
+  /// A few changed entries, several of them coupling rows on both sides of the processes' split.
+  void change_few(Mat Km) {
     const int mid = n / 2;
     const int at[][2] = {{mid, mid}, {mid - 1, mid}, {mid, mid - 1}, {mid - 1, mid - 1 + m}, {mid + 2, mid + 2 - m}, {5, 6}};
-    for (int k = 0; k < 6; ++k) add_entry(K, Ks, at[k][0], at[k][1], 0.37 * (k + 1) * (m + 1.0) * (m + 1.0));
-    MatAssemblyBegin(K, MAT_FINAL_ASSEMBLY);
-    MatAssemblyEnd(K, MAT_FINAL_ASSEMBLY);
+    for (int k = 0; k < 6; ++k) add_entry(Km, K, at[k][0], at[k][1], 0.37 * (k + 1) * (m + 1.0) * (m + 1.0));
+    MatAssemblyBegin(Km, MAT_FINAL_ASSEMBLY);
+    MatAssemblyEnd(Km, MAT_FINAL_ASSEMBLY);
+  }
+  /// Every entry changed (K scaled).
+  void change_all(Mat Km) {
+    MatScale(Km, 1.5);
+    K *= 1.5;
+  }
+  /// P_lᵀ ⋯ K ⋯ P_l of the current K, level by level (Eigen, as a hierarchy's operators would be).
+  std::vector<RowMat> chain() const {
+    std::vector<RowMat> C;
+    RowMat F = K;
+    for (const RowMat& p : P) {
+      RowMat c = RowMat(p.transpose()) * F * p;
+      C.push_back(c);
+      F = c;
+    }
+    return C;
+  }
+};
+
+void destroy(std::vector<Mat>& Ms) {
+  for (Mat& M : Ms) MatDestroy(&M);
+}
+}  // namespace
+
+TEST_CASE("the PETSc engine's Galerkin operators follow K's changed entries: updated as recomputed") {
+  INFO("on " << size_of() << " processes");
+  GalerkinCase c;
+  Mat K = to_petsc(c.K);
+  std::vector<Mat> Pm;
+  for (const RowMat& p : c.P) Pm.push_back(to_petsc(p));
+  {
+    petsc::GalerkinOperators G(Pm);
+    CHECK(G.form(K));  // formed (MatPtAP)
+    CHECK_FALSE(G.updated());
+    check_operators(G, c.K, c.P);
+    c.change_few(K);
     CHECK_FALSE(G.form(K));
     CHECK(G.updated());
-    check_operators(G, Ks, P);
-    // many changed entries (every row scaled): recomputed
-    MatScale(K, 1.5);
-    Ks *= 1.5;
+    check_operators(G, c.K, c.P);
+    c.change_all(K);  // too many changed entries: recomputed
     G.form(K);
     CHECK_FALSE(G.updated());
-    check_operators(G, Ks, P);
+    check_operators(G, c.K, c.P);
   }
-  for (Mat& p : Pm) MatDestroy(&p);
+  destroy(Pm);
   MatDestroy(&K);
+}
+
+TEST_CASE("the PETSc engine's Galerkin operators start from the hierarchy's: updated by K - A, or formed") {
+  INFO("on " << size_of() << " processes");
+  for (bool few : {true, false}) {
+    INFO((few ? "few changes" : "every entry changed"));
+    GalerkinCase c;
+    Mat A = to_petsc(c.K), K = to_petsc(c.K);
+    std::vector<Mat> Pm, coarse;
+    for (const RowMat& p : c.P) Pm.push_back(to_petsc(p));
+    for (const RowMat& C : c.chain()) coarse.push_back(to_petsc(C));
+    few ? c.change_few(K) : c.change_all(K);
+    {
+      petsc::GalerkinOperators G(Pm, A, coarse);
+      CHECK(G.form(K));             // new Mats either way
+      CHECK(G.updated() == few);    // copies of the hierarchy's updated, or MatPtAP's
+      check_operators(G, c.K, c.P);
+      c.change_few(K);
+      CHECK_FALSE(G.form(K));
+      CHECK(G.updated());
+      check_operators(G, c.K, c.P);
+      c.change_all(K);
+      G.form(K);
+      CHECK_FALSE(G.updated());
+      check_operators(G, c.K, c.P);
+    }
+    destroy(Pm);
+    destroy(coarse);
+    MatDestroy(&A);
+    MatDestroy(&K);
+  }
 }
 
 TEST_CASE("the PETSc engine's symmetry check is the serial rule: ||M - M^T||_F <= 1e-14 ||M||_F") {

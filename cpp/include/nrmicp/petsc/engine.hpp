@@ -323,14 +323,18 @@ struct Hierarchy {
 /// after (symmetric: CG applies), LU on the coarsest level (redundant on several processes).
 class VCycle {
  public:
-  VCycle(PC pc, const Hierarchy& below, int processes) : below_(below), mg_(pc) {
+  /// `A`: the level's matrix (its hierarchy's operators below start the Galerkin ones).
+  VCycle(PC pc, const Matrix& A, const Hierarchy& below, int processes) : below_(below), mg_(pc) {
     const PetscInt L = static_cast<PetscInt>(below_.levels) + 1;
     check(PCSetType(pc, PCMG), "PCSetType");
     check(PCMGSetLevels(pc, L, nullptr), "PCMGSetLevels");
     check(PCMGSetGalerkin(pc, PC_MG_GALERKIN_NONE), "PCMGSetGalerkin");
-    std::vector<Mat> P;
-    for (std::size_t l = 0; l < below_.levels; ++l) P.push_back(below_.level[l].P.get());
-    galerkin_ = std::make_unique<GalerkinOperators>(std::move(P));
+    std::vector<Mat> P, operators;
+    for (std::size_t l = 0; l < below_.levels; ++l) {
+      P.push_back(below_.level[l].P.get());
+      operators.push_back(below_.level[l].A.get());
+    }
+    galerkin_ = std::make_unique<GalerkinOperators>(std::move(P), A.get(), std::move(operators));
     for (PetscInt l = 1; l < L; ++l) {
       check(PCMGSetInterpolation(pc, l, below_.level[L - 1 - l].P.get()), "PCMGSetInterpolation");
       smoother(pc, l, true);
@@ -545,7 +549,7 @@ class System {
     } else {
       PC pc = krylov(ksp_);
       if (costly_galerkin(below_, A_)) return boomeramg(pc);
-      vcycle_ = std::make_unique<VCycle>(pc, below_, A_.comm().size());
+      vcycle_ = std::make_unique<VCycle>(pc, A_, below_, A_.comm().size());
     }
     KSPSetOptionsPrefix(ksp_, "nrmicp_inner_");
     check(KSPSetFromOptions(ksp_), "KSPSetFromOptions");

@@ -1,11 +1,13 @@
 // nrmicp — the PETSc engine's Galerkin operators K_{l+1} = P_lᵀ K_l P_l of a Newton step's reduced
 // system K (the serial engine's detail/galerkin.hpp, on PETSc Mats): PCMG's coarse operators, kept
-// across Newton steps. K keeps A's pattern (MatZeroRowsColumns stores zeros), so each K_l keeps the
-// pattern of its first MatPtAP: later steps recompute only the values (MatPtAP, MAT_REUSE_MATRIX) or,
-// when K changed in few entries (GalerkinUpdate::max_changes of K's entries, counted over every
-// process), add P_lᵀ ΔK_l P_l level by level: on one process detail::GalerkinUpdate, the serial
-// engine's update itself, on the Mats' CSR arrays; on several, DistributedUpdate (the same terms, the
-// rows of P and C they need exchanged between the processes that own them).
+// across Newton steps. K keeps A's pattern (MatZeroRowsColumns stores zeros), so the operators keep the
+// patterns of A's: the first form starts, as the serial engine's, from copies of the hierarchy's
+// operators (A's own Galerkin ones) updated by K − A (else MatPtAP forms them); later steps add
+// P_lᵀ ΔK_l P_l level by level when K changed in few entries (GalerkinUpdate::max_changes of K's
+// entries, counted over every process), else recompute the values (MatPtAP, MAT_REUSE_MATRIX). The
+// update: on one process detail::GalerkinUpdate, the serial engine's own, on the Mats' CSR arrays; on
+// several, DistributedUpdate (the same terms, the rows of P and C they need exchanged between the
+// processes that own them).
 #pragma once
 
 #include "../detail/galerkin.hpp"
@@ -163,13 +165,16 @@ class GalerkinOperators {
  public:
   using Changes = std::vector<detail::Change<PetscInt>>;
 
-  /// `P`: the prolongations (alive while this object is).
-  explicit GalerkinOperators(std::vector<Mat> P) : P_(std::move(P)) {}
+  /// `P`: the prolongations; `A`, `coarse` (optional): a fine A with the pattern of the fine K's to
+  /// come and its Galerkin operators (the hierarchy's), the first form's start (all alive while this
+  /// object is).
+  explicit GalerkinOperators(std::vector<Mat> P, Mat A = nullptr, std::vector<Mat> coarse = {})
+      : P_(std::move(P)), A_(A), coarse_(std::move(coarse)) {
+    if (!A_ || coarse_.size() != P_.size()) coarse_.clear();
+  }
   GalerkinOperators(const GalerkinOperators&) = delete;
   GalerkinOperators& operator=(const GalerkinOperators&) = delete;
-  ~GalerkinOperators() {
-    for (Mat& C : C_) MatDestroy(&C);
-  }
+  ~GalerkinOperators() { destroy(); }
 
   /// K_{l+1}, l = 0, ..., levels − 1 (null before the first form).
   Mat K(std::size_t l) const { return C_.empty() ? nullptr : C_[l]; }
@@ -177,27 +182,56 @@ class GalerkinOperators {
   /// Whether the last form updated the operators by K's change (neither formed nor recomputed them).
   bool updated() const { return updated_; }
 
-  /// The operators of `fine` (assembled, the pattern of the first call): formed by MatPtAP the first
-  /// time (returns true: the Mats are new), then updated by fine's changed entries since the last
-  /// form when they are few (GalerkinUpdate::max_changes), else their values recomputed. Collective.
+  /// The operators of `fine` (assembled, the pattern of the first call): the first time new Mats
+  /// (returns true), copies of the hierarchy's operators updated by fine − A when that is cheaper
+  /// than forming them (first_changes), else formed by MatPtAP; later updated by fine's changed
+  /// entries since the last form when they are few (GalerkinUpdate::max_changes), else their values
+  /// recomputed (MatPtAP, MAT_REUSE_MATRIX). Collective.
   bool form(Mat fine) {
     updated_ = false;
     if (C_.empty()) {
+      updated_ = start(fine);
+      if (updated_) return true;
+      destroy();
       C_.resize(P_.size(), nullptr);
       for (std::size_t l = 0; l < P_.size(); ++l)
         check(MatPtAP(l ? C_[l - 1] : fine, P_[l], MAT_INITIAL_MATRIX, 2.0, &C_[l]), "MatPtAP");
+      product_ = true;
       updatable_ = sorted(fine);
       if (updatable_) remember(fine);
       return true;
     }
-    updated_ = updatable_ && update(fine);
-    if (!updated_)
-      for (std::size_t l = 0; l < P_.size(); ++l)
-        check(MatPtAP(l ? C_[l - 1] : fine, P_[l], MAT_REUSE_MATRIX, 2.0, &C_[l]), "MatPtAP");
+    updated_ = updatable_ && update(fine, detail::GalerkinUpdate<PetscInt>::max_changes(nnz_));
+    if (!updated_) recompute(fine);
     return false;
   }
 
  private:
+  /// The first form from the hierarchy's operators (copies) updated by fine − A; false when there are
+  /// none, too many changes (first_changes) or a term outside their patterns.
+  bool start(Mat fine) {
+    if (coarse_.empty()) return false;
+    C_.resize(P_.size(), nullptr);
+    for (std::size_t l = 0; l < P_.size(); ++l) check(MatDuplicate(coarse_[l], MAT_COPY_VALUES, &C_[l]), "MatDuplicate");
+    updatable_ = sorted(A_);
+    if (!updatable_) return false;
+    remember(A_);
+    return update(fine, first_changes(nnz_));
+  }
+  /// The values recomputed on the patterns (MatPtAP, MAT_REUSE_MATRIX; formed first when the
+  /// operators are the hierarchy's copies).
+  void recompute(Mat fine) {
+    const MatReuse reuse = product_ ? MAT_REUSE_MATRIX : MAT_INITIAL_MATRIX;
+    if (!product_) destroy();
+    C_.resize(P_.size(), nullptr);
+    for (std::size_t l = 0; l < P_.size(); ++l)
+      check(MatPtAP(l ? C_[l - 1] : fine, P_[l], reuse, 2.0, &C_[l]), "MatPtAP");
+    product_ = true;
+  }
+  void destroy() {
+    for (Mat& C : C_) MatDestroy(&C);
+    C_.clear();
+  }
   static void check(PetscErrorCode e, const char* what) {
     if (e) throw std::runtime_error(std::string("PETSc: ") + what + " failed (PETSc error " + std::to_string(e) + ")");
   }
@@ -226,8 +260,8 @@ class GalerkinOperators {
   }
   /// The update by fine's changed entries; false (every process alike) when there are too many or
   /// a term falls outside a level's pattern (then recompute them all). Remembers fine either way.
-  bool update(Mat fine) {
-    if (!few_changes(fine)) return false;
+  bool update(Mat fine, std::size_t most) {
+    if (!few_changes(fine, most)) return false;
     int processes = 1;
     MPI_Comm_size(comm_of(fine), &processes);
     if (processes > 1) return distributed_.apply(changes_, P_, C_);
@@ -236,14 +270,13 @@ class GalerkinOperators {
       Ps.push_back(std::make_unique<LocalRows>(P_[l], false));
       Cs.push_back(std::make_unique<LocalRows>(C_[l], true));
     }
-    return update_.apply(changes_, nnz_, P_.size(), [&](std::size_t l) { return Ps[l]->diagonal_block(); },
-                         [&](std::size_t l) { return Cs[l]->diagonal_block(); });
+    return update_.add(changes_, P_.size(), [&](std::size_t l) { return Ps[l]->diagonal_block(); },
+                       [&](std::size_t l) { return Cs[l]->diagonal_block(); });
   }
   /// fine's changed entries since the last form into changes_ (global numbers; all of them remembered):
-  /// whether they are few (at most GalerkinUpdate::max_changes of the stored entries, over all processes).
-  bool few_changes(Mat fine) {
+  /// whether they are few (at most `most`, over all processes).
+  bool few_changes(Mat fine, std::size_t most) {
     const LocalRows K(fine, false);
-    const std::size_t most = detail::GalerkinUpdate<PetscInt>::max_changes(nnz_);
     const PetscInt lo = K.row_begin();
     std::uint64_t counts[2] = {0, static_cast<std::size_t>(K.nonzeros()) != previous_.size()};
     changes_.clear();
@@ -260,8 +293,16 @@ class GalerkinOperators {
     return counts[0] <= most;
   }
 
+  /// The most changes the first form takes as an update of the hierarchy's operators: half of K's
+  /// entries (its alternative is MatPtAP's symbolic and numeric product, not a numeric one: a change
+  /// cost 1.6–1.9 entries of it; docs/MEASUREMENTS.md, "The PETSc engine on two processes").
+  static std::size_t first_changes(Eigen::Index nnz) { return static_cast<std::size_t>(nnz / 2); }
+
   std::vector<Mat> P_;
+  Mat A_;                         // the hierarchy's level and its operators (the first form's start)
+  std::vector<Mat> coarse_;
   std::vector<Mat> C_;
+  bool product_ = false;          // C_ came from MatPtAP (MAT_REUSE_MATRIX applies)
   bool updatable_ = false;        // sorted rows: form may update
   bool updated_ = false;          // the last form updated
   std::vector<double> previous_;  // the fine K's values at the last form, by position (updatable_)
