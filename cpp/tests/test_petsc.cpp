@@ -234,24 +234,39 @@ namespace {
 /// A nonsymmetric K on a 2D grid (the upwind part couples rows held by different processes) and
 /// three bilinear prolongations.
 struct GalerkinCase {
+  using Changes = petsc::GalerkinOperators::Changes;
   int m = 31, n = 31 * 31;
   RowMat K = laplacian(31);
   std::vector<RowMat> P{bilinear(31), bilinear(15), bilinear(7)};
   GalerkinCase() {
     for (int r = m; r < n; ++r) K.coeffRef(r, r - m) -= 0.3 * (m + 1.0) * (m + 1.0);
   }
-  /// A few changed entries, several of them coupling rows on both sides of the processes' split.
-  void change_few(Mat Km) {
+  /// A few changed entries, several of them coupling rows on both sides of the processes' split;
+  /// returns them (this process's rows).
+  Changes change_few(Mat Km) {
+    const RowMat before = K;
     const int mid = n / 2;
     const int at[][2] = {{mid, mid}, {mid - 1, mid}, {mid, mid - 1}, {mid - 1, mid - 1 + m}, {mid + 2, mid + 2 - m}, {5, 6}};
     for (int k = 0; k < 6; ++k) add_entry(Km, K, at[k][0], at[k][1], 0.37 * (k + 1) * (m + 1.0) * (m + 1.0));
     MatAssemblyBegin(Km, MAT_FINAL_ASSEMBLY);
     MatAssemblyEnd(Km, MAT_FINAL_ASSEMBLY);
+    return changes_since(before);
   }
   /// Every entry changed (K scaled).
-  void change_all(Mat Km) {
+  Changes change_all(Mat Km) {
+    const RowMat before = K;
     MatScale(Km, 1.5);
     K *= 1.5;
+    return changes_since(before);
+  }
+  /// K − before on this process's rows (K keeps before's pattern).
+  Changes changes_since(const RowMat& before) const {
+    Changes c;
+    const auto [lo, hi] = split(n);
+    for (int i = lo; i < hi; ++i)
+      for (RowMat::InnerIterator a(before, i), b(K, i); a && b; ++a, ++b)
+        if (a.value() != b.value()) c.push_back({i, static_cast<PetscInt>(a.index()), b.value() - a.value()});
+    return c;
   }
   /// P_lᵀ ⋯ K ⋯ P_l of the current K, level by level (Eigen, as a hierarchy's operators would be).
   std::vector<RowMat> chain() const {
@@ -279,15 +294,20 @@ TEST_CASE("the PETSc engine's Galerkin operators follow K's changed entries: upd
   for (const RowMat& p : c.P) Pm.push_back(to_petsc(p));
   {
     petsc::GalerkinOperators G(Pm);
-    CHECK(G.form(K));  // formed (MatPtAP)
+    const GalerkinCase::Changes none;
+    CHECK(G.form(K, &none));  // formed (MatPtAP)
     CHECK_FALSE(G.updated());
     check_operators(G, c.K, c.P);
-    c.change_few(K);
-    CHECK_FALSE(G.form(K));
+    GalerkinCase::Changes changes = c.change_few(K);
+    CHECK_FALSE(G.form(K, &changes));
     CHECK(G.updated());
     check_operators(G, c.K, c.P);
-    c.change_all(K);  // too many changed entries: recomputed
-    G.form(K);
+    changes = c.change_all(K);  // too many changed entries: recomputed
+    G.form(K, &changes);
+    CHECK_FALSE(G.updated());
+    check_operators(G, c.K, c.P);
+    changes = c.change_few(K);  // not recorded: recomputed
+    G.form(K, nullptr);
     CHECK_FALSE(G.updated());
     check_operators(G, c.K, c.P);
   }
@@ -304,18 +324,18 @@ TEST_CASE("the PETSc engine's Galerkin operators start from the hierarchy's: upd
     std::vector<Mat> Pm, coarse;
     for (const RowMat& p : c.P) Pm.push_back(to_petsc(p));
     for (const RowMat& C : c.chain()) coarse.push_back(to_petsc(C));
-    few ? c.change_few(K) : c.change_all(K);
+    GalerkinCase::Changes changes = few ? c.change_few(K) : c.change_all(K);
     {
       petsc::GalerkinOperators G(Pm, A, coarse);
-      CHECK(G.form(K));             // new Mats either way
+      CHECK(G.form(K, &changes));   // new Mats either way
       CHECK(G.updated() == few);    // copies of the hierarchy's updated, or MatPtAP's
       check_operators(G, c.K, c.P);
-      c.change_few(K);
-      CHECK_FALSE(G.form(K));
+      changes = c.change_few(K);
+      CHECK_FALSE(G.form(K, &changes));
       CHECK(G.updated());
       check_operators(G, c.K, c.P);
-      c.change_all(K);
-      G.form(K);
+      changes = c.change_all(K);
+      G.form(K, &changes);
       CHECK_FALSE(G.updated());
       check_operators(G, c.K, c.P);
     }

@@ -97,10 +97,15 @@ class Matrix {
   /// out += |A| v, read off A's own rows (a copy |A| cost more than the products: it was 10% of a
   /// nested solve, docs/MEASUREMENTS.md); the off-diagonal block's columns of v from their owners.
   void abs_multiply_add(const Eigen::VectorXd& v, Eigen::VectorXd& out) const {
-    const Eigen::VectorXd ghost = s_->ghosts(v);
+    const Eigen::VectorXd ghost = ghosts(v);
     const LocalRows rows(get(), false);
-    rows.for_each_local([&](PetscInt i, bool off, PetscInt c, double a) { out[i] += std::abs(a) * (off ? ghost[c] : v[c]); });
+    rows.for_each_local([&](PetscInt i, bool off, PetscInt c, PetscInt p) {
+      out[i] += std::abs(rows.value(p)) * (off ? ghost[c] : v[c]);
+    });
   }
+  /// v (this process's entries of a vector in A's column layout) at the off-diagonal block's columns,
+  /// LocalRows::ghost_columns (gathered from their owners; empty on one process). Collective.
+  Eigen::VectorXd ghosts(const Eigen::VectorXd& v) const { return s_->ghosts(v); }
   /// The diagonal block (this process's rows and columns; the whole matrix on one process), a view
   /// valid while this Matrix lives and its values do not change.
   Block block() const {
@@ -113,8 +118,8 @@ class Matrix {
   Eigen::VectorXd coupling(const Eigen::VectorXd& v) const {
     Eigen::VectorXd c = Eigen::VectorXd::Zero(rows());
     if (comm().size() == 1) return c;
-    multiply(v, c);
-    c.noalias() -= block() * v;
+    const Eigen::VectorXd ghost = ghosts(v);  // (the off-diagonal block's product alone: not A v − block v)
+    LocalRows(get(), false).for_each_ghost([&](PetscInt i, PetscInt k, double a) { c[i] += a * ghost[k]; });
     return c;
   }
   Eigen::VectorXd diagonal() const {
@@ -355,9 +360,12 @@ class VCycle {
     PetscObjectTypeCompare(reinterpret_cast<PetscObject>(mg_), PCMG, &mg);
     return mg;
   }
-  /// The coarse operators of the step's K (updated by its change where GalerkinOperators can).
-  void update(Mat K) {
-    if (galerkin_->form(K)) coarse_operators();
+  /// The most changed entries of K that the next update takes (GalerkinOperators::most_changes).
+  std::size_t most_changes() const { return galerkin_->most_changes(); }
+  /// The coarse operators of the step's K (updated by its `changes` since the last update where
+  /// GalerkinOperators can; null: more than most_changes).
+  void update(Mat K, const GalerkinOperators::Changes* changes) {
+    if (galerkin_->form(K, changes)) coarse_operators();
   }
 
  private:
@@ -459,14 +467,13 @@ class System {
 
   /// K of the active set `inactive` (rows with kInactive keep A's row; the others are identity rows).
   bool factorize(const std::vector<char>& inactive) {
-    if (!K_) check(MatDuplicate(A_.get(), MAT_COPY_VALUES, &K_), "MatDuplicate");
-    else check(MatCopy(A_.get(), K_, SAME_NONZERO_PATTERN), "MatCopy");
-    active_.clear();
-    for (std::size_t i = 0; i < inactive.size(); ++i)
-      if (!detail::inactive_state(inactive[i])) active_.push_back(static_cast<PetscInt>(A_.row_offset() + i));
-    check(MatZeroRowsColumns(K_, static_cast<PetscInt>(active_.size()), active_.data(), 1.0, nullptr, nullptr),
-          "MatZeroRowsColumns");
-    if (vcycle_) vcycle_->update(K_);
+    if (!K_) {
+      check(MatDuplicate(A_.get(), MAT_COPY_VALUES, &K_), "MatDuplicate");
+      check_diagonal();
+    }
+    const std::size_t most = vcycle_ ? vcycle_->most_changes() : 0;
+    const bool few = write_values(inactive, most);
+    if (vcycle_) vcycle_->update(K_, few ? &changes_ : nullptr);
     check(KSPSetOperators(ksp_, K_, K_), "KSPSetOperators");
     if (ssor_) check(KSPSetOperators(ssor_, K_, K_), "KSPSetOperators");
     inactive_ = inactive;
@@ -505,6 +512,37 @@ class System {
   void set_max_iterations(int k) { max_iterations_ = k; }
 
  private:
+  /// K's values for the active set: A's where row and column are inactive, the identity's elsewhere (what
+  /// MatZeroRowsColumns of the active rows makes of A, written in place: no copy of A, no exchange of the
+  /// rows zeroed). K's changed entries are recorded (changes_, global numbers) up to `most` + 1: whether
+  /// they were all recorded.
+  bool write_values(const std::vector<char>& inactive, std::size_t most) {
+    Eigen::VectorXd keep(static_cast<Eigen::Index>(inactive.size()));
+    for (std::size_t i = 0; i < inactive.size(); ++i) keep[static_cast<Eigen::Index>(i)] = detail::inactive_state(inactive[i]);
+    const Eigen::VectorXd ghost = A_.ghosts(keep);  // the other processes' columns' states
+    const LocalRows a(A_.get(), false);
+    LocalRows k(K_, true);                          // (assembled again when it goes)
+    const PetscInt lo = a.row_begin(), clo = a.col_begin();
+    const PetscInt* columns = a.ghost_columns();
+    changes_.clear();
+    a.for_each_local([&](PetscInt i, bool off, PetscInt c, PetscInt p) {
+      const PetscInt j = off ? columns[c] : clo + c;
+      const double v = keep[i] > 0 && (off ? ghost[c] : keep[c]) > 0 ? a.value(p) : (lo + i == j ? 1.0 : 0.0);
+      double& kv = k.value(p);
+      if (kv == v) return;
+      if (changes_.size() <= most) changes_.push_back({lo + i, j, v - kv});
+      kv = v;
+    });
+    return changes_.size() <= most;
+  }
+  /// Every row of A stores its diagonal (an active row's 1 goes there); every process alike.
+  void check_diagonal() const {
+    const LocalRows a(A_.get(), false);
+    int stored = 1;
+    for (PetscInt i = 0; i < a.rows() && stored; ++i) stored = a.find(i, a.row_begin() + i) >= 0;
+    MPI_Allreduce(MPI_IN_PLACE, &stored, 1, MPI_INT, MPI_LAND, A_.comm().get());
+    if (!stored) throw std::invalid_argument("the PETSc engine's Newton member needs A's diagonal stored in every row");
+  }
   /// One KSP solve from zv to ‖b − Kz‖ ≤ target (1e-12 ‖b‖ when 0), at most `cap` iterations (added
   /// to `its`); whether it converged.
   bool run(KSP ksp, Vec bv, Vec zv, double target, int cap, int& its) const {
@@ -581,7 +619,7 @@ class System {
   Vec bv_ = nullptr, zv_ = nullptr;
   Mat K_ = nullptr;
   std::unique_ptr<VCycle> vcycle_;  // PCMG's set-up and coarse operators (when it preconditions)
-  std::vector<PetscInt> active_;
+  GalerkinOperators::Changes changes_;  // K's changed entries at the last factorize (write_values)
   std::vector<char> inactive_;
   bool iterative_ = false, lu_ = false, symmetric_ = false;
   mutable std::string name_;  // inner_name's

@@ -167,10 +167,11 @@ class GalerkinOperators {
 
   /// `P`: the prolongations; `A`, `coarse` (optional): a fine A with the pattern of the fine K's to
   /// come and its Galerkin operators (the hierarchy's), the first form's start (all alive while this
-  /// object is).
+  /// object is). Collective.
   explicit GalerkinOperators(std::vector<Mat> P, Mat A = nullptr, std::vector<Mat> coarse = {})
       : P_(std::move(P)), A_(A), coarse_(std::move(coarse)) {
     if (!A_ || coarse_.size() != P_.size()) coarse_.clear();
+    if (!coarse_.empty()) nnz_ = nonzeros(A_);
   }
   GalerkinOperators(const GalerkinOperators&) = delete;
   GalerkinOperators& operator=(const GalerkinOperators&) = delete;
@@ -181,16 +182,25 @@ class GalerkinOperators {
   std::size_t levels() const { return P_.size(); }
   /// Whether the last form updated the operators by K's change (neither formed nor recomputed them).
   bool updated() const { return updated_; }
+  /// The most changed entries (every process's) the next form takes as an update: half of A's entries
+  /// the first time (first_changes), GalerkinUpdate::max_changes of K's after; a caller records one more
+  /// at most (form's `changes`).
+  std::size_t most_changes() const {
+    if (C_.empty()) return coarse_.empty() ? 0 : first_changes(nnz_);
+    return detail::GalerkinUpdate<PetscInt>::max_changes(nnz_);
+  }
 
-  /// The operators of `fine` (assembled, the pattern of the first call): the first time new Mats
-  /// (returns true), copies of the hierarchy's operators updated by fine − A when that is cheaper
-  /// than forming them (first_changes), else formed by MatPtAP; later updated by fine's changed
-  /// entries since the last form when they are few (GalerkinUpdate::max_changes), else their values
-  /// recomputed (MatPtAP, MAT_REUSE_MATRIX). Collective.
-  bool form(Mat fine) {
+  /// The operators of `fine` (assembled, one pattern throughout): the first time new Mats (returns
+  /// true), the hierarchy's operators (copies) updated by `changes` (fine − A) when there are at most
+  /// most_changes(), else formed by MatPtAP; later updated by `changes` (fine's changed entries since the
+  /// last form, global numbers, rows of this process) when they are at most most_changes() over every
+  /// process, else their values recomputed (MatPtAP, MAT_REUSE_MATRIX). `changes` null: not recorded
+  /// (more than most_changes()). Collective.
+  bool form(Mat fine, const Changes* changes) {
+    const std::size_t most = most_changes();
     updated_ = false;
     if (C_.empty()) {
-      updated_ = start(fine);
+      updated_ = start(changes, most);
       if (updated_) return true;
       destroy();
       C_.resize(P_.size(), nullptr);
@@ -198,25 +208,23 @@ class GalerkinOperators {
         check(MatPtAP(l ? C_[l - 1] : fine, P_[l], MAT_INITIAL_MATRIX, 2.0, &C_[l]), "MatPtAP");
       product_ = true;
       updatable_ = sorted(fine);
-      if (updatable_) remember(fine);
+      nnz_ = nonzeros(fine);
       return true;
     }
-    updated_ = updatable_ && update(fine, detail::GalerkinUpdate<PetscInt>::max_changes(nnz_));
+    updated_ = updatable_ && update(fine, changes, most);
     if (!updated_) recompute(fine);
     return false;
   }
 
  private:
   /// The first form from the hierarchy's operators (copies) updated by fine − A; false when there are
-  /// none, too many changes (first_changes) or a term outside their patterns.
-  bool start(Mat fine) {
+  /// none, too many changes or a term outside their patterns.
+  bool start(const Changes* changes, std::size_t most) {
     if (coarse_.empty()) return false;
     C_.resize(P_.size(), nullptr);
     for (std::size_t l = 0; l < P_.size(); ++l) check(MatDuplicate(coarse_[l], MAT_COPY_VALUES, &C_[l]), "MatDuplicate");
     updatable_ = sorted(A_);
-    if (!updatable_) return false;
-    remember(A_);
-    return update(fine, first_changes(nnz_));
+    return updatable_ && update(A_, changes, most);
   }
   /// The values recomputed on the patterns (MatPtAP, MAT_REUSE_MATRIX; formed first when the
   /// operators are the hierarchy's copies).
@@ -244,53 +252,33 @@ class GalerkinOperators {
     }
     return all;
   }
-  /// fine's values, the reference of the next form's changes, and its stored entries on every process.
-  void remember(Mat fine) {
-    const LocalRows K(fine, false);
-    previous_.resize(static_cast<std::size_t>(K.nonzeros()));
-    K.for_each([&](PetscInt, PetscInt, PetscInt p) { previous_[static_cast<std::size_t>(p)] = K.value(p); });
-    std::uint64_t nnz = previous_.size();
-    MPI_Allreduce(MPI_IN_PLACE, &nnz, 1, MPI_UINT64_T, MPI_SUM, comm_of(fine));
-    nnz_ = static_cast<Eigen::Index>(nnz);
+  /// M's stored entries, every process's.
+  static Eigen::Index nonzeros(Mat M) {
+    std::uint64_t nnz = static_cast<std::uint64_t>(LocalRows(M, false).nonzeros());
+    MPI_Allreduce(MPI_IN_PLACE, &nnz, 1, MPI_UINT64_T, MPI_SUM, comm_of(M));
+    return static_cast<Eigen::Index>(nnz);
   }
   static MPI_Comm comm_of(Mat M) {
     MPI_Comm c;
     PetscObjectGetComm(reinterpret_cast<PetscObject>(M), &c);
     return c;
   }
-  /// The update by fine's changed entries; false (every process alike) when there are too many or
-  /// a term falls outside a level's pattern (then recompute them all). Remembers fine either way.
-  bool update(Mat fine, std::size_t most) {
-    if (!few_changes(fine, most)) return false;
+  /// The update by `changes`; false (every process alike) when they are not recorded or more than
+  /// `most`, or a term falls outside a level's pattern (then recompute them all).
+  bool update(Mat fine, const Changes* changes, std::size_t most) {
+    std::uint64_t count = changes ? changes->size() : most + 1;
+    MPI_Allreduce(MPI_IN_PLACE, &count, 1, MPI_UINT64_T, MPI_SUM, comm_of(fine));
+    if (count > most) return false;
     int processes = 1;
     MPI_Comm_size(comm_of(fine), &processes);
-    if (processes > 1) return distributed_.apply(changes_, P_, C_);
+    if (processes > 1) return distributed_.apply(*changes, P_, C_);
     std::vector<std::unique_ptr<LocalRows>> Ps, Cs;  // open while the update runs
     for (std::size_t l = 0; l < P_.size(); ++l) {
       Ps.push_back(std::make_unique<LocalRows>(P_[l], false));
       Cs.push_back(std::make_unique<LocalRows>(C_[l], true));
     }
-    return update_.add(changes_, P_.size(), [&](std::size_t l) { return Ps[l]->diagonal_block(); },
+    return update_.add(*changes, P_.size(), [&](std::size_t l) { return Ps[l]->diagonal_block(); },
                        [&](std::size_t l) { return Cs[l]->diagonal_block(); });
-  }
-  /// fine's changed entries since the last form into changes_ (global numbers; all of them remembered):
-  /// whether they are few (at most `most`, over all processes).
-  bool few_changes(Mat fine, std::size_t most) {
-    const LocalRows K(fine, false);
-    const PetscInt lo = K.row_begin();
-    std::uint64_t counts[2] = {0, static_cast<std::size_t>(K.nonzeros()) != previous_.size()};
-    changes_.clear();
-    if (!counts[1])
-      K.for_each([&](PetscInt i, PetscInt j, PetscInt p) {
-        const double v = K.value(p), before = previous_[static_cast<std::size_t>(p)];
-        if (v == before) return;
-        if (changes_.size() <= most) changes_.push_back({lo + i, j, v - before});
-        previous_[static_cast<std::size_t>(p)] = v;
-      });
-    counts[0] = changes_.size();
-    MPI_Allreduce(MPI_IN_PLACE, counts, 2, MPI_UINT64_T, MPI_SUM, comm_of(fine));
-    if (counts[1]) throw std::logic_error("GalerkinOperators: K's pattern changed");
-    return counts[0] <= most;
   }
 
   /// The most changes the first form takes as an update of the hierarchy's operators: half of K's
@@ -305,9 +293,7 @@ class GalerkinOperators {
   bool product_ = false;          // C_ came from MatPtAP (MAT_REUSE_MATRIX applies)
   bool updatable_ = false;        // sorted rows: form may update
   bool updated_ = false;          // the last form updated
-  std::vector<double> previous_;  // the fine K's values at the last form, by position (updatable_)
   Eigen::Index nnz_ = 0;          // the fine K's stored entries, every process's
-  Changes changes_;
   detail::GalerkinUpdate<PetscInt> update_;
   DistributedUpdate distributed_;
 };

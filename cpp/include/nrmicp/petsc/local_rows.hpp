@@ -106,20 +106,28 @@ class LocalRows {
     for (PetscInt i = 0; i < o_.rows; ++i)
       for (PetscInt p = o_.ia[i]; p < o_.ia[i + 1]; ++p) f(i, garray_[o_.ja[p]], nnz(d_) + p);
   }
-  /// f(local row, off, column, value) for every stored entry, row by row (each row's diagonal-block
+  /// f(local row, off, column, position) for every stored entry, row by row (each row's diagonal-block
   /// entries first): `off` false, the column is this process's (local number); true, the off-diagonal
-  /// block's (its number among that block's columns: a ghost's).
+  /// block's (its number among that block's columns: a ghost's, ghost_columns()).
   template <typename F>
   void for_each_local(F&& f) const {
     for (PetscInt i = 0; i < d_.rows; ++i) {
-      for (PetscInt p = d_.ia[i]; p < d_.ia[i + 1]; ++p) f(i, false, d_.ja[p], d_.va[p]);
+      for (PetscInt p = d_.ia[i]; p < d_.ia[i + 1]; ++p) f(i, false, d_.ja[p], p);
       if (o_.seq)
-        for (PetscInt p = o_.ia[i]; p < o_.ia[i + 1]; ++p) f(i, true, o_.ja[p], o_.va[p]);
+        for (PetscInt p = o_.ia[i]; p < o_.ia[i + 1]; ++p) f(i, true, o_.ja[p], nnz(d_) + p);
     }
+  }
+  /// f(local row, ghost, value) for every entry of the off-diagonal block (none on one process).
+  template <typename F>
+  void for_each_ghost(F&& f) const {
+    if (!o_.seq) return;
+    for (PetscInt i = 0; i < o_.rows; ++i)
+      for (PetscInt p = o_.ia[i]; p < o_.ia[i + 1]; ++p) f(i, o_.ja[p], o_.va[p]);
   }
   /// The off-diagonal block's columns (global numbers, sorted; none on one process).
   const PetscInt* ghost_columns() const { return garray_; }
-  PetscInt ghosts() const { return ngarray_; }
+  /// The first column (global) of the diagonal block.
+  PetscInt col_begin() const { return cstart_; }
   /// f(global column, value) for every stored entry of local row i.
   template <typename F>
   void for_row(PetscInt i, F&& f) const {
