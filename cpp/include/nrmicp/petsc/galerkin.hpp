@@ -129,15 +129,16 @@ class DistributedUpdate {
     MPI_Comm_size(comm, &processes);
     MPI_Comm_rank(comm, &rank);
     std::vector<std::vector<Term>> send(static_cast<std::size_t>(processes));
+    const PetscInt c_hi = ranges[rank + 1];
+    PetscInt row = -1;
     for (const auto& change : in) {
-      row_of(p, change.row, row_i_);
+      if (change.row != row) row_of(p, row = change.row, row_i_);  // (in comes row by row)
       row_of(p, change.col, row_j_);
       for (const Entry& a : row_i_)
         for (const Entry& b : row_j_) {
           const Term t{a.col, b.col, a.value * change.delta * b.value};
-          const int r = owner_of(ranges, processes, t.row);
-          if (r == rank) add(c, t, inside);
-          else send[static_cast<std::size_t>(r)].push_back(t);
+          if (t.row >= c_lo_ && t.row < c_hi) add(c, t, inside);
+          else send[static_cast<std::size_t>(owner_of(ranges, processes, t.row))].push_back(t);
         }
     }
     for (const Term& t : all_to_all(comm, send).data) add(c, t, inside);
