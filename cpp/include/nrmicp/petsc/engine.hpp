@@ -431,8 +431,8 @@ inline bool costly_galerkin(const Hierarchy& below, const Matrix& A) {
 }
 
 /// The reduced system of a Newton step (detail::ActiveSetSystem's PETSc form) for the (shifted) LCP
-/// and the box problem: K = A with the active rows and columns replaced by the identity's
-/// (MatZeroRowsColumns: K stays symmetric where A is), solved by KSP — CG (symmetric A) or BiCGSTAB
+/// and the box problem: K = A with the active rows and columns replaced by the identity's (on A's
+/// pattern, written in place: K stays symmetric where A is), solved by KSP — CG (symmetric A) or BiCGSTAB
 /// with hypre BoomerAMG, stopped on the true residual as the serial Krylov solve is; where the serial
 /// rule (ActiveSetSystem::use_iterative) solves exactly, LU (PETSc's on one process, MUMPS on several). Options prefix nrmicp_inner_ (e.g. -nrmicp_inner_pc_hypre_boomeramg_...).
 class System {

@@ -1,6 +1,6 @@
 // nrmicp — the PETSc engine's Galerkin operators K_{l+1} = P_lᵀ K_l P_l of a Newton step's reduced
 // system K (the serial engine's detail/galerkin.hpp, on PETSc Mats): PCMG's coarse operators, kept
-// across Newton steps. K keeps A's pattern (MatZeroRowsColumns stores zeros), so the operators keep the
+// across Newton steps. K keeps A's pattern (its zeros stored), so the operators keep the
 // patterns of A's: the first form starts, as the serial engine's, from copies of the hierarchy's
 // operators (A's own Galerkin ones) updated by K − A (else MatPtAP forms them); later steps add
 // P_lᵀ ΔK_l P_l level by level when K changed in few entries (GalerkinUpdate::max_changes of K's
