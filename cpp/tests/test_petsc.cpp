@@ -1,8 +1,11 @@
 // The Newton member from C++ on the PETSc engine (nrmicp/petsc.hpp), run by ctest under mpiexec on
 // 1 and 2 processes: the same nrmicp::Newton over a distributed Mat takes the serial member's
 // decisions (status, finest steps within 1, z to 1e-8) and its answer meets the complementarity
-// conditions row by row — a 2D obstacle cold and nested (bilinear prolongations) and a two-sided box —
-// and the 'amg' hierarchy built from A alone (nrmicp/petsc/hierarchy.hpp) on a 2D and a 3D obstacle.
+// conditions row by row — a 2D obstacle cold and nested (bilinear prolongations), a two-sided box, and
+// the 'amg' hierarchy built from A alone (nrmicp/petsc/hierarchy.hpp) on a 2D and a 3D obstacle; and
+// the engine's own parts that split rows between processes: the Galerkin operators' update by K's
+// changed entries (against P_lᵀ⋯KP_l computed here), the symmetry check (against the serial rule) and
+// |A| v (against the dense product).
 #include "common.hpp"
 
 #include <nrmicp/petsc.hpp>
@@ -10,6 +13,7 @@
 #define DOCTEST_CONFIG_IMPLEMENT
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -273,6 +277,212 @@ TEST_CASE("the Newton member on PETSc takes the serial decisions: obstacle neste
 
 TEST_CASE("the Newton member on PETSc takes the serial decisions: two-sided box, nested") {
   run(membrane(63, 20.0, true, 3), "two-sided nested");
+}
+
+namespace {
+/// This process's rows of a Mat against the same rows of a dense reference: max |M − ref| over every
+/// process, relative to max |ref| (an entry of ref that M does not store counts in full).
+double relative_difference(Mat M, const Eigen::MatrixXd& ref) {
+  PetscInt lo, hi;
+  MatGetOwnershipRange(M, &lo, &hi);
+  double d[2] = {0, ref.cwiseAbs().maxCoeff()};
+  for (PetscInt i = lo; i < hi; ++i) {
+    Eigen::RowVectorXd row = ref.row(i);
+    PetscInt k;
+    const PetscInt* cols;
+    const PetscScalar* vals;
+    MatGetRow(M, i, &k, &cols, &vals);
+    for (PetscInt p = 0; p < k; ++p) row[cols[p]] -= vals[p];
+    MatRestoreRow(M, i, &k, &cols, &vals);
+    d[0] = std::max(d[0], row.cwiseAbs().maxCoeff());
+  }
+  MPI_Allreduce(MPI_IN_PLACE, d, 2, MPI_DOUBLE, MPI_MAX, PETSC_COMM_WORLD);
+  return d[0] / d[1];
+}
+
+/// K(i, j) += v on the Mat (its owner's call) and on the serial copy, (i, j) stored in both.
+void add_entry(Mat K, RowMat& Ks, int i, int j, double v) {
+  Ks.coeffRef(i, j) += v;
+  PetscInt lo, hi;
+  MatGetOwnershipRange(K, &lo, &hi);
+  if (i >= lo && i < hi) MatSetValue(K, i, j, v, ADD_VALUES);
+}
+
+/// The Galerkin chain P_lᵀ ⋯ P_0ᵀ K P_0 ⋯ P_l computed here (Eigen, dense coarse levels), and the
+/// engine's operators checked against it.
+void check_operators(const petsc::GalerkinOperators& G, const RowMat& K, const std::vector<RowMat>& P) {
+  Eigen::MatrixXd C = Eigen::MatrixXd(K);
+  for (std::size_t l = 0; l < P.size(); ++l) {
+    const Eigen::MatrixXd Pl = Eigen::MatrixXd(P[l]);
+    C = Pl.transpose() * C * Pl;
+    CHECK(relative_difference(G.K(l), C) <= 1e-13);
+  }
+}
+}  // namespace
+
+namespace {
+/// A nonsymmetric K on a 2D grid (the upwind part couples rows held by different processes) and
+/// three bilinear prolongations.
+struct GalerkinCase {
+  using Changes = petsc::GalerkinOperators::Changes;
+  int m = 31, n = 31 * 31;
+  RowMat K = laplacian(31);
+  std::vector<RowMat> P{bilinear(31), bilinear(15), bilinear(7)};
+  GalerkinCase() {
+    for (int r = m; r < n; ++r) K.coeffRef(r, r - m) -= 0.3 * (m + 1.0) * (m + 1.0);
+  }
+  /// A few changed entries, several of them coupling rows on both sides of the processes' split;
+  /// returns them (this process's rows).
+  Changes change_few(Mat Km) {
+    const RowMat before = K;
+    const int mid = n / 2;
+    const int at[][2] = {{mid, mid}, {mid - 1, mid}, {mid, mid - 1}, {mid - 1, mid - 1 + m}, {mid + 2, mid + 2 - m}, {5, 6}};
+    for (int k = 0; k < 6; ++k) add_entry(Km, K, at[k][0], at[k][1], 0.37 * (k + 1) * (m + 1.0) * (m + 1.0));
+    MatAssemblyBegin(Km, MAT_FINAL_ASSEMBLY);
+    MatAssemblyEnd(Km, MAT_FINAL_ASSEMBLY);
+    return changes_since(before);
+  }
+  /// Every entry changed (K scaled).
+  Changes change_all(Mat Km) {
+    const RowMat before = K;
+    MatScale(Km, 1.5);
+    K *= 1.5;
+    return changes_since(before);
+  }
+  /// K − before on this process's rows (K keeps before's pattern).
+  Changes changes_since(const RowMat& before) const {
+    Changes c;
+    const auto [lo, hi] = split(n);
+    for (int i = lo; i < hi; ++i)
+      for (RowMat::InnerIterator a(before, i), b(K, i); a && b; ++a, ++b)
+        if (a.value() != b.value()) c.push_back({i, static_cast<PetscInt>(a.index()), b.value() - a.value()});
+    return c;
+  }
+  /// P_lᵀ ⋯ K ⋯ P_l of the current K, level by level (Eigen, as a hierarchy's operators would be).
+  std::vector<RowMat> chain() const {
+    std::vector<RowMat> C;
+    RowMat F = K;
+    for (const RowMat& p : P) {
+      RowMat c = RowMat(p.transpose()) * F * p;
+      C.push_back(c);
+      F = c;
+    }
+    return C;
+  }
+};
+
+void destroy(std::vector<Mat>& Ms) {
+  for (Mat& M : Ms) MatDestroy(&M);
+}
+}  // namespace
+
+TEST_CASE("the PETSc engine's Galerkin operators follow K's changed entries: updated as recomputed") {
+  INFO("on " << size_of() << " processes");
+  GalerkinCase c;
+  Mat K = to_petsc(c.K);
+  std::vector<Mat> Pm;
+  for (const RowMat& p : c.P) Pm.push_back(to_petsc(p));
+  {
+    petsc::GalerkinOperators G(Pm);
+    const GalerkinCase::Changes none;
+    CHECK(G.form(K, &none));  // formed (MatPtAP)
+    CHECK_FALSE(G.updated());
+    check_operators(G, c.K, c.P);
+    GalerkinCase::Changes changes = c.change_few(K);
+    CHECK_FALSE(G.form(K, &changes));
+    CHECK(G.updated());
+    check_operators(G, c.K, c.P);
+    changes = c.change_all(K);  // too many changed entries: recomputed
+    G.form(K, &changes);
+    CHECK_FALSE(G.updated());
+    check_operators(G, c.K, c.P);
+    changes = c.change_few(K);  // not recorded: recomputed
+    G.form(K, nullptr);
+    CHECK_FALSE(G.updated());
+    check_operators(G, c.K, c.P);
+  }
+  destroy(Pm);
+  MatDestroy(&K);
+}
+
+TEST_CASE("the PETSc engine's Galerkin operators start from the hierarchy's: updated by K - A, or formed") {
+  INFO("on " << size_of() << " processes");
+  for (bool few : {true, false}) {
+    INFO((few ? "few changes" : "every entry changed"));
+    GalerkinCase c;
+    Mat A = to_petsc(c.K), K = to_petsc(c.K);
+    std::vector<Mat> Pm, coarse;
+    for (const RowMat& p : c.P) Pm.push_back(to_petsc(p));
+    for (const RowMat& C : c.chain()) coarse.push_back(to_petsc(C));
+    GalerkinCase::Changes changes = few ? c.change_few(K) : c.change_all(K);
+    {
+      petsc::GalerkinOperators G(Pm, A, coarse);
+      CHECK(G.form(K, &changes));   // new Mats either way
+      CHECK(G.updated() == few);    // copies of the hierarchy's updated, or MatPtAP's
+      check_operators(G, c.K, c.P);
+      changes = c.change_few(K);
+      CHECK_FALSE(G.form(K, &changes));
+      CHECK(G.updated());
+      check_operators(G, c.K, c.P);
+      changes = c.change_all(K);
+      G.form(K, &changes);
+      CHECK_FALSE(G.updated());
+      check_operators(G, c.K, c.P);
+    }
+    destroy(Pm);
+    destroy(coarse);
+    MatDestroy(&A);
+    MatDestroy(&K);
+  }
+}
+
+TEST_CASE("the PETSc engine's symmetry check is the serial rule: ||M - M^T||_F <= 1e-14 ||M||_F") {
+  INFO("on " << size_of() << " processes");
+  const int m = 15, n = m * m, i = n / 2, j = n / 2 + m;  // (i, j): rows on both sides of the split
+  const RowMat L = laplacian(m);
+  const double threshold = 1e-14 * L.norm() / std::sqrt(2.0);  // one entry off by this: at the bound
+  for (double off : {0.0, 0.5 * threshold, 2 * threshold}) {
+    RowMat M = L;
+    M.coeffRef(i, j) += off;
+    const Eigen::MatrixXd D = Eigen::MatrixXd(M);
+    const bool expected = (D - D.transpose()).norm() <= 1e-14 * D.norm();
+    CHECK(expected == (off < threshold));
+    Mat A = to_petsc(M);
+    CHECK(petsc::is_symmetric(A) == expected);
+    MatDestroy(&A);
+  }
+  // an entry whose mirror is not stored: symmetric when it is 0, not when it is not
+  for (double v : {0.0, 1.0}) {
+    RowMat M = L;
+    M.insert(3, n - 2) = v;
+    M.makeCompressed();
+    Mat A = to_petsc(M);
+    CHECK(petsc::is_symmetric(A) == (v == 0.0));
+    MatDestroy(&A);
+  }
+}
+
+TEST_CASE("the PETSc engine's |A| v adds every row's |a_ij| v_j, the other processes' columns included") {
+  INFO("on " << size_of() << " processes");
+  const int m = 15, n = m * m;
+  RowMat Ks = laplacian(m);
+  for (int r = m; r < n; ++r) Ks.coeffRef(r, r - m) -= 3.0;  // nonsymmetric, some entries change sign
+  Ks.coeffRef(2, n - 3) = -7.0;                              // a coupling to the last rows
+  Ks.makeCompressed();
+  Eigen::VectorXd v(n), start(n);
+  for (int i = 0; i < n; ++i) { v[i] = std::sin(1.0 + i); start[i] = std::cos(2.0 * i); }
+  const Eigen::VectorXd expected = start + Eigen::MatrixXd(Ks).cwiseAbs() * v;
+  Mat K = to_petsc(Ks);
+  {
+    const petsc::Matrix A(K);
+    Eigen::VectorXd out = rows_of(start);
+    abs_multiply_add(A, rows_of(v), out);
+    CHECK((out - rows_of(expected)).lpNorm<Eigen::Infinity>() <= 1e-12 * expected.lpNorm<Eigen::Infinity>());
+    out = rows_of(start);
+    abs_multiply_add(A, rows_of(v), out);  // (the gather of the other processes' columns, formed once, again)
+    CHECK((out - rows_of(expected)).lpNorm<Eigen::Infinity>() <= 1e-12 * expected.lpNorm<Eigen::Infinity>());
+  }
+  MatDestroy(&K);
 }
 
 // Its own main: doctest runs between PetscInitialize and PetscFinalize (MPI's lifetime).

@@ -70,7 +70,11 @@ class GalerkinUpdate {
   /// them all) when there are too many changes or a term falls outside a level's pattern.
   template <typename PAt, typename CAt>
   bool apply(const Changes& changes, Eigen::Index nnz, std::size_t levels, PAt&& P, CAt&& C) {
-    if (changes.size() > max_changes(nnz)) return false;
+    return changes.size() <= max_changes(nnz) && add(changes, levels, P, C);
+  }
+  /// The same whatever the number of changes (the caller has decided they are few enough).
+  template <typename PAt, typename CAt>
+  bool add(const Changes& changes, std::size_t levels, PAt&& P, CAt&& C) {
     const Changes* in = &changes;
     for (std::size_t l = 0; l < levels; ++l) {
       Changes& out = level_changes_[l % 2];

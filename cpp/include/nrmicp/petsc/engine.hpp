@@ -18,6 +18,7 @@
 #include "../solver.hpp"
 #include "../zeta.hpp"
 #include "galerkin.hpp"
+#include "symmetric.hpp"
 
 #include <petscksp.h>
 
@@ -93,11 +94,18 @@ class Matrix {
     check(VecResetArray(s.x), "VecResetArray");
     check(VecResetArray(s.y), "VecResetArray");
   }
-  /// out += |A| v (|A| formed on first use).
+  /// out += |A| v, read off A's own rows (a copy |A| cost more than the products: it was 10% of a
+  /// nested solve, docs/MEASUREMENTS.md); the off-diagonal block's columns of v from their owners.
   void abs_multiply_add(const Eigen::VectorXd& v, Eigen::VectorXd& out) const {
-    if (!s_->abs) s_->abs = std::make_unique<Matrix>(absolute());
-    s_->abs->multiply(v, out, true);
+    const Eigen::VectorXd ghost = ghosts(v);
+    const LocalRows rows(get(), false);
+    rows.for_each_local([&](PetscInt i, bool off, PetscInt c, PetscInt p) {
+      out[i] += std::abs(rows.value(p)) * (off ? ghost[c] : v[c]);
+    });
   }
+  /// v (this process's entries of a vector in A's column layout) at the off-diagonal block's columns,
+  /// LocalRows::ghost_columns (gathered from their owners; empty on one process). Collective.
+  Eigen::VectorXd ghosts(const Eigen::VectorXd& v) const { return s_->ghosts(v); }
   /// The diagonal block (this process's rows and columns; the whole matrix on one process), a view
   /// valid while this Matrix lives and its values do not change.
   Block block() const {
@@ -110,8 +118,8 @@ class Matrix {
   Eigen::VectorXd coupling(const Eigen::VectorXd& v) const {
     Eigen::VectorXd c = Eigen::VectorXd::Zero(rows());
     if (comm().size() == 1) return c;
-    multiply(v, c);
-    c.noalias() -= block() * v;
+    const Eigen::VectorXd ghost = ghosts(v);  // (the off-diagonal block's product alone: not A v − block v)
+    LocalRows(get(), false).for_each_ghost([&](PetscInt i, PetscInt k, double a) { c[i] += a * ghost[k]; });
     return c;
   }
   Eigen::VectorXd diagonal() const {
@@ -133,12 +141,8 @@ class Matrix {
     VecDestroy(&v);
     return d;
   }
-  /// Whether A is symmetric (to rounding).
-  bool symmetric() const {
-    PetscBool sym = PETSC_FALSE;
-    check(MatIsSymmetric(get(), 1e-14, &sym), "MatIsSymmetric");
-    return sym == PETSC_TRUE;
-  }
+  /// Whether A is symmetric to rounding: the serial engine's rule (petsc/symmetric.hpp). Collective.
+  bool symmetric() const { return is_symmetric(get()); }
 
  private:
   static void copy_out(Vec v, Eigen::VectorXd& d) {
@@ -147,34 +151,13 @@ class Matrix {
     std::copy_n(a, d.size(), d.data());
     VecRestoreArrayRead(v, &a);
   }
-  /// |A| entry-wise (a copy of A with its values' absolute values).
-  Matrix absolute() const {
-    Mat B;
-    check(MatDuplicate(get(), MAT_COPY_VALUES, &B), "MatDuplicate");
-    Mat parts[2] = {B, nullptr};
-    PetscBool mpi = PETSC_FALSE;
-    PetscObjectTypeCompare(reinterpret_cast<PetscObject>(B), MATMPIAIJ, &mpi);
-    if (mpi) check(MatMPIAIJGetSeqAIJ(B, &parts[0], &parts[1], nullptr), "MatMPIAIJGetSeqAIJ");
-    for (Mat part : parts) {
-      if (!part) continue;
-      PetscScalar* a;
-      check(MatSeqAIJGetArray(part, &a), "MatSeqAIJGetArray");
-      MatInfo info;
-      MatGetInfo(part, MAT_LOCAL, &info);
-      for (PetscInt k = 0; k < static_cast<PetscInt>(info.nz_used); ++k) a[k] = std::abs(a[k]);
-      MatSeqAIJRestoreArray(part, &a);
-    }
-    Matrix out(B);
-    MatDestroy(&B);  // out holds its own reference
-    return out;
-  }
-
   struct State {
     Mat A = nullptr;
     Vec x = nullptr, y = nullptr;  // work vectors whose arrays are the driver's (VecPlaceArray)
     PetscInt m = 0, n = 0, lo = 0;
     std::unique_ptr<MpiComm> comm;
-    std::unique_ptr<Matrix> abs;
+    VecScatter gather = nullptr;  // v's entries at the off-diagonal block's columns (ghosts), formed on first use
+    Vec ghost = nullptr;
     Mat Ad = nullptr;  // the diagonal block, its CSR arrays open while the State lives
     const PetscInt *ia = nullptr, *ja = nullptr;
     const PetscScalar* va = nullptr;
@@ -189,6 +172,39 @@ class Matrix {
       check(PetscObjectGetComm(reinterpret_cast<PetscObject>(A), &c), "PetscObjectGetComm");
       comm = std::make_unique<MpiComm>(c);
       check(MatCreateVecs(A, &x, &y), "MatCreateVecs");
+    }
+    /// v (this process's columns) at the off-diagonal block's columns (empty without that block).
+    Eigen::VectorXd ghosts(const Eigen::VectorXd& v) {
+      if (!gather && !scatter_ghosts()) return {};
+      check(VecPlaceArray(x, v.data()), "VecPlaceArray");
+      check(VecScatterBegin(gather, x, ghost, INSERT_VALUES, SCATTER_FORWARD), "VecScatterBegin");
+      check(VecScatterEnd(gather, x, ghost, INSERT_VALUES, SCATTER_FORWARD), "VecScatterEnd");
+      check(VecResetArray(x), "VecResetArray");
+      PetscInt k;
+      const PetscScalar* g;
+      VecGetLocalSize(ghost, &k);
+      check(VecGetArrayRead(ghost, &g), "VecGetArrayRead");
+      Eigen::VectorXd out = Eigen::Map<const Eigen::VectorXd>(g, k);
+      VecRestoreArrayRead(ghost, &g);
+      return out;
+    }
+    /// The scatter of ghosts (false on a SeqAIJ Mat: none).
+    bool scatter_ghosts() {
+      PetscBool mpi = PETSC_FALSE;
+      PetscObjectTypeCompare(reinterpret_cast<PetscObject>(A), MATMPIAIJ, &mpi);
+      if (!mpi) return false;
+      Mat Ad, Ao;
+      const PetscInt* columns;
+      PetscInt k;
+      check(MatMPIAIJGetSeqAIJ(A, &Ad, &Ao, &columns), "MatMPIAIJGetSeqAIJ");
+      check(MatGetSize(Ao, nullptr, &k), "MatGetSize");
+      IS is;
+      check(ISCreateGeneral(PETSC_COMM_SELF, k, columns, PETSC_COPY_VALUES, &is), "ISCreateGeneral");
+      check(VecCreateSeq(PETSC_COMM_SELF, k, &ghost), "VecCreateSeq");
+      const PetscErrorCode e = VecScatterCreate(x, is, ghost, nullptr, &gather);
+      ISDestroy(&is);
+      check(e, "VecScatterCreate");
+      return true;
     }
     void open_block() {
       check(MatGetDiagonalBlock(A, &Ad), "MatGetDiagonalBlock");
@@ -209,7 +225,8 @@ class Matrix {
       }
       VecDestroy(&x);
       VecDestroy(&y);
-      abs.reset();
+      VecScatterDestroy(&gather);
+      VecDestroy(&ghost);
       MatDestroy(&A);
     }
   };
@@ -311,14 +328,18 @@ struct Hierarchy {
 /// after (symmetric: CG applies), LU on the coarsest level (redundant on several processes).
 class VCycle {
  public:
-  VCycle(PC pc, const Hierarchy& below, int processes) : below_(below), mg_(pc) {
+  /// `A`: the level's matrix (its hierarchy's operators below start the Galerkin ones).
+  VCycle(PC pc, const Matrix& A, const Hierarchy& below, int processes) : below_(below), mg_(pc) {
     const PetscInt L = static_cast<PetscInt>(below_.levels) + 1;
     check(PCSetType(pc, PCMG), "PCSetType");
     check(PCMGSetLevels(pc, L, nullptr), "PCMGSetLevels");
     check(PCMGSetGalerkin(pc, PC_MG_GALERKIN_NONE), "PCMGSetGalerkin");
-    std::vector<Mat> P;
-    for (std::size_t l = 0; l < below_.levels; ++l) P.push_back(below_.level[l].P.get());
-    galerkin_ = std::make_unique<GalerkinOperators>(std::move(P), processes == 1);
+    std::vector<Mat> P, operators;
+    for (std::size_t l = 0; l < below_.levels; ++l) {
+      P.push_back(below_.level[l].P.get());
+      operators.push_back(below_.level[l].A.get());
+    }
+    galerkin_ = std::make_unique<GalerkinOperators>(std::move(P), A.get(), std::move(operators));
     for (PetscInt l = 1; l < L; ++l) {
       check(PCMGSetInterpolation(pc, l, below_.level[L - 1 - l].P.get()), "PCMGSetInterpolation");
       smoother(pc, l, true);
@@ -339,9 +360,12 @@ class VCycle {
     PetscObjectTypeCompare(reinterpret_cast<PetscObject>(mg_), PCMG, &mg);
     return mg;
   }
-  /// The coarse operators of the step's K (updated by its change where GalerkinOperators can).
-  void update(Mat K) {
-    if (galerkin_->form(K)) coarse_operators();
+  /// The most changed entries of K that the next update takes (GalerkinOperators::most_changes).
+  std::size_t most_changes() const { return galerkin_->most_changes(); }
+  /// The coarse operators of the step's K (updated by its `changes` since the last update where
+  /// GalerkinOperators can; null: more than most_changes).
+  void update(Mat K, const GalerkinOperators::Changes* changes) {
+    if (galerkin_->form(K, changes)) coarse_operators();
   }
 
  private:
@@ -407,8 +431,8 @@ inline bool costly_galerkin(const Hierarchy& below, const Matrix& A) {
 }
 
 /// The reduced system of a Newton step (detail::ActiveSetSystem's PETSc form) for the (shifted) LCP
-/// and the box problem: K = A with the active rows and columns replaced by the identity's
-/// (MatZeroRowsColumns: K stays symmetric where A is), solved by KSP — CG (symmetric A) or BiCGSTAB
+/// and the box problem: K = A with the active rows and columns replaced by the identity's (on A's
+/// pattern, written in place: K stays symmetric where A is), solved by KSP — CG (symmetric A) or BiCGSTAB
 /// with hypre BoomerAMG, stopped on the true residual as the serial Krylov solve is; where the serial
 /// rule (ActiveSetSystem::use_iterative) solves exactly, LU (PETSc's on one process, MUMPS on several). Options prefix nrmicp_inner_ (e.g. -nrmicp_inner_pc_hypre_boomeramg_...).
 class System {
@@ -443,14 +467,13 @@ class System {
 
   /// K of the active set `inactive` (rows with kInactive keep A's row; the others are identity rows).
   bool factorize(const std::vector<char>& inactive) {
-    if (!K_) check(MatDuplicate(A_.get(), MAT_COPY_VALUES, &K_), "MatDuplicate");
-    else check(MatCopy(A_.get(), K_, SAME_NONZERO_PATTERN), "MatCopy");
-    active_.clear();
-    for (std::size_t i = 0; i < inactive.size(); ++i)
-      if (!detail::inactive_state(inactive[i])) active_.push_back(static_cast<PetscInt>(A_.row_offset() + i));
-    check(MatZeroRowsColumns(K_, static_cast<PetscInt>(active_.size()), active_.data(), 1.0, nullptr, nullptr),
-          "MatZeroRowsColumns");
-    if (vcycle_) vcycle_->update(K_);
+    if (!K_) {
+      check(MatDuplicate(A_.get(), MAT_COPY_VALUES, &K_), "MatDuplicate");
+      check_diagonal();
+    }
+    const std::size_t most = vcycle_ ? vcycle_->most_changes() : 0;
+    const bool few = write_values(inactive, most);
+    if (vcycle_) vcycle_->update(K_, few ? &changes_ : nullptr);
     check(KSPSetOperators(ksp_, K_, K_), "KSPSetOperators");
     if (ssor_) check(KSPSetOperators(ssor_, K_, K_), "KSPSetOperators");
     inactive_ = inactive;
@@ -489,6 +512,37 @@ class System {
   void set_max_iterations(int k) { max_iterations_ = k; }
 
  private:
+  /// K's values for the active set: A's where row and column are inactive, the identity's elsewhere (what
+  /// MatZeroRowsColumns of the active rows makes of A, written in place: no copy of A, no exchange of the
+  /// rows zeroed). K's changed entries are recorded (changes_, global numbers) up to `most` + 1: whether
+  /// they were all recorded.
+  bool write_values(const std::vector<char>& inactive, std::size_t most) {
+    Eigen::VectorXd keep(static_cast<Eigen::Index>(inactive.size()));
+    for (std::size_t i = 0; i < inactive.size(); ++i) keep[static_cast<Eigen::Index>(i)] = detail::inactive_state(inactive[i]);
+    const Eigen::VectorXd ghost = A_.ghosts(keep);  // the other processes' columns' states
+    const LocalRows a(A_.get(), false);
+    LocalRows k(K_, true);                          // (assembled again when it goes)
+    const PetscInt lo = a.row_begin(), clo = a.col_begin();
+    const PetscInt* columns = a.ghost_columns();
+    changes_.clear();
+    a.for_each_local([&](PetscInt i, bool off, PetscInt c, PetscInt p) {
+      const PetscInt j = off ? columns[c] : clo + c;
+      const double v = keep[i] > 0 && (off ? ghost[c] : keep[c]) > 0 ? a.value(p) : (lo + i == j ? 1.0 : 0.0);
+      double& kv = k.value(p);
+      if (kv == v) return;
+      if (changes_.size() <= most) changes_.push_back({lo + i, j, v - kv});
+      kv = v;
+    });
+    return changes_.size() <= most;
+  }
+  /// Every row of A stores its diagonal (an active row's 1 goes there); every process alike.
+  void check_diagonal() const {
+    const LocalRows a(A_.get(), false);
+    int stored = 1;
+    for (PetscInt i = 0; i < a.rows() && stored; ++i) stored = a.find(i, a.row_begin() + i) >= 0;
+    MPI_Allreduce(MPI_IN_PLACE, &stored, 1, MPI_INT, MPI_LAND, A_.comm().get());
+    if (!stored) throw std::invalid_argument("the PETSc engine's Newton member needs A's diagonal stored in every row");
+  }
   /// One KSP solve from zv to ‖b − Kz‖ ≤ target (1e-12 ‖b‖ when 0), at most `cap` iterations (added
   /// to `its`); whether it converged.
   bool run(KSP ksp, Vec bv, Vec zv, double target, int cap, int& its) const {
@@ -533,7 +587,7 @@ class System {
     } else {
       PC pc = krylov(ksp_);
       if (costly_galerkin(below_, A_)) return boomeramg(pc);
-      vcycle_ = std::make_unique<VCycle>(pc, below_, A_.comm().size());
+      vcycle_ = std::make_unique<VCycle>(pc, A_, below_, A_.comm().size());
     }
     KSPSetOptionsPrefix(ksp_, "nrmicp_inner_");
     check(KSPSetFromOptions(ksp_), "KSPSetFromOptions");
@@ -565,7 +619,7 @@ class System {
   Vec bv_ = nullptr, zv_ = nullptr;
   Mat K_ = nullptr;
   std::unique_ptr<VCycle> vcycle_;  // PCMG's set-up and coarse operators (when it preconditions)
-  std::vector<PetscInt> active_;
+  GalerkinOperators::Changes changes_;  // K's changed entries at the last factorize (write_values)
   std::vector<char> inactive_;
   bool iterative_ = false, lu_ = false, symmetric_ = false;
   mutable std::string name_;  // inner_name's
