@@ -400,46 +400,18 @@ class VCycle {
   std::unique_ptr<GalerkinOperators> galerkin_;
 };
 
-/// Where the hierarchy's coarse operators outweigh a level's matrix by more than this, BoomerAMG
-/// replaces the V-cycle (costly_galerkin).
-inline constexpr double kGalerkinComplexity = 1.3;
-
-/// Sums of the hierarchy's nonzeros (MAT_GLOBAL_SUM: every process decides alike).
-inline double nonzeros(const Matrix& M) {
-  MatInfo info;
-  check(MatGetInfo(M.get(), MAT_GLOBAL_SUM, &info), "MatGetInfo");
-  return info.nz_used;
-}
-inline bool costly_below(const Hierarchy& h, double own) {
-  double below = 0;
-  for (std::size_t l = 0; l < h.levels; ++l) below += nonzeros(h.level[l].A);
-  return below > kGalerkinComplexity * own;
-}
-/// The hierarchy below holds more than `kGalerkinComplexity` times this level's nonzeros (3D, P1
-/// elements): each step's Galerkin operators PᵀKP of every level cost more than a BoomerAMG set-up on
-/// K with aggressive coarsening (docs/MEASUREMENTS.md, "The PETSc engine's reduced solves").
-/// A coarse level also when any coarse level above it is (the levels it reaches by `depth`): the bottom
-/// of a dense hierarchy is small against its own level but not cheap (3D: PtAP with dense P's).
-inline bool costly_galerkin(const Hierarchy& below, const Matrix& A) {
-  if (costly_below(below, nonzeros(A))) return true;
-  for (std::size_t up = 1; up < below.depth; ++up) {
-    const Level* above = below.level - 1 - up;  // a coarse level above this one (this level's A is level[-1].A)
-    const Hierarchy from{const_cast<Level*>(above + 1), below.levels + up, below.depth - up};
-    if (costly_below(from, nonzeros(above->A))) return true;
-  }
-  return false;
-}
-
 /// The reduced system of a Newton step (detail::ActiveSetSystem's PETSc form) for the (shifted) LCP
 /// and the box problem: K = A with the active rows and columns replaced by the identity's (on A's
 /// pattern, written in place: K stays symmetric where A is), solved by KSP — CG (symmetric A) or BiCGSTAB
-/// with hypre BoomerAMG, stopped on the true residual as the serial Krylov solve is; where the serial
-/// rule (ActiveSetSystem::use_iterative) solves exactly, LU (PETSc's on one process, MUMPS on several). Options prefix nrmicp_inner_ (e.g. -nrmicp_inner_pc_hypre_boomeramg_...).
+/// preconditioned by a V-cycle (PCMG) on the hierarchy's Galerkin operators of K (updated by K's changed
+/// entries: cheaper than any per-step AMG set-up, docs/MEASUREMENTS.md), stopped on the true residual as
+/// the serial Krylov solve is; where the serial rule (ActiveSetSystem::use_iterative) solves exactly, LU
+/// (PETSc's on one process, MUMPS on several). Options prefix nrmicp_inner_ (e.g. -nrmicp_inner_pc_type).
 class System {
  public:
-  /// `finest`: the finest level's system (the serial engine's `borrow`: it alone frees the hierarchy's
-  /// operators while it solves); every other level's loose solves try SSOR first where BoomerAMG is used.
-  System(const Matrix& A, const Matrix* B, Inner inner, Hierarchy below = {}, bool finest = false)
+  /// `finest`: the engine interface's `borrow` (the serial engine's finest system frees the hierarchy's
+  /// operators while it solves); this engine keeps them.
+  System(const Matrix& A, const Matrix* B, Inner inner, Hierarchy below = {}, bool /*finest*/ = false)
       : A_(A), below_(below) {
     if (B) throw std::invalid_argument("the PETSc engine has no affine zeta (B): use the serial Newton member");
     PetscInt N;
@@ -449,7 +421,6 @@ class System {
     symmetric_ = A.symmetric();
     check(KSPCreate(A.comm().get(), &ksp_), "KSPCreate");
     configure();
-    if (!finest && iterative_ && costly_galerkin(below_, A_)) ssor_first();
     // the solves' vectors, their arrays the driver's (VecPlaceArray): no 8 MB a million rows per solve
     check(VecCreateMPIWithArray(A.comm().get(), 1, A.rows(), PETSC_DECIDE, nullptr, &bv_), "VecCreateMPIWithArray");
     check(VecDuplicate(bv_, &zv_), "VecDuplicate");
@@ -458,7 +429,6 @@ class System {
   System& operator=(const System&) = delete;
   ~System() {
     KSPDestroy(&ksp_);
-    KSPDestroy(&ssor_);
     vcycle_.reset();
     VecDestroy(&bv_);
     VecDestroy(&zv_);
@@ -475,7 +445,6 @@ class System {
     const bool few = write_values(inactive, most);
     if (vcycle_) vcycle_->update(K_, few ? &changes_ : nullptr);
     check(KSPSetOperators(ksp_, K_, K_), "KSPSetOperators");
-    if (ssor_) check(KSPSetOperators(ssor_, K_, K_), "KSPSetOperators");
     inactive_ = inactive;
     return true;
   }
@@ -488,17 +457,12 @@ class System {
     check(VecPlaceArray(bv_, b.data()), "VecPlaceArray");
     check(VecPlaceArray(zv_, z.data()), "VecPlaceArray");
     int its = 0;
-    // a loose coarse solve: SSOR's CG first, BoomerAMG (its set-up the cost) only if that falls short
-    const bool done = ssor_ && target > 0 && run(ssor_, bv_, zv_, target, ssor_iterations, its);
-    if (!done && !run(ksp_, bv_, zv_, target, max_iterations_, its)) its = max_iterations_ + 1;
+    if (!run(ksp_, bv_, zv_, target, max_iterations_, its)) its = max_iterations_ + 1;
     VecResetArray(bv_);
     VecResetArray(zv_);
     return lu_ ? 0 : its;
   }
   void restore_hierarchy() {}
-  /// The SSOR tries' iterations before BoomerAMG takes over (more did not pay: docs/MEASUREMENTS.md,
-  /// "The PETSc engine's reduced solves").
-  static constexpr int ssor_iterations = 30;
   /// "lu", or the Krylov method and the preconditioner ("cg+mg", "bicgstab+hypre", ...).
   const char* inner_name() const {
     PC pc;
@@ -568,15 +532,6 @@ class System {
     KSPGetPC(ksp, &pc);
     return pc;
   }
-  /// The coarse levels' first try: the same Krylov method with local symmetric SOR (prefix nrmicp_ssor_).
-  void ssor_first() {
-    check(KSPCreate(A_.comm().get(), &ssor_), "KSPCreate");
-    PC pc = krylov(ssor_);
-    PCSetType(pc, PCSOR);
-    PCSORSetSymmetric(pc, SOR_LOCAL_SYMMETRIC_SWEEP);
-    KSPSetOptionsPrefix(ssor_, "nrmicp_ssor_");
-    check(KSPSetFromOptions(ssor_), "KSPSetFromOptions");
-  }
   void configure() {
     if (lu_) {
       KSPSetType(ksp_, KSPPREONLY);
@@ -586,36 +541,16 @@ class System {
       if (A_.comm().size() > 1) PCFactorSetMatSolverType(pc, MATSOLVERMUMPS);  // PETSc's own LU is serial
     } else {
       PC pc = krylov(ksp_);
-      if (costly_galerkin(below_, A_)) return boomeramg(pc);
       vcycle_ = std::make_unique<VCycle>(pc, A_, below_, A_.comm().size());
     }
     KSPSetOptionsPrefix(ksp_, "nrmicp_inner_");
     check(KSPSetFromOptions(ksp_), "KSPSetFromOptions");
     if (vcycle_ && !vcycle_->in_use()) vcycle_.reset();  // -nrmicp_inner_pc_type chose another preconditioner
   }
-  /// BoomerAMG on each step's K: HMIS coarsening, ext+i interpolation (at most 4 weights a row), one
-  /// aggressive level — defaults for this KSP only; the user's -nrmicp_inner_ options win.
-  void boomeramg(PC pc) {
-    PCSetType(pc, PCHYPRE);
-    static const char* ours[][2] = {{"-nrmicp_inner_pc_hypre_boomeramg_coarsen_type", "HMIS"},
-                                    {"-nrmicp_inner_pc_hypre_boomeramg_interp_type", "ext+i"},
-                                    {"-nrmicp_inner_pc_hypre_boomeramg_P_max", "4"},
-                                    {"-nrmicp_inner_pc_hypre_boomeramg_agg_nl", "1"}};
-    std::vector<const char*> set;
-    for (const auto& o : ours) {
-      PetscBool given = PETSC_FALSE;
-      PetscOptionsHasName(nullptr, nullptr, o[0], &given);
-      if (!given && !PetscOptionsSetValue(nullptr, o[0], o[1])) set.push_back(o[0]);
-    }
-    KSPSetOptionsPrefix(ksp_, "nrmicp_inner_");
-    const PetscErrorCode e = KSPSetFromOptions(ksp_);
-    for (const char* name : set) PetscOptionsClearValue(nullptr, name);  // (nothing of ours stays behind)
-    check(e, "KSPSetFromOptions");
-  }
 
   Matrix A_;
   Hierarchy below_;
-  KSP ksp_ = nullptr, ssor_ = nullptr;
+  KSP ksp_ = nullptr;
   Vec bv_ = nullptr, zv_ = nullptr;
   Mat K_ = nullptr;
   std::unique_ptr<VCycle> vcycle_;  // PCMG's set-up and coarse operators (when it preconditions)
