@@ -719,6 +719,11 @@ def case_hooks():
     run("plain", method="nrmgs")
     run("anderson", method="nrmgs", accelerate="anderson", anderson_m=3, record_history=True)
     run("stop_on_one_rank", method="nrmgs", callback=lambda k, z, res: RANK == SIZE - 1 and k == 3)
+
+    def stop_iteration(k, z, res):
+        if RANK == SIZE - 1 and k == 3:
+            raise StopIteration
+    run("stop_iteration_on_one_rank", method="nrmgs", callback=stop_iteration)
     run("two_sweep_theta", method="two_sweep", theta=0.8)
     run("phi", method="nrmgs", phi=0.5)
     run("verbose", method="nrmj", verbose=1)

@@ -68,6 +68,8 @@ def test_anderson_accelerates_on_two_ranks_with_history_and_callback(hooks):
 def test_a_callback_that_stops_on_one_rank_stops_every_rank(hooks):
     r = hooks["stop_on_one_rank"]
     assert r["status"] == "CALLBACK_STOP" and r["iterations"] == 3, r
+    r = hooks["stop_iteration_on_one_rank"]   # StopIteration stops as True does (nrmicp.solve's rule)
+    assert r["status"] == "CALLBACK_STOP" and r["iterations"] == 3, r
 
 
 @pytest.mark.parametrize("name", ["two_sweep_theta", "phi", "verbose"])

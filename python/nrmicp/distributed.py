@@ -6,9 +6,10 @@ call into the core.
 Run under ``mpirun -n P python script.py``; every rank calls :func:`solve` with the same
 arguments for its own rows. A is a petsc4py ``Mat`` (MPIAIJ; or each rank's CSR row block, a
 scipy matrix of shape (n_local, n)), q a petsc4py ``Vec`` with A's row layout (or each rank's
-rows as a numpy array). The heavy work is PETSc's: products, PtAP, KSP (CG / BiCGSTAB) with
-hypre BoomerAMG, whose prolongations are the hierarchy of the nested iteration (hierarchy='amg':
-built by the core, nrmicp/petsc/hierarchy.hpp; PETSc options -nrmicp_hierarchy_... replace its rule). Option names, their checks, the statuses and the result fields are the
+rows as a numpy array). The heavy work is PETSc's: products, KSP (CG / BiCGSTAB) preconditioned by
+a V-cycle (PCMG) on the nested iteration's hierarchy, whose prolongations are hypre BoomerAMG's
+(hierarchy='amg': built by the core, nrmicp/petsc/hierarchy.hpp; PETSc options -nrmicp_hierarchy_...
+replace its rule). Option names, their checks, the statuses and the result fields are the
 serial library's (nrmicp._api, nrmicp._core): one definition.
 
 What is distributed: everything per iteration (products, reductions, the reduced solves, the
@@ -251,7 +252,8 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     member's iterates; 'nrmj' takes them on any number). upper: z ≤ upper, as in :func:`nrmicp.solve`: a constant,
     or an implicit upper bound ('newton' only; its outer fixed point) — :class:`nrmicp.Affine` (B a petsc4py
     Mat in A's layout) or a callable of this rank's rows, as zeta.
-    callback(k, z, res) sees this rank's rows of z; returning True on any rank stops every rank.
+    callback(k, z, res) sees this rank's rows of z; returning True (or raising StopIteration) on any rank stops
+    every rank.
     ``options`` are :func:`nrmicp.solve`'s, with its defaults, checked by the same code (one table:
     nrmicp._options); those that cannot apply on PETSc raise a ValueError naming them:
     ``_UNSUPPORTED`` (scale, components, zeta_jacobian), for 'newton' also ``_UNSUPPORTED_NEWTON``
@@ -268,8 +270,8 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     comm = comm or (A.getComm() if isinstance(A, PETSc.Mat) else PETSc.COMM_WORLD)
     _collective(comm, lambda: _options.validate(options, where="distributed.solve", unsupported=_UNSUPPORTED))
     o = {**_options.defaults(), **options}
-    if o["callback"] is not None:   # each call collective: a failure on one rank raises on all, no rank left waiting
-        o["callback"] = functools.partial(_collective, comm, o["callback"])
+    if o["callback"] is not None:
+        o["callback"] = _collective_callback(comm, o["callback"])
     t_start = time.perf_counter()
     it, units = _criterion({"tol": o["tol"], "rtol": o["rtol"]})
     Am, m, opts, qa, xa, zf = _prepare(A, q, zeta, o["x0"], comm, o, it)
@@ -305,6 +307,17 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     if opts.verbose > 0 and comm.getRank() == 0:
         _log_final(m, r, fields["timings"]["total"])
     return r
+
+
+def _collective_callback(comm, callback):
+    """callback(k, z, res) with each call collective (a failure on one rank raises on all, no rank left
+    waiting); StopIteration stops the solve as True does (nrmicp.solve's rule)."""
+    def call(k, z, res):
+        try:
+            return callback(k, z, res)
+        except StopIteration:
+            return True
+    return functools.partial(_collective, comm, call)
 
 
 def _auto_method(Am, options, comm):

@@ -3,7 +3,7 @@
 // one. A petsc::Matrix is a distributed AIJ Mat; the driver's vectors (Eigen) hold the rows this
 // process owns, so every row-wise decision is the serial code, and only the reductions
 // (petsc::MpiComm), the products (MatMult), the reduced step's solve (KSP: the serial V-cycle in PCMG,
-// BoomerAMG, or LU) and the level's sweeps and fallback (on the process's diagonal block, the
+// or LU) and the level's sweeps and fallback (on the process's diagonal block, the
 // couplings to other processes' rows held) are PETSc's.
 // Needs PETSc (3.18 or later) with hypre; include it before any nrmicp header that instantiates
 // Newton<petsc::Matrix> (nrmicp/petsc.hpp does).
@@ -369,7 +369,7 @@ class VCycle {
   }
 
  private:
-  /// PCMG's coarse levels take the Galerkin operators (new Mats after their first form).
+  /// PCMG's coarse levels take the Galerkin operators (whenever GalerkinOperators::form made new Mats).
   void coarse_operators() {
     const std::size_t L = below_.levels + 1;
     for (std::size_t k = 0; k + 1 < L; ++k) {  // K_{k+1} is PCMG's level L − 2 − k (0: the coarsest)
@@ -378,9 +378,11 @@ class VCycle {
       KSP s;
       check(PCMGGetSmoother(mg_, l, &s), "PCMGGetSmoother");
       check(KSPSetOperators(s, C, C), "KSPSetOperators");
-      if (l == 0) continue;  // the coarse solve has no up smoother
+      if (l == 0) continue;  // the coarse solve has no up smoother, no residual
       check(PCMGGetSmootherUp(mg_, l, &s), "PCMGGetSmootherUp");
       check(KSPSetOperators(s, C, C), "KSPSetOperators");
+      // PCMG keeps the operator of a level's residual from its first set-up: it must follow the smoothers'
+      check(PCMGSetResidual(mg_, l, PCMGResidualDefault, C), "PCMGSetResidual");
     }
   }
   static void smoother(PC pc, PetscInt l, bool down) {

@@ -4,7 +4,7 @@
 // patterns of A's: the first form starts, as the serial engine's, from copies of the hierarchy's
 // operators (A's own Galerkin ones) updated by K − A (else MatPtAP forms them); later steps add
 // P_lᵀ ΔK_l P_l level by level when K changed in few entries (GalerkinUpdate::max_changes of K's
-// entries, counted over every process), else recompute the values (MatPtAP, MAT_REUSE_MATRIX). The
+// entries, counted over every process), else recompute them by MatPtAP (new Mats in place of the copies). The
 // update: on one process detail::GalerkinUpdate, the serial engine's own, on the Mats' CSR arrays; on
 // several, DistributedUpdate (the same terms, the rows of P and C they need exchanged between the
 // processes that own them).
@@ -191,12 +191,13 @@ class GalerkinOperators {
     return detail::GalerkinUpdate<PetscInt>::max_changes(nnz_);
   }
 
-  /// The operators of `fine` (assembled, one pattern throughout): the first time new Mats (returns
-  /// true), the hierarchy's operators (copies) updated by `changes` (fine − A) when there are at most
-  /// most_changes(), else formed by MatPtAP; later updated by `changes` (fine's changed entries since the
-  /// last form, global numbers, rows of this process) when they are at most most_changes() over every
-  /// process, else their values recomputed (MatPtAP, MAT_REUSE_MATRIX). `changes` null: not recorded
-  /// (more than most_changes()). Collective.
+  /// The operators of `fine` (assembled, one pattern throughout): the first time the hierarchy's
+  /// operators (copies) updated by `changes` (fine − A) when there are at most most_changes(), else formed
+  /// by MatPtAP; later updated by `changes` (fine's changed entries since the last form, global numbers,
+  /// rows of this process) when they are at most most_changes() over every process, else recomputed by
+  /// MatPtAP (values only, MAT_REUSE_MATRIX, once they are its products; new Mats when they were the
+  /// copies). Returns whether the Mats are new (K(l) must be handed on again). `changes` null: not
+  /// recorded (more than most_changes()). Collective.
   bool form(Mat fine, const Changes* changes) {
     const std::size_t most = most_changes();
     updated_ = false;
@@ -213,8 +214,10 @@ class GalerkinOperators {
       return true;
     }
     updated_ = updatable_ && update(fine, changes, most);
-    if (!updated_) recompute(fine);
-    return false;
+    if (updated_) return false;
+    const bool fresh = !product_;  // the hierarchy's copies give way to new Mats: PCMG must take them
+    recompute(fine);
+    return fresh;
   }
 
  private:
