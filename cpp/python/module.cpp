@@ -284,6 +284,7 @@ void bind_vocabulary(py::module_& m) {
   tuning["overshoot_growth"] = nrmicp::detail::kOvershootGrowth;
   tuning["overshoot_damping"] = nrmicp::detail::kOvershootDamping;
   tuning["smoothing_sweeps"] = nrmicp::detail::kSmoothingSweeps;
+  tuning["fold_density"] = nrmicp::detail::kFoldDensity;
   m.attr("newton_tuning") = tuning;
   m.def("is_aor_type", &nrmicp::is_aor_type, py::arg("method"),
         "True for the methods whose left matrix is triangular or diagonal (no factorization).");

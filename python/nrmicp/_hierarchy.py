@@ -313,8 +313,8 @@ def _levels(A, components, kw) -> tuple:
         return out, None
     # A first coarse operator denser than A costs more per V-cycle and Newton step than the finest
     # level: folded into the next (P_0 P_1, nonnegative), whose levels use direct interpolation.
-    # "denser" = 1.2x A's nonzeros (docs/MEASUREMENTS.md, "The fold of a denser first coarse level")
-    dense = len(out) == 1 and A.nnz > 1.2 * A_fine.nnz
+    # "denser": the core's fold density (also the PETSc engine's; docs/MEASUREMENTS.md, "The fold of a denser first coarse level")
+    dense = len(out) == 1 and A.nnz > _core.newton_tuning["fold_density"] * A_fine.nnz
     out += [(_canonical(P), _canonical(Ac)) for P, Ac in
             _rs_levels(A, kw["theta"], kw["max_coarse"], kw["max_levels"] - len(out), "direct" if dense else "classical",
                        components)]

@@ -62,6 +62,11 @@ inline bool have_umfpack() {
 
 namespace detail {
 
+/// The symmetry rule of both engines from the squared Frobenius norms of M − Mᵀ and of M.
+inline bool symmetric_within_rounding(double diff2, double norm2) {
+  return std::sqrt(diff2) <= 1e-14 * (norm2 > 0 ? std::sqrt(norm2) : 1.0);
+}
+
 /// ‖M − Mᵀ‖_F ≤ 1e-14 ‖M‖_F, read off M's compressed storage (each entry's mirror found by
 /// binary search in its sorted inner vector; a mirror that is not stored is 0), without
 /// forming Mᵀ, which showed in a nested Newton solve's profile (docs/MEASUREMENTS.md, "Inner solvers
@@ -92,7 +97,7 @@ bool is_symmetric(const SpMat& M) {
         diff += 2 * v[p] * v[p];  // both (k, j) and (j, k) of M − Mᵀ
       }
     }
-  return std::sqrt(diff) <= 1e-14 * (norm > 0 ? std::sqrt(norm) : 1.0);
+  return symmetric_within_rounding(diff, norm);
 }
 
 template <typename SpMat>

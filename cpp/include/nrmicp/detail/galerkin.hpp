@@ -18,6 +18,12 @@
 
 namespace nrmicp::detail {
 
+/// A nesting hierarchy's first coarse operator with more than this many times A's nonzeros is folded
+/// into the next level (P_0 P_1): both set-ups ask it, the serial (nrmicp._hierarchy, through
+/// _core.newton_tuning) and the PETSc engine's (petsc/hierarchy.hpp). 7-point 3D grids give 1.26–1.34,
+/// 2D grids 0.9, P1 0.8, P2 0.64 (docs/MEASUREMENTS.md, "The fold of a denser first coarse level").
+inline constexpr double kFoldDensity = 1.2;
+
 /// One level of a hierarchy below a finer one, as pyamg's MultilevelSolver.Level: P maps this
 /// level to the next finer one, R = Pᵀ (formed once), A = R A_finer P its Galerkin operator.
 template <typename StorageIndex>

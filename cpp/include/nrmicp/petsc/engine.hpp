@@ -191,7 +191,7 @@ class Matrix {
     /// The scatter of ghosts (false on a SeqAIJ Mat: none).
     bool scatter_ghosts() {
       PetscBool mpi = PETSC_FALSE;
-      PetscObjectTypeCompare(reinterpret_cast<PetscObject>(A), MATMPIAIJ, &mpi);
+      PetscObjectBaseTypeCompare(reinterpret_cast<PetscObject>(A), MATMPIAIJ, &mpi);  // (subtypes too)
       if (!mpi) return false;
       Mat Ad, Ao;
       const PetscInt* columns;
@@ -440,8 +440,8 @@ class System {
   /// K of the active set `inactive` (rows with kInactive keep A's row; the others are identity rows).
   bool factorize(const std::vector<char>& inactive) {
     if (!K_) {
+      check_diagonal();  // (first: a throw leaves no K behind for the next solve to skip the check)
       check(MatDuplicate(A_.get(), MAT_COPY_VALUES, &K_), "MatDuplicate");
-      check_diagonal();
     }
     const std::size_t most = vcycle_ ? vcycle_->most_changes() : 0;
     const bool few = write_values(inactive, most);

@@ -34,9 +34,7 @@ struct AmgHierarchy {
 
 /// PETSc options with this prefix build the hierarchy (the rule of amg_hierarchy gives way to them).
 inline constexpr const char* kHierarchyPrefix = "nrmicp_hierarchy_";
-/// A first classical level with more than this many times A's nonzeros is folded into the next
-/// (the serial set-up's threshold: 7-point 3D gives 1.26–1.34, 2D grids 0.9, P1 0.8, P2 0.64).
-inline constexpr double kFoldDensity = 1.2;
+using detail::kFoldDensity;  // (the serial set-up's threshold too)
 
 namespace hierarchy_detail {
 

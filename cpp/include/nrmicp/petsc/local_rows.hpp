@@ -63,7 +63,7 @@ class LocalRows {
  public:
   LocalRows(Mat M, bool write) : M_(M), write_(write) {
     PetscBool mpi = PETSC_FALSE;
-    PetscObjectTypeCompare(reinterpret_cast<PetscObject>(M), MATMPIAIJ, &mpi);
+    PetscObjectBaseTypeCompare(reinterpret_cast<PetscObject>(M), MATMPIAIJ, &mpi);  // (subtypes too)
     d_.seq = M;
     if (mpi) check(MatMPIAIJGetSeqAIJ(M, &d_.seq, &o_.seq, &garray_), "MatMPIAIJGetSeqAIJ");
     check(MatGetOwnershipRange(M, &rstart_, nullptr), "MatGetOwnershipRange");

@@ -54,7 +54,7 @@ inline bool is_symmetric(Mat M) {
   });
   for (const Entry& e : all_to_all(comm, out).data) visit(e.row, e.col, e.value);
   MPI_Allreduce(MPI_IN_PLACE, sums, 2, MPI_DOUBLE, MPI_SUM, comm);
-  return std::sqrt(sums[0]) <= 1e-14 * (sums[1] > 0 ? std::sqrt(sums[1]) : 1.0);
+  return detail::symmetric_within_rounding(sums[0], sums[1]);
 }
 
 }  // namespace nrmicp::petsc
