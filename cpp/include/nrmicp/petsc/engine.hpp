@@ -36,10 +36,6 @@
 
 namespace nrmicp::petsc {
 
-/// A PETSc call's error as an exception (PETSc has printed its trace already).
-inline void check(PetscErrorCode e, const char* what) {
-  if (e) throw std::runtime_error(std::string("PETSc: ") + what + " failed (PETSc error " + std::to_string(e) + ")");
-}
 
 /// The reductions over an MPI communicator (detail::Comm).
 class MpiComm : public detail::Comm {

@@ -244,9 +244,6 @@ class GalerkinOperators {
     for (Mat& C : C_) MatDestroy(&C);
     C_.clear();
   }
-  static void check(PetscErrorCode e, const char* what) {
-    if (e) throw std::runtime_error(std::string("PETSc: ") + what + " failed (PETSc error " + std::to_string(e) + ")");
-  }
   /// Every Mat's rows sorted (MatPtAP's are; the updates search them); every process alike.
   bool sorted(Mat fine) const {
     bool all = LocalRows(fine, false).sorted();

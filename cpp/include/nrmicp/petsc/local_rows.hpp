@@ -17,6 +17,11 @@
 
 namespace nrmicp::petsc {
 
+/// A PETSc call's error as an exception (PETSc has printed its trace already); the engine's one helper.
+inline void check(PetscErrorCode e, const char* what) {
+  if (e) throw std::runtime_error(std::string("PETSc: ") + what + " failed (PETSc error " + std::to_string(e) + ")");
+}
+
 /// Which process owns global index g of a layout whose process p owns [ranges[p], ranges[p + 1]).
 inline int owner_of(const PetscInt* ranges, int processes, PetscInt g) {
   return static_cast<int>(std::upper_bound(ranges, ranges + processes + 1, g) - ranges) - 1;
@@ -29,29 +34,33 @@ struct Received {
   std::vector<std::size_t> from;
 };
 
-/// out[p] sent to process p, for every p, one collective call (trivially copyable items, as bytes).
+/// out[p] sent to process p, for every p, one collective call (trivially copyable items, sent as a
+/// contiguous MPI type of sizeof(T) bytes: counts and offsets in items, so an int holds them).
 template <typename T>
 Received<T> all_to_all(MPI_Comm comm, const std::vector<std::vector<T>>& out) {
   int processes = 1;
   MPI_Comm_size(comm, &processes);
   const auto p = static_cast<std::size_t>(processes);
   std::vector<int> sent(p), got(p), sent_at(p, 0), got_at(p, 0);
-  for (std::size_t r = 0; r < p; ++r) sent[r] = static_cast<int>(out[r].size() * sizeof(T));
+  for (std::size_t r = 0; r < p; ++r) sent[r] = static_cast<int>(out[r].size());
   MPI_Alltoall(sent.data(), 1, MPI_INT, got.data(), 1, MPI_INT, comm);
   std::vector<T> send;
   for (std::size_t r = 0; r < p; ++r) {
-    sent_at[r] = static_cast<int>(send.size() * sizeof(T));
+    sent_at[r] = static_cast<int>(send.size());
     send.insert(send.end(), out[r].begin(), out[r].end());
   }
   Received<T> in;
   in.from.assign(p + 1, 0);
   for (std::size_t r = 0; r < p; ++r) {
-    got_at[r] = static_cast<int>(in.from[r] * sizeof(T));
-    in.from[r + 1] = in.from[r] + static_cast<std::size_t>(got[r]) / sizeof(T);
+    got_at[r] = static_cast<int>(in.from[r]);
+    in.from[r + 1] = in.from[r] + static_cast<std::size_t>(got[r]);
   }
   in.data.resize(in.from[p]);
-  MPI_Alltoallv(send.data(), sent.data(), sent_at.data(), MPI_BYTE, in.data.data(), got.data(), got_at.data(), MPI_BYTE,
-                comm);
+  MPI_Datatype item;
+  MPI_Type_contiguous(static_cast<int>(sizeof(T)), MPI_BYTE, &item);
+  MPI_Type_commit(&item);
+  MPI_Alltoallv(send.data(), sent.data(), sent_at.data(), item, in.data.data(), got.data(), got_at.data(), item, comm);
+  MPI_Type_free(&item);
   return in;
 }
 
@@ -161,9 +170,6 @@ class LocalRows {
     const PetscInt *ia = nullptr, *ja = nullptr;
     PetscScalar* va = nullptr;
   };
-  static void check(PetscErrorCode e, const char* what) {
-    if (e) throw std::runtime_error(std::string("PETSc: ") + what + " failed (PETSc error " + std::to_string(e) + ")");
-  }
   static PetscInt nnz(const Block& b) { return b.seq ? b.ia[b.rows] : 0; }
   static PetscInt search(const Block& b, PetscInt i, PetscInt c) {
     const PetscInt* at = std::lower_bound(b.ja + b.ia[i], b.ja + b.ia[i + 1], c);
