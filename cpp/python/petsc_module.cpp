@@ -147,7 +147,7 @@ py::dict amg_levels(std::uintptr_t A) {
     PetscInt n;
     nrmicp::petsc::check(MatGetSize(C.get(), &n, nullptr), "MatGetSize");
     rows.append(n);
-    nonzeros.append(nrmicp::petsc::hierarchy_detail::global_nonzeros(C.get()));
+    nonzeros.append(static_cast<double>(nrmicp::petsc::global_nonzeros(C.get())));
   }
   py::dict d;
   d["rows"] = rows;

@@ -238,7 +238,7 @@ void run_amg(const Case& c, const char* what) {
     CHECK_FALSE(options_left());
     REQUIRE(h.prolongations.size() >= 2);
     REQUIRE(h.coarse_operators.size() == h.prolongations.size());
-    CHECK(petsc::hierarchy_detail::global_nonzeros(h.coarse_operators[0].get()) <=
+    CHECK(static_cast<double>(petsc::global_nonzeros(h.coarse_operators[0].get())) <=
           petsc::kFoldDensity * static_cast<double>(c.A.nonZeros()));
     Mat finer = A;
     for (std::size_t l = 0; l < h.prolongations.size(); ++l) {

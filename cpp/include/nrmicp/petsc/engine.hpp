@@ -36,7 +36,6 @@
 
 namespace nrmicp::petsc {
 
-
 /// The reductions over an MPI communicator (detail::Comm).
 class MpiComm : public detail::Comm {
  public:
@@ -314,8 +313,7 @@ struct Level {
 struct Hierarchy {
   Level* level = nullptr;
   std::size_t levels = 0;
-  std::size_t depth = 0;  ///< the coarse levels above this hierarchy (0: it is the finest level's)
-  Hierarchy below() const { return levels ? Hierarchy{level + 1, levels - 1, depth + 1} : *this; }
+  Hierarchy below() const { return levels ? Hierarchy{level + 1, levels - 1} : *this; }
 };
 
 /// The serial V-cycle (detail/multigrid.hpp) in PETSc's PCMG, set up on `pc` over the hierarchy below a

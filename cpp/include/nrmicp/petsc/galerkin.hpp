@@ -172,7 +172,7 @@ class GalerkinOperators {
   explicit GalerkinOperators(std::vector<Mat> P, Mat A = nullptr, std::vector<Mat> coarse = {})
       : P_(std::move(P)), A_(A), coarse_(std::move(coarse)) {
     if (!A_ || coarse_.size() != P_.size()) coarse_.clear();
-    if (!coarse_.empty()) nnz_ = nonzeros(A_);
+    if (!coarse_.empty()) nnz_ = global_nonzeros(A_);
   }
   GalerkinOperators(const GalerkinOperators&) = delete;
   GalerkinOperators& operator=(const GalerkinOperators&) = delete;
@@ -210,7 +210,7 @@ class GalerkinOperators {
         check(MatPtAP(l ? C_[l - 1] : fine, P_[l], MAT_INITIAL_MATRIX, 2.0, &C_[l]), "MatPtAP");
       product_ = true;
       updatable_ = sorted(fine);
-      nnz_ = nonzeros(fine);
+      nnz_ = global_nonzeros(fine);
       return true;
     }
     updated_ = updatable_ && update(fine, changes, most);
@@ -252,12 +252,6 @@ class GalerkinOperators {
       all = LocalRows(C_[l], false).sorted() && all;
     }
     return all;
-  }
-  /// M's stored entries, every process's.
-  static Eigen::Index nonzeros(Mat M) {
-    std::uint64_t nnz = static_cast<std::uint64_t>(LocalRows(M, false).nonzeros());
-    MPI_Allreduce(MPI_IN_PLACE, &nnz, 1, MPI_UINT64_T, MPI_SUM, comm_of(M));
-    return static_cast<Eigen::Index>(nnz);
   }
   static MPI_Comm comm_of(Mat M) {
     MPI_Comm c;

@@ -113,13 +113,6 @@ inline AmgHierarchy set_up(Mat A, const std::string& prefix, const std::vector<O
   return h;
 }
 
-/// Nonzeros of M over every process (every process decides alike).
-inline double global_nonzeros(Mat M) {
-  MatInfo info;
-  check(MatGetInfo(M, MAT_GLOBAL_SUM, &info), "MatGetInfo");
-  return info.nz_used;
-}
-
 /// P_0 P_1 in place of P_0 and P_1, the operator between them dropped.
 inline void fold_first(AmgHierarchy& h) {
   Mat F;
@@ -143,7 +136,8 @@ inline AmgHierarchy amg_hierarchy(const Matrix& A, const std::string& prefix = k
   const std::string max_levels = b + "max_levels", coarse = b + "relax_type_coarse";
   AmgHierarchy h = set_up(A.get(), prefix, {{max_levels.c_str(), "2"}, {coarse.c_str(), "symmetric-SOR/Jacobi"}});
   if (h.prolongations.empty()) return h;
-  const bool dense = global_nonzeros(h.coarse_operators[0].get()) > kFoldDensity * global_nonzeros(A.get());
+  const bool dense = static_cast<double>(global_nonzeros(h.coarse_operators[0].get())) >
+                     kFoldDensity * static_cast<double>(global_nonzeros(A.get()));
   const std::string coarsen = b + "coarsen_type", interp = b + "interp_type", p_max = b + "P_max";
   std::vector<Option> below;
   if (dense) below = {{coarsen.c_str(), "HMIS"}, {interp.c_str(), "ext+i"}, {p_max.c_str(), "4"}};

@@ -22,6 +22,13 @@ inline void check(PetscErrorCode e, const char* what) {
   if (e) throw std::runtime_error(std::string("PETSc: ") + what + " failed (PETSc error " + std::to_string(e) + ")");
 }
 
+/// M's stored entries over every process (every process decides alike; collective).
+inline Eigen::Index global_nonzeros(Mat M) {
+  MatInfo info;
+  check(MatGetInfo(M, MAT_GLOBAL_SUM, &info), "MatGetInfo");
+  return static_cast<Eigen::Index>(info.nz_used);
+}
+
 /// Which process owns global index g of a layout whose process p owns [ranges[p], ranges[p + 1]).
 inline int owner_of(const PetscInt* ranges, int processes, PetscInt g) {
   return static_cast<int>(std::upper_bound(ranges, ranges + processes + 1, g) - ranges) - 1;
