@@ -90,15 +90,15 @@ def test_units_table():
 
 
 def test_qvi_operator_table():
-    # the QVIs with zeta' as a LinearOperator against the outer fixed point (benchmarks/qvi_operator.py)
-    rows = table_rows(run("qvi_operator.py", "--achp", "63", "--thermo2d", "15", "--sin", "15"))
-    assert [r[0] for r in rows] == [f"{p}, {how}" for p in ("ACHP 1D", "thermoforming_2d κ=2 δ=1", "ψ + 0.2 sin z")
-                                    for how in ("zeta' operator", "outer fixed point")]
-    for with_j, without in zip(rows[::2], rows[1::2]):
-        assert 1 <= int(with_j[2]) <= 6 and int(with_j[5]) > 0, with_j   # Newton steps, FGMRES iterations
-        for r in (with_j, without):
-            assert r[8] == "CONVERGED" and float(r[10]) < 1e-8, r  # the numpy complementarity check
-        assert float(without[12]) < 1e-8, without  # the two answers agree
+    # README "Quasi-variational inequalities": issue 37's table (benchmarks/qvi_operator.py) on its smallest sizes:
+    # each scene with zeta' and without it converges to an answer numpy's complementarity check accepts
+    rows = table_rows(run("qvi_operator.py", "--achp", "63", "--thermo2d", "15", "--impulse", "101", "--sin", "15"))
+    assert [r[0] for r in rows] == ["ACHP 1D", "thermoforming_2d κ=2 δ=1", "impulse control", "ψ + 0.2 sin z"]
+    for r in rows:
+        assert 1 <= int(r[2]) <= 6 and 1 <= int(r[5]) <= 20, r   # Newton steps with zeta', outer steps without
+        assert r[4].startswith("CONVERGED") and r[7].startswith("CONVERGED"), r
+        assert float(r[8]) < 1e-8, r                              # numpy's check of both answers
+        assert float(r[11]) >= 0 and float(r[12]) > 0 and float(r[13]) > 0, r   # obstacle CPU s, the ratios
 
 
 def test_qvi_outer_table():
@@ -109,16 +109,6 @@ def test_qvi_outer_table():
     for r in rows:
         assert r[5] == "CONVERGED" and float(r[7]) < 1e-8, r  # the numpy complementarity check
         assert float(r[9]) >= 0 and float(r[10]) > 0, r       # the frozen obstacle's CPU s, the ratio
-
-
-def test_qvi_scaling_table():
-    # issue 37's remaining QVI targets (benchmarks/qvi_scaling.py), on its smallest sizes
-    rows = table_rows(run("qvi_scaling.py", "--impulse", "101", "--sin", "31"))
-    assert [r[0] for r in rows] == ["impulse control, with zeta'", "impulse control, without zeta'",
-                                    "ψ + 0.2 sin z, zeta' sparse", "ψ + 0.2 sin z, zeta' operator"]
-    for r in rows:
-        assert r[7] == "CONVERGED" and float(r[9]) < 1e-8, r  # the numpy check (impulse: against policy iteration)
-    assert 1 <= int(rows[0][2]) <= 6 and all(1 <= int(r[2]) <= 3 for r in rows[2:]), rows
 
 
 def test_qvi_units_table():
