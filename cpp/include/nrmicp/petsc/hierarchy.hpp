@@ -8,8 +8,8 @@
 // The rule (the serial amg set-up's fold, python/nrmicp/_hierarchy.py): one classical level first (hypre's
 // Falgout coarsening, classical interpolation); where it holds more than kFoldDensity times A's nonzeros
 // (7-point 3D grids) it is folded into the next (P_0 P_1, its operator not kept) and the levels below it
-// use HMIS coarsening and ext+i interpolation with at most 4 weights a row — hypre's options for dense
-// operators; elsewhere (2D grids, P1 and P2 elements) the levels below are classical too
+// use HMIS coarsening and direct interpolation with at most 4 weights a row (direct, as the serial fold's
+// levels below: its coarse levels and finest steps; ext+i took a fifth step in 3D); elsewhere (2D grids, P1 and P2 elements) the levels below are classical too
 // (docs/MEASUREMENTS.md, "The nesting hierarchy on PETSc"). PETSc options with the prefix
 // nrmicp_hierarchy_ replace the rule: one set-up of the PC with them (-nrmicp_hierarchy_pc_hypre_boomeramg_...,
 // or -nrmicp_hierarchy_pc_type gamg: any PC with PCGetInterpolations), hypre's defaults otherwise.
@@ -140,7 +140,7 @@ inline AmgHierarchy amg_hierarchy(const Matrix& A, const std::string& prefix = k
                      kFoldDensity * static_cast<double>(global_nonzeros(A.get()));
   const std::string coarsen = b + "coarsen_type", interp = b + "interp_type", p_max = b + "P_max";
   std::vector<Option> below;
-  if (dense) below = {{coarsen.c_str(), "HMIS"}, {interp.c_str(), "ext+i"}, {p_max.c_str(), "4"}};
+  if (dense) below = {{coarsen.c_str(), "HMIS"}, {interp.c_str(), "direct"}, {p_max.c_str(), "4"}};
   AmgHierarchy rest = set_up(h.coarse_operators[0].get(), prefix, below);
   for (auto& P : rest.prolongations) h.prolongations.push_back(std::move(P));
   for (auto& C : rest.coarse_operators) h.coarse_operators.push_back(std::move(C));
