@@ -313,11 +313,16 @@ class NewtonLevel {
     constexpr double inf = std::numeric_limits<double>::infinity();
     if (!comm_.all(v.allFinite())) return inf;
     if (!comm_.all(eval_zeta(zeta, v, zv))) return std::numeric_limits<double>::quiet_NaN();
+    return icp_residual_at(q, v, zv, wv, upper);
+  }
+  /// The same with ζ(v) = zv given (a finite v): no evaluation of ζ.
+  double icp_residual_at(const Vector& q, const Vector& v, const Vector& zv, Vector& wv,
+                         const Vector& upper = Vector()) const {
     ScopedTimer t(timings().spmv);
     multiply(A_, v, wv);
     wv += q;
     const double r = bounded_residual(wv, v - zv, v, upper, comm_);
-    return std::isnan(r) ? inf : r;
+    return std::isnan(r) ? std::numeric_limits<double>::infinity() : r;
   }
 
   /// Res of the ICP at v with ζ(v) = zv given: ‖min(Av + q, v − zv)‖.

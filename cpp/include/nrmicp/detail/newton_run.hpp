@@ -30,6 +30,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <optional>
@@ -225,6 +226,151 @@ struct NewtonTuning {
   static constexpr double outer_trust = 0.1;
 };
 
+/// The bounds ψ ≤ z ≤ u of an obstacle problem as the box problem in y = z − s (ShiftedBounds, the
+/// Newton member's: a problem with bounds is not shifted), with the q of that problem, q + A s.
+template <typename MatrixType>
+struct ObstacleFrame {
+  using Vector = Eigen::VectorXd;
+  ShiftedBounds bounds;
+  Vector shifted_q;  ///< q + A s (empty when not shifted: the problem's q itself)
+
+  ObstacleFrame(const MatrixType& A, const Vector& q, const Vector& psi, const Vector& upper, const Comm& comm,
+                Timings& tm)
+      : bounds(psi, upper, false, comm) {
+    if (!bounds.shifted()) return;
+    ScopedTimer t(tm.spmv);
+    shifted_q = q;
+    multiply_add(A, bounds.s, shifted_q);
+  }
+  const Vector& q(const Vector& q0) const { return bounds.shifted() ? shifted_q : q0; }
+  const Box& box() const { return bounds.box; }
+  const Vector& s() const { return bounds.s; }
+};
+
+/// An obstacle problem of a QVI, its bounds those at an outer step's z: the nested start takes
+/// them afresh at each level (NestedStart::refreshed). `at(z, lower, upper)`: the bounds at z, the
+/// lower one capped by the upper where they cross, the upper one unchanged unless it is implicit
+/// (false: ζ or u failed there). `lower`, `upper`: the bounds the solve was given, then those of the
+/// finest level; `z`: where those were taken (z_f); `moved`: whether they changed on the way.
+struct RefreshedBounds {
+  using Vector = Eigen::VectorXd;
+  std::function<bool(const Vector& z, Vector& lower, Vector& upper)> at;
+  Vector lower, upper, z;
+  bool moved = false;
+};
+
+/// The nested start of an obstacle problem: Newton on each coarse level to a settled active set,
+/// coarse to fine, each solution prolongated (Box::prolongate) as the next level's start.
+template <typename MatrixType>
+class NestedStart {
+ public:
+  using Vector = Eigen::VectorXd;
+  using Frame = ObstacleFrame<MatrixType>;
+
+  NestedStart(const NewtonLevels<MatrixType>& levels, NewtonTally<MatrixType>& tally) : levels_(levels), tally_(tally) {}
+
+  /// The start for the box problem `box` of LCP(q_shift, A) (empty: y ≥ 0), its bounds frozen.
+  Vector frozen(const Vector& q_shift, const Box& box) {
+    levels_.finest->restore_hierarchy();  // the coarse levels solve on the A_l its V-cycle freed
+    const Chain c = chain(q_shift, box);
+    Vector y = Vector::Zero(levels_.coarse.back()->size());
+    for (std::size_t l = levels_.coarse.size(); l >= 1; --l) y = solve_level(l, c, y);
+    return y;
+  }
+
+  /// The start of a QVI's obstacle problem (bounds ψ = `psi`, `upper` taken at the outer step's z):
+  /// the coarsest level on them, each finer one on the bounds at z_f, the finest prolongation of the
+  /// coarser answer (fresh.at: one evaluation of ζ a level), from that answer in the new variables,
+  /// y = P y_c + R̃(s_old − s_new) projected (R̃ = Pᵀ at unit row sums). A bound frozen at the outer
+  /// step's z would leave the free boundary where ζ(z) puts it, and the finest solve peel the rest a
+  /// grid layer a step (docs/MEASUREMENTS.md, "A nested start that re-takes ζ a level").
+  /// `f` becomes the finest level's frame; fresh says where it was taken. Where the bounds do not
+  /// change, nothing else does; after ζ or u failed, the levels keep the last bounds.
+  Vector refreshed(const Vector& q, const Vector& psi, const Vector& upper, Frame& f, RefreshedBounds& fresh) {
+    levels_.finest->restore_hierarchy();
+    fresh.lower = psi;
+    fresh.upper = upper;
+    Chain c = chain(f.q(q), f.box());
+    Vector y = Vector::Zero(levels_.coarse.back()->size()), lower, up;
+    bool failed = false;
+    for (std::size_t l = levels_.coarse.size(); l >= 1; --l) {
+      y = solve_level(l, c, y);
+      if (failed) continue;
+      Vector z = to_finest(c, y, l - 1, f.s());
+      if ((failed = !comm().all(fresh.at(z, lower, up)))) continue;
+      fresh.z.swap(z);
+      if (comm().all(lower == fresh.lower && up == fresh.upper)) continue;
+      Frame g(levels_.A, q, lower, up, comm(), tally_.timings());
+      shift_start(y, l - 1, f.s(), g.s());
+      f = std::move(g);
+      fresh.lower.swap(lower);
+      fresh.upper.swap(up);
+      fresh.moved = true;
+      c = chain(f.q(q), f.box());
+      c.boxes[l - 1].project(y);
+    }
+    return y;
+  }
+
+ private:
+  /// Each level's q and box: restricted (R q) resp. injected (Box::coarse) from the finer level's.
+  struct Chain {
+    std::vector<Vector> qs;
+    std::vector<Box> boxes;  // empty for the LCP
+  };
+  Chain chain(const Vector& q_shift, const Box& box) const {
+    const std::size_t L = levels_.coarse.size();
+    Chain c{std::vector<Vector>(L + 1), std::vector<Box>(L + 1)};
+    c.qs[0] = q_shift;
+    c.boxes[0] = box;
+    for (std::size_t l = 0; l < L; ++l) {
+      multiply(levels_.hierarchy[l].R, c.qs[l], c.qs[l + 1]);
+      c.boxes[l + 1] = c.boxes[l].coarse(levels_.hierarchy[l].P);
+    }
+    return c;
+  }
+  /// Coarse level l's problem from y, to a settled active set; its answer prolongated to level l − 1.
+  Vector solve_level(std::size_t l, const Chain& c, const Vector& y) {
+    NewtonControl ctl;
+    ctl.solve.maxiter = NewtonTuning::coarse_maxiter;
+    ctl.forcing = ctl.first_forcing = NewtonTuning::coarse_forcing;
+    ctl.repeat_trust = NewtonTuning::coarse_repeat_trust;
+    ctl.sweep_budget = 1000;
+    const auto t0 = std::chrono::steady_clock::now();
+    auto& level = *levels_.coarse[l - 1];
+    const auto out = newton_loop(level, level.lcp_system(), c.qs[l], nullptr, nullptr, y, ctl, &c.boxes[l]);
+    tally_.absorb(out, static_cast<int>(l), ScopedTimer::seconds_since(t0));
+    Vector next = c.boxes[l - 1].prolongate(levels_.hierarchy[l - 1].P, c.boxes[l], out.z);
+    level.release();
+    return next;
+  }
+  /// z on the finest level of the start y of level k: prolongated level by level, y + s there.
+  Vector to_finest(const Chain& c, Vector y, std::size_t k, const Vector& s) const {
+    for (; k > 0; --k) y = c.boxes[k - 1].prolongate(levels_.hierarchy[k - 1].P, c.boxes[k], y);
+    if (s.size()) y += s;
+    return y;
+  }
+  /// y (level k, in y = z − s_old) into y = z − s_new: y + R̃(s_old − s_new), R̃ level by level Pᵀ
+  /// scaled to unit row sums (an average of the fine rows a coarse row reaches); an empty s is 0.
+  void shift_start(Vector& y, std::size_t k, const Vector& s_old, const Vector& s_new) const {
+    if (!s_old.size() && !s_new.size()) return;
+    Vector d = s_old.size() ? s_old : Vector::Zero(s_new.size()), r, weight;
+    if (s_new.size()) d -= s_new;
+    for (std::size_t j = 0; j < k; ++j) {
+      const auto& R = levels_.hierarchy[j].R;
+      multiply(R, d, r);
+      multiply(R, Vector::Ones(d.size()), weight);
+      d = (weight.array() != 0).select(r.array() / weight.array(), 0.0).matrix();
+    }
+    y += d;
+  }
+  /// The reductions over every process (the finest level's engine).
+  const Comm& comm() const { return levels_.finest->comm(); }
+
+  const NewtonLevels<MatrixType>& levels_;
+  NewtonTally<MatrixType>& tally_;
+};
+
 /// One solve's obstacle problems ψ ≤ z (≤ upper): ζ none or constant, and the inner solves of the
 /// strategies by ζ. The finest level's loop from the nested start, the user's start or the last
 /// inner solve's active set; their statistics go to the solve's tally.
@@ -232,6 +378,7 @@ template <typename MatrixType>
 class ObstacleSolver {
  public:
   using Vector = Eigen::VectorXd;
+  using Frame = ObstacleFrame<MatrixType>;
 
   /// `upper`: the upper bounds of z (empty: none).
   ObstacleSolver(const NewtonLevels<MatrixType>& levels, const Options& o, const Hooks& hooks, const Vector& upper,
@@ -244,21 +391,14 @@ class ObstacleSolver {
   /// callback), not an inner one. `set` (optional): the inactive set to start from, replaced by the final one.
   /// z ≤ upper too; ψ and upper may be −∞ resp. +∞ in places (ShiftedBounds: the box problem in y).
   /// tol, maxiter < 0: the solve's. `upper` (optional): this problem's upper bounds in place of the
-  /// solve's (an implicit upper bound frozen at an outer step's z).
+  /// solve's (an implicit upper bound frozen at an outer step's z). `fresh` (optional): the bounds are
+  /// a QVI's, taken afresh at each level of the nested start (NestedStart::refreshed), which then
+  /// says where the finest level's were taken; the answer is that problem's.
   Result solve(const Vector& q, const Vector& psi, const Vector* z0, bool nest, double tol, int maxiter, bool report,
-               std::vector<char>* set, const Vector* upper = nullptr) {
-    const ShiftedBounds bounds(psi, upper ? *upper : upper_, false, comm());
-    const Box& box = bounds.box;
-    const bool shifted = bounds.shifted();
-    Vector shifted_q;
-    if (shifted) {
-      ScopedTimer t(tally_.timings().spmv);
-      shifted_q = q;
-      multiply_add(levels_.A, bounds.s, shifted_q);
-    }
-    const Vector& q_shift = shifted ? shifted_q : q;
-    Vector y0 = !z0 ? Vector::Zero(q.size()) : shifted ? Vector(*z0 - bounds.s) : Vector(*z0);
-    box.project(y0);
+               std::vector<char>* set, const Vector* upper = nullptr, RefreshedBounds* fresh = nullptr) {
+    Frame f(levels_.A, q, psi, upper ? *upper : upper_, comm(), tally_.timings());
+    Vector y0 = !z0 ? Vector::Zero(q.size()) : f.bounds.shifted() ? Vector(*z0 - f.s()) : Vector(*z0);
+    f.box().project(y0);
     const bool nested = nest && !levels_.coarse.empty();
     const double level_tol = tol >= 0 ? tol : o_.tol;
     int budget = maxiter >= 0 ? maxiter : o_.maxiter;
@@ -268,23 +408,23 @@ class ObstacleSolver {
     // whose active set is far off although its Res is small (another problem's solution: it peels),
     // after warm_steps (docs/MEASUREMENTS.md, "Warm starts with a hierarchy").
     std::optional<LevelOutcome> tried;
-    const Vector& s = bounds.s;
-    if (nested && report && z0 && !comm().all(z0->isZero(0.0)) && closer_than_cold(q_shift, y0, box)) {
+    if (nested && report && z0 && !comm().all(z0->isZero(0.0)) && closer_than_cold(f.q(q), y0, f.box())) {
       const auto t0 = std::chrono::steady_clock::now();
-      tried = finest_lcp(q_shift, y0, guess_control(s, level_tol, std::min(budget, NewtonTuning::warm_steps), true), box);
+      tried = finest_lcp(f.q(q), y0, guess_control(f.s(), level_tol, std::min(budget, NewtonTuning::warm_steps), true), f.box());
       if (tried->status != Status::MaxIterations || budget <= NewtonTuning::warm_steps)
-        return finish_obstacle(*tried, *tried, bounds.s, q, t0);
+        return finish_obstacle(*tried, *tried, f.s(), q, t0);
       tally_.absorb(*tried, 0, ScopedTimer::seconds_since(t0));
       budget -= tried->steps;
     }
-    if (nested) y0 = nested_start(q_shift, box);
+    if (nested) y0 = fresh ? start_.refreshed(q, psi, upper ? *upper : upper_, f, *fresh) : start_.frozen(f.q(q), f.box());
     const auto t0 = std::chrono::steady_clock::now();
+    const Vector& s = f.s();  // (the finest level's frame: the refreshed start's bounds)
     const auto control = nested ? guess_control(s, level_tol, budget, report) : finest_control(s, level_tol, budget, report);
-    const auto out = set && !set->empty() ? from_set(q_shift, y0, *set, control, box) : finest_lcp(q_shift, y0, control, box);
+    const auto out = set && !set->empty() ? from_set(f.q(q), y0, *set, control, f.box()) : finest_lcp(f.q(q), y0, control, f.box());
     if (set && !out.inactive.empty()) *set = out.inactive;
     // maxiter spent on both: the warm try's iterate when the nested run ended no better
     const bool keep_try = tried && out.status != Status::Converged && tried->residual < out.residual;
-    return finish_obstacle(out, keep_try ? *tried : out, bounds.s, q, t0);
+    return finish_obstacle(out, keep_try ? *tried : out, s, q, t0);
   }
 
   /// The control of a finest-level loop; `report`: this loop is the problem being solved.
@@ -357,41 +497,12 @@ class ObstacleSolver {
     return finest_lcp(q_shift, y0, control, box);
   }
 
-  /// Nested start for LCP(q_shift, A) in y ≥ 0: Newton on each coarse level to a settled active
-  /// set, coarse to fine, each solution prolongated and projected onto y ≥ 0.
-  Vector nested_start(const Vector& q_shift, const Box& box) {
-    levels_.finest->restore_hierarchy();  // the coarse levels solve on the A_l its V-cycle freed
-    const std::size_t L = levels_.coarse.size();
-    std::vector<Vector> qs(L + 1);
-    std::vector<Box> boxes(L + 1);  // empty for the LCP
-    qs[0] = q_shift;
-    boxes[0] = box;
-    for (std::size_t l = 0; l < L; ++l) {
-      multiply(levels_.hierarchy[l].R, qs[l], qs[l + 1]);
-      boxes[l + 1] = boxes[l].coarse(levels_.hierarchy[l].P);
-    }
-    Vector y = Vector::Zero(L ? levels_.coarse.back()->size() : q_shift.size());
-    NewtonControl c;
-    c.solve.maxiter = NewtonTuning::coarse_maxiter;
-    c.forcing = c.first_forcing = NewtonTuning::coarse_forcing;
-    c.repeat_trust = NewtonTuning::coarse_repeat_trust;
-    c.sweep_budget = 1000;
-    for (std::size_t l = L; l >= 1; --l) {
-      const auto t0 = std::chrono::steady_clock::now();
-      auto& level = *levels_.coarse[l - 1];
-      const auto out = newton_loop(level, level.lcp_system(), qs[l], nullptr, nullptr, y, c, &boxes[l]);
-      tally_.absorb(out, static_cast<int>(l), ScopedTimer::seconds_since(t0));
-      y = boxes[l - 1].prolongate(levels_.hierarchy[l - 1].P, boxes[l], out.z);
-      level.release();
-    }
-    return y;
-  }
-
   const NewtonLevels<MatrixType>& levels_;
   const Options& o_;
   const Hooks& hooks_;
   const Vector& upper_;
   NewtonTally<MatrixType>& tally_;
+  NestedStart<MatrixType> start_{levels_, tally_};
 };
 
 /// One solve: the strategies by ζ, and the statistics they gather over levels and outer steps.
@@ -417,8 +528,8 @@ class NewtonRun {
   /// The obstacle problem z ≥ ψ (ObstacleSolver::solve; tol, maxiter < 0: the solve's).
   Result solve_obstacle(const Vector& q, const Vector& psi, const Vector* z0, bool nest, double tol = -1,
                         int maxiter = -1, bool report = true, std::vector<char>* set = nullptr,
-                        const Vector* upper = nullptr) {
-    return obstacle_.solve(q, psi, z0, nest, tol, maxiter, report, set, upper);
+                        const Vector* upper = nullptr, RefreshedBounds* fresh = nullptr) {
+    return obstacle_.solve(q, psi, z0, nest, tol, maxiter, report, set, upper, fresh);
   }
 
   /// ζ(z) = Bz + c: Newton on the full system, from the obstacle problem with ψ = ζ(z0) (or
@@ -483,7 +594,7 @@ class NewtonRun {
     outer_set_.clear();
     outer_ok_ = outer_mode_ = true;
     step_set_.clear();
-    if (!(z0 && !nest_)) outer_solve(q, psi, z0, nest_, std::min(start_maxiter, o_.maxiter));
+    if (!(z0 && !nest_)) outer_solve(q, psi, z0, nest_, std::min(start_maxiter, o_.maxiter), zeta_bounds(zeta));
     const Vector start = (z0 && !nest_) ? *z0 : outer_z_;
     const auto t0 = std::chrono::steady_clock::now();
     SemismoothRecord record;
@@ -540,10 +651,13 @@ class NewtonRun {
 
   /// The obstacle problem's solution S(ψ) from z (null: zeros, nested when `nest`), from the active
   /// set of the last one, to a settled set; kept with its inactive set (outer_z_, outer_set_): the
-  /// semismooth loop's outer steps.
+  /// semismooth loop's outer steps. `fresh`: ψ = ζ(z), taken afresh a level when nested (the
+  /// solution is then S(ζ(z_f)): the start of the Newton steps, wherever it came from).
   /// Returns its Res (of the obstacle problem).
-  double outer_solve(const Vector& q, const Vector& psi, const Vector* z, bool nest, int maxiter) {
-    Result inner = solve_obstacle(q, psi, z, nest, 0.0, maxiter, false, &outer_set_);
+  double outer_solve(const Vector& q, const Vector& psi, const Vector* z, bool nest, int maxiter,
+                     RefreshedBounds fresh = {}) {
+    Result inner = solve_obstacle(q, psi, z, nest, 0.0, maxiter, false, &outer_set_, nullptr,
+                                  nest && fresh.at ? &fresh : nullptr);
     outer_z_.swap(inner.z);
     return inner.residual;
   }
@@ -556,6 +670,13 @@ class NewtonRun {
     const double res_obstacle = outer_solve(q, psi, &z, false, std::max(1, o_.maxiter - tally_.nit()));
     outer_ok_ = !(res_obstacle > NewtonTuning::outer_trust * res_z);
     return outer_ok_;
+  }
+  /// The bounds of the semismooth loop's outer steps at z: ζ(z), the run's upper bound.
+  RefreshedBounds zeta_bounds(const Z& zeta) const {
+    return {[this, &zeta](const Vector& z, Vector& lower, Vector& upper) {
+      upper = upper_;
+      return comm().all(levels_.finest->eval_zeta(zeta, z, lower));
+    }};
   }
   /// z is the last outer step's solution (its active set is outer_set_).
   bool is_outer(const Vector& z) const { return outer_z_.size() == z.size() && outer_z_ == z; }
@@ -606,6 +727,9 @@ struct NewtonRun<MatrixType>::Outer {
   const Z& zeta;
   std::vector<char> set;  // the last inner solve's inactive set: the next one starts from it
   Vector w, capped;
+  Vector start_z;         // z_f of the first inner solve's nested start, when it moved (moved)
+  Frozen start_b{0};      // the bounds taken there
+  bool moved = false;
   bool upper_failed = false;  // an implicit u(z) failed (the Monitor ends the solve: ZETA_FAILED)
   const Comm& comm() const { return run.comm(); }
   /// The upper bound of the box frozen in b (empty: none).
@@ -618,13 +742,41 @@ struct NewtonRun<MatrixType>::Outer {
   /// is defined and its Newton member's rules apply unchanged; Res keeps the crossing on those rows
   /// (bounded_residual's term max(z − u, ζ − z) > 0), so a z where the bounds cross by more than tol is
   /// never declared converged (crossing() says why in the message).
+  /// The first one, nested, takes the bounds afresh a level (NestedStart::refreshed): it is S at z_f,
+  /// and moved_start() makes z_f the iterate it was taken at.
   Result obstacle(const Frozen& b, const Vector* z, bool first, double tol) {
     const Vector& u = upper(b);
     const Vector& lower = u.size() ? (capped = b.lower.cwiseMin(u)) : b.lower;
-    Result inner = run.solve_obstacle(q, lower, z, first && run.nest_, tol, run.o_.maxiter - run.tally_.nit(), false,
-                                      &set, &u);
+    const bool nest = first && run.nest_;
+    RefreshedBounds fresh{[this](const Vector& v, Vector& lo, Vector& up) { return bounds_at(v, lo, up); }};
+    Result inner = run.solve_obstacle(q, lower, z, nest, tol, run.o_.maxiter - run.tally_.nit(), false, &set, &u,
+                                      nest ? &fresh : nullptr);
+    moved = fresh.moved;
+    if (moved) start_z.swap(fresh.z);
     run.tally_.outer_step();
     return inner;
+  }
+  /// After the first inner solve: when its nested start took the bounds at z_f, z becomes z_f, b its
+  /// bounds and r its Res (no evaluation of ζ: those of the start), and true.
+  bool moved_start(Vector& z, Frozen& b, double& r) {
+    if (!moved) return false;
+    moved = false;
+    z.swap(start_z);
+    b.swap(start_b);
+    r = run.levels_.finest->icp_residual_at(q, z, b.lower, w, upper(b));
+    return true;
+  }
+  /// The bounds at v into start_b (ζ(v), u(v) when implicit) and as the inner problem's: lo = ζ(v)
+  /// capped by the upper bound, up = that bound; false when ζ or u failed (start_b then unchanged).
+  bool bounds_at(const Vector& v, Vector& lo, Vector& up) {
+    auto& level = *run.levels_.finest;
+    Frozen b(v.size());
+    if (!comm().all(level.eval_zeta(zeta, v, b.lower))) return false;
+    if (zeta.implicit_upper() && !comm().all(level.eval_upper(zeta, v, b.upper))) return false;
+    start_b.swap(b);
+    up = upper(start_b);
+    lo = up.size() ? start_b.lower.cwiseMin(up) : start_b.lower;
+    return true;
   }
   /// Res of the mixed problem at v with the bounds at v (an implicit u evaluated there, timed as ζ is).
   double icp_residual(const Vector& v, Frozen& b) {

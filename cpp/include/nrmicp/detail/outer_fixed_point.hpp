@@ -47,7 +47,10 @@ namespace nrmicp::detail {
 ///   Result obstacle(const Frozen& b, const Vector* z, bool first, double tol)
 ///                                                         the inner solve S(b) from z (null: from
 ///                                                         z = ψ) to Res < tol (0: a settled active
-///                                                         set); the first one may start nested
+///                                                         set); the first one may start nested, its
+///                                                         bounds taken afresh on the way (at z_f)
+///   bool moved_start(Vector& z, Frozen& b, double& r)     after the first: it was S at z_f; z, b, r
+///                                                         become z_f, its bounds and Res
 ///   double icp_residual(const Vector& v, Frozen& b)       Res of the ICP at v, the bounds at v in b
 ///                                                         (NaN: ζ or u failed)
 ///   double rounding_level(const Vector& v, const Frozen& b)  the rounding level of Res at the v of the
@@ -80,6 +83,8 @@ class OuterFixedPoint {
   void move_x(Iterate&) {
     if (floor_end_) return void(end_ = floor_end_);  // (after the Monitor has looked at the iterate that met it)
     Result inner = run_.obstacle(psi_, given_ || !first_ ? &z_ : nullptr, first_, 0.0);
+    // a nested first solve whose start took ζ at z_f solved S(ζ(z_f)): G of z_f, the iterate it judges
+    if (first_ && run_.moved_start(z_, psi_, r_) && r_ < best_r_) { best_z_ = z_; best_r_ = r_; }
     first_ = false;
     const double f = run_.comm().stable_norm(inner.z - z_);  // ‖G(z) − z‖, z's units
     if (mixed_) {
