@@ -287,6 +287,17 @@ def test_relaxation_with_no_fine_fine_coupling_is_its_first_sweep():
     np.testing.assert_allclose(got, ideal, rtol=1e-14, atol=1e-15)
 
 
+def test_relaxation_refuses_c_flags_that_do_not_match_the_columns_of_p():
+    # a C point writes P's column in C order: one flag too many once wrote past the row's accumulator (heap corruption)
+    from nrmicp import _core
+    B = sp.csr_matrix(sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(4, 4)))
+    P = sp.csr_matrix(np.array([[1.0, 0], [0.5, 0.5], [0, 1], [0, 1.0]]))
+    for flags in ([1, 0, 1, 1], [1, 0, 0, 0]):
+        with pytest.raises(ValueError, match="n_coarse"):
+            _core.relax_interpolation(B.indptr, B.indices, B.data, np.array(flags, bool), P.indptr, P.indices, P.data,
+                                      2, 3, 0.2)
+
+
 def laplacian_3d(m):
     t = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(m, m))
     eye = sp.identity(m)

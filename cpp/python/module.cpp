@@ -414,6 +414,8 @@ void bind_utilities(py::module_& m) {
       throw py::value_error("relax_interpolation: B's and P's indices must have the same dtype");
     const bool* flags = checked_data<bool>(is_c, "is_c");
     std::vector<char> c(flags, flags + n);
+    if (std::count(c.begin(), c.end(), char(1)) != n_coarse)  // C point k writes P's column k
+      throw py::value_error("relax_interpolation: is_c must flag exactly n_coarse points (one per column of P)");
     auto run = [&](auto index) -> py::tuple {
       using I = decltype(index);
       check_compressed<I>(b_indptr, b_indices, b_data.shape(0), n, n, "B");
