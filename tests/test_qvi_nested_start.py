@@ -114,3 +114,21 @@ def test_a_constant_callable_zeta_with_a_hierarchy_solves_as_the_constant_obstac
     assert np.all(c.z >= psi) and c.timings["zeta"] == 0.0  # a vector ψ: ζ is never evaluated
     # the finest solve's iterates are the constant obstacle's: the same finest steps and coarse levels
     assert r.level_steps[1:] == c.level_steps[1:], (r.level_steps, c.level_steps)
+
+
+@pytest.mark.parametrize("with_jacobian", [False, True])
+def test_a_given_start_with_a_hierarchy_is_used_not_replaced_by_the_nested_start(with_jacobian):
+    # x0 close to z* (a loose solve): the first outer step starts from it, so fewer ζ calls than a cold nested solve
+    p, zeta, jacobian, seen = thermoforming()
+    extra = {"zeta_jacobian": jacobian} if with_jacobian else {}
+    loose = nrmicp.solve(p.A, p.q, p.zeta, method="newton", tol=1e-5, **extra)
+    options = dict(method="newton", tol=1e-11, hierarchy=p.prolongations(), **extra)
+    seen.clear()
+    cold = nrmicp.solve(p.A, p.q, zeta, **options)
+    cold_calls = len(seen)
+    seen.clear()
+    warm = nrmicp.solve(p.A, p.q, zeta, x0=loose.z, **options)
+    assert cold.status == warm.status == nrmicp.Status.CONVERGED
+    assert complementarity(p.A, p.q, p.zeta, warm.z) < 1e-9
+    assert np.array_equal(seen[0], loose.z)   # ζ's first call is at the given start
+    assert len(seen) < cold_calls

@@ -4,8 +4,8 @@
 // conditions row by row — a 2D obstacle cold and nested (bilinear prolongations), a two-sided box, and
 // the 'amg' hierarchy built from A alone (nrmicp/petsc/hierarchy.hpp) on a 2D and a 3D obstacle; and
 // the engine's own parts that split rows between processes: the Galerkin operators' update by K's
-// changed entries (against P_lᵀ⋯KP_l computed here), the symmetry check (against the serial rule) and
-// |A| v (against the dense product).
+// changed entries (against P_lᵀ⋯KP_l computed here), the symmetry check (against the serial rule),
+// |A| v (against the dense product), and input one process gets wrong refused on every process.
 #include "common.hpp"
 
 #include <nrmicp/petsc.hpp>
@@ -486,6 +486,54 @@ TEST_CASE("the PETSc engine's |A| v adds every row's |a_ij| v_j, the other proce
     CHECK((out - rows_of(expected)).lpNorm<Eigen::Infinity>() <= 1e-12 * expected.lpNorm<Eigen::Infinity>());
   }
   MatDestroy(&K);
+}
+
+/// B with this process's rows [lo + shift, hi + shift) on process 0 and 1 (their columns split as usual):
+/// a square Mat whose row and column layouts differ on those processes.
+Mat shifted_rows(const RowMat& B, int shift) {
+  auto [lo, hi] = split(static_cast<int>(B.rows()));
+  const auto [clo, chi] = split(static_cast<int>(B.cols()));
+  if (rank_of() == 0) hi += shift;
+  if (rank_of() == 1) lo += shift;
+  Mat M;
+  REQUIRE(MatCreateAIJ(PETSC_COMM_WORLD, hi - lo, chi - clo, B.rows(), B.cols(), 8, nullptr, 8, nullptr, &M) == 0);
+  for (int i = lo; i < hi; ++i)
+    for (RowMat::InnerIterator it(B, i); it; ++it) {
+      const PetscInt r = i, col = static_cast<PetscInt>(it.index());
+      const PetscScalar v = it.value();
+      REQUIRE(MatSetValues(M, 1, &r, 1, &col, &v, INSERT_VALUES) == 0);
+    }
+  REQUIRE(MatAssemblyBegin(M, MAT_FINAL_ASSEMBLY) == 0);
+  REQUIRE(MatAssemblyEnd(M, MAT_FINAL_ASSEMBLY) == 0);
+  return M;
+}
+
+TEST_CASE("an input one process alone gets wrong is refused on every process (none is left waiting)") {
+  INFO("on " << size_of() << " processes");
+  const Case c = membrane(15, 20.0, false, 0);
+  Options newton_options;
+  newton_options.method = Method::Newton;
+  Options nrmgs_options;
+  nrmgs_options.method = Method::NRMGS;
+  Mat A = to_petsc(c.A);
+  {
+    const petsc::Matrix Am(A);
+    Eigen::VectorXd q = rows_of(c.q);
+    if (rank_of() == 0) q.conservativeResize(q.size() - 1);  // one row short on process 0 only
+    CHECK_THROWS_AS(Newton<petsc::Matrix>(Am, newton_options).solve(q), std::invalid_argument);
+    CHECK_THROWS_AS(Solver<petsc::Matrix>(Am, nrmgs_options).solve(q), std::invalid_argument);
+    const Result r = Newton<petsc::Matrix>(Am, newton_options).solve(rows_of(c.q));  // and every process goes on
+    CHECK(r.status == Status::Converged);
+  }
+  MatDestroy(&A);
+  if (size_of() < 2) return;
+  Mat B = shifted_rows(c.A, 1);  // process 0 owns a row more than columns, process 1 one fewer
+  {
+    const petsc::Matrix Bm(B);
+    CHECK_THROWS_AS(Newton<petsc::Matrix>(Bm, newton_options), std::invalid_argument);
+    CHECK_THROWS_AS(Solver<petsc::Matrix>(Bm, nrmgs_options), std::invalid_argument);
+  }
+  MatDestroy(&B);
 }
 
 // Its own main: doctest runs between PetscInitialize and PetscFinalize (MPI's lifetime).

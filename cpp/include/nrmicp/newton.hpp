@@ -91,10 +91,11 @@ class Newton {
   Newton(const MatrixType& A, Options options, std::vector<RowMatrix> prolongations = {},
          std::vector<RowMatrix> coarse_operators = {})
       : options_(as_newton(std::move(options))), levels_{A, {}, {}, {}} {
-    if (A.rows() != A.cols())
-      throw std::invalid_argument("Newton: A must be square, got " + std::to_string(A.rows()) + "x" +
-                                  std::to_string(A.cols()));
-    options_.check(A.rows());
+    using detail::comm_of;  // (rows and columns below: this process's)
+    detail::collective_check(comm_of(A), [&] {
+      if (A.rows() != A.cols()) throw std::invalid_argument("Newton: A must be square, got " + std::to_string(A.rows()) + "x" + std::to_string(A.cols()));
+      options_.check(A.rows());
+    });
     check_shapes([&] { using detail::global_rows; return global_rows(A); }(), prolongations, coarse_operators);
     const auto t0 = std::chrono::steady_clock::now();
     levels_.finest = std::make_unique<detail::NewtonLevel<MatrixType>>(A, options_);  // checks Ω1, Ω2
@@ -125,7 +126,8 @@ class Newton {
                const Callback& callback = {}, const Poll& poll = {}, const SolveOptions* solve_options = nullptr,
                const Progress& progress = {}) const {
     const Busy busy(*this);
-    const Options o = solve_options ? options_.with(solve_options, levels_.A.rows()) : options_;
+    Options o = options_;
+    if (solve_options) detail::collective_check(levels_.finest->comm(), [&] { o = options_.with(solve_options, levels_.A.rows()); });
     return run(q, zeta, z0, {callback, poll, progress}, o, levels() > 1);
   }
 
@@ -254,9 +256,11 @@ class Newton {
              const Options& o, bool nest) const {
     const auto t0 = std::chrono::steady_clock::now();
     const Eigen::Index n = levels_.A.rows();
-    if (q.size() != n) throw std::invalid_argument("Newton::solve: q has length " + std::to_string(q.size()) + ", expected n = " + std::to_string(n));
-    if (z0 && z0->size() != n) throw std::invalid_argument("Newton::solve: x0 has length " + std::to_string(z0->size()) + ", expected n = " + std::to_string(n));
-    zeta.check(n);
+    detail::collective_check(levels_.finest->comm(), [&] {
+      if (q.size() != n) throw std::invalid_argument("Newton::solve: q has length " + std::to_string(q.size()) + ", expected n = " + std::to_string(n));
+      if (z0 && z0->size() != n) throw std::invalid_argument("Newton::solve: x0 has length " + std::to_string(z0->size()) + ", expected n = " + std::to_string(n));
+      zeta.check(n);
+    });
     Options resolved = o;
     resolve_tolerance(resolved, q, zeta, levels_.finest->comm());
     detail::NewtonRun<MatrixType> run(levels_, resolved, hooks, nest, zeta.upper());

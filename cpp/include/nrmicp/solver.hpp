@@ -113,13 +113,15 @@ class Solver {
   Solver(const MatrixType& A, Options options)
       : A_(A), block_(detail::block_of(A)),
         options_(std::move(options)) {
-    if (A.rows() != A.cols())
-      throw std::invalid_argument("Solver: A must be square, got " + std::to_string(A.rows()) + "x" +
-                                  std::to_string(A.cols()));
     if (!is_stationary(options_.method))
       throw std::invalid_argument("Solver: method 'newton' is the Newton member: use nrmicp::Newton (newton.hpp), "
                                   "not nrmicp::Solver");
-    options_.check(A.rows());
+    detail::collective_check(comm(), [&] {  // (rows and columns are this process's)
+      if (A.rows() != A.cols())
+        throw std::invalid_argument("Solver: A must be square, got " + std::to_string(A.rows()) + "x" +
+                                    std::to_string(A.cols()));
+      options_.check(A.rows());
+    });
     const auto t0 = std::chrono::steady_clock::now();
     params_ = resolve_parameters(A, options_);
     {
@@ -148,10 +150,13 @@ class Solver {
                const SolveOptions* solve_options = nullptr, const Progress& progress = {}) const {
     const auto t0 = std::chrono::steady_clock::now();
     const Eigen::Index n = A_.rows();
-    Options o = solve_options ? options_.with(solve_options, n) : options_;
-    if (q.size() != n) throw std::invalid_argument("Solver::solve: q has length " + std::to_string(q.size()) + ", expected n = " + std::to_string(n));
-    if (z0 && z0->size() != n) throw std::invalid_argument("Solver::solve: x0 has length " + std::to_string(z0->size()) + ", expected n = " + std::to_string(n));
-    zeta.check(n);
+    Options o = options_;
+    detail::collective_check(comm(), [&] {
+      if (solve_options) o = options_.with(solve_options, n);
+      if (q.size() != n) throw std::invalid_argument("Solver::solve: q has length " + std::to_string(q.size()) + ", expected n = " + std::to_string(n));
+      if (z0 && z0->size() != n) throw std::invalid_argument("Solver::solve: x0 has length " + std::to_string(z0->size()) + ", expected n = " + std::to_string(n));
+      zeta.check(n);
+    });
     resolve_tolerance(o, q, zeta, comm());
     Result r;
     if (zeta.bounded()) {

@@ -10,6 +10,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <stdexcept>
+#include <string>
 
 namespace nrmicp::detail {
 
@@ -41,6 +43,23 @@ class Comm {
     return scale * std::sqrt(sum(m.size() ? (m / scale).squaredNorm() : 0.0));
   }
 };
+
+/// Runs `check` (which throws std::invalid_argument for this process's input: its rows' lengths, its
+/// layout) so that every process throws when one does: a throw on one process alone would leave the
+/// others waiting in the solve's first reduction. The process at fault gives its own message.
+template <typename Check>
+void collective_check(const Comm& comm, Check&& check) {
+  std::string message;
+  try {
+    check();
+  } catch (const std::invalid_argument& e) {
+    message = e.what();
+  }
+  if (comm.all(message.empty())) return;
+  throw std::invalid_argument(message.empty() ? std::string("another process refused its part of the input (its own "
+                                                            "message names the argument)")
+                                              : message);
+}
 
 /// The one process that owns every row.
 inline const Comm& serial_comm() {

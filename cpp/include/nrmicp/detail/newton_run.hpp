@@ -351,7 +351,8 @@ class NestedStart {
     return y;
   }
   /// y (level k, in y = z − s_old) into y = z − s_new: y + R̃(s_old − s_new), R̃ level by level Pᵀ
-  /// scaled to unit row sums (an average of the fine rows a coarse row reaches); an empty s is 0.
+  /// scaled by |Pᵀ|'s row sums (an average of the fine rows a coarse row reaches where P ≥ 0, and
+  /// never larger than the largest of them); an empty s is 0.
   void shift_start(Vector& y, std::size_t k, const Vector& s_old, const Vector& s_new) const {
     if (!s_old.size() && !s_new.size()) return;
     Vector d = s_old.size() ? s_old : Vector::Zero(s_new.size()), r, weight;
@@ -359,7 +360,8 @@ class NestedStart {
     for (std::size_t j = 0; j < k; ++j) {
       const auto& R = levels_.hierarchy[j].R;
       multiply(R, d, r);
-      multiply(R, Vector::Ones(d.size()), weight);
+      weight = Vector::Zero(R.rows());
+      abs_multiply_add(R, Vector::Ones(d.size()), weight);  // |R| 1: no amplification where P has signs
       d = (weight.array() != 0).select(r.array() / weight.array(), 0.0).matrix();
     }
     y += d;
@@ -590,11 +592,10 @@ class NewtonRun {
     Vector psi(n);
     const Vector z_start = z0 ? *z0 : Vector::Zero(n);
     if (!levels_.finest->eval_zeta(zeta, z_start, psi)) return tally_.zeta_failed(z_start, q);
-    outer_z_.resize(0);
-    outer_set_.clear();
+    outer_z_.resize(0), outer_set_.clear(), step_set_.clear();  // (a new run's outer-step state)
     outer_ok_ = outer_mode_ = true;
-    step_set_.clear();
-    if (!(z0 && !nest_)) outer_solve(q, psi, z0, nest_, std::min(start_maxiter, o_.maxiter), zeta_bounds(zeta));
+    if (!(z0 && !nest_))  // (a given start keeps the frozen nest: its bounds are the better guess than a coarse answer's)
+      outer_solve(q, psi, z0, nest_, std::min(start_maxiter, o_.maxiter), z0 ? RefreshedBounds{} : zeta_bounds(zeta));
     const Vector start = (z0 && !nest_) ? *z0 : outer_z_;
     const auto t0 = std::chrono::steady_clock::now();
     SemismoothRecord record;
@@ -750,7 +751,7 @@ struct NewtonRun<MatrixType>::Outer {
     const bool nest = first && run.nest_;
     RefreshedBounds fresh{[this](const Vector& v, Vector& lo, Vector& up) { return bounds_at(v, lo, up); }};
     Result inner = run.solve_obstacle(q, lower, z, nest, tol, run.o_.maxiter - run.tally_.nit(), false, &set, &u,
-                                      nest ? &fresh : nullptr);
+                                      nest && !z ? &fresh : nullptr);  // (a given start: the frozen nest)
     moved = fresh.moved;
     if (moved) start_z.swap(fresh.z);
     run.tally_.outer_step();

@@ -84,7 +84,8 @@ class OuterFixedPoint {
     if (floor_end_) return void(end_ = floor_end_);  // (after the Monitor has looked at the iterate that met it)
     Result inner = run_.obstacle(psi_, given_ || !first_ ? &z_ : nullptr, first_, 0.0);
     // a nested first solve whose start took ζ at z_f solved S(ζ(z_f)): G of z_f, the iterate it judges
-    if (first_ && run_.moved_start(z_, psi_, r_) && r_ < best_r_) { best_z_ = z_; best_r_ = r_; }
+    // (z_f is not a best iterate: the Monitor never saw it, and the floor's message quotes the best)
+    if (first_) run_.moved_start(z_, psi_, r_);
     first_ = false;
     const double f = run_.comm().stable_norm(inner.z - z_);  // ‖G(z) − z‖, z's units
     if (mixed_) {
