@@ -189,6 +189,30 @@ def case_bad(kind, method):
         return [json.loads(t) for t in outcomes]
 
 
+def case_no_rows():
+    """A whose last rank owns no rows: Newton refuses it on every rank (its driver decides per rank's rows;
+    before, a hang or a false error), the stationary members solve it (each rank's exception or status)."""
+    pb = obstacle_2d(15, exact=False)
+    A = sp.csr_matrix(pb.A)
+    n = A.shape[0]
+    lo, hi = (n, n) if RANK == SIZE - 1 else split(n, [1] * (SIZE - 1) + [0])
+    M = mat(A, lo, hi)
+    q = vec(M, pb.q)
+    out = {}
+    for method, zeta in (("newton", pb.zeta[lo:hi]), ("newton_amg", pb.zeta[lo:hi]), ("nrmgs", pb.zeta[lo:hi])):
+        try:
+            extra = {"hierarchy": "amg"} if method == "newton_amg" else {}
+            r = dist.solve(M, q, zeta, method=method.split("_")[0], tol=1e-8, **extra)
+            z = dist.gather(r.z)   # (rank 0's; the error there)
+            ref = nrmicp.solve(A, pb.q, pb.zeta, method="newton", tol=1e-10).z
+            outcome = [str(r.status), float(np.max(np.abs(z - ref))) if RANK == 0 else 0.0]
+        except Exception as exc:  # noqa: BLE001 - the outcome is the test's subject
+            outcome = [type(exc).__name__, str(exc)]
+        got = _allgather_text(json.dumps(outcome))
+        out[method] = [json.loads(t) for t in got] if RANK == 0 else None
+    return out
+
+
 def _snapshot(*objs):
     out = []
     for o in objs:
@@ -742,6 +766,6 @@ if __name__ == "__main__":
               "bad": lambda: case_bad(args[0], args[1]), "boomeramg": case_boomeramg, "dense": case_dense,
               "floor": case_floor, "overshoot": case_overshoot, "sweeps": case_sweeps,
               "warm": case_warm, "one_sided_contact": case_one_sided_contact, "implicit_upper": case_implicit_upper, "units": case_units, "engine": lambda: case_engine(*args), "options": case_options,
-              "fuzz": lambda: case_fuzz(int(args[0])), "family": case_family, "hooks": case_hooks}[name]()
+              "fuzz": lambda: case_fuzz(int(args[0])), "family": case_family, "hooks": case_hooks, "no_rows": case_no_rows}[name]()
     if RANK == 0:
         print("RESULT " + json.dumps(result), flush=True)

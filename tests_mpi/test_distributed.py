@@ -145,6 +145,16 @@ def test_bad_input_raises_the_same_exception_on_every_rank(kind, method):
     assert untouched, "an input was modified"
 
 
+def test_a_rank_without_rows_newton_refuses_on_every_rank_the_stationary_members_solve():
+    out = mpirun(2, "no_rows", timeout=120)
+    for method in ("newton", "newton_amg"):
+        assert len(out[method]) == 2 and out[method][0] == out[method][1], out[method]   # the same on both ranks
+        name, message = out[method][0]
+        assert name == "ValueError" and message.startswith("rank 1: A has no rows on this rank"), out[method]
+    for status, err in out["nrmgs"]:
+        assert status == "CONVERGED" and err < 1e-6, out["nrmgs"]
+
+
 def test_readme_example_runs_on_two_ranks():
     import os
     import subprocess

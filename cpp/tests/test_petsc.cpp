@@ -488,13 +488,13 @@ TEST_CASE("the PETSc engine's |A| v adds every row's |a_ij| v_j, the other proce
   MatDestroy(&K);
 }
 
-/// B with this process's rows [lo + shift, hi + shift) on process 0 and 1 (their columns split as usual):
-/// a square Mat whose row and column layouts differ on those processes.
-Mat shifted_rows(const RowMat& B, int shift) {
+/// B with process 0's and 1's last and first rows moved by `shift` (columns too when `columns`): a square
+/// Mat whose row and column layouts differ there, or with every row on process 0 (shift: all of 1's).
+Mat shifted_rows(const RowMat& B, int shift, bool columns = false) {
   auto [lo, hi] = split(static_cast<int>(B.rows()));
-  const auto [clo, chi] = split(static_cast<int>(B.cols()));
-  if (rank_of() == 0) hi += shift;
-  if (rank_of() == 1) lo += shift;
+  auto [clo, chi] = split(static_cast<int>(B.cols()));
+  if (rank_of() == 0) hi += shift, chi += columns ? shift : 0;
+  if (rank_of() == 1) lo += shift, clo += columns ? shift : 0;
   Mat M;
   REQUIRE(MatCreateAIJ(PETSC_COMM_WORLD, hi - lo, chi - clo, B.rows(), B.cols(), 8, nullptr, 8, nullptr, &M) == 0);
   for (int i = lo; i < hi; ++i)
@@ -534,6 +534,16 @@ TEST_CASE("an input one process alone gets wrong is refused on every process (no
     CHECK_THROWS_AS(Solver<petsc::Matrix>(Bm, nrmgs_options), std::invalid_argument);
   }
   MatDestroy(&B);
+  if (size_of() != 2) return;
+  const int rows_of_1 = split(static_cast<int>(c.A.rows())).second - split(static_cast<int>(c.A.rows())).first;
+  int shift = rows_of_1;  // process 1's row count, known to process 0 too (even split, n odd: 0 owns one more)
+  if (rank_of() == 0) shift = static_cast<int>(c.A.rows()) / 2;
+  Mat C = shifted_rows(c.A, shift, true);  // every row on process 0: the Newton member refuses it on both
+  {
+    const petsc::Matrix Cm(C);
+    CHECK_THROWS_AS(Newton<petsc::Matrix>(Cm, newton_options), std::invalid_argument);
+  }
+  MatDestroy(&C);
 }
 
 // Its own main: doctest runs between PetscInitialize and PetscFinalize (MPI's lifetime).

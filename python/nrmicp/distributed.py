@@ -415,6 +415,7 @@ def _newton(_petsc, Am, qa, problem, xa, opts, o, comm):
     serial member's. Returns (z, Res, status, message, the result's other fields)."""
     t0 = time.perf_counter()
     polish = bool(_collective(comm, lambda: check_polish(o["polish"])))
+    _collective(comm, _owns_rows, Am)
     h = o["hierarchy"]   # 'amg': built by the core (nrmicp/petsc/hierarchy.hpp)
     amg = h == "amg" or (h == "auto" and Am.getSize()[0] >= AUTO_AMG_MIN_N)
     Ps = [P.handle for P in h] if isinstance(h, (list, tuple)) else []
@@ -437,6 +438,14 @@ def _newton(_petsc, Am, qa, problem, xa, opts, o, comm):
     if polish:
         fields["polished"] = polished
     return z, res, status, message, fields
+
+
+def _owns_rows(Am):
+    """The Newton member's driver takes its per-level decisions from each rank's rows: a rank without
+    any would take other branches than its peers (a stationary member works there)."""
+    if Am.getLocalSize()[0] == 0:
+        raise ValueError("A has no rows on this rank: method 'newton' needs at least one row of A on every rank "
+                         "(the stationary members, e.g. method='nrmgs', do not)")
 
 
 def _units_sigma(Am):

@@ -93,7 +93,8 @@ class Newton {
       : options_(as_newton(std::move(options))), levels_{A, {}, {}, {}} {
     using detail::comm_of;  // (rows and columns below: this process's)
     detail::collective_check(comm_of(A), [&] {
-      if (A.rows() != A.cols()) throw std::invalid_argument("Newton: A must be square, got " + std::to_string(A.rows()) + "x" + std::to_string(A.cols()));
+      if (A.rows() != A.cols() || (!A.rows() && comm_of(A).size() > 1))  // (each process decides on its rows)
+        throw std::invalid_argument("Newton: A must be square with rows on every process, got " + std::to_string(A.rows()) + "x" + std::to_string(A.cols()));
       options_.check(A.rows());
     });
     check_shapes([&] { using detail::global_rows; return global_rows(A); }(), prolongations, coarse_operators);
