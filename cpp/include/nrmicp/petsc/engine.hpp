@@ -60,6 +60,19 @@ class MpiComm : public detail::Comm {
   int size_ = 1;
 };
 
+/// v's array is `data` while this object lives (VecPlaceArray), and v's own again after (VecResetArray),
+/// also when a PETSc call in between throws: v stays usable for the next product or solve.
+class PlacedArray {
+ public:
+  PlacedArray(Vec v, const double* data) : v_(v) { check(VecPlaceArray(v, data), "VecPlaceArray"); }
+  ~PlacedArray() { VecResetArray(v_); }
+  PlacedArray(const PlacedArray&) = delete;
+  PlacedArray& operator=(const PlacedArray&) = delete;
+
+ private:
+  Vec v_;
+};
+
 /// A distributed AIJ matrix (a reference to the caller's Mat, which it keeps alive): rows()/cols()
 /// are this process's, as the driver's vectors are. Copies share the Mat and its work vectors.
 class Matrix {
@@ -83,11 +96,8 @@ class Matrix {
   void multiply(const Eigen::VectorXd& v, Eigen::VectorXd& out, bool add = false) const {
     if (!add) out.resize(rows());
     State& s = *s_;
-    check(VecPlaceArray(s.x, v.data()), "VecPlaceArray");
-    check(VecPlaceArray(s.y, out.data()), "VecPlaceArray");
+    const PlacedArray x(s.x, v.data()), y(s.y, out.data());
     check(add ? MatMultAdd(s.A, s.x, s.y, s.y) : MatMult(s.A, s.x, s.y), "MatMult");
-    check(VecResetArray(s.x), "VecResetArray");
-    check(VecResetArray(s.y), "VecResetArray");
   }
   /// out += |A| v, read off A's own rows (a copy |A| cost more than the products: it was 10% of a
   /// nested solve, docs/MEASUREMENTS.md); the off-diagonal block's columns of v from their owners.
@@ -171,10 +181,11 @@ class Matrix {
     /// v (this process's columns) at the off-diagonal block's columns (empty without that block).
     Eigen::VectorXd ghosts(const Eigen::VectorXd& v) {
       if (!gather && !scatter_ghosts()) return {};
-      check(VecPlaceArray(x, v.data()), "VecPlaceArray");
-      check(VecScatterBegin(gather, x, ghost, INSERT_VALUES, SCATTER_FORWARD), "VecScatterBegin");
-      check(VecScatterEnd(gather, x, ghost, INSERT_VALUES, SCATTER_FORWARD), "VecScatterEnd");
-      check(VecResetArray(x), "VecResetArray");
+      {
+        const PlacedArray placed(x, v.data());
+        check(VecScatterBegin(gather, x, ghost, INSERT_VALUES, SCATTER_FORWARD), "VecScatterBegin");
+        check(VecScatterEnd(gather, x, ghost, INSERT_VALUES, SCATTER_FORWARD), "VecScatterEnd");
+      }
       PetscInt k;
       const PetscScalar* g;
       VecGetLocalSize(ghost, &k);
@@ -450,12 +461,9 @@ class System {
   int solve(const Eigen::VectorXd& b, Eigen::VectorXd& z, double target = 0) const {
     for (Eigen::Index i = 0; i < z.size(); ++i)
       if (!detail::inactive_state(inactive_[i])) z[i] = b[i];
-    check(VecPlaceArray(bv_, b.data()), "VecPlaceArray");
-    check(VecPlaceArray(zv_, z.data()), "VecPlaceArray");
+    const PlacedArray placed_b(bv_, b.data()), placed_z(zv_, z.data());
     int its = 0;
     if (!run(ksp_, bv_, zv_, target, max_iterations_, its)) its = max_iterations_ + 1;
-    VecResetArray(bv_);
-    VecResetArray(zv_);
     return lu_ ? 0 : its;
   }
   void restore_hierarchy() {}
