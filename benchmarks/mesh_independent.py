@@ -30,9 +30,9 @@ needs > 10 GB there).
 The report is one table: CPU seconds of the solving child (all threads), finest-level Newton
 steps / linear solves on all levels (or iterations), extra peak memory.
 
-Other sections (in this process): thermoforming 1D/2D (total linear solves of newton against
-iterations of nrmgs ± Anderson), the American put march (Newton steps per time step,
-warm-started) and impulse control (steps). Writes <out>.csv and <out>.md. Timings on a shared
+Other section (in this process): the American put march (Newton steps per time step,
+warm-started). The QVIs (thermoforming, impulse control) are benchmarks/qvi_operator.py's.
+Writes <out>.csv and <out>.md. Timings on a shared
 machine are noisy: compare peers within one run; the load average is recorded.
 """
 from __future__ import annotations
@@ -213,47 +213,6 @@ def obstacle_section(args, log):
     return rows
 
 
-def _newton_row(section, case, n, peer, r, seconds, z_exact=None, extra=None):
-    row = dict(section=section, case=case, n=n, peer=peer, status=r.status.name.lower(),
-               steps=int(r.nit), seconds=seconds, res=float(r.residual),
-               load=round(os.getloadavg()[0], 2))
-    if hasattr(r, "linear_solves"):
-        row["solves"] = int(r.linear_solves)
-        row["note"] = f"path={r.path}; outer={r.outer_iterations}; level_steps={r.level_steps}"
-    if z_exact is not None:
-        row["err"] = float(np.abs(r.z - z_exact).max())
-    row.update(extra or {})
-    return row
-
-
-def thermoforming_section(args, log):
-    import nrmicp
-    from nrmicp import scenes
-    rows = []
-    sizes = {"1d": [63, 127, 255, 511] if not args.quick else [63, 127],
-             "2d": [15, 31, 63, 127] if not args.quick else [15, 31]}
-    for dim, ms in sizes.items():
-        for m in ms:
-            n = m if dim == "1d" else m * m
-            P = (scenes.thermoforming_1d if dim == "1d" else scenes.thermoforming_2d)(m, exact=n <= 4096)
-            log(f"\n== thermoforming_{dim} m={m} n={n}")
-            runs = [("newton", dict(method="newton")),
-                    ("newton-cold", dict(method="newton", hierarchy=None)),
-                    ("newton-geo", dict(method="newton", hierarchy=P.prolongations())),
-                    ("nrmgs", dict(method="nrmgs", maxiter=200_000)),
-                    ("nrmgs+aa", dict(method="nrmgs", accelerate="anderson", maxiter=200_000))]
-            for peer, kw in runs:
-                t0 = time.perf_counter()
-                r = nrmicp.solve(P.A, P.q, P.zeta, tol=args.tol, **kw)
-                row = _newton_row("thermoforming", f"thermoforming_{dim}", n, peer, r,
-                                  time.perf_counter() - t0, P.z_exact)
-                rows.append(row)
-                log(f"  {peer:12s} {row['status']:10s} steps={row['steps']} solves={row.get('solves')} "
-                    f"t={row['seconds']:.2f}s res={row['res']:.1e} err={row.get('err', float('nan')):.1e} "
-                    f"{row.get('note', '')}")
-    return rows
-
-
 def _march(n_space, step):
     """The American-put march (S0 = K = 100, 100 steps, Rannacher 2): ``step(m, q, v)`` solves
     one LCP warm-started from v and returns (v_new, finest steps, linear solves, ok)."""
@@ -316,25 +275,6 @@ def american_section(args, log):
     return rows
 
 
-def impulse_section(args, log):
-    import nrmicp
-    from nrmicp import scenes
-    rows = []
-    sizes = [101, 401, 1601] if not args.quick else [101, 401]
-    for n in sizes:
-        P = scenes.impulse_control(n)
-        log(f"\n== impulse control n={n}")
-        for peer, kw in [("newton", dict(method="newton")),
-                         ("nrmgs (z_update=solve)", dict(method="nrmgs", z_update="solve", maxiter=200_000))]:
-            t0 = time.perf_counter()
-            r = nrmicp.solve(P.A, P.q, P.zeta, tol=args.tol, **kw)
-            row = _newton_row("impulse", "impulse_control", n, peer, r, time.perf_counter() - t0, P.z_exact)
-            rows.append(row)
-            log(f"  {peer:22s} {row['status']:10s} steps={row['steps']} solves={row.get('solves')} "
-                f"t={row['seconds']:.2f}s res={row['res']:.1e} err={row['err']:.1e} {row.get('note', '')}")
-    return rows
-
-
 # ----------------------------------------------------------------------------- report
 FIELDS = ["section", "case", "m", "n", "peer", "status", "steps", "solves", "seconds", "cpu_seconds", "res", "err",
           "peak_mb", "extra_mb", "target", "load", "note"]
@@ -383,10 +323,8 @@ def markdown(rows, meta):
                       for p in newtons]
             out.append(f"| {case} | {n:,} | " + " | ".join(cells) + " |")
         out.append("")
-    for sec, title in [("thermoforming", "Thermoforming: Newton steps / linear solves (total) and nrmgs iterations"),
-                       ("american", "American put, 100 time steps: per time step (mean), Newton steps on the finest "
-                                    "level and linear solves on all levels (nrmgs+aa: iterations)"),
-                       ("impulse", "Impulse control")]:
+    for sec, title in [("american", "American put, 100 time steps: per time step (mean), Newton steps on the finest "
+                                    "level and linear solves on all levels (nrmgs+aa: iterations)")]:
         rs = [r for r in rows if r["section"] == sec]
         if not rs:
             continue
@@ -407,7 +345,7 @@ def main():
     ap.add_argument("--child", help=argparse.SUPPRESS)
     ap.add_argument("--out", default="bench-out/mesh_independent")
     ap.add_argument("--quick", action="store_true", help="small sizes only (minutes)")
-    ap.add_argument("--sections", nargs="+", default=["obstacle", "thermoforming", "american", "impulse"])
+    ap.add_argument("--sections", nargs="+", default=["obstacle", "american"], choices=["obstacle", "american"])
     ap.add_argument("--dims", nargs="+", default=["2d", "3d"])
     ap.add_argument("--peers", nargs="+", default=PEERS)
     ap.add_argument("--m", nargs="+", type=int, help="grid sides instead of the defaults "
@@ -424,8 +362,7 @@ def main():
             f"{os.getloadavg()[0]:.1f} (shared machine: compare within the run), {time.strftime('%Y-%m-%d %H:%M')}")
     log(meta)
     rows = []
-    sections = {"obstacle": obstacle_section, "thermoforming": thermoforming_section,
-                "american": american_section, "impulse": impulse_section}
+    sections = {"obstacle": obstacle_section, "american": american_section}
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     for name in args.sections:
         rows += sections[name](args, log)
