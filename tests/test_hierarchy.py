@@ -292,10 +292,15 @@ def test_relaxation_refuses_c_flags_that_do_not_match_the_columns_of_p():
     from nrmicp import _core
     B = sp.csr_matrix(sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(4, 4)))
     P = sp.csr_matrix(np.array([[1.0, 0], [0.5, 0.5], [0, 1], [0, 1.0]]))
-    for flags in ([1, 0, 1, 1], [1, 0, 0, 0]):
+    def raw(*b):   # a bool array from raw bytes: a byte 2 is a C flag too (it was counted as none)
+        return np.frombuffer(bytes(b), dtype=bool)
+    for flags in (np.array([1, 0, 1, 1], bool), np.array([1, 0, 0, 0], bool), raw(1, 0, 2, 1)):
         with pytest.raises(ValueError, match="n_coarse"):
-            _core.relax_interpolation(B.indptr, B.indices, B.data, np.array(flags, bool), P.indptr, P.indices, P.data,
-                                      2, 3, 0.2)
+            _core.relax_interpolation(B.indptr, B.indices, B.data, flags, P.indptr, P.indices, P.data, 2, 3, 0.2)
+    args = (P.indptr, P.indices, P.data, 2, 3, 0.2)
+    same = [_core.relax_interpolation(B.indptr, B.indices, B.data, f, *args) for f in (raw(1, 0, 2, 0), raw(1, 0, 1, 0))]
+    for a, b in zip(*same):
+        np.testing.assert_array_equal(a, b)
 
 
 def laplacian_3d(m):

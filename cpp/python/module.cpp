@@ -412,8 +412,9 @@ void bind_utilities(py::module_& m) {
     if (sweeps < 0 || !(truncate >= 0 && truncate <= 1)) throw py::value_error("relax_interpolation: sweeps >= 0, 0 <= truncate <= 1");
     if (has_dtype<std::int64_t>(b_indices) != has_dtype<std::int64_t>(p_indices))
       throw py::value_error("relax_interpolation: B's and P's indices must have the same dtype");
-    const bool* flags = checked_data<bool>(is_c, "is_c");
-    std::vector<char> c(flags, flags + n);
+    const auto* flags = reinterpret_cast<const unsigned char*>(checked_data<bool>(is_c, "is_c"));  // (bytes: any nonzero is C)
+    std::vector<char> c(static_cast<std::size_t>(n));
+    for (py::ssize_t i = 0; i < n; ++i) c[i] = flags[i] != 0;
     if (std::count(c.begin(), c.end(), char(1)) != n_coarse)  // C point k writes P's column k
       throw py::value_error("relax_interpolation: is_c must flag exactly n_coarse points (one per column of P)");
     auto run = [&](auto index) -> py::tuple {

@@ -526,6 +526,14 @@ TEST_CASE("an input one process alone gets wrong is refused on every process (no
     CHECK(r.status == Status::Converged);
   }
   MatDestroy(&A);
+  RowMat Z = c.A;
+  Z.coeffRef(Z.rows() - 1, Z.rows() - 1) = 0.0;  // a zero diagonal in the last process's rows: Ω2 = diag(A) refuses it
+  Mat D = to_petsc(Z);
+  {
+    const petsc::Matrix Dm(D);
+    CHECK_THROWS_AS(Solver<petsc::Matrix>(Dm, nrmgs_options), std::invalid_argument);
+  }
+  MatDestroy(&D);
   if (size_of() < 2) return;
   Mat B = shifted_rows(c.A, 1);  // process 0 owns a row more than columns, process 1 one fewer
   {

@@ -123,11 +123,11 @@ class Solver {
       options_.check(A.rows());
     });
     const auto t0 = std::chrono::steady_clock::now();
-    params_ = resolve_parameters(A, options_);
-    {
+    detail::collective_check(comm(), [&] {  // (Ω2 = diag(A) and the splitting read this process's rows)
+      params_ = resolve_parameters(A, options_);
       detail::ScopedTimer t(setup_factorization_);
       splitting_.emplace(block_, options_.method, params_, options_.inner);
-    }
+    });
     if (options_.z_update == ZUpdate::Solve) factorize_A();
     setup_timings_.setup = detail::ScopedTimer::seconds_since(t0);
     setup_timings_.factorization = setup_factorization_ + a_factorization_;

@@ -10,8 +10,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <exception>
 #include <stdexcept>
-#include <string>
 
 namespace nrmicp::detail {
 
@@ -44,21 +44,21 @@ class Comm {
   }
 };
 
-/// Runs `check` (which throws std::invalid_argument for this process's input: its rows' lengths, its
-/// layout) so that every process throws when one does: a throw on one process alone would leave the
-/// others waiting in the solve's first reduction. The process at fault gives its own message.
+/// Runs `check` (which may throw for this process's input: its rows' lengths, its layout, its diagonal)
+/// so that every process throws when one does: a throw on one process alone would leave the others
+/// waiting in the next reduction. The process at fault rethrows its own exception (type and message);
+/// the others throw std::invalid_argument saying so. `check` may take collective calls before it throws.
 template <typename Check>
 void collective_check(const Comm& comm, Check&& check) {
-  std::string message;
+  std::exception_ptr failed;
   try {
     check();
-  } catch (const std::invalid_argument& e) {
-    message = e.what();
+  } catch (...) {
+    failed = std::current_exception();
   }
-  if (comm.all(message.empty())) return;
-  throw std::invalid_argument(message.empty() ? std::string("another process refused its part of the input (its own "
-                                                            "message names the argument)")
-                                              : message);
+  if (comm.all(!failed)) return;
+  if (failed) std::rethrow_exception(failed);
+  throw std::invalid_argument("another process refused its part of the input (its own message names the argument)");
 }
 
 /// The one process that owns every row.
