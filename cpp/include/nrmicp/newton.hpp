@@ -257,11 +257,7 @@ class Newton {
              const Options& o, bool nest) const {
     const auto t0 = std::chrono::steady_clock::now();
     const Eigen::Index n = levels_.A.rows();
-    detail::collective_check(levels_.finest->comm(), [&] {
-      if (q.size() != n) throw std::invalid_argument("Newton::solve: q has length " + std::to_string(q.size()) + ", expected n = " + std::to_string(n));
-      if (z0 && z0->size() != n) throw std::invalid_argument("Newton::solve: x0 has length " + std::to_string(z0->size()) + ", expected n = " + std::to_string(n));
-      zeta.check(n);
-    });
+    detail::collective_check(levels_.finest->comm(), [&] { detail::check_solve_input("Newton::solve", q, z0, zeta, n); });
     Options resolved = o;
     resolve_tolerance(resolved, q, zeta, levels_.finest->comm());
     detail::NewtonRun<MatrixType> run(levels_, resolved, hooks, nest, zeta.upper());

@@ -153,9 +153,7 @@ class Solver {
     Options o = options_;
     detail::collective_check(comm(), [&] {
       if (solve_options) o = options_.with(solve_options, n);
-      if (q.size() != n) throw std::invalid_argument("Solver::solve: q has length " + std::to_string(q.size()) + ", expected n = " + std::to_string(n));
-      if (z0 && z0->size() != n) throw std::invalid_argument("Solver::solve: x0 has length " + std::to_string(z0->size()) + ", expected n = " + std::to_string(n));
-      zeta.check(n);
+      detail::check_solve_input("Solver::solve", q, z0, zeta, n);
     });
     resolve_tolerance(o, q, zeta, comm());
     Result r;

@@ -213,4 +213,18 @@ void resolve_tolerance(Options& o, const Eigen::VectorXd& q, const Zeta<StorageI
   o.rtol = 0;
 }
 
+namespace detail {
+/// A solve's inputs against A's n rows (this process's): q's and x0's lengths, ζ's sizes (Zeta::check);
+/// throws std::invalid_argument, its message starting with `who`.
+template <typename StorageIndex>
+void check_solve_input(const std::string& who, const Eigen::VectorXd& q, const Eigen::VectorXd* z0,
+                       const Zeta<StorageIndex>& zeta, Eigen::Index n) {
+  if (q.size() != n)
+    throw std::invalid_argument(who + ": q has length " + std::to_string(q.size()) + ", expected n = " + std::to_string(n));
+  if (z0 && z0->size() != n)
+    throw std::invalid_argument(who + ": x0 has length " + std::to_string(z0->size()) + ", expected n = " + std::to_string(n));
+  zeta.check(n);
+}
+}  // namespace detail
+
 }  // namespace nrmicp

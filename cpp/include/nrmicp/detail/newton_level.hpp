@@ -315,7 +315,7 @@ class NewtonLevel {
     if (!comm_.all(eval_zeta(zeta, v, zv))) return std::numeric_limits<double>::quiet_NaN();
     return icp_residual_at(q, v, zv, wv, upper);
   }
-  /// The same with ζ(v) = zv given (a finite v): no evaluation of ζ.
+  /// The same with ζ(v) = zv given (a finite v): no evaluation of ζ; without `upper`, ‖min(Av + q, v − zv)‖.
   double icp_residual_at(const Vector& q, const Vector& v, const Vector& zv, Vector& wv,
                          const Vector& upper = Vector()) const {
     ScopedTimer t(timings().spmv);
@@ -323,14 +323,6 @@ class NewtonLevel {
     wv += q;
     const double r = bounded_residual(wv, v - zv, v, upper, comm_);
     return std::isnan(r) ? std::numeric_limits<double>::infinity() : r;
-  }
-
-  /// Res of the ICP at v with ζ(v) = zv given: ‖min(Av + q, v − zv)‖.
-  double icp_residual_with(const Vector& q, const Vector& v, const Vector& zv) const {
-    ScopedTimer t(timings().spmv);
-    Vector w = q;
-    multiply_add(A_, v, w);
-    return comm_.stable_norm(w.cwiseMin(v - zv));
   }
 
   /// The rounding level of Res at z: ε ‖t‖₂, t_i the rounding of the term Res takes in row i

@@ -666,7 +666,8 @@ class NewtonRun {
   /// it solved its obstacle problem, to NewtonTuning::outer_trust × Res(z) (an LCP of a matrix that
   /// is no P-matrix may not be solved): outer_ok_.
   bool outer_step(const Vector& q, const Vector& psi, const Vector& z) {
-    const double res_z = levels_.finest->icp_residual_with(q, z, psi);
+    Vector w;
+    const double res_z = levels_.finest->icp_residual_at(q, z, psi, w);  // (+inf where w overflowed: the same test)
     tally_.outer_step();
     const double res_obstacle = outer_solve(q, psi, &z, false, std::max(1, o_.maxiter - tally_.nit()));
     outer_ok_ = !(res_obstacle > NewtonTuning::outer_trust * res_z);
