@@ -353,24 +353,33 @@ class NestedStart {
   /// y (level k, in y = z − s_old) into y = z − s_new: y + R̃(s_old − s_new), R̃ level by level Pᵀ
   /// scaled by |Pᵀ|'s row sums (an average of the fine rows a coarse row reaches where P ≥ 0, and
   /// never larger than the largest of them); an empty s is 0.
-  void shift_start(Vector& y, std::size_t k, const Vector& s_old, const Vector& s_new) const {
+  void shift_start(Vector& y, std::size_t k, const Vector& s_old, const Vector& s_new) {
     if (!s_old.size() && !s_new.size()) return;
-    Vector d = s_old.size() ? s_old : Vector::Zero(s_new.size()), r, weight;
+    Vector d = s_old.size() ? s_old : Vector::Zero(s_new.size()), r;
     if (s_new.size()) d -= s_new;
     for (std::size_t j = 0; j < k; ++j) {
-      const auto& R = levels_.hierarchy[j].R;
-      multiply(R, d, r);
-      weight = Vector::Zero(R.rows());
-      abs_multiply_add(R, Vector::Ones(d.size()), weight);  // |R| 1: no amplification where P has signs
+      multiply(levels_.hierarchy[j].R, d, r);
+      const Vector& weight = row_weights(j);
       d = (weight.array() != 0).select(r.array() / weight.array(), 0.0).matrix();
     }
     y += d;
+  }
+  /// |R_j| 1 (no amplification where P has signs), formed once a level.
+  const Vector& row_weights(std::size_t j) {
+    if (weights_.size() <= j) weights_.resize(j + 1);
+    if (!weights_[j].size()) {
+      const auto& R = levels_.hierarchy[j].R;
+      weights_[j] = Vector::Zero(R.rows());
+      abs_multiply_add(R, Vector::Ones(R.cols()), weights_[j]);
+    }
+    return weights_[j];
   }
   /// The reductions over every process (the finest level's engine).
   const Comm& comm() const { return levels_.finest->comm(); }
 
   const NewtonLevels<MatrixType>& levels_;
   NewtonTally<MatrixType>& tally_;
+  std::vector<Vector> weights_;  // row_weights (empty: not formed yet)
 };
 
 /// One solve's obstacle problems ψ ≤ z (≤ upper): ζ none or constant, and the inner solves of the
@@ -398,7 +407,8 @@ class ObstacleSolver {
   /// says where the finest level's were taken; the answer is that problem's.
   Result solve(const Vector& q, const Vector& psi, const Vector* z0, bool nest, double tol, int maxiter, bool report,
                std::vector<char>* set, const Vector* upper = nullptr, RefreshedBounds* fresh = nullptr) {
-    Frame f(levels_.A, q, psi, upper ? *upper : upper_, comm(), tally_.timings());
+    const Vector& u = upper ? *upper : upper_;
+    Frame f(levels_.A, q, psi, u, comm(), tally_.timings());
     Vector y0 = !z0 ? Vector::Zero(q.size()) : f.bounds.shifted() ? Vector(*z0 - f.s()) : Vector(*z0);
     f.box().project(y0);
     const bool nested = nest && !levels_.coarse.empty();
@@ -418,7 +428,7 @@ class ObstacleSolver {
       tally_.absorb(*tried, 0, ScopedTimer::seconds_since(t0));
       budget -= tried->steps;
     }
-    if (nested) y0 = fresh ? start_.refreshed(q, psi, upper ? *upper : upper_, f, *fresh) : start_.frozen(f.q(q), f.box());
+    if (nested) y0 = fresh ? start_.refreshed(q, psi, u, f, *fresh) : start_.frozen(f.q(q), f.box());
     const auto t0 = std::chrono::steady_clock::now();
     const Vector& s = f.s();  // (the finest level's frame: the refreshed start's bounds)
     const auto control = nested ? guess_control(s, level_tol, budget, report) : finest_control(s, level_tol, budget, report);
