@@ -281,7 +281,7 @@ class NestedStart {
   /// The start of a QVI's obstacle problem (bounds ψ = `psi`, `upper` taken at the outer step's z):
   /// the coarsest level on them, each finer one on the bounds at z_f, the finest prolongation of the
   /// coarser answer (fresh.at: one evaluation of ζ a level), from that answer in the new variables,
-  /// y = P y_c + R̃(s_old − s_new) projected (R̃ = Pᵀ at unit row sums). A bound frozen at the outer
+  /// y = P y_c + R̃(s_old − s_new) projected (R̃: shift_start). A bound frozen at the outer
   /// step's z would leave the free boundary where ζ(z) puts it, and the finest solve peel the rest a
   /// grid layer a step (docs/MEASUREMENTS.md, "A nested start that re-takes ζ a level").
   /// `f` becomes the finest level's frame; fresh says where it was taken. Where the bounds do not
