@@ -144,3 +144,25 @@ def test_a_matvec_writing_into_its_input_is_named():
     # a fresh array)
     with pytest.raises(ValueError, match=r"zeta_jacobian\(z\)\.matvec\(v\) tried to modify its input v"):
         nrmicp.solve(A, q, zeta, method="newton", zeta_jacobian=writes, scale=False, tol=1e-10)
+
+
+@pytest.mark.parametrize("form", ["operator", "none"])
+def test_zeta_is_not_called_again_at_the_z_of_its_last_call(form):
+    # A costly ζ (here a sparse solve) is asked at one z by the step's Res, the outer step after it, the stop
+    # rules and the next linearization: the Newton member keeps its last value instead of calling again.
+    pb, jacobian = thermoforming(31)
+    seen = []
+
+    def zeta(z):
+        seen.append(np.array(z, copy=True))
+        return pb.zeta(z).copy()
+    # tol below Res's rounding floor: the floor's stop rules ask for ζ at the z they judge, too
+    res = nrmicp.solve(pb.A, pb.q, zeta, method="newton", tol=1e-14, hierarchy=pb.prolongations(),
+                       zeta_jacobian=jacobian if form == "operator" else None)
+    assert res.status in (nrmicp.Status.CONVERGED, nrmicp.Status.STAGNATED), res.message
+    # the last call is the result's Res, computed in numpy in the user's variables (an independent check)
+    assert len(seen) > 3 and np.array_equal(seen[-1], res.z)
+    core = seen[:-1]
+    repeats = [k for k in range(1, len(core)) if np.array_equal(core[k], core[k - 1])]
+    assert not repeats, f"zeta called again at the same z at calls {repeats} of {len(core)}"
+    assert complementarity(pb.A, pb.q, lambda z: pb.zeta(z).copy(), res.z) < 1e-9

@@ -246,8 +246,11 @@ class NewtonLevel {
   }
 
   /// Where this level's work is timed (a solve's Result::timings, set by NewtonRun for its
-  /// duration; nullptr: a scratch record nobody reads).
-  void record_into(Timings* tm) { tm_ = tm; }
+  /// duration; nullptr: a scratch record nobody reads); a new record begins eval_zeta's memo afresh.
+  void record_into(Timings* tm) {
+    tm_ = tm;
+    memo_ = {};
+  }
   Timings& timings() const { return tm_ ? *tm_ : unrecorded_; }
 
   /// The reduced system of the (shifted) LCP, analysed once (its pattern and analysis: setup).
@@ -368,10 +371,21 @@ class NewtonLevel {
   Result sweep(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector& z0, int sweeps, double tol) {
     return fallback_.sweep(options_, q, zeta, z0, sweeps, tol, timings());
   }
-  /// ζ(v) into zv, timed; false when ζ failed.
+  /// ζ(v) into zv, timed; false when ζ failed. A functor ζ asked again at the v of its last call is
+  /// not called (a step's Res, its outer step, the stop rules and the next linearization all ask at
+  /// one z); the memo lives for one solve (record_into) and every process hits or misses together.
   bool eval_zeta(const Zeta<StorageIndex>& zeta, const Vector& v, Vector& zv) const {
     ScopedTimer t(timings().zeta);
-    return zeta.eval(v, zv);
+    if (zeta.kind() != ZetaKind::Functor) return zeta.eval(v, zv);
+    if (comm_.all(memo_.z.size() == v.size() && memo_.z == v)) {
+      zv = memo_.zeta;
+      return true;
+    }
+    memo_.z.resize(0);
+    if (!zeta.eval(v, zv)) return false;
+    memo_.z = v;
+    memo_.zeta = zv;
+    return true;
   }
   /// u(v) of an implicit upper bound into uv, timed as ζ is; false when u failed (Zeta::eval_upper).
   bool eval_upper(const Zeta<StorageIndex>& zeta, const Vector& v, Vector& uv) const {
@@ -410,6 +424,7 @@ class NewtonLevel {
   FallbackMember<MatrixType> fallback_{A_};
   Timings* tm_ = nullptr;
   mutable Timings unrecorded_;
+  mutable struct { Vector z, zeta; } memo_;  // eval_zeta's last functor call: z and ζ(z) (empty: none)
 };
 
 }  // namespace nrmicp::detail
