@@ -9,7 +9,8 @@ Scenes:
   banded solve a product).
 - ``thermo2d``: nrmicp.scenes.thermoforming_2d (kappa = 2, delta = 1: a strong, long-range coupling, or
   the scene's defaults with --defaults), m = 127 -> 1023 (n = 1.6e4 -> 1.05e6), its geometric hierarchy;
-  zeta' = kappa (I + delta A)^{-1} diag(s'(z)) as a LinearOperator (one sparse LU solve a product).
+  zeta' = kappa (I + delta A)^{-1} diag(s'(z)) as a LinearOperator (scenes.thermoforming's: one solve with the
+  scene's sparse LU a product).
 - ``impulse``: nrmicp.scenes.impulse_control, n = 101 -> 6401 (hierarchy 'auto'), its sparse selection
   Jacobian.
 - ``sin``: the 2D obstacle scene with zeta = psi + 0.2 sin z, m = 99 -> 1023 (n = 9,801 -> 1.05e6), its
@@ -37,6 +38,7 @@ import scipy.sparse.linalg as spla
 import nrmicp
 from nrmicp import scenes
 from nrmicp.scenes.impulse import impulse_zeta_jacobian
+from nrmicp.scenes.thermoforming import thermoforming_zeta_jacobian
 
 try:
     from qvi_outer import achp_problem
@@ -47,15 +49,7 @@ except ImportError:   # run from the repository root as a module path
 def thermo2d_problem(m: int, kappa: float = 0.05, delta: float = 0.01):
     """(A, q, zeta, zeta_jacobian, hierarchy) of scenes.thermoforming_2d with its exact zeta' as an operator."""
     pb = scenes.thermoforming_2d(m, kappa=kappa, delta=delta, exact=False)
-    phi0, ell, n = pb.reference["phi0"], pb.reference["ell"], pb.n
-    lu = spla.splu(sp.csc_matrix(sp.identity(n) + delta * pb.A))
-
-    def zeta_jacobian(z):
-        u = (z - phi0) / ell
-        ds = kappa * -2.0 * u / ell / (1.0 + u * u) ** 2
-        return spla.LinearOperator((n, n), matvec=lambda v: lu.solve(ds * v.ravel()), dtype=float)
-
-    return pb.A, pb.q, pb.zeta, zeta_jacobian, pb.prolongations()
+    return pb.A, pb.q, pb.zeta, thermoforming_zeta_jacobian(pb), pb.prolongations()
 
 
 def sin_problem(m: int, form: str = "operator"):

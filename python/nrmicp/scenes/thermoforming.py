@@ -15,9 +15,11 @@ the same finite differences as :mod:`.obstacle` (A = −Δ_h, q = −f), the ICP
 
     ζ(z) = Φ₀ + κ (I − δΔ_h)⁻¹ s(z)      — nonlinear and nonlocal: a Python callable.
 
-(I − δΔ_h) is factorized once (scipy ``splu``) when the scene is built; each call of ζ is
-a handful of vectorized numpy operations, one pair of triangular solves, and writes into a
-preallocated buffer (overwritten by the next call).
+(I − δΔ_h) is factorized once (scipy ``splu``, minimum-degree ordering) when the scene is built;
+each call of ζ is a handful of vectorized numpy operations, one pair of triangular solves, and
+writes into a preallocated buffer (overwritten by the next call). Its derivative
+ζ′(z) = κ (I − δΔ_h)⁻¹ diag(s′(z)) is dense: :func:`thermoforming_zeta_jacobian` gives it as a
+``LinearOperator`` (one pair of triangular solves a product) for ``zeta_jacobian``.
 
 Lipschitz constant (∞-norm): (I − δΔ_h) is an M-matrix with row sums ≥ 1, so
 ‖(I − δΔ_h)⁻¹‖∞ ≤ 1, and |s'| ≤ 3√3/(8ℓ); hence L = κ·3√3/(8ℓ) (0.162 with the defaults
@@ -35,7 +37,7 @@ import scipy.sparse.linalg as spla
 
 from . import Problem
 from ._exact import solve_exact_qvi
-from ._operators import grid_1d, grid_2d, neg_laplacian_1d, neg_laplacian_2d
+from ._operators import grid_1d, grid_2d, heat_solve, neg_laplacian_1d, neg_laplacian_2d
 
 _MODELS = ("linear elastic membrane under forming pressure", "unilateral contact with a mould",
            "mould thermal expansion driven by a membrane-heated temperature field (nonlocal)")
@@ -43,39 +45,53 @@ _OMITS = ("transient heating (steady state only)", "membrane temperature and the
           "contact-dependent heat transfer coefficient", "large deflections", "mould deformation")
 
 
-def _thermo_zeta(L: sp.csr_matrix, phi0: np.ndarray, kappa: float, delta: float, ell: float):
-    """Build ζ(z) = Φ₀ + κ (I − δL)⁻¹ s(z) with a prefactorized solve and reused buffers."""
+def _thermo_zeta(solve, phi0: np.ndarray, kappa: float, ell: float):
+    """Build ζ(z) = Φ₀ + κ (I − δL)⁻¹ s(z) from the prefactorized solve, with reused buffers."""
     n = phi0.size
-    heat = sp.csc_matrix(sp.identity(n) + delta * L)
-    lu = spla.splu(heat)
     src = np.empty(n)
     out = np.empty(n)
 
-    def zeta(z, _lu=lu, _src=src, _out=out, _phi0=phi0, _k=kappa, _ell=ell):
+    def zeta(z, _solve=solve, _src=src, _out=out, _phi0=phi0, _k=kappa, _ell=ell):
         """ζ(z) = Φ₀ + κ (I − δΔ_h)⁻¹ [1 / (1 + ((z − Φ₀)/ℓ)²)]; returns a reused buffer."""
         np.subtract(z, _phi0, out=_src)
         _src *= 1.0 / _ell
         np.multiply(_src, _src, out=_src)
         _src += 1.0
         np.reciprocal(_src, out=_src)
-        np.multiply(_lu.solve(_src), _k, out=_out)
+        np.multiply(_solve(_src), _k, out=_out)
         _out += _phi0
         return _out
 
     return zeta
 
 
+def thermoforming_zeta_jacobian(problem: Problem):
+    """ζ′ of a thermoforming problem's ζ, for ``zeta_jacobian``: at z the ``LinearOperator``
+    v ↦ κ (I − δΔ_h)⁻¹ (s′(z) v), s′(z) = −2u/(ℓ(1 + u²)²), u = (z − Φ₀)/ℓ (dense as a matrix;
+    each product one pair of triangular solves with the scene's factorization)."""
+    ref = problem.reference
+    phi0, kappa, ell, solve, n = ref["phi0"], ref["kappa"], ref["ell"], ref["heat_solve"], problem.n
+
+    def jacobian(z):
+        u = (np.asarray(z, dtype=float) - phi0) / ell
+        ds = kappa * -2.0 * u / ell / (1.0 + u * u) ** 2
+        return spla.LinearOperator((n, n), matvec=lambda v: solve(ds * np.ravel(v)), dtype=float)
+
+    return jacobian
+
+
 def _problem(name, dim, L, phi0, f, kappa, delta, ell, exact, extra_ref, grid):
     if not (kappa >= 0 and delta >= 0 and ell > 0):
         raise ValueError(f"need kappa >= 0, delta >= 0, ell > 0; got {kappa}, {delta}, {ell}")
     lip = kappa * 3.0 * np.sqrt(3.0) / (8.0 * ell)
-    zeta = _thermo_zeta(L, phi0, kappa, delta, ell)
+    solve = heat_solve(L, delta)
+    zeta = _thermo_zeta(solve, phi0, kappa, ell)
     q = np.full(phi0.size, -float(f))
     z_exact = None
     if exact and lip < 1.0:
         # the reference solver must not share the scene's buffers
-        z_exact = solve_exact_qvi(L, q, _thermo_zeta(L, phi0, kappa, delta, ell), lip)
-    ref = {"phi0": phi0, "kappa": kappa, "delta": delta, "ell": ell, "f": f}
+        z_exact = solve_exact_qvi(L, q, _thermo_zeta(solve, phi0, kappa, ell), lip)
+    ref = {"phi0": phi0, "kappa": kappa, "delta": delta, "ell": ell, "f": f, "heat_solve": solve}
     ref.update(extra_ref)
     return Problem(
         name=name, A=L, q=q, zeta=zeta, z_exact=z_exact, reference=ref,

@@ -23,8 +23,8 @@ from __future__ import annotations
 import numpy as np
 
 from . import Problem
-from ._exact import solve_exact_box
-from ._operators import grid_1d, grid_2d, neg_laplacian_1d, neg_laplacian_2d
+from ._exact import fixed_point_settled, solve_exact_box
+from ._operators import grid_1d, grid_2d, heat_solve, neg_laplacian_1d, neg_laplacian_2d
 
 __all__ = ["two_sided_membrane_1d", "two_sided_membrane_1d_exact", "two_sided_membrane_2d",
            "two_sided_membrane_heated_2d"]
@@ -113,14 +113,11 @@ def _sagging_ceiling(L, ceiling: float, kappa: float, delta: float, ell: float):
     """u(z) = ceiling − κ (I − δL)⁻¹ s(ceiling − z), s(d) = 1/(1 + (d/ℓ)²): the upper plate sags toward
     the membrane where the membrane, close below it, heats it (thermoforming's mould law, from above).
     (I − δL) is factorized once; each call returns a fresh array."""
-    import scipy.sparse as sp
-    import scipy.sparse.linalg as spla
-
-    lu = spla.splu(sp.csc_matrix(sp.identity(L.shape[0]) + delta * L))
+    solve = heat_solve(L, delta)
 
     def upper(z):
         gap = (ceiling - np.asarray(z, dtype=float)) / ell
-        return ceiling - kappa * lu.solve(1.0 / (1.0 + gap * gap))
+        return ceiling - kappa * solve(1.0 / (1.0 + gap * gap))
 
     return upper
 
@@ -160,11 +157,13 @@ def two_sided_membrane_heated_2d(m: int, load: float = 50.0, lower: float = -0.3
 
 
 def _exact_fixed_point(A, q, lower, upper_fn, tol=1e-14, maxiter=200):
-    """The fixed point z = S(u(z)) of exact box solves (solve_exact_box), u a contraction."""
-    z = solve_exact_box(A, q, lower, upper_fn(np.zeros(A.shape[0])))
+    """The fixed point z = S(u(z)) of exact box solves (solve_exact_box), u a contraction; stops as
+    solve_exact_qvi does (fixed_point_settled)."""
+    z, prev = solve_exact_box(A, q, lower, upper_fn(np.zeros(A.shape[0]))), np.inf
     for _ in range(maxiter):
         new = solve_exact_box(A, q, lower, upper_fn(z), z0=z)
         step, z = np.max(np.abs(new - z)), new
-        if step <= tol * max(1.0, np.max(np.abs(z))):
+        if fixed_point_settled(step, prev, z, tol):
             return z
+        prev = step
     raise RuntimeError(f"the exact outer fixed point did not settle in {maxiter} steps")
