@@ -16,6 +16,7 @@
 #pragma once
 
 #include "comm.hpp"
+#include "galerkin.hpp"
 #include "sparse_product.hpp"
 
 #include <Eigen/SparseCore>
@@ -32,10 +33,6 @@ inline constexpr double kKrylovRtol = 1e-12;
 
 template <typename StorageIndex>
 class ActiveSetSystem;
-template <typename StorageIndex>
-struct Level;
-template <typename StorageIndex>
-struct Hierarchy;
 
 /// The serial engine's matrices: Eigen sparse matrices (and Maps of them), every row owned.
 template <typename Derived>

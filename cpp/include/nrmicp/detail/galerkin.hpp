@@ -24,22 +24,27 @@ namespace nrmicp::detail {
 /// 2D grids 0.9, P1 0.8, P2 0.64 (docs/MEASUREMENTS.md, "The fold of a denser first coarse level").
 inline constexpr double kFoldDensity = 1.2;
 
-/// One level of a hierarchy below a finer one, as pyamg's MultilevelSolver.Level: P maps this
-/// level to the next finer one, R = Pᵀ (formed once), A = R A_finer P its Galerkin operator.
-template <typename StorageIndex>
-struct Level {
-  using RowMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, StorageIndex>;
-  RowMatrix P, R, A;
+/// One level of a hierarchy below a finer one, as pyamg's MultilevelSolver.Level, in either engine's
+/// matrices: P maps this level to the next finer one, R = Pᵀ (formed once), A = R A_finer P its Galerkin operator.
+template <typename Matrix>
+struct HierarchyLevel {
+  Matrix P, R, A;
 };
 
 /// The levels below a level, owned elsewhere (by nrmicp::Newton): level[0] is the next coarser one.
 /// Not const: the finest level's V-cycle frees and restores the operators A (GalerkinOperators, `borrow`).
-template <typename StorageIndex>
-struct Hierarchy {
-  Level<StorageIndex>* level = nullptr;
+template <typename LevelType>
+struct LevelsBelow {
+  LevelType* level = nullptr;
   std::size_t levels = 0;
-  Hierarchy below() const { return levels ? Hierarchy{level + 1, levels - 1} : *this; }
+  LevelsBelow below() const { return levels ? LevelsBelow{level + 1, levels - 1} : *this; }
 };
+
+/// The serial engine's: Eigen's row-major matrices.
+template <typename StorageIndex>
+using Level = HierarchyLevel<Eigen::SparseMatrix<double, Eigen::RowMajor, StorageIndex>>;
+template <typename StorageIndex>
+using Hierarchy = LevelsBelow<Level<StorageIndex>>;
 
 /// One changed entry of a matrix on a fixed pattern: M(row, col) += delta.
 template <typename StorageIndex>

@@ -316,16 +316,9 @@ inline Eigen::VectorXd inject_bounds(const Matrix& P, const Eigen::VectorXd& b, 
   return c;
 }
 
-/// A level of the hierarchy below another (detail::Level's PETSc form): P, R = Pᵀ, A = PᵀA_finer P.
-struct Level {
-  Matrix P, R, A;
-};
-/// The levels below a level (detail::Hierarchy's PETSc form).
-struct Hierarchy {
-  Level* level = nullptr;
-  std::size_t levels = 0;
-  Hierarchy below() const { return levels ? Hierarchy{level + 1, levels - 1} : *this; }
-};
+/// A level of the hierarchy below another, and the levels below one, in PETSc Mats.
+using Level = detail::HierarchyLevel<Matrix>;
+using Hierarchy = detail::LevelsBelow<Level>;
 
 /// The serial V-cycle (detail/multigrid.hpp) in PETSc's PCMG, set up on `pc` over the hierarchy below a
 /// level: its P's, the Galerkin operators PᵀKP of each step's K (GalerkinOperators: updated by K's change,
