@@ -144,11 +144,17 @@ Vec gather(const Vec& local, Eigen::Index n) {
   return all;
 }
 
+/// The default options with `method` (and `tol`, when given).
+Options with_method(Method method, double tol = -1) {
+  Options o;
+  o.method = method;
+  if (tol > 0) o.tol = tol;
+  return o;
+}
+
 void run(const Case& c, const char* what) {
   INFO(what << " on " << size_of() << " processes");
-  Options o;
-  o.method = Method::Newton;
-  o.tol = 1e-9;
+  const Options o = with_method(Method::Newton, 1e-9);
   Zeta<int> zs = Zeta<int>::constant(c.lower);
   if (c.upper.size()) zs = zs.with_upper(c.upper);
   const Result serial = Newton<RowMat>(c.A, o, c.P).solve(c.q, zs);
@@ -226,9 +232,7 @@ bool options_left() {
 /// the complementarity conditions and the serial cold solve's z, in few finest steps.
 void run_amg(const Case& c, const char* what) {
   INFO(what << " on " << size_of() << " processes");
-  Options o;
-  o.method = Method::Newton;
-  o.tol = 1e-9;
+  const Options o = with_method(Method::Newton, 1e-9);
   const Result serial = Newton<RowMat>(c.A, o).solve(c.q, Zeta<int>::constant(c.lower));
   Mat A = to_petsc(c.A);
   Result r;
@@ -511,10 +515,7 @@ Mat shifted_rows(const RowMat& B, int shift, bool columns = false) {
 TEST_CASE("an input one process alone gets wrong is refused on every process (none is left waiting)") {
   INFO("on " << size_of() << " processes");
   const Case c = membrane(15, 20.0, false, 0);
-  Options newton_options;
-  newton_options.method = Method::Newton;
-  Options nrmgs_options;
-  nrmgs_options.method = Method::NRMGS;
+  const Options newton_options = with_method(Method::Newton), nrmgs_options = with_method(Method::NRMGS);
   Mat A = to_petsc(c.A);
   {
     const petsc::Matrix Am(A);
