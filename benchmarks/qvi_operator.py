@@ -25,6 +25,7 @@ of the obstacle solve; the QVIs' CPU over the obstacle's; CPU microseconds per u
     OPENBLAS_NUM_THREADS=1 python benchmarks/qvi_operator.py
     OPENBLAS_NUM_THREADS=1 python benchmarks/qvi_operator.py --achp 63 255 --thermo2d 31 --impulse 101 --sin 31
     OPENBLAS_NUM_THREADS=1 python benchmarks/qvi_operator.py --achp --thermo2d --impulse --sin 1023  # one scene
+    OPENBLAS_NUM_THREADS=1 python benchmarks/qvi_operator.py --achp --thermo2d --impulse --tol default  # the default stop
 """
 from __future__ import annotations
 
@@ -87,7 +88,8 @@ def timed(A, q, zeta, hierarchy, tol, zeta_jacobian=None):
     """One method='newton' solve: (result, CPU s); the garbage of the solves before it collected first."""
     gc.collect()
     t0 = time.process_time()
-    r = nrmicp.solve(A, q, zeta, method="newton", tol=tol, hierarchy=hierarchy, zeta_jacobian=zeta_jacobian)
+    stop = {} if tol is None else {"tol": tol}   # None: the library's default (units-free, relative) stop
+    r = nrmicp.solve(A, q, zeta, method="newton", hierarchy=hierarchy, zeta_jacobian=zeta_jacobian, **stop)
     return r, time.process_time() - t0
 
 
@@ -118,7 +120,8 @@ def main(argv=None):
     ap.add_argument("--sin", type=int, nargs="*", default=[99, 255, 511, 1023], help="2D grid sides m of zeta = psi + 0.2 sin z")
     ap.add_argument("--sin-form", default="operator", choices=["operator", "sparse"], help="the sin QVI's zeta'")
     ap.add_argument("--defaults", action="store_true", help="thermoforming_2d at the scene's kappa, delta")
-    ap.add_argument("--tol", type=float, default=1e-8)
+    ap.add_argument("--tol", type=lambda t: None if t == "default" else float(t), default=1e-8,
+                    help="the solves' tol, or 'default': nrmicp's default stop (relative to Res(0), units-free)")
     args = ap.parse_args(argv)
     print("| problem | n | ζ′: Newton steps | ζ′: linear solves | ζ′: status, Res | no ζ′: outer steps | "
           "no ζ′: linear solves | no ζ′: status, Res | numpy err | ζ′: CPU s | no ζ′: CPU s | obstacle CPU s | "
