@@ -116,6 +116,12 @@ struct Box {
     if (empty()) { y = y.cwiseMax(0.0); return; }
     for (Eigen::Index i = 0; i < y.size(); ++i) y[i] = clamp(i, y[i]);
   }
+  /// y of the box `old` moved into this one with each row's state kept: a row at old's lower (upper)
+  /// bound goes to this box's, any other keeps its value, projected.
+  void carry(const Box& old, Vector& y) const {
+    for (Eigen::Index i = 0; i < y.size(); ++i)
+      y[i] = y[i] == old.lower(i) ? lower(i) : y[i] == old.upper(i) ? upper(i) : clamp(i, y[i]);
+  }
 
   /// The box of the next coarser level (y_fine ≈ P y_coarse): a coarse row is bounded (below, above)
   /// where any fine row it reaches is, free where all of them are (so a row free on the finest level

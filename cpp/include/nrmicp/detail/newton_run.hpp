@@ -280,10 +280,11 @@ class NestedStart {
 
   /// The start of a QVI's obstacle problem (bounds ψ = `psi`, `upper` taken at the outer step's z):
   /// the coarsest level on them, each finer one on the bounds at z_f, the finest prolongation of the
-  /// coarser answer (fresh.at: one evaluation of ζ a level), from that answer in the new variables,
-  /// y = P y_c + R̃(s_old − s_new) projected (R̃: shift_start). A bound frozen at the outer
-  /// step's z would leave the free boundary where ζ(z) puts it, and the finest solve peel the rest a
-  /// grid layer a step (docs/MEASUREMENTS.md, "A nested start that re-takes ζ a level").
+  /// coarser answer (fresh.at: one evaluation of ζ a level), from that answer with each row's state
+  /// kept (Box::carry: a row at a bound moves with it, so the active set carries over). A bound frozen
+  /// at the outer step's z would leave the free boundary where ζ(z) puts it, and the finest solve peel
+  /// the rest a grid layer a step; so would a start that keeps z where the bound moved (docs/MEASUREMENTS.md,
+  /// "A nested start that re-takes ζ a level", "The refreshed start keeps the active set").
   /// `f` becomes the finest level's frame; fresh says where it was taken. Where the bounds do not
   /// change, nothing else does; after ζ or u failed, the levels keep the last bounds.
   Vector refreshed(const Vector& q, const Vector& psi, const Vector& upper, Frame& f, RefreshedBounds& fresh) {
@@ -300,14 +301,13 @@ class NestedStart {
       if ((failed = !comm().all(fresh.at(z, lower, up)))) continue;
       fresh.z.swap(z);
       if (comm().all(lower == fresh.lower && up == fresh.upper)) continue;
-      Frame g(levels_.A, q, lower, up, comm(), tally_.timings());
-      shift_start(y, l - 1, f.s(), g.s());
-      f = std::move(g);
+      f = Frame(levels_.A, q, lower, up, comm(), tally_.timings());
       fresh.lower.swap(lower);
       fresh.upper.swap(up);
       fresh.moved = true;
+      const Box old = std::move(c.boxes[l - 1]);
       c = chain(f.q(q), f.box());
-      c.boxes[l - 1].project(y);
+      c.boxes[l - 1].carry(old, y);
     }
     return y;
   }
@@ -350,36 +350,11 @@ class NestedStart {
     if (s.size()) y += s;
     return y;
   }
-  /// y (level k, in y = z − s_old) into y = z − s_new: y + R̃(s_old − s_new), R̃ level by level Pᵀ
-  /// scaled by |Pᵀ|'s row sums (an average of the fine rows a coarse row reaches where P ≥ 0, and
-  /// never larger than the largest of them); an empty s is 0.
-  void shift_start(Vector& y, std::size_t k, const Vector& s_old, const Vector& s_new) {
-    if (!s_old.size() && !s_new.size()) return;
-    Vector d = s_old.size() ? s_old : Vector::Zero(s_new.size()), r;
-    if (s_new.size()) d -= s_new;
-    for (std::size_t j = 0; j < k; ++j) {
-      multiply(levels_.hierarchy[j].R, d, r);
-      const Vector& weight = row_weights(j);
-      d = (weight.array() != 0).select(r.array() / weight.array(), 0.0).matrix();
-    }
-    y += d;
-  }
-  /// |R_j| 1 (no amplification where P has signs), formed once a level.
-  const Vector& row_weights(std::size_t j) {
-    if (weights_.size() <= j) weights_.resize(j + 1);
-    if (!weights_[j].size()) {
-      const auto& R = levels_.hierarchy[j].R;
-      weights_[j] = Vector::Zero(R.rows());
-      abs_multiply_add(R, Vector::Ones(R.cols()), weights_[j]);
-    }
-    return weights_[j];
-  }
   /// The reductions over every process (the finest level's engine).
   const Comm& comm() const { return levels_.finest->comm(); }
 
   const NewtonLevels<MatrixType>& levels_;
   NewtonTally<MatrixType>& tally_;
-  std::vector<Vector> weights_;  // row_weights (empty: not formed yet)
 };
 
 /// One solve's obstacle problems ψ ≤ z (≤ upper): ζ none or constant, and the inner solves of the
