@@ -218,3 +218,25 @@ TEST_CASE("an implicit upper bound: crossing bounds are no success; u failing is
   CHECK_THROWS_WITH_AS(newton.solve(q, Zeta<int>::none().with_upper(Zeta<int>::affine(wrong, Vec::Ones(n + 1)))),
                        doctest::Contains("upper"), std::invalid_argument);
 }
+
+TEST_CASE("Box::carry keeps each row's state when the bounds move: a row at a bound moves with it") {
+  detail::Box old, moved;
+  old.lo = Vec::Zero(5);
+  old.hi = (Vec(5) << 1.0, 1.0, 1.0, inf, 2.0).finished();
+  moved.lo = (Vec(5) << -1e-6, 1e-6, 0.0, 0.5, 0.0).finished();
+  moved.hi = (Vec(5) << 1.0, 1.0, 1.0 - 1e-6, inf, 2.0 + 1e-6).finished();
+  old.has_lo = old.has_hi = moved.has_lo = moved.has_hi = true;
+  // rows: at lower (bound down), at lower (bound up), at upper (bound down), between (now below the new
+  // lower: projected), at upper (bound up)
+  Vec y = (Vec(5) << 0.0, 0.0, 1.0, 0.25, 2.0).finished();
+  moved.carry(old, y);
+  CHECK(y[0] == -1e-6);       // stays at the lower bound that moved down (projection alone: inactive)
+  CHECK(y[1] == 1e-6);
+  CHECK(y[2] == 1.0 - 1e-6);
+  CHECK(y[3] == 0.5);
+  CHECK(y[4] == 2.0 + 1e-6);  // stays at the upper bound that moved up (projection alone: inactive)
+  Vec p = (Vec(5) << 0.0, 0.0, 1.0, 0.25, 2.0).finished();
+  moved.project(p);
+  CHECK(p[0] == 0.0);  // what the projection alone would leave: no longer at a bound
+  CHECK(p[4] == 2.0);
+}
