@@ -24,13 +24,13 @@ Scenes (nrmicp.scenes): the two-sided membrane 2D (two_sided_membrane_2d, m = 12
                    snes_atol from the target down by 10× until the numpy Res meets it. Run by the
                    interpreter of --petsc-python (petsc4py) on the matrices saved to .npz; the CPU of
                    SNESSolve (the matrix's assembly from CSR not counted).
-3. Contact against the obstacle problem of the same mesh and size (the issue's ≤ 1.5×), both
-   with every default:
+3. Contact against obstacle problems of the same mesh and size, both with every default; the
+   issue's ≤ 1.5× is contact / finite (free unknowns against bounded rows of the same A):
      membranes     the same mesh, elements and unknowns (same n, the same interleaved numbering, the
                    top edge held at 0), each displacement component replaced by a membrane: A =
                    the vector Laplacian (two uncoupled P_k stiffness matrices), load −0.2 on both,
                    every unknown bounded below by ψ = −0.02 − 0.5(x − 0.9)² (the floor's shape): an
-                   obstacle problem with a 2D contact region, about half the nonzeros of elasticity.
+                   obstacle problem with a 2D contact region, 1/2.4 of elasticity's nonzeros (another A).
      finite        the contact problem itself with the free unknowns' −inf replaced by −1 (inactive:
                    |u| ≤ 0.05): the same A, q and answer, every row bounded (the issue's workaround).
      mesh          the contact problem with the scene's mesh hierarchy (Problem.prolongations(),
