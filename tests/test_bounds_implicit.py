@@ -311,3 +311,39 @@ def test_heated_two_sided_membrane_agrees_with_its_exact_fixed_point(hierarchy):
     assert_mcp_at(p.A, p.q, res.z, p.zeta, u, res.active_mask, tol=1e-8)
     assert (res.active_mask == 1).sum() > 0 and (res.active_mask == -1).sum() > 0   # touches both
     assert p.residual(res.z) == pytest.approx(res.residual, rel=1e-6, abs=1e-12)
+
+
+def test_an_implicit_upper_bound_lifted_to_inf_keeps_the_nested_start_finite():
+    # The nested start re-takes u at each level and moves a row at its old upper bound to the new one: where
+    # u(z) lifts the bound to +inf (no bound there) the row must become free, not start at +inf (a review's
+    # case: the start went non-finite and the solve reported DIVERGED).
+    k = 8
+    n, h = 2 ** k - 1, 1.0 / 2 ** k
+    x = np.arange(1, n + 1) * h
+    A = sp.diags([-np.ones(n - 1), 2 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1], format="csr")
+    q, lower = -h * h * 50 * np.sin(2 * np.pi * x), np.full(n, -0.3)
+
+    def interpolation(nc):
+        rows = [r for j in range(nc) for r in (2 * j + 1, 2 * j, 2 * j + 2)]
+        cols = [j for j in range(nc) for _ in range(3)]
+        return sp.csr_matrix(([1.0, 0.5, 0.5] * nc, (rows, cols)), shape=(2 * nc + 1, nc))
+    hierarchy, nc = [], (n - 1) // 2
+    while nc >= 3:
+        hierarchy.append(interpolation(nc))
+        nc = (nc - 1) // 2
+    left, middle = x < 0.2, (x >= 0.3) & (x < 0.45)
+
+    def upper(z):   # the ceiling 0.25 over x < 0.2 is lifted once the membrane presses it further right
+        u = np.full(n, 0.25)
+        if np.mean(z[middle]) > 0.2:
+            u[left] = np.inf
+        return u
+    lifted = np.full(n, 0.25)
+    lifted[left] = np.inf
+    ref = reference_box_solve(A, q, lower, lifted).z
+    assert np.array_equal(upper(ref), lifted)   # the fixed point: the lifted ceiling
+    for h_ in (hierarchy, None):
+        res = nrmicp.solve(A, q, lower, upper=upper, method="newton", hierarchy=h_)
+        assert res.success and np.all(np.isfinite(res.z)), res.message
+        assert np.max(np.abs(res.z - ref)) < 1e-10
+        assert_mcp_at(A, q, res.z, lower, upper(res.z), res.active_mask)

@@ -240,3 +240,16 @@ TEST_CASE("Box::carry keeps each row's state when the bounds move: a row at a bo
   CHECK(p[0] == 0.0);  // what the projection alone would leave: no longer at a bound
   CHECK(p[4] == 2.0);
 }
+
+TEST_CASE("Box::carry frees a row whose bound was lifted to +-inf instead of putting it there") {
+  detail::Box old, lifted;
+  old.lo = Vec::Zero(2);
+  old.hi = Vec::Constant(2, 0.25);
+  lifted.lo = (Vec(2) << -inf, 0.0).finished();
+  lifted.hi = (Vec(2) << 0.25, inf).finished();
+  old.has_lo = old.has_hi = lifted.has_lo = lifted.has_hi = true;
+  Vec y = (Vec(2) << 0.0, 0.25).finished();  // row 0 at its lower bound, row 1 at its upper one
+  lifted.carry(old, y);
+  CHECK(y[0] == 0.0);   // free below now: keeps its value
+  CHECK(y[1] == 0.25);  // free above now: keeps its value
+}

@@ -123,14 +123,16 @@ def solve_exact_qvi(A, q, zeta_fn, lipschitz: float, z0=None, tol: float = 1e-13
         z_new = solve_exact_obstacle(A, q, np.array(zeta_fn(z)), z0=z)
         step = np.max(np.abs(z_new - z))
         z = z_new
-        if fixed_point_settled(step, prev, z, tol):
+        if fixed_point_settled(step, prev, z, tol, lipschitz):
             return z
         prev = step
     raise RuntimeError(f"solve_exact_qvi: no convergence in {maxiter} outer steps")
 
 
-def fixed_point_settled(step: float, prev: float, z: np.ndarray, tol: float) -> bool:
+def fixed_point_settled(step: float, prev: float, z: np.ndarray, tol: float, lipschitz: float) -> bool:
     """An exact outer fixed point's stop: the ∞-norm step below tol · max(1, ‖z‖∞), or below 1e-9 of
-    that scale and no longer contracting (the rounding floor of the inner solves, ~1e-13 for h⁻²-scaled A)."""
+    that scale and no longer contracting at the map's rate (a step above max(0.5, lipschitz) × the one
+    before it, which a contraction with that constant cannot take: the rounding floor of the inner
+    solves, ~1e-13 for h⁻²-scaled A)."""
     scale = max(1.0, np.max(np.abs(z)))
-    return step <= tol * scale or (step <= 1e-9 * scale and step > 0.5 * prev)
+    return step <= tol * scale or (step <= 1e-9 * scale and step > max(0.5, lipschitz) * prev)

@@ -144,8 +144,8 @@ def two_sided_membrane_heated_2d(m: int, load: float = 50.0, lower: float = -0.3
     upper = _sagging_ceiling(A, ceiling, kappa, delta, ell)
     if exact is None:
         exact = m * m <= 5_000
-    z_exact = _exact_fixed_point(A, q, lo, upper) if exact else None
     lip = kappa * 3.0 * np.sqrt(3.0) / (8.0 * ell)
+    z_exact = _exact_fixed_point(A, q, lo, upper, lip) if exact else None
     return Problem(
         name=f"two_sided_membrane_heated_2d(m={m})", A=A, q=q, zeta=lo, upper=upper, z_exact=z_exact,
         reference={"x": X, "y": Y, "h": 1.0 / (m + 1), "ceiling": ceiling, "kappa": kappa, "delta": delta,
@@ -156,14 +156,14 @@ def two_sided_membrane_heated_2d(m: int, load: float = 50.0, lower: float = -0.3
         omits=_OMITS + ("transient heating (steady state only)",), lipschitz=0.0, grid=(m, m))
 
 
-def _exact_fixed_point(A, q, lower, upper_fn, tol=1e-14, maxiter=200):
-    """The fixed point z = S(u(z)) of exact box solves (solve_exact_box), u a contraction; stops as
-    solve_exact_qvi does (fixed_point_settled)."""
+def _exact_fixed_point(A, q, lower, upper_fn, lipschitz, tol=1e-14, maxiter=200):
+    """The fixed point z = S(u(z)) of exact box solves (solve_exact_box), u a contraction with constant
+    `lipschitz`; stops as solve_exact_qvi does (fixed_point_settled)."""
     z, prev = solve_exact_box(A, q, lower, upper_fn(np.zeros(A.shape[0]))), np.inf
     for _ in range(maxiter):
         new = solve_exact_box(A, q, lower, upper_fn(z), z0=z)
         step, z = np.max(np.abs(new - z)), new
-        if fixed_point_settled(step, prev, z, tol):
+        if fixed_point_settled(step, prev, z, tol, lipschitz):
             return z
         prev = step
     raise RuntimeError(f"the exact outer fixed point did not settle in {maxiter} steps")

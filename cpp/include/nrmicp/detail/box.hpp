@@ -117,10 +117,13 @@ struct Box {
     for (Eigen::Index i = 0; i < y.size(); ++i) y[i] = clamp(i, y[i]);
   }
   /// y of the box `old` moved into this one with each row's state kept: a row at old's lower (upper)
-  /// bound goes to this box's, any other keeps its value, projected.
+  /// bound goes to this box's where that is finite (a bound lifted to ±∞ frees the row), any other
+  /// keeps its value, projected.
   void carry(const Box& old, Vector& y) const {
-    for (Eigen::Index i = 0; i < y.size(); ++i)
-      y[i] = y[i] == old.lower(i) ? lower(i) : y[i] == old.upper(i) ? upper(i) : clamp(i, y[i]);
+    for (Eigen::Index i = 0; i < y.size(); ++i) {
+      const double lo = lower(i), hi = upper(i);
+      y[i] = y[i] == old.lower(i) && std::isfinite(lo) ? lo : y[i] == old.upper(i) && std::isfinite(hi) ? hi : clamp(i, y[i]);
+    }
   }
 
   /// The box of the next coarser level (y_fine ≈ P y_coarse): a coarse row is bounded (below, above)

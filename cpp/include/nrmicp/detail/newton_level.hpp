@@ -381,9 +381,11 @@ class NewtonLevel {
       zv = memo_.zeta;
       return true;
     }
-    memo_.z.resize(0);
-    if (!zeta.eval(v, zv)) return false;
-    memo_.z = v;
+    memo_.z = v;  // (kept before the call: zv may be v itself)
+    if (!zeta.eval(memo_.z, zv)) {
+      memo_.z.resize(0);
+      return false;
+    }
     memo_.zeta = zv;
     return true;
   }
