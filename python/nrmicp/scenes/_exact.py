@@ -111,28 +111,29 @@ def solve_exact_qvi(A, q, zeta_fn, lipschitz: float, z0=None, tol: float = 1e-13
     Fixed point of z ↦ S(ζ(z)), S(ψ) = solution of the obstacle problem with obstacle ψ.
     For an M-matrix A, S is 1-Lipschitz in the ∞-norm, so the map contracts with factor
     ``lipschitz``; each obstacle problem is solved exactly by :func:`solve_exact_obstacle`.
-    Stops when the ∞-norm step is below ``tol`` (times max(1, ‖z‖∞)), or when below 1e-9
-    it stops contracting (the rounding floor of the inner solves, ~1e-12 for h⁻²-scaled A).
+    Stops as :func:`exact_fixed_point` does.
     """
     if not lipschitz < 1.0:
         raise ValueError(f"solve_exact_qvi needs a contraction, got lipschitz={lipschitz}")
     A = sp.csr_matrix(A, dtype=np.float64)
     z = solve_exact_obstacle(A, q, np.array(zeta_fn(np.zeros(A.shape[0])))) if z0 is None else np.asarray(z0, float)
+    return exact_fixed_point(lambda v: solve_exact_obstacle(A, q, np.array(zeta_fn(v)), z0=v), z, lipschitz, tol,
+                             maxiter, "solve_exact_qvi")
+
+
+def exact_fixed_point(step_map, z: np.ndarray, lipschitz: float, tol: float, maxiter: int, who: str) -> np.ndarray:
+    """The fixed point of ``step_map`` (an outer step of exact inner solves, a contraction with constant
+    ``lipschitz``) from z. Stops when the ∞-norm step is below tol · max(1, ‖z‖∞), or below 1e-9 of that
+    scale and no longer contracting at the map's rate (a step above max(0.5, lipschitz) × the one before
+    it, which a contraction with that constant cannot take: the rounding floor of the inner solves,
+    ~1e-13 for h⁻²-scaled A). RuntimeError naming ``who`` after maxiter steps."""
     prev = np.inf
     for _ in range(maxiter):
-        z_new = solve_exact_obstacle(A, q, np.array(zeta_fn(z)), z0=z)
+        z_new = step_map(z)
         step = np.max(np.abs(z_new - z))
         z = z_new
-        if fixed_point_settled(step, prev, z, tol, lipschitz):
+        scale = max(1.0, np.max(np.abs(z)))
+        if step <= tol * scale or (step <= 1e-9 * scale and step > max(0.5, lipschitz) * prev):
             return z
         prev = step
-    raise RuntimeError(f"solve_exact_qvi: no convergence in {maxiter} outer steps")
-
-
-def fixed_point_settled(step: float, prev: float, z: np.ndarray, tol: float, lipschitz: float) -> bool:
-    """An exact outer fixed point's stop: the ∞-norm step below tol · max(1, ‖z‖∞), or below 1e-9 of
-    that scale and no longer contracting at the map's rate (a step above max(0.5, lipschitz) × the one
-    before it, which a contraction with that constant cannot take: the rounding floor of the inner
-    solves, ~1e-13 for h⁻²-scaled A)."""
-    scale = max(1.0, np.max(np.abs(z)))
-    return step <= tol * scale or (step <= 1e-9 * scale and step > max(0.5, lipschitz) * prev)
+    raise RuntimeError(f"{who}: no convergence in {maxiter} outer steps")

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import Problem
-from ._exact import fixed_point_settled, solve_exact_box
+from ._exact import exact_fixed_point, solve_exact_box
 from ._operators import grid_1d, grid_2d, heat_solve, neg_laplacian_1d, neg_laplacian_2d
 
 __all__ = ["two_sided_membrane_1d", "two_sided_membrane_1d_exact", "two_sided_membrane_2d",
@@ -158,12 +158,7 @@ def two_sided_membrane_heated_2d(m: int, load: float = 50.0, lower: float = -0.3
 
 def _exact_fixed_point(A, q, lower, upper_fn, lipschitz, tol=1e-14, maxiter=200):
     """The fixed point z = S(u(z)) of exact box solves (solve_exact_box), u a contraction with constant
-    `lipschitz`; stops as solve_exact_qvi does (fixed_point_settled)."""
-    z, prev = solve_exact_box(A, q, lower, upper_fn(np.zeros(A.shape[0]))), np.inf
-    for _ in range(maxiter):
-        new = solve_exact_box(A, q, lower, upper_fn(z), z0=z)
-        step, z = np.max(np.abs(new - z)), new
-        if fixed_point_settled(step, prev, z, tol, lipschitz):
-            return z
-        prev = step
-    raise RuntimeError(f"the exact outer fixed point did not settle in {maxiter} steps")
+    `lipschitz` (exact_fixed_point)."""
+    z = solve_exact_box(A, q, lower, upper_fn(np.zeros(A.shape[0])))
+    return exact_fixed_point(lambda v: solve_exact_box(A, q, lower, upper_fn(v), z0=v), z, lipschitz, tol, maxiter,
+                             "the heated membrane's exact outer fixed point")
