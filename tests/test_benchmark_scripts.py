@@ -69,7 +69,7 @@ def test_newton_inner_table(scene):
 
 
 def test_time_stepping_table():
-    # README "Time stepping": the two-asset put march at n = 4,225 (hierarchy 'auto' = 'amg' from 4,096);
+    # README "Time stepping": the two-asset put march at n = 4,225 (hierarchy 'auto' = 'amg' from 1,000);
     # every peer converges and they agree on the value (the march's answer, not a timing)
     rows = table_rows(run("time_stepping.py", "--m", "65"))
     assert [r[1] for r in rows] == ["4,225"]

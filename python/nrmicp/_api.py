@@ -1062,7 +1062,7 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
         problems P_lᵀ A_l P_l, P_lᵀ q_l, solved coarse to fine, each solution prolongated,
         projected onto z ≥ ζ and used as the next start; 'amg' builds classical Ruge–Stüben
         prolongations with pyamg; None starts cold (from x0 or zeros). 'auto': 'amg' for
-        n >= 4096 when A stores at most 10% of its n² entries and pyamg is installed, else None
+        n >= 1000 when A stores at most 10% of its n² entries and pyamg is installed, else None
         (measured: README "Mesh-independent solves"; docs/MEASUREMENTS.md, AUTO_AMG_MIN_N).
         With a hierarchy the start is the nested solution, unless ζ is None or constant and ``x0``
         is nonzero and closer than a cold start (its Res below half the Res at the obstacle: a time

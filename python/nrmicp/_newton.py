@@ -14,11 +14,11 @@ from ._zeta import CheckedZeta
 
 #: hierarchy="auto" builds the AMG hierarchy (pyamg) for method "newton" from this many unknowns
 #: on, and starts cold below, where AMG's set-up outweighs the steps it saves (docs/MEASUREMENTS.md,
-#: "`AUTO_AMG_MIN_N` = 4096").
-AUTO_AMG_MIN_N = 4096
+#: "`AUTO_AMG_MIN_N` = 1000").
+AUTO_AMG_MIN_N = 1000
 #: ... and only on a matrix with at most this fraction of its n² entries stored: on a dense one the
 #: V-cycle's sweeps and Galerkin products cost more than a dense factorization (docs/MEASUREMENTS.md,
-#: "`AUTO_AMG_MIN_N` = 4096", its AUTO_AMG_MAX_DENSITY paragraph).
+#: "`AUTO_AMG_MIN_N` = 1000", its AUTO_AMG_MAX_DENSITY paragraph).
 AUTO_AMG_MAX_DENSITY = 0.1
 
 

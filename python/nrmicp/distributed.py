@@ -260,7 +260,7 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     (inner, verbose), for the stationary members ``_UNSUPPORTED_STATIONARY`` (z_update 'solve',
     polish). verbose prints rank 0's progress lines.
     method='auto' is nrmicp.solve's rule on every rank's rows; hierarchy='auto' is 'amg' from
-    n = 4096 on (BoomerAMG: no pyamg needed).
+    n = 1000 on (BoomerAMG: no pyamg needed).
     tol and rtol both None is nrmicp.solve's default rule (units-free Res_E, rtol 1e-10), applied by
     solving σA, σq (σ from the diagonal's global geometric mean), ``residual`` the paper's Res.
     Returns a :class:`nrmicp.Result` on every rank, with ``z`` and ``w`` as PETSc Vecs
