@@ -265,6 +265,18 @@ def _fuzz_options(extra, method, A, lo, hi):
     return kw
 
 
+def _fuzz_jacobian(form):
+    """ζ′ of ψ + 0.1 sin z on this rank's rows: a LinearOperator or a sparse diagonal."""
+    from scipy.sparse.linalg import LinearOperator
+
+    def jacobian(z):
+        d = 0.1 * np.cos(z)
+        if form == "diagonal":
+            return sp.diags(d)
+        return LinearOperator((len(z), len(z)), matvec=lambda v: d * np.ravel(v), dtype=float)
+    return jacobian
+
+
 def case_fuzz(examples):
     """Random small problems (np = 2): M-matrix LCPs and obstacles, P-matrix LCPs; every member
     against serial nrmicp and the numpy oracle; a callback on every member, bounds on every member, the
@@ -272,6 +284,7 @@ def case_fuzz(examples):
     stationary members took these options (the same Newton problems); `extra` draws the rest."""
     seed = int(os.environ.get("NRMICP_FUZZ_SEED", "2026"))
     rng, extra = np.random.default_rng(seed), np.random.default_rng(seed + 1)
+    jacobians = np.random.default_rng(seed + 2)   # (drawn last: the problems above unchanged)
     rows = []
     for k in range(examples):
         n = int(rng.integers(5, 60))
@@ -301,13 +314,18 @@ def case_fuzz(examples):
             base, local_base = upper.copy(), upper[lo:hi].copy()
             upper = lambda z, b=base: b + 0.05 * (1.0 + np.sin(z))  # noqa: E731
             local_upper = lambda z, b=local_base: b + 0.05 * (1.0 + np.sin(z))  # noqa: E731
-        r = dist.solve(A[lo:hi], q[lo:hi], None if zeta is None else zeta[lo:hi], method=method, tol=1e-9,
+        local_zeta = None if zeta is None else zeta[lo:hi]
+        if method == "newton" and zeta is not None and upper is None and jacobians.random() < 0.5:
+            # a callable ζ = ψ + 0.1 sin z with ζ′ as an operator of this rank's rows or a diagonal
+            zeta, local_zeta = (lambda z, p=zeta: p + 0.1 * np.sin(z)), (lambda z, p=zeta[lo:hi]: p + 0.1 * np.sin(z))
+            kw["zeta_jacobian"] = _fuzz_jacobian(str(jacobians.choice(["operator", "diagonal"])))
+        r = dist.solve(A[lo:hi], q[lo:hi], local_zeta, method=method, tol=1e-9,
                        maxiter=100000, polish=polish and not callable(upper), upper=local_upper,
                        callback=lambda k, zk, res: calls.append(k) and False, **kw)
         z = dist.gather(r.z)
         if RANK == 0:
             serial = nrmicp.solve(A, q, zeta, upper=upper, method="newton", tol=1e-11, polish=not callable(upper))
-            g = z - (0.0 if zeta is None else zeta)
+            g = z - (0.0 if zeta is None else (zeta(z) if callable(zeta) else zeta))
             u = upper(z) if callable(upper) else upper
             m = np.minimum(A @ z + q, g) if upper is None else np.minimum(g, np.maximum(z - u, A @ z + q))
             rows.append({"n": n, "method": method, "status": str(r.status), "err": float(np.max(np.abs(z - serial.z))),
@@ -458,6 +476,80 @@ def case_implicit_upper():
         out["nrmgs"] = "solved"
     except ValueError as exc:
         out["nrmgs"] = str(exc)
+    return out
+
+
+def case_jacobian():
+    """ζ's Jacobian on the PETSc engine (semismooth Newton on the whole ICP, the one driver's): the 2D
+    obstacle with ζ = ψ + 0.2 sin z, ζ′ a LinearOperator of this rank's rows and a diagonal matrix, and a
+    nonlocal ζ = ψ + 0.3 M z (M the 5-point averaging stencil as a PETSc Mat: ζ and ζ′'s products
+    communicate) with ζ′ an operator; each cold and nested (BoomerAMG), against nrmicp.solve with the same
+    ζ′ (cold: the same decisions). Then a ζ′ that couples rows as a sparse matrix, and an operator of the
+    wrong shape on the last rank only: refused on every rank."""
+    from scipy.sparse.linalg import LinearOperator, aslinearoperator
+    pb = obstacle_2d(31, exact=False)
+    A = sp.csr_matrix(pb.A)
+    n = A.shape[0]
+    lo, hi = split(n)
+    m, psi = hi - lo, np.asarray(pb.zeta, dtype=float)
+    M = sp.csr_matrix((sp.diags(A.diagonal()) - A) / A.diagonal().max())
+    Mp = mat(M, lo, hi)
+    x, y = Mp.createVecs()
+
+    def mv(v):   # this rank's rows of M v (collective)
+        x.setArray(v)
+        Mp.mult(x, y)
+        return y.getArray().copy()
+
+    def diag(k, d):
+        return LinearOperator((k, k), matvec=lambda v: d * np.ravel(v), dtype=float)
+    problems = {
+        "sin operator": (lambda z: psi + 0.2 * np.sin(z), lambda z: diag(n, 0.2 * np.cos(z)),
+                         lambda z: psi[lo:hi] + 0.2 * np.sin(z), lambda z: diag(m, 0.2 * np.cos(z))),
+        "sin diagonal": (lambda z: psi + 0.2 * np.sin(z), lambda z: sp.diags(0.2 * np.cos(z)),
+                         lambda z: psi[lo:hi] + 0.2 * np.sin(z), lambda z: sp.diags(0.2 * np.cos(z))),
+        "nonlocal operator": (lambda z: psi + 0.3 * (M @ z), lambda z: aslinearoperator(0.3 * M),
+                              lambda z: psi[lo:hi] + 0.3 * mv(z),
+                              lambda z: LinearOperator((m, m), matvec=lambda v: 0.3 * mv(np.ravel(v)), dtype=float))}
+    out = {}
+    for name, (zeta, jac, local_zeta, local_jac) in problems.items():
+        for hierarchy in (None, "amg"):
+            calls = []
+            r = dist.solve(A[lo:hi], pb.q[lo:hi], local_zeta, method="newton", hierarchy=hierarchy, tol=1e-10,
+                           zeta_jacobian=lambda z: calls.append(1) or local_jac(z))
+            z = dist.gather(r.z)
+            if RANK == 0:
+                s_calls = []
+                s = nrmicp.solve(A, pb.q, zeta, method="newton", hierarchy=hierarchy, tol=1e-10,
+                                 zeta_jacobian=lambda z: s_calls.append(1) or jac(z))
+                g = z - zeta(z)
+                out[f"{name} {hierarchy}"] = {
+                    "status": str(r.status), "serial_status": str(s.status), "path": r.path,
+                    "calls": len(calls), "serial_calls": len(s_calls), "nit": r.nit, "serial_nit": s.nit,
+                    "err": float(np.max(np.abs(z - s.z)) / np.max(np.abs(s.z))),
+                    "oracle_res": float(oracle_residual(A, pb.q, z, zeta)), "res": float(r.residual),
+                    "min_g": float(g.min()), "min_w": float((A @ z + pb.q).min()),
+                    "gw": float(np.max(np.abs(np.minimum(A @ z + pb.q, g)))),
+                    "matrix_free": int(r.counters.get("matrix_free_iterations", 0))}
+    last = RANK == SIZE - 1
+    bad_jacobians = {
+        "coupling matrix": lambda z: sp.csr_matrix(0.3 * M[lo:hi, lo:hi]),
+        "wrong shape on the last rank": lambda z: diag(m + last, np.zeros(m + last)),
+        "complex operator": lambda z: LinearOperator((m, m), matvec=lambda v: 1j * v, dtype=complex),
+        "a string": lambda z: "J",
+        "matvec of the wrong length on the last rank": lambda z: LinearOperator(
+            (m, m), matvec=lambda v: np.zeros(m + 1) if last else 0 * v, dtype=float),
+        "matvec NaN on the last rank": lambda z: diag(m, np.full(m, np.nan if last else 0.1)),
+        "not callable": np.eye(m)}
+    refused = {}
+    for name, bad in bad_jacobians.items():
+        try:
+            dist.solve(A[lo:hi], pb.q[lo:hi], problems["nonlocal operator"][2], method="newton", hierarchy=None,
+                       zeta_jacobian=bad)
+            refused[name] = ["no exception", ""]
+        except Exception as exc:  # noqa: BLE001 - the outcome is the test's subject
+            refused[name] = [type(exc).__name__, str(exc)]
+    out["refused"] = _allgather_text(json.dumps(refused))
     return out
 
 
@@ -624,10 +716,11 @@ def case_options():
     an unknown name's, and what the supported ones deliver (one rank)."""
     import nrmicp._options as table
     jac = lambda z: sp.eye(len(z))  # noqa: E731
-    refused_newton = {"scale": True, "components": 2, "zeta_jacobian": jac, "inner": "cg", "verbose": 1}
-    # options of the stationary members only: the core's Options.check refuses them for newton, naming them
-    checked_newton = {"accelerate": "anderson", "phi": 0.5, "theta": 0.5, "z_update": "explicit"}
-    refused_stationary = {"scale": True, "components": 2, "zeta_jacobian": jac, "z_update": "solve", "polish": True}
+    refused_newton = {"scale": True, "components": 2, "inner": "cg", "verbose": 1}
+    # options of the stationary members only: the core's Options.check refuses them for newton, naming them;
+    # zeta_jacobian without a callable zeta, nrmicp.solve's check
+    checked_newton = {"accelerate": "anderson", "phi": 0.5, "theta": 0.5, "z_update": "explicit", "zeta_jacobian": jac}
+    refused_stationary = {"scale": True, "components": 2, "z_update": "solve", "polish": True}
     A = sp.diags([-1.0, 4.0, -1.0], [-1, 0, 1], shape=(8, 8), format="csr")
     q = np.linspace(-1.0, 1.0, 8)
 
@@ -660,6 +753,7 @@ def case_options():
             "refused": {name: outcome(**{name: value}) for name, value in refused_newton.items()},
             "checked": {name: outcome(**{name: value}) for name, value in checked_newton.items()},
             "refused_stationary": {name: outcome("nrmgs", **{name: value}) for name, value in refused_stationary.items()},
+            "jacobian_stationary": outcome("nrmgs", lambda z: 0 * z, zeta_jacobian=jac),
             "auto_solve": outcome("nrm", lambda z: 0 * z, tol=1e-10),   # nrm, Omega2 = I, an ICP: 'auto' means 'solve'
             "unknown": outcome(tolerance=1e-8),
             "supported": delivered("newton", polish=True),
@@ -765,7 +859,7 @@ if __name__ == "__main__":
     result = {"agreement": lambda: case_agreement(), "partition": case_partition,
               "bad": lambda: case_bad(args[0], args[1]), "boomeramg": case_boomeramg, "dense": case_dense,
               "floor": case_floor, "overshoot": case_overshoot, "sweeps": case_sweeps,
-              "warm": case_warm, "one_sided_contact": case_one_sided_contact, "implicit_upper": case_implicit_upper, "units": case_units, "engine": lambda: case_engine(*args), "options": case_options,
+              "warm": case_warm, "one_sided_contact": case_one_sided_contact, "implicit_upper": case_implicit_upper, "jacobian": case_jacobian, "units": case_units, "engine": lambda: case_engine(*args), "options": case_options,
               "fuzz": lambda: case_fuzz(int(args[0])), "family": case_family, "hooks": case_hooks, "no_rows": case_no_rows}[name]()
     if RANK == 0:
         print("RESULT " + json.dumps(result), flush=True)

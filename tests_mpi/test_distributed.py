@@ -1,5 +1,7 @@
 """nrmicp.distributed under mpirun: agreement with serial nrmicp, partition independence, bad
 input on one rank (the same exception on every rank, no hang), nothing mutated."""
+import json
+
 import pytest
 
 from conftest import mpirun
@@ -205,3 +207,35 @@ def test_an_implicit_upper_bound_runs_the_serial_outer_fixed_point(np_):
         assert r["err"] < 1e-8 and r["res"] < 1e-10, (np_, name, r)
         assert r["at_upper"] > 100 and r["above"] <= 1e-12, (np_, name, r)   # the ceiling is met, never crossed
     assert "solved by method 'newton'" in out["nrmgs"] and "upper" in out["nrmgs"]
+
+
+@pytest.mark.parametrize("np_", [1, 2])
+def test_zeta_jacobian_runs_semismooth_newton_on_petsc_with_the_serial_decisions(np_):
+    """ζ′ as a LinearOperator of this rank's rows (its products communicating, for a nonlocal ζ) or a
+    diagonal matrix: the one driver's semismooth Newton on the whole ICP. Cold, the serial member's
+    decisions (ζ′ calls, steps) and z; nested (BoomerAMG against pyamg) the same answer; the ICP's own
+    conditions checked in numpy. A coupling sparse ζ′, and an operator of the wrong shape on one rank,
+    are refused on every rank naming zeta_jacobian."""
+    out = mpirun(np_, "jacobian")
+    for name, r in out.items():
+        if name == "refused":
+            continue
+        assert r["status"] == r["serial_status"] == "CONVERGED" and r["path"] == "newton", (name, r)
+        assert r["gw"] < 1e-9 and r["min_w"] > -1e-9 and r["min_g"] > -1e-9, (name, r)
+        assert abs(r["oracle_res"] - r["res"]) <= 1e-6 * r["res"] + 1e-13, (name, r)
+        assert 1 <= r["calls"] <= 3, (name, r)
+        assert r["err"] < 1e-9, (name, r)
+        if name.endswith(" None"):
+            assert (r["calls"], r["nit"]) == (r["serial_calls"], r["serial_nit"]), (name, r)
+        assert (r["matrix_free"] > 0) == ("operator" in name), (name, r)
+    for rank in out["refused"]:
+        refused = json.loads(rank)
+        kind, message = refused["coupling matrix"]
+        assert kind == "ValueError" and "zeta_jacobian" in message and "linear operator" in message, refused
+        kind, message = refused["wrong shape on the last rank"]
+        assert kind == "ValueError" and "zeta_jacobian(z) must return" in message, refused
+        for name, expected in (("complex operator", "TypeError"), ("a string", "TypeError"),
+                               ("matvec of the wrong length on the last rank", "ValueError"),
+                               ("matvec NaN on the last rank", "ValueError"), ("not callable", "TypeError")):
+            kind, message = refused[name]
+            assert kind == expected and "zeta_jacobian" in message, (name, refused)

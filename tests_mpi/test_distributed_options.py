@@ -29,6 +29,11 @@ def test_the_stationary_members_options_are_refused_for_newton_by_the_core_namin
         assert kind == "ValueError" and name in message, (name, kind, message)
 
 
+def test_zeta_jacobian_of_a_stationary_member_is_refused_naming_it(out):
+    kind, message = out["jacobian_stationary"]
+    assert kind == "ValueError" and "zeta_jacobian" in message and "newton" in message, out["jacobian_stationary"]
+
+
 def test_z_update_auto_that_means_solve_is_refused_naming_it(out):
     kind, message = out["auto_solve"]
     assert kind == "ValueError" and "z_update" in message and "explicit" in message, out["auto_solve"]

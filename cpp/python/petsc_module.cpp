@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace py = pybind11;
@@ -34,12 +35,15 @@ std::vector<Matrix> from_handles(const std::vector<std::uintptr_t>& handles, con
   return out;
 }
 
-/// ζ of this process's rows (an affine ζ comes as a callable: the engine has no B).
-Zeta zeta_of(nrmicp::ZetaKind kind, py::object c, py::object fn) {
+/// ζ of this process's rows (an affine ζ comes as a callable: the engine has no B), with its Jacobian
+/// (_newton.core_jacobian's: a linear operator's product or a diagonal on this process's rows) when given.
+Zeta zeta_of(nrmicp::ZetaKind kind, py::object c, py::object fn, py::object jacobian = py::none()) {
   switch (kind) {
     case nrmicp::ZetaKind::None: return Zeta::none();
     case nrmicp::ZetaKind::Constant: return Zeta::constant(to_vector(c.cast<py::array>(), "zeta"));
-    case nrmicp::ZetaKind::Functor: return Zeta::functor(CallableZeta(fn));
+    case nrmicp::ZetaKind::Functor:
+      if (jacobian.is_none()) return Zeta::functor(CallableZeta(fn));
+      return Zeta::functor(CallableZeta(fn), Zeta::Differential(CallableJacobian<PetscInt>(jacobian)));
     case nrmicp::ZetaKind::Affine: break;
   }
   throw py::value_error("zeta: an affine zeta is not available on the PETSc engine");
@@ -56,48 +60,59 @@ nrmicp::petsc::AmgHierarchy hierarchy_of(const Matrix& A, const std::vector<std:
 class PyPetscNewton {
  public:
   PyPetscNewton(std::uintptr_t A, const nrmicp::Options& o, const std::vector<std::uintptr_t>& prolongations, bool amg)
-      : A_(from_handle(A, "A")), levels_(hierarchy_of(A_, prolongations, amg)),
-        core_(A_, o, levels_.prolongations, levels_.coarse_operators) {
+      : A_(from_handle(A, "A")), levels_(hierarchy_of(A_, prolongations, amg)) {
+    core_.emplace(A_, o, levels_.prolongations, levels_.coarse_operators);
     levels_ = {};  // (the core holds what it uses)
   }
+  /// Destroys the core now (collective: a KSP's MUMPS factors are freed by every process together), not
+  /// when the garbage collector takes this object, which it does at a different time on each process.
+  void close() { core_.reset(); }
 
   py::dict solve(py::array q, nrmicp::ZetaKind kind, py::object zeta_c, py::object zeta_fn, py::object upper,
-                 py::object x0, py::object callback, const nrmicp::SolveOptions& it) {
+                 py::object x0, py::object callback, const nrmicp::SolveOptions& it, py::object zeta_jacobian) {
     const Eigen::VectorXd qv = to_vector(q, "q");
     std::optional<Eigen::VectorXd> z0;
     if (!x0.is_none()) z0 = to_vector(x0.cast<py::array>(), "x0");
-    const auto zeta = with_upper(zeta_of(kind, zeta_c, zeta_fn), upper, qv.size());
+    const auto zeta = with_upper(zeta_of(kind, zeta_c, zeta_fn, zeta_jacobian), upper, qv.size());
     const auto cb = make_callback(callback);
-    const nrmicp::Result r = core_.solve(qv, zeta, z0 ? &*z0 : nullptr, cb, {}, &it);
+    const nrmicp::Result r = core().solve(qv, zeta, z0 ? &*z0 : nullptr, cb, {}, &it);
     return result_dict(r, it.record_history);
   }
   py::dict polish(py::array q, nrmicp::ZetaKind kind, py::object zeta_c, py::object zeta_fn, py::object upper,
                   py::array z, double tol) {
     const Eigen::VectorXd qv = to_vector(q, "q");
     const auto zeta = with_upper(zeta_of(kind, zeta_c, zeta_fn), upper, qv.size());
-    return result_dict(core_.polish(qv, zeta, to_vector(z, "z"), tol), false);
+    return result_dict(core().polish(qv, zeta, to_vector(z, "z"), tol), false);
   }
-  int levels() const { return core_.levels(); }
+  int levels() const { return core().levels(); }
   py::dict hierarchy() const {
-    const nrmicp::HierarchyReport& h = core_.hierarchy();
+    const nrmicp::HierarchyReport& h = core().hierarchy();
     py::dict d;
     d["requested"] = h.requested; d["used"] = h.used; d["reason"] = h.reason;
     return d;
   }
-  std::string inner() const { return core_.inner_name(); }
-  py::dict setup_timings() const { return timings_dict(core_.setup_timings()); }
+  std::string inner() const { return core().inner_name(); }
+  py::dict setup_timings() const { return timings_dict(core().setup_timings()); }
 
  private:
+  const Core& core() const {
+    if (!core_) throw py::value_error("this PETSc Newton member was closed");
+    return *core_;
+  }
+  Core& core() { return const_cast<Core&>(std::as_const(*this).core()); }
+
   Matrix A_;
   nrmicp::petsc::AmgHierarchy levels_;
-  Core core_;
+  std::optional<Core> core_;
 };
 
 /// A stationary member (nrm, nrmm, nrmaor, nrmsor, nrmgs, nrmj, two_sweep) over a PETSc Mat: the
 /// serial nrmicp::Solver on the PETSc engine, each process's diagonal block split (multisplitting).
 class PyPetscSolver {
  public:
-  PyPetscSolver(std::uintptr_t A, const nrmicp::Options& o) : A_(from_handle(A, "A")), core_(A_, o) {}
+  PyPetscSolver(std::uintptr_t A, const nrmicp::Options& o) : A_(from_handle(A, "A")) { core_.emplace(A_, o); }
+  /// As PyPetscNewton::close.
+  void close() { core_.reset(); }
 
   py::dict solve(py::array q, nrmicp::ZetaKind kind, py::object zeta_c, py::object zeta_fn, py::object upper,
                  py::object x0, py::object callback, const nrmicp::SolveOptions& it, py::object progress) {
@@ -106,15 +121,22 @@ class PyPetscSolver {
     if (!x0.is_none()) z0 = to_vector(x0.cast<py::array>(), "x0");
     const auto zeta = with_upper(zeta_of(kind, zeta_c, zeta_fn), upper, qv.size());
     const nrmicp::Result r =
-        core_.solve(qv, zeta, z0 ? &*z0 : nullptr, make_callback(callback), {}, &it, make_progress(progress));
+        core().solve(qv, zeta, z0 ? &*z0 : nullptr, make_callback(callback), {}, &it, make_progress(progress));
     return result_dict(r, it.record_history);
   }
-  py::dict setup_timings() const { return timings_dict(core_.setup_timings()); }
-  std::string inner() const { return core_.inner_name(); }
+  py::dict setup_timings() const { return timings_dict(core().setup_timings()); }
+  std::string inner() const { return core().inner_name(); }
 
  private:
+  using Core = nrmicp::Solver<Matrix>;
+  const Core& core() const {
+    if (!core_) throw py::value_error("this PETSc solver was closed");
+    return *core_;
+  }
+  Core& core() { return const_cast<Core&>(std::as_const(*this).core()); }
+
   Matrix A_;
-  nrmicp::Solver<Matrix> core_;
+  std::optional<Core> core_;
 };
 
 /// w = Az + q and Res(z) of ICP(q, A, ζ) (with `upper`: the bounded Res, an implicit one at z), every process's rows
@@ -164,19 +186,22 @@ PYBIND11_MODULE(_petsc, m) {
       .def(py::init<std::uintptr_t, const nrmicp::Options&, const std::vector<std::uintptr_t>&, bool>(),
            py::arg("A"), py::arg("options"), py::arg("prolongations"), py::arg("amg") = false)
       .def("solve", &PyPetscNewton::solve, py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("zeta_fn"),
-           py::arg("upper"), py::arg("x0"), py::arg("callback"), py::arg("options"))
+           py::arg("upper"), py::arg("x0"), py::arg("callback"), py::arg("options"),
+           py::arg("zeta_jacobian") = py::none())
       .def("polish", &PyPetscNewton::polish, py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("zeta_fn"),
            py::arg("upper"), py::arg("z"), py::arg("tol"))
       .def_property_readonly("levels", &PyPetscNewton::levels)
       .def_property_readonly("hierarchy", &PyPetscNewton::hierarchy)
       .def_property_readonly("inner", &PyPetscNewton::inner)
-      .def("setup_timings", &PyPetscNewton::setup_timings);
+      .def("setup_timings", &PyPetscNewton::setup_timings)
+      .def("close", &PyPetscNewton::close, "Destroys the core now, on every process together (collective).");
   py::class_<PyPetscSolver>(m, "Solver")
       .def(py::init<std::uintptr_t, const nrmicp::Options&>(), py::arg("A"), py::arg("options"))
       .def("solve", &PyPetscSolver::solve, py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("zeta_fn"),
            py::arg("upper"), py::arg("x0"), py::arg("callback"), py::arg("options"), py::arg("progress") = py::none())
       .def_property_readonly("inner", &PyPetscSolver::inner)
-      .def("setup_timings", &PyPetscSolver::setup_timings);
+      .def("setup_timings", &PyPetscSolver::setup_timings)
+      .def("close", &PyPetscSolver::close, "Destroys the core now, on every process together (collective).");
   m.def("amg_levels", &amg_levels, py::arg("A"),
         "{'rows', 'nonzeros'} of the 'amg' hierarchy's coarse operators, finest first (built and let go).");
   m.def("measure", &measure, py::arg("A"), py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("zeta_fn"),

@@ -276,22 +276,32 @@ def as_operator(J, n: int):
 
 
 def jacobian_argument(zeta_jacobian, solver, kind, dc) -> dict:
-    """The core's ``zeta_jacobian`` keyword: a wrapper returning, for a matrix, canonical CSR arrays
-    with the core's index type, for a linear operator its JacobianProduct (in the scaled variables
-    y = D_c⁻¹ z: J' = D_c⁻¹ J(D_c y) D_c)."""
+    """The core's ``zeta_jacobian`` keyword for a serial Solver: {} without one, else core_jacobian's."""
     if not check_jacobian(zeta_jacobian, solver.method, kind):
         return {}
+    return {"zeta_jacobian": core_jacobian(zeta_jacobian, solver.n, solver._index_dtype, dc)}
+
+
+def _direct(fn, *args):
+    return fn(*args)
+
+
+def core_jacobian(zeta_jacobian, n, idx, dc=None, collective=_direct):
+    """The core's Jacobian callable (bridge.hpp CallableJacobian): a wrapper returning, for a matrix,
+    canonical CSR arrays with the index type ``idx``, for a linear operator its JacobianProduct (in the
+    scaled variables y = D_c⁻¹ z: J' = D_c⁻¹ J(D_c y) D_c). ``collective(fn, *args)`` runs each call of
+    the user's code and its checks (the distributed engine's: a failure on one rank raises on all)."""
     import scipy.sparse as sp
     from ._inputs import as_csr
 
-    n, idx = solver.n, solver._index_dtype
     product = JacobianProduct(None, n)   # one per solve: its dtype warning once
 
-    def jac(y):
+    def convert(y):
         z = y * dc if dc is not None else y
         J = zeta_jacobian(z)
         if not is_matrix(J):
-            product.fn = product.wrap(as_operator(J, n).matvec, dc)
+            matvec = product.wrap(as_operator(J, n).matvec, dc)
+            product.fn = matvec if collective is _direct else (lambda v: collective(lambda u: product.output(matvec(u)), v))
             return product
         # silent: J is copied every step anyway (index type, scaling); sp.diags' DIA is no mistake
         J = as_csr(J, "zeta_jacobian(z)", warn=False)
@@ -302,4 +312,4 @@ def jacobian_argument(zeta_jacobian, solver, kind, dc) -> dict:
             J.sort_indices()
         return J.indptr.astype(idx), J.indices.astype(idx), np.ascontiguousarray(J.data, dtype=np.float64)
 
-    return {"zeta_jacobian": jac}
+    return lambda y: collective(convert, y)

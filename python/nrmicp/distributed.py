@@ -34,7 +34,8 @@ except ImportError as exc:  # the core package needs no MPI; this module does
 
 from . import _bounds, _core, _options
 from ._mpi import DistributedError, collective as _collective, flag_max as _flag_max, flag_sum as _flag_sum
-from ._newton import AUTO_AMG_MIN_N, POLISH_TOL, check_polish, polish_outcome, result_fields
+from ._newton import (AUTO_AMG_MIN_N, POLISH_TOL, check_jacobian, check_polish, core_jacobian, polish_outcome,
+                      result_fields)
 from ._api import (METHODS as _ALL_METHODS, _SPLITTING, Affine, Result, Status, _Rounds, _checked, _choice, _criterion,
                    _iteration_options, _log_final, _units_parameters, at_rounding_floor,
                    choose_method, dominance_margin)
@@ -50,8 +51,7 @@ METHODS = _ALL_METHODS
 #: unless at their defaults).
 _UNSUPPORTED = {
     "scale": "the default rule's units scaling is the one scaling here",
-    "components": "BoomerAMG builds the hierarchy: PETSc options -nrmicp_hierarchy_pc_hypre_boomeramg_...",
-    "zeta_jacobian": "the PETSc engine has no Jacobian path yet: the outer fixed point solves a callable zeta"}
+    "components": "BoomerAMG builds the hierarchy: PETSc options -nrmicp_hierarchy_pc_hypre_boomeramg_..."}
 #: ... for the Newton member only (the stationary members' loop takes them).
 _UNSUPPORTED_NEWTON = {
     "inner": "the PETSc engine's reduced solves are its own: PETSc options -nrmicp_inner_...",
@@ -252,11 +252,16 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     member's iterates; 'nrmj' takes them on any number). upper: z ≤ upper, as in :func:`nrmicp.solve`: a constant,
     or an implicit upper bound ('newton' only; its outer fixed point) — :class:`nrmicp.Affine` (B a petsc4py
     Mat in A's layout) or a callable of this rank's rows, as zeta.
+    zeta_jacobian ('newton', a callable zeta): zeta_jacobian(z) of this rank's rows returns ζ′(z) as a
+    linear operator on this rank's rows (a LinearOperator, or anything with shape and matvec: semismooth
+    Newton on the whole ICP, its Krylov solve preconditioned by the LCP system; each matvec is called on
+    every rank together, so it may communicate) or as a diagonal matrix of them; a matrix that couples
+    rows is refused (no distributed system for it: pass its product as an operator).
     callback(k, z, res) sees this rank's rows of z; returning True (or raising StopIteration) on any rank stops
     every rank.
     ``options`` are :func:`nrmicp.solve`'s, with its defaults, checked by the same code (one table:
     nrmicp._options); those that cannot apply on PETSc raise a ValueError naming them:
-    ``_UNSUPPORTED`` (scale, components, zeta_jacobian), for 'newton' also ``_UNSUPPORTED_NEWTON``
+    ``_UNSUPPORTED`` (scale, components), for 'newton' also ``_UNSUPPORTED_NEWTON``
     (inner, verbose), for the stationary members ``_UNSUPPORTED_STATIONARY`` (z_update 'solve',
     polish). verbose prints rank 0's progress lines.
     method='auto' is nrmicp.solve's rule on every rank's rows; hierarchy='auto' is 'amg' from
@@ -287,11 +292,12 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
         _collective(comm, _z_update_applies, opts, m, zf.kind)
     kind, c, fn = zf.core_args(Am)
     problem = (kind, c, fn, ua)
+    jacobian = _jacobian(o["zeta_jacobian"], zf, m, Am, comm)
     if opts.rtol > 0:   # the absolute target, on the problem the core iterates (Options::target of Res(0))
         opts.tol = opts.target(_petsc.measure(Am.handle, qa, *problem, np.zeros_like(qa))["residual"])
         opts.rtol = 0.0
     if m == "newton":
-        za, res, status, message, fields = _newton(_petsc, Am, qa, problem, xa, opts, o, comm)
+        za, res, status, message, fields = _newton(_petsc, Am, qa, problem, xa, opts, o, comm, jacobian)
     else:
         za, res, status, message, fields = _stationary(_petsc, Am, qa, problem, xa, opts, o, comm, units)
     criterion = {"measure": "units" if units else "paper", "target": float(opts.tol), "value": float(res)}
@@ -370,6 +376,14 @@ def _stationary(_petsc, Am, qa, problem, xa, opts, o, comm, units):
     fields)."""
     t0 = time.perf_counter()
     core = _collective(comm, lambda: _petsc.Solver(Am.handle, opts))
+    try:
+        return _stationary_rounds(_petsc, core, Am, qa, problem, xa, opts, o, comm, units, t0)
+    finally:
+        core.close()   # on every rank together (as _newton's)
+
+
+def _stationary_rounds(_petsc, core, Am, qa, problem, xa, opts, o, comm, units, t0):
+    """_stationary's rounds on its core."""
     t_iter = time.perf_counter()
     kind, c, fn, ua = problem
     solver = _AsSerialSolver(core, o["method"], len(qa), comm.getRank() == 0)
@@ -410,7 +424,17 @@ class _Measure:
         return d["w"], d["residual"]
 
 
-def _newton(_petsc, Am, qa, problem, xa, opts, o, comm):
+def _jacobian(zeta_jacobian, zf, method, Am, comm):
+    """ζ's Jacobian for the core (None: none given): zeta_jacobian(z) of this rank's rows returns a
+    linear operator on them (its matvec may communicate: every rank calls it together) or a diagonal
+    matrix; nrmicp.solve's checks, each call of the user's code collective."""
+    kind = (_core.ZetaKind.none, _core.ZetaKind.constant, _core.ZetaKind.affine, _core.ZetaKind.functor)[zf.kind]
+    if not _collective(comm, check_jacobian, zeta_jacobian, method, kind):
+        return None
+    return core_jacobian(zeta_jacobian, Am.getLocalSize()[0], PETSc.IntType, collective=functools.partial(_collective, comm))
+
+
+def _newton(_petsc, Am, qa, problem, xa, opts, o, comm, jacobian=None):
     """The Newton member: nrmicp::Newton on the PETSc engine (nrmicp._petsc), its every decision the
     serial member's. Returns (z, Res, status, message, the result's other fields)."""
     t0 = time.perf_counter()
@@ -420,9 +444,17 @@ def _newton(_petsc, Am, qa, problem, xa, opts, o, comm):
     amg = h == "amg" or (h == "auto" and Am.getSize()[0] >= AUTO_AMG_MIN_N)
     Ps = [P.handle for P in h] if isinstance(h, (list, tuple)) else []
     core = _collective(comm, lambda: _petsc.Newton(Am.handle, opts, Ps, amg))
+    try:
+        return _newton_solve(core, t0, qa, problem, xa, opts, o, jacobian, polish)
+    finally:
+        core.close()   # on every rank together: an exception's traceback would leave it to each rank's gc
+
+
+def _newton_solve(core, t0, qa, problem, xa, opts, o, jacobian, polish):
+    """_newton's solve (and polish) with the core set up."""
     t_iter = time.perf_counter()
     args = (qa, *problem)
-    d = core.solve(*args, xa, o["callback"], opts)
+    d = core.solve(*args, xa, o["callback"], opts, jacobian)
     z, res, status, message, w = d["z"], d["residual"], Status(d["status"]), d["message"], d["w"]
     polished = None
     if polish:

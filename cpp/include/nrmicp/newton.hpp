@@ -274,8 +274,7 @@ class Newton {
         case ZetaKind::Functor: break;
       }
       if (!zeta.has_jacobian()) return run.solve_outer_fixed_point(q, zeta, z0);
-      if constexpr (detail::Engine<MatrixType>::serial) return run.solve_semismooth(q, zeta, z0);
-      throw std::invalid_argument("Newton: zeta's Jacobian (semismooth Newton on the ICP) is not available on this engine");
+      return run.solve_semismooth(q, zeta, z0);
     }();
     // all levels, nested start included; the set-up done on the way (the reduced systems' analyses,
     // the hierarchy's operators formed again) is setup's, not the loop's

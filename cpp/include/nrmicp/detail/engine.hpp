@@ -98,7 +98,7 @@ struct Engine {
   using Level = detail::Level<StorageIndex>;          ///< P, R = Pᵀ and the coarse operator (multigrid.hpp)
   using Hierarchy = detail::Hierarchy<StorageIndex>;  ///< the levels below one
   using Fallback = Solver<MatrixType>;                ///< the fallback member (nrm) of a level
-  /// Whether the engine has every ζ strategy (an affine ζ's full system, ζ's Jacobian).
+  /// Whether the engine has every ζ strategy: an affine ζ's full system, a sparse ζ′ that couples rows.
   static constexpr bool serial = true;
 };
 

@@ -6,8 +6,11 @@
 // Z = M⁻¹V, so the preconditioner may change from one application to the next (an inner CG
 // stopped at a tolerance, as the V-cycle-preconditioned solve of the LCP piece is). The basis
 // grows by one pair of n-vectors per iteration, up to `restart` pairs, allocated on first need
-// and kept for the next solve.
+// and kept for the next solve. Vectors hold the rows a process owns: inner products and norms are
+// reduced over every process by the Comm (detail/comm.hpp; serially nothing).
 #pragma once
+
+#include "comm.hpp"
 
 #include <Eigen/Core>
 
@@ -21,7 +24,8 @@ class Gmres {
   using Vector = Eigen::VectorXd;
 
   /// Krylov dimension before a restart, and the iterations of one solve in all.
-  explicit Gmres(int restart = 30, int max_iterations = 300) : restart_(restart), max_iterations_(max_iterations) {}
+  explicit Gmres(int restart = 30, int max_iterations = 300, const Comm& comm = serial_comm())
+      : restart_(restart), max_iterations_(max_iterations), comm_(&comm) {}
 
   /// x ← x + the correction with ‖b − Kx‖ ≤ `target` (absolute), from the start x; `apply(v, out)`:
   /// out = K v, `precondition(v, out)`: out ≈ K⁻¹ v. Returns the iterations (products with K) taken;
@@ -33,7 +37,7 @@ class Gmres {
     int total = 0;
     r_ = b;
     if (x.squaredNorm() > 0) { apply(x, w_); r_ -= w_; }  // the start's residual (zero start: b)
-    double beta = r_.norm();
+    double beta = norm(r_);
     while (beta > target && std::isfinite(beta) && total < max_iterations_) {
       const int k = cycle(apply, precondition, beta, target, total);
       update(x, k);
@@ -41,7 +45,7 @@ class Gmres {
       r_ = b;  // the true residual for the restart (the estimate drifts from it)
       apply(x, w_);
       r_ -= w_;
-      beta = r_.norm();
+      beta = norm(r_);
     }
     if (total == 0) residual_ = beta;
     return total;
@@ -66,18 +70,18 @@ class Gmres {
       apply(z_[k], w_);
       ++total;
       for (int i = 0; i <= k; ++i) {
-        h_(i, k) = w_.dot(v_[i]);
+        h_(i, k) = comm_->sum(w_.dot(v_[i]));
         w_ -= h_(i, k) * v_[i];
       }
-      const double norm = w_.norm();
-      h_(k + 1, k) = norm;
+      const double w_norm = norm(w_);
+      h_(k + 1, k) = w_norm;
       for (int i = 0; i < k; ++i) rotate(i, h_(i, k), h_(i + 1, k));
       givens(k);
       rotate(k, g_[k], g_[k + 1]);
       ++k;
       residual_ = std::abs(g_[k]);
-      if (!(residual_ > target) || !(norm > 0)) break;  // converged, broken down (exact), or NaN
-      basis(k) = w_ / norm;
+      if (!(residual_ > target) || !(w_norm > 0)) break;  // converged, broken down (exact), or NaN
+      basis(k) = w_ / w_norm;
     }
     return k;
   }
@@ -105,7 +109,10 @@ class Gmres {
     return v_[k];
   }
 
+  double norm(const Vector& v) const { return std::sqrt(comm_->sum(v.squaredNorm())); }
+
   int restart_, max_iterations_;
+  const Comm* comm_;
   std::vector<Vector> v_, z_;  // the Arnoldi basis and its preconditioned directions (kept across solves)
   Vector r_, w_, g_, cs_, sn_;
   Eigen::MatrixXd h_;

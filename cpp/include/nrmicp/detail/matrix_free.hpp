@@ -58,7 +58,8 @@ class MatrixFreeSystem {
   using Product = typename Zeta<typename MatrixType::StorageIndex>::Product;
 
   /// `record`: where its solves count their iterations (outlives this).
-  MatrixFreeSystem(NewtonLevel<MatrixType>& level, SemismoothRecord& record) : level_(level), record_(record) {}
+  MatrixFreeSystem(NewtonLevel<MatrixType>& level, SemismoothRecord& record)
+      : level_(level), gmres_(30, 300, level.comm()), record_(record) {}
 
   /// J = ∂ζ(z) by its product (valid until the next call); `res`: Res(z) (the forcing's).
   void linearize(Product product, double res) {
@@ -94,16 +95,13 @@ class MatrixFreeSystem {
     const auto t0 = std::chrono::steady_clock::now();
     const bool ok = product_ && product_(v.data(), out.data(), v.size());
     level_.timings().zeta += ScopedTimer::seconds_since(t0);
-    return ok && out.allFinite();
+    return level_.comm().all(ok && out.allFinite());
   }
 
  private:
   /// out = K v: A's rows on ℐ, (I − J)'s on 𝒜.
   void apply(const Vector& v, Vector& out) {
-    {
-      ScopedTimer t(level_.timings().spmv);
-      out.noalias() = level_.matrix() * v;
-    }
+    level_.apply(v, out);
     jv_.resize(v.size());
     const auto t0 = std::chrono::steady_clock::now();
     const bool ok = product_(v.data(), jv_.data(), v.size());
@@ -118,15 +116,12 @@ class MatrixFreeSystem {
     rhs_ = v;
     active_.resize(v.size());
     for (Eigen::Index i = 0; i < v.size(); ++i) active_[i] = inactive_state(inactive_[i]) ? 0.0 : v[i];
-    {
-      ScopedTimer t(level_.timings().spmv);
-      av_.noalias() = level_.matrix() * active_;
-    }
+    level_.apply(active_, av_);
     for (Eigen::Index i = 0; i < v.size(); ++i)
       if (inactive_state(inactive_[i])) rhs_[i] -= av_[i];
     out.setZero(v.size());
     auto& K0 = level_.lcp_system();
-    record_.preconditioner += K0.solve(rhs_, out, K0.iterative() ? kPreconditionerTolerance * rhs_.norm() : 0.0);
+    record_.preconditioner += K0.solve(rhs_, out, K0.iterative() ? kPreconditionerTolerance * std::sqrt(level_.comm().sum(rhs_.squaredNorm())) : 0.0);
   }
 
   NewtonLevel<MatrixType>& level_;

@@ -9,6 +9,7 @@
 #include "../zeta.hpp"
 #include "active_set.hpp"
 #include "box.hpp"
+#include "engine.hpp"
 #include "matrix_free.hpp"
 #include "newton_level.hpp"
 #include "residual.hpp"
@@ -21,6 +22,7 @@
 #include <functional>
 #include <limits>
 #include <memory>
+#include <stdexcept>
 #include <vector>
 
 namespace nrmicp::detail {
@@ -34,7 +36,7 @@ struct SemismoothLinearization {
   using Level = NewtonLevel<MatrixType>;
   using Vector = Eigen::VectorXd;
   using StorageIndex = typename MatrixType::StorageIndex;
-  using Sparse = ActiveSetSystem<StorageIndex>;
+  using Sparse = typename Engine<MatrixType>::System;
   static constexpr bool set_fixes_step = false;
 
   /// The reduced system of this step, of either form (the interface NewtonStep uses): a sparse ∂ζ(z)
@@ -88,31 +90,37 @@ struct SemismoothLinearization {
       if (!zeta.derivative(z, J)) return false;
     }
     K.is_matrix_free = J.matrix_free();
+    if (!level.comm().all(K.is_matrix_free) && !level.comm().all(!K.is_matrix_free))
+      throw std::invalid_argument("zeta_jacobian returned a linear operator on some processes and a matrix on others");
     if (K.is_matrix_free) {
-      {
-        ScopedTimer t(level.timings().spmv);
-        minus_w.noalias() = level.matrix() * z;
-      }
+      level.apply(z, minus_w);
       minus_w = -(minus_w + q);
       c = zeta_z - z;  // −g
-      K.matrix_free.linearize(std::move(J.product), stable_norm(minus_w.cwiseMax(c)));  // Res = ‖min(w, g)‖ = ‖max(−w, −g)‖
+      K.matrix_free.linearize(std::move(J.product), level.comm().stable_norm(minus_w.cwiseMax(c)));  // Res = ‖min(w, g)‖ = ‖max(−w, −g)‖
       K.sparse.reset();
       return true;
     }
     c = zeta_z - J.matrix * z;
     K.lcp = nullptr;
-    if (decoupled()) {
+    if (level.comm().all(decoupled())) {
       K.sparse.reset();
       K.lcp = &level.lcp_system();
       return true;
     }
-    K.sparse = level.affine_system(J.matrix, &Timings::factorization, true);
-    return true;
+    if constexpr (Engine<MatrixType>::serial) {
+      K.sparse = level.affine_system(J.matrix, &Timings::factorization, true);
+      return true;
+    } else {
+      throw std::invalid_argument("on this engine zeta_jacobian must return a linear operator (its products) or a "
+                                  "diagonal matrix: a sparse ζ′ that couples rows has no distributed system here");
+    }
   }
   /// A diagonal ∂ζ(z) = diag(d) with d ≠ 1 (a local ζ, ζ(z)_i = f_i(z_i)): an active row of the step
   /// fixes z⁺_i = c_i / (1 − d_i) alone, so the step is the LCP's on that bound (c becomes it), on the
   /// level's LCP system: analysed once, symmetric where A is (CG on the hierarchy), where the union
   /// pattern's system is built each step and nonsymmetric (BiCGSTAB; docs/MEASUREMENTS.md, "A diagonal ζ′").
+  /// (Each process tests its rows; a process whose rows are diagonal divides c all the same, which is
+  /// harmless: c is used only when every process's are.)
   bool decoupled() {
     const auto& B = J.matrix;
     for (Eigen::Index i = 0; i < B.outerSize(); ++i)
@@ -130,8 +138,11 @@ struct SemismoothLinearization {
   /// ζ's included) and curvature are far below kJacobianMiss there. One call of ζ and one product.
   double jacobian_miss(const Vector& z, const Vector& zeta_z) {
     const Eigen::Index n = z.size();
-    const Vector d = move.size() == n && move.squaredNorm() > 0 ? move : Vector::Ones(n);
-    const double eps = kDifferenceStep * (z.norm() > 0 ? z.norm() : 1.0) / d.norm();
+    const Comm& comm = level.comm();
+    auto norm = [&comm](const Vector& v) { return std::sqrt(comm.sum(v.squaredNorm())); };
+    const Vector d = comm.all(move.size() == n) && comm.sum(move.squaredNorm()) > 0 ? move : Vector::Ones(n);
+    const double z_norm = norm(z);
+    const double eps = kDifferenceStep * (z_norm > 0 ? z_norm : 1.0) / norm(d);
     Vector moved(n), jd;
     if (!level.eval_zeta(zeta, z + eps * d, moved)) return std::numeric_limits<double>::quiet_NaN();
     if (K.is_matrix_free) {
@@ -140,8 +151,8 @@ struct SemismoothLinearization {
       jd = J.matrix * d;
     }
     const Vector quotient = (moved - zeta_z) / eps;
-    const double scale = std::max(quotient.norm(), jd.norm());
-    return scale > 0 ? (quotient - jd).norm() / scale : 0.0;
+    const double scale = std::max(norm(quotient), norm(jd));
+    return scale > 0 ? norm(quotient - jd) / scale : 0.0;
   }
   static constexpr double kDifferenceStep = 1e-4;
 
