@@ -37,6 +37,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+import pyamg  # noqa: F401  (imported before timing: else the first solve with an 'amg' hierarchy pays it)
+
 import nrmicp
 from nrmicp import scenes
 from nrmicp.scenes.impulse import impulse_zeta_jacobian
