@@ -292,7 +292,9 @@ class Globalized {
     if constexpr (Plain::set_fixes_step)
       if (overshoots()) { r = plain_.damp(kOvershootDamping); damped = true; }
     const bool still = Plain::set_fixes_step && plain_.trial_still();  // the solve's own z⁺, before the sweeps
-    if (!repeat) {  // a repeat is the exact solve of its set: kept as solved
+    // a repeat is the exact solve of its set: kept as solved; so is a step that met tol where smoothing
+    // is a solve (the semismooth loop's outer step: the loop ends there anyway)
+    if (!repeat && !(Plain::smoothing_solves && r < ctl_.solve.tol)) {
       // a damped z⁺, or one whose set the sweeps changed, is no set's exact solve: its repeat is solved again
       moved_set_ = plain_.smooth(kSmoothingSweeps) || damped;
       r = plain_.trial_residual();

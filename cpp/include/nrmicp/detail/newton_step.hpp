@@ -37,6 +37,8 @@ struct FixedLinearization {
   using System = typename Engine<MatrixType>::System;
   /// The active set alone fixes the step: a set seen before is a cycle, the last one a settled solve.
   static constexpr bool set_fixes_step = true;
+  /// Its smoothing is a few projected sweeps (cheap: also after a step that met tol).
+  static constexpr bool smoothing_solves = false;
 
   Level& level;
   System& K;
@@ -97,6 +99,7 @@ class NewtonStep {
  public:
   using Vector = Eigen::VectorXd;
   static constexpr bool set_fixes_step = Linearization::set_fixes_step;
+  static constexpr bool smoothing_solves = Linearization::smoothing_solves;
 
   NewtonStep(NewtonLevel<MatrixType>& level, Linearization lin, Vector z)
       : level_(level), lin_(std::move(lin)), z_(std::move(z)) {

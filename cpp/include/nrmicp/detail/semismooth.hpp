@@ -38,6 +38,8 @@ struct SemismoothLinearization {
   using StorageIndex = typename MatrixType::StorageIndex;
   using Sparse = typename Engine<MatrixType>::System;
   static constexpr bool set_fixes_step = false;
+  /// Its smoothing is an outer step, a whole obstacle solve: not taken after a step that met tol.
+  static constexpr bool smoothing_solves = true;
 
   /// The reduced system of this step, of either form (the interface NewtonStep uses): a sparse ∂ζ(z)
   /// its own system on the union pattern, or (diagonal) the level's LCP system; or matrix-free.
