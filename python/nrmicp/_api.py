@@ -346,7 +346,7 @@ def _outer_hint(solver, measure) -> str:
             or measure.kind != ZetaKind.functor:
         return ""
     return ("; the default target (Res_E below 1e-10 of its value at z = 0) may lie below what zeta itself resolves "
-            "(the outer steps stopped contracting): pass tol (the paper's Res, e.g. tol=1e-8) or rtol")
+            "(its outer steps no longer contract there): pass tol (the paper's Res, e.g. tol=1e-8) or rtol")
 
 
 def _member_hint(A: sp.csr_matrix, method: str) -> str:

@@ -111,8 +111,15 @@ class JacobianCheck {
   /// A step rejected by the acceptance test (Res grew beyond the non-monotone reference, or is not finite).
   void rejected(bool same_set) { grew_ += same_set || outer_; }
   bool poor() const { return slow_ >= kPoorSlowSteps || grew_ >= kPoorGrowthSteps; }
-  /// Why (the start of the solve's message).
-  std::string message() const {
+  /// Why (the start of the solve's message). `matches`: ζ′ was found to match ζ's difference quotient
+  /// (kJacobianMiss), so the steps, not the Jacobian, failed: said as such.
+  std::string message(bool matches = false) const {
+    if (matches)
+      return "the Newton steps with zeta_jacobian stopped converging (" +
+             (slow_ >= kPoorSlowSteps ? std::to_string(slow_) + " in a row each reduced Res by less than a factor " +
+                                            to_text(1 / (outer_ ? kOuterSlowStep : kSlowStep))
+                                      : std::to_string(grew_) + " made Res grow") +
+             ") though zeta_jacobian matches zeta's difference quotient: zeta may resolve less than the target asks";
     if (outer_)
       return slow_ >= kPoorSlowSteps
                  ? "zeta_jacobian looks wrong: " + std::to_string(slow_) + " Newton steps in a row each reduced Res by "
@@ -240,7 +247,7 @@ class Globalized {
   void move_x(Iterate&) {
     if (still_ || at_floor_) return settle();
     if (jacobian_.outer() && !outer()) plain_steps();
-    if (jacobian_.poor() && !jacobian_.outer()) return give_up_jacobian();
+    if (jacobian_.poor() && !jacobian_.outer()) return give_up_jacobian(true);
     if (plain_.steps() >= ctl_.solve.maxiter) return stop(Status::MaxIterations);
     if (!plain_.linearize()) return stop(Status::ZetaFailed);
     if constexpr (!Plain::set_fixes_step)
@@ -250,7 +257,7 @@ class Globalized {
         plain_steps();
         if (!plain_.linearize()) return stop(Status::ZetaFailed);
       }
-    if (!newton()) jacobian_.poor() && !jacobian_.outer() ? give_up_jacobian() : fall_back();  // (outer: judged next move)
+    if (!newton()) jacobian_.poor() && !jacobian_.outer() ? give_up_jacobian(true) : fall_back();  // (outer: judged next move)
   }
   void update_z(Iterate& s) { s.z = plain_.z(); }
   const StepEnd* end() const { return end_ ? &*end_ : nullptr; }
@@ -374,10 +381,15 @@ class Globalized {
     if (r < best_r_) { best_r_ = r; best_z_ = plain_.z(); }
   }
   void give_up() { stop(runs_.give_up(sweeps_)); }
-  void give_up_jacobian() {
+  /// `check`: the plain steps' verdict, not yet checked against ζ's difference quotient (the outer
+  /// steps' is: move_x), is checked at z first (one call of ζ, one product).
+  void give_up_jacobian(bool check = false) {
     jacobian_poor_ = true;
-    std::string why = jacobian_.message();
-    if (jacobian_.outer())
+    if constexpr (!Plain::set_fixes_step)
+      if (check) miss_ = plain_.linearize() ? plain_.jacobian_miss() : std::numeric_limits<double>::quiet_NaN();
+    const bool checked = jacobian_.outer() || check;
+    std::string why = jacobian_.message(checked && miss_ <= kJacobianMiss);
+    if (checked)
       why += ", and zeta_jacobian(z) v misses zeta's difference quotient along the last step v by " + to_text(100 * miss_) + "%";
     end_ = StepEnd{Status::Stagnated, why};
   }

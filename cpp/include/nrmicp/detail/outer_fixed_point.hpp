@@ -88,6 +88,7 @@ class OuterFixedPoint {
     if (first_) run_.moved_start(z_, psi_, r_);
     first_ = false;
     const double f = run_.comm().stable_norm(inner.z - z_);  // ‖G(z) − z‖, z's units
+    if (stalled(f)) return;
     if (mixed_) {
       mixed_ = false;
       if (!(f < f_from_)) return reject_mix(inner.z, f);
@@ -187,6 +188,20 @@ class OuterFixedPoint {
     return true;
   }
   void give_up() { end_ = StepEnd{runs_.give_up(run_.sweeps_spent()), {}}; }
+  /// ‖G − z‖ has not gone below its best for kStallSteps outer steps: the map no longer contracts (a ζ
+  /// evaluated less accurately than the target asks, e.g. by an inner solve of its own); each step is
+  /// a whole obstacle solve, so the solve ends here, STAGNATED, its best iterate returned.
+  bool stalled(double f) {
+    if (f < best_f_) best_f_ = f, since_best_f_ = 0;
+    else if (++since_best_f_ >= kStallSteps)
+      end_ = StepEnd{Status::Stagnated, "the outer steps stopped contracting: ||G(z) - z|| not below its best (" +
+                                            to_text(best_f_) + ") for " + std::to_string(kStallSteps) +
+                                            " outer steps; returning the best iterate"};
+    return end_.has_value();
+  }
+  /// Outer steps without a new best ‖G − z‖ before the solve ends (docs/MEASUREMENTS.md, "The outer
+  /// fixed point's stall rule").
+  static constexpr int kStallSteps = 10;
 
   static constexpr double kNone = std::numeric_limits<double>::infinity();  // no ‖G − z‖ yet: any finite one is acceptable
   Run& run_;
@@ -204,6 +219,8 @@ class OuterFixedPoint {
   bool mixed_ = false;      // z is Anderson's mix, on trial
   double f_from_ = kNone;   // ‖G − z‖ of the iterate z was mixed from
   bool accelerate_;
+  double best_f_ = kNone;  // the smallest ‖G − z‖ so far
+  int since_best_f_ = 0;   // outer steps since it
   long long rejections_ = 0;
   std::optional<StepEnd> end_, floor_end_;
 };
