@@ -239,3 +239,22 @@ def test_zeta_jacobian_runs_semismooth_newton_on_petsc_with_the_serial_decisions
                                ("matvec NaN on the last rank", "ValueError"), ("not callable", "TypeError")):
             kind, message = refused[name]
             assert kind == expected and "zeta_jacobian" in message, (name, refused)
+
+
+@pytest.mark.parametrize("np_", [1, 2])
+def test_a_solver_is_set_up_once_for_a_march_of_solves(np_):
+    """distributed.Solver: three loads with x0 the last answer, newton ('amg') and nrmgs, each against
+    serial nrmicp and the numpy oracle; the set-up is reported by the first solve of each scaling only
+    (the default rule's σA, then the paper's tol on A); misplaced options and a closed Solver refused."""
+    out = mpirun(np_, "solver")
+    for method, rows in (("newton", out["newton"]), ("nrmgs", out["nrmgs"])):
+        assert [r["status"] for r in rows] == ["CONVERGED"] * 3, rows
+        assert rows[0]["setup"] > 0 and rows[1]["setup"] == 0 and rows[2]["setup"] > 0, rows
+        for r in rows:   # the default rule is relative (Res_E 1e-10 of Res_E(0)); the last row is tol 1e-9
+            assert r["err"] < (1e-10 if method == "newton" else 1e-6), (method, rows)
+        assert rows[2]["res"] < 1e-9 * 1.0001, rows
+    kind, message = out["x0 at set-up"]
+    assert kind == "TypeError" and "x0" in message and "solve()" in message, out
+    kind, message = out["method per solve"]
+    assert kind == "TypeError" and "method" in message and "distributed.Solver()" in message, out
+    assert out["closed"][0] == "ValueError" and "closed" in out["closed"][1], out

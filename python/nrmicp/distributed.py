@@ -43,7 +43,7 @@ from ._scaling import sigma_from_logs
 from ._inputs import as_constant, as_vector
 from ._zeta import CheckedZeta
 
-__all__ = ["solve", "gather", "METHODS", "DistributedError"]
+__all__ = ["solve", "Solver", "gather", "METHODS", "DistributedError"]
 
 #: The distributed members: every member of nrmicp (the stationary ones as synchronous multisplitting).
 METHODS = _ALL_METHODS
@@ -188,9 +188,10 @@ class _Zeta:
 
 
 # ----------------------------------------------------------------------------- the entry points
-def _prepare(A, q, zeta, x0, comm, o, it):
-    """Every check, with every rank's failure raised on all ranks: (Am, method, core Options, this
-    rank's q and x0, ζ)."""
+def _prepare_matrix(A, comm, o):
+    """A's checks and the member, with every rank's failure raised on all ranks: (Am, method). The
+    set-up options `o` are checked here too (the core's Options, by the serial code), with tol and
+    rtol at their defaults."""
     A_in = _collective(comm, _check_mat, A)
     Am = _as_mat(A_in, comm) if sp.issparse(A_in) else A_in
     nloc = Am.getLocalSize()[0]
@@ -200,16 +201,16 @@ def _prepare(A, q, zeta, x0, comm, o, it):
 
     def local():
         m = _choice(method, METHODS, "method")
-        opts = _core_options(o, m, nloc, it)
+        _core_options(o, m, nloc, _criterion({"tol": o["tol"], "rtol": o["rtol"]})[0])
         hierarchy = o["hierarchy"]
         if m != "newton" and hierarchy not in (None, "amg", "auto"):
             raise ValueError(f"hierarchy is the nested iteration of method 'newton'; got {hierarchy!r}")
         if m == "newton" and not (hierarchy in (None, "amg", "auto") or isinstance(hierarchy, (list, tuple))):
             raise ValueError(f"hierarchy must be 'amg', None or a list of PETSc prolongations; got {hierarchy!r}")
-        qa = _local(q, Am, "q")
-        xa = None if x0 is None else _local(x0, Am, "x0")
-        return m, opts, qa, xa, _Zeta(zeta, Am, comm)
-    m, opts, qa, xa, zf = _collective(comm, local)
+        if m == "newton":
+            check_polish(o["polish"])
+        return m
+    m = _collective(comm, local)
     d = Am.getDiagonal()
 
     def diagonal():
@@ -220,7 +221,19 @@ def _prepare(A, q, zeta, x0, comm, o, it):
             raise ValueError(f"A's diagonal must be positive (method {m!r} divides by it); "
                              f"A[{lo + i}, {lo + i}] = {da[i]}")
     _collective(comm, diagonal)
-    return Am, m, opts, qa, xa, zf
+    if m == "newton":
+        _collective(comm, _owns_rows, Am)
+    return Am, m
+
+
+def _prepare_call(Am, m, q, zeta, x0, comm, o, it):
+    """A solve's checks, every rank's failure raised on all: (core Options, this rank's q and x0, ζ)."""
+    nloc = Am.getLocalSize()[0]
+
+    def local():
+        return _core_options(o, m, nloc, it), _local(q, Am, "q"), None if x0 is None else _local(x0, Am, "x0"), \
+            _Zeta(zeta, Am, comm)
+    return _collective(comm, local)
 
 
 def _z_update_applies(opts, method, zeta_kind):
@@ -271,48 +284,138 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     Returns a :class:`nrmicp.Result` on every rank, with ``z`` and ``w`` as PETSc Vecs
     (:func:`gather` copies one to rank 0). A failure on any rank raises on every rank.
     """
-    from . import _petsc
     comm = comm or (A.getComm() if isinstance(A, PETSc.Mat) else PETSc.COMM_WORLD)
     _collective(comm, lambda: _options.validate(options, where="distributed.solve", unsupported=_UNSUPPORTED))
-    o = {**_options.defaults(), **options}
-    if o["callback"] is not None:
-        o["callback"] = _collective_callback(comm, o["callback"])
-    t_start = time.perf_counter()
-    it, units = _criterion({"tol": o["tol"], "rtol": o["rtol"]})
-    Am, m, opts, qa, xa, zf = _prepare(A, q, zeta, o["x0"], comm, o, it)
-    o["method"] = m
-    ua = _upper(upper, Am, zf, comm, m)
-    A_user, q_user = Am, qa
-    if units:   # the iteration runs on σA, σq: its Res is the units-free Res_E
-        sigma = _units_sigma(Am)
-        Am, qa = Am.copy(), sigma * qa
-        Am.scale(sigma)
-        _units_parameters(opts, m, sigma, Am.getLocalSize()[0])
-    if m != "newton":
-        _collective(comm, _z_update_applies, opts, m, zf.kind)
-    kind, c, fn = zf.core_args(Am)
-    problem = (kind, c, fn, ua)
-    jacobian = _jacobian(o["zeta_jacobian"], zf, m, Am, comm)
-    if opts.rtol > 0:   # the absolute target, on the problem the core iterates (Options::target of Res(0))
-        opts.tol = opts.target(_petsc.measure(Am.handle, qa, *problem, np.zeros_like(qa))["residual"])
-        opts.rtol = 0.0
-    if m == "newton":
-        za, res, status, message, fields = _newton(_petsc, Am, qa, problem, xa, opts, o, comm, jacobian)
-    else:
-        za, res, status, message, fields = _stationary(_petsc, Am, qa, problem, xa, opts, o, comm, units)
-    criterion = {"measure": "units" if units else "paper", "target": float(opts.tol), "value": float(res)}
-    wa = fields.pop("w")
-    if units:   # the paper's Res, and w, in the user's units
-        status, message = at_rounding_floor(status, message, res, opts.tol, lambda: _petsc.measure(
-            Am.handle, qa, *problem, za, rounding=True)["rounding_level"])
-        got = _petsc.measure(A_user.handle, q_user, *problem, za)
-        res, wa = got["residual"], got["w"]
-    fields["timings"]["total"] = time.perf_counter() - t_start
-    r = Result(z=_vec(A_user, za), w=_vec(A_user, wa), success=status == Status.CONVERGED, status=Status(status),
-               message=message, residual=float(res), criterion=criterion, method=m, ranks=comm.getSize(), **fields)
-    if opts.verbose > 0 and comm.getRank() == 0:
-        _log_final(m, r, fields["timings"]["total"])
+    setup = {k: v for k, v in options.items() if _options.TABLE[k].scope == "setup"}
+    if options.get("zeta_jacobian") is not None and str(setup.get("method", "auto")).lower() == "auto":
+        setup["method"] = "newton"   # (nrmicp.solve's rule: a Jacobian is for Newton)
+    t0 = time.perf_counter()
+    with Solver(A, comm=comm, **setup) as solver:
+        r = solver.solve(q, zeta, upper=upper, **{k: v for k, v in options.items() if k not in setup})
+    r.timings["total"] = time.perf_counter() - t0
     return r
+
+
+class Solver:
+    """:class:`nrmicp.Solver` on PETSc: A set up once — checked, its member chosen, and on the first solve
+    that needs it the core (nrmicp::Newton or nrmicp::Solver on the PETSc engine: the hierarchy, its
+    Galerkin operators, the reduced systems' solvers) — then solved for many q, ζ, x0 (a time march, an
+    outer loop of the user's). :func:`solve` is one Solver's one solve.
+
+    ``Solver(A, *, comm=None, **options)`` takes :func:`solve`'s set-up options (method, hierarchy, the
+    splitting, ...) and per-solve defaults (tol, maxiter, ...); ``solve(q, zeta=None, *, upper=None,
+    **options)`` the per-solve ones and each call's own (x0, callback, zeta_jacobian), as
+    :meth:`nrmicp.Solver.solve`. Call both on every rank. The default rule (tol and rtol None) iterates on
+    σA, the paper's tol on A: one core each, kept. ``close()`` (or ``with``) frees the cores on every
+    rank together: their KSPs' MUMPS factors are freed collectively, and left to each rank's garbage
+    collector that happens at different times (a deadlock); a closed Solver raises on solve."""
+
+    def __init__(self, A, *, comm=None, **options):
+        t0 = time.perf_counter()
+        self.comm = comm = comm or (A.getComm() if isinstance(A, PETSc.Mat) else PETSc.COMM_WORLD)
+        _collective(comm, _scoped, options, ("setup", "solve"), "distributed.Solver", "its solve()")
+        self._options = {**_options.defaults("setup", "solve"), **options}
+        self.A, self.method = _prepare_matrix(A, comm, {**_options.defaults(), **self._options})
+        self._cores = {}   # units (the default rule's σA) -> [the core, its set-up seconds not yet reported]
+        self._operators = {False: (self.A, 1.0)}   # units -> (the Mat the core iterates, σ)
+        self._setup_seconds = time.perf_counter() - t0   # reported by the first solve
+        self._closed = False
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def close(self):
+        """Frees the cores (collective: on every rank); a closed Solver's solve raises."""
+        for core, _ in self._cores.values():
+            core.close()
+        self._cores, self._closed = {}, True
+
+    def solve(self, q, zeta=None, *, upper=None, **options) -> Result:
+        """ICP(q, A, ζ) with this Solver's A: :func:`solve`'s arguments but A, comm and the set-up options."""
+        from . import _petsc
+        comm = self.comm
+        if self._closed:
+            raise ValueError("this distributed.Solver was closed")
+        _collective(comm, _scoped, options, ("solve", "call"), "distributed.Solver.solve", "distributed.Solver()")
+        o = {**_options.defaults(), **self._options, **options, "method": self.method}
+        if o["callback"] is not None:
+            o["callback"] = _collective_callback(comm, o["callback"])
+        t_start = time.perf_counter()
+        it, units = _criterion({"tol": o["tol"], "rtol": o["rtol"]})
+        A_user, m = self.A, self.method
+        opts, qa, xa, zf = _prepare_call(A_user, m, q, zeta, o["x0"], comm, o, it)
+        ua = _upper(upper, A_user, zf, comm, m)
+        q_user = qa
+        Am, sigma = self._operator(units)
+        if units:   # the iteration runs on σA, σq: its Res is the units-free Res_E
+            qa = sigma * qa
+            _units_parameters(opts, m, sigma, Am.getLocalSize()[0])
+        if m != "newton":
+            _collective(comm, _z_update_applies, opts, m, zf.kind)
+        kind, c, fn = zf.core_args(Am)
+        problem = (kind, c, fn, ua)
+        jacobian = _jacobian(o["zeta_jacobian"], zf, m, Am, comm)
+        if opts.rtol > 0:   # the absolute target, on the problem the core iterates (Options::target of Res(0))
+            opts.tol = opts.target(_petsc.measure(Am.handle, qa, *problem, np.zeros_like(qa))["residual"])
+            opts.rtol = 0.0
+        core, setup = self._core(_petsc, units, Am, opts, o)
+        if m == "newton":
+            za, res, status, message, fields = _newton_solve(core, setup, qa, problem, xa, opts, o, jacobian)
+        else:
+            za, res, status, message, fields = _stationary_rounds(_petsc, core, setup, Am, qa, problem, xa, opts, o,
+                                                                  comm, units)
+        criterion = {"measure": "units" if units else "paper", "target": float(opts.tol), "value": float(res)}
+        wa = fields.pop("w")
+        if units:   # the paper's Res, and w, in the user's units
+            status, message = at_rounding_floor(status, message, res, opts.tol, lambda: _petsc.measure(
+                Am.handle, qa, *problem, za, rounding=True)["rounding_level"])
+            got = _petsc.measure(A_user.handle, q_user, *problem, za)
+            res, wa = got["residual"], got["w"]
+        fields["timings"]["total"] = time.perf_counter() - t_start + setup
+        r = Result(z=_vec(A_user, za), w=_vec(A_user, wa), success=status == Status.CONVERGED, status=Status(status),
+                   message=message, residual=float(res), criterion=criterion, method=m, ranks=comm.getSize(), **fields)
+        if opts.verbose > 0 and comm.getRank() == 0:
+            _log_final(m, r, fields["timings"]["total"])
+        return r
+
+    def _operator(self, units):
+        """(the Mat the core iterates, σ): A, or under the default rule σA (a copy, made once)."""
+        if units not in self._operators:
+            sigma = _units_sigma(self.A)
+            scaled = self.A.copy()
+            scaled.scale(sigma)
+            self._operators[units] = (scaled, sigma)
+        return self._operators[units]
+
+    def _core(self, _petsc, units, Am, opts, o):
+        """(the core for this scaling, the set-up seconds this solve reports): built on its first solve,
+        which also reports the Solver's own set-up."""
+        if units not in self._cores:
+            t0 = time.perf_counter()
+            if self.method == "newton":
+                h = o["hierarchy"]   # 'amg': built by the core (nrmicp/petsc/hierarchy.hpp)
+                amg = h == "amg" or (h == "auto" and Am.getSize()[0] >= AUTO_AMG_MIN_N)
+                Ps = [P.handle for P in h] if isinstance(h, (list, tuple)) else []
+                core = _collective(self.comm, lambda: _petsc.Newton(Am.handle, opts, Ps, amg))
+            else:
+                core = _collective(self.comm, lambda: _petsc.Solver(Am.handle, opts))
+            self._cores[units] = [core, time.perf_counter() - t0]
+        entry = self._cores[units]
+        setup, entry[1] = entry[1] + self._setup_seconds, 0.0
+        self._setup_seconds = 0.0
+        return entry[0], setup
+
+
+def _scoped(options, scopes, where, elsewhere):
+    """TypeError naming the options of `options` outside these scopes (they belong `elsewhere`), then
+    the table's checks (_options.validate) with the options PETSc cannot apply refused."""
+    misplaced = sorted(k for k in options if k in _options.TABLE and _options.TABLE[k].scope not in scopes)
+    if misplaced:
+        raise TypeError(f"{where}() does not take {misplaced}: pass them to {elsewhere}")
+    _options.validate(options, where=where, unsupported=_UNSUPPORTED)
 
 
 def _collective_callback(comm, callback):
@@ -368,23 +471,12 @@ def _implicit_upper(upper, Am, comm):
     return (_core.ZetaKind.functor, None, None, None, None, fn)
 
 
-def _stationary(_petsc, Am, qa, problem, xa, opts, o, comm, units):
-    """A stationary member: nrmicp::Solver on the PETSc engine (nrmicp._petsc), the serial loop with
-    its every rule, driven by the serial layer's rounds (_api._Rounds: Res of z re-measured where the
-    core iterated another problem — a constant ζ's shifted LCP, the default rule's σA — and re-solved
-    with a tighter tolerance when it misses tol). Returns (z, Res, status, message, the result's other
-    fields)."""
-    t0 = time.perf_counter()
-    core = _collective(comm, lambda: _petsc.Solver(Am.handle, opts))
-    try:
-        return _stationary_rounds(_petsc, core, Am, qa, problem, xa, opts, o, comm, units, t0)
-    finally:
-        core.close()   # on every rank together (as _newton's)
-
-
-def _stationary_rounds(_petsc, core, Am, qa, problem, xa, opts, o, comm, units, t0):
-    """_stationary's rounds on its core."""
-    t_iter = time.perf_counter()
+def _stationary_rounds(_petsc, core, setup, Am, qa, problem, xa, opts, o, comm, units):
+    """A stationary member: nrmicp::Solver on the PETSc engine (nrmicp._petsc, `core`), the serial loop
+    with its every rule, driven by the serial layer's rounds (_api._Rounds: Res of z re-measured where
+    the core iterated another problem — a constant ζ's shifted LCP, the default rule's σA — and
+    re-solved with a tighter tolerance when it misses tol). Returns (z, Res, status, message, the
+    result's other fields); `setup`: the set-up seconds this solve reports."""
     kind, c, fn, ua = problem
     solver = _AsSerialSolver(core, o["method"], len(qa), comm.getRank() == 0)
     measure = _Measure(_petsc, Am, qa, problem, units) if units or kind == _core.ZetaKind.constant else None
@@ -393,7 +485,7 @@ def _stationary_rounds(_petsc, core, Am, qa, problem, xa, opts, o, comm, units, 
     rounds.cb = o["callback"]   # (distributed's callback(k, z, res), each rank's rows)
     rounds.run(xa, opts.tol)
     status, message = rounds.status(rounds.res, opts.tol)
-    timings = dict(rounds.timings, setup=t_iter - t0 + rounds.timings["setup"])
+    timings = dict(rounds.timings, setup=setup + rounds.timings["setup"])
     fields = dict(nit=int(rounds.nit), iterations=int(rounds.done_iters), history=rounds.history(),
                   inner=rounds.best_d["inner"], counters=rounds.counters, timings=timings, w=rounds.w)
     return rounds.z, rounds.res, Status(status), message, fields
@@ -434,29 +526,16 @@ def _jacobian(zeta_jacobian, zf, method, Am, comm):
     return core_jacobian(zeta_jacobian, Am.getLocalSize()[0], PETSc.IntType, collective=functools.partial(_collective, comm))
 
 
-def _newton(_petsc, Am, qa, problem, xa, opts, o, comm, jacobian=None):
-    """The Newton member: nrmicp::Newton on the PETSc engine (nrmicp._petsc), its every decision the
-    serial member's. Returns (z, Res, status, message, the result's other fields)."""
-    t0 = time.perf_counter()
-    polish = bool(_collective(comm, lambda: check_polish(o["polish"])))
-    _collective(comm, _owns_rows, Am)
-    h = o["hierarchy"]   # 'amg': built by the core (nrmicp/petsc/hierarchy.hpp)
-    amg = h == "amg" or (h == "auto" and Am.getSize()[0] >= AUTO_AMG_MIN_N)
-    Ps = [P.handle for P in h] if isinstance(h, (list, tuple)) else []
-    core = _collective(comm, lambda: _petsc.Newton(Am.handle, opts, Ps, amg))
-    try:
-        return _newton_solve(core, t0, qa, problem, xa, opts, o, jacobian, polish)
-    finally:
-        core.close()   # on every rank together: an exception's traceback would leave it to each rank's gc
-
-
-def _newton_solve(core, t0, qa, problem, xa, opts, o, jacobian, polish):
-    """_newton's solve (and polish) with the core set up."""
+def _newton_solve(core, setup, qa, problem, xa, opts, o, jacobian):
+    """The Newton member: nrmicp::Newton on the PETSc engine (nrmicp._petsc, `core`), its every decision
+    the serial member's; polished when asked. Returns (z, Res, status, message, the result's other
+    fields); `setup`: the set-up seconds this solve reports."""
     t_iter = time.perf_counter()
     args = (qa, *problem)
     d = core.solve(*args, xa, o["callback"], opts, jacobian)
     z, res, status, message, w = d["z"], d["residual"], Status(d["status"]), d["message"], d["w"]
     polished = None
+    polish = bool(o["polish"])
     if polish:
         p = core.polish(*args, z, POLISH_TOL)
         polished = p["residual"] < res
@@ -465,7 +544,7 @@ def _newton_solve(core, t0, qa, problem, xa, opts, o, jacobian, polish):
         status, message = polish_outcome(status, message, res, opts.tol, polished, p)
         status = Status(status)
     fields = dict(nit=int(d["nit"]), iterations=int(d["iterations"]), inner=core.inner, counters=dict(d["counters"]),
-                  history=d["history"], timings={"setup": t_iter - t0, "iterations": time.perf_counter() - t_iter},
+                  history=d["history"], timings={"setup": setup, "iterations": time.perf_counter() - t_iter},
                   w=w, **result_fields(d, core.hierarchy))
     if polish:
         fields["polished"] = polished
