@@ -10,7 +10,7 @@ Problems:
   evaluation of zeta. In z = -u the ICP is A z + q >= 0, z >= zeta(z) = -(Phi0 + phi T(-z)).
 - ``thermo2d``: the product's scene nrmicp.scenes.thermoforming_2d with its geometric hierarchy,
   at its defaults and at kappa = 2, delta = 1 (a stronger, longer-range coupling), the latter also
-  with hierarchy 'auto' (the algebraic one from n = 4096).
+  with hierarchy 'auto' (the algebraic one from n = 1000).
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/qvi_outer.py
     OPENBLAS_NUM_THREADS=1 python benchmarks/qvi_outer.py --achp 63 255 --thermo2d 31 63

@@ -479,6 +479,12 @@ def case_implicit_upper():
     return out
 
 
+def _blocks(n):
+    """Every rank's row range of split(n)."""
+    cuts = np.concatenate([[0], np.round(np.arange(1, SIZE + 1) / SIZE * n)]).astype(int)
+    return [(int(cuts[r]), int(cuts[r + 1])) for r in range(SIZE)]
+
+
 def case_jacobian():
     """ζ's Jacobian on the PETSc engine (semismooth Newton on the whole ICP, the one driver's): the 2D
     obstacle with ζ = ψ + 0.2 sin z, ζ′ a LinearOperator of this rank's rows and a diagonal matrix, and a
@@ -493,6 +499,11 @@ def case_jacobian():
     lo, hi = split(n)
     m, psi = hi - lo, np.asarray(pb.zeta, dtype=float)
     M = sp.csr_matrix((sp.diags(A.diagonal()) - A) / A.diagonal().max())
+    Mb = sp.csr_matrix(sp.block_diag([M[a:b, a:b] for a, b in _blocks(n)]))   # M within each rank's rows
+    free = np.arange(n) % 31 < 2   # the grid's first two columns
+
+    def shifted(z, p, f):
+        return np.where(f, z - 10.0, p + 0.2 * np.sin(z))
     Mp = mat(M, lo, hi)
     x, y = Mp.createVecs()
 
@@ -510,7 +521,15 @@ def case_jacobian():
                          lambda z: psi[lo:hi] + 0.2 * np.sin(z), lambda z: sp.diags(0.2 * np.cos(z))),
         "nonlocal operator": (lambda z: psi + 0.3 * (M @ z), lambda z: aslinearoperator(0.3 * M),
                               lambda z: psi[lo:hi] + 0.3 * mv(z),
-                              lambda z: LinearOperator((m, m), matvec=lambda v: 0.3 * mv(np.ravel(v)), dtype=float))}
+                              lambda z: LinearOperator((m, m), matvec=lambda v: 0.3 * mv(np.ravel(v)), dtype=float)),
+        # a coupling sparse ζ′ of a row-local ζ (ζ_i of z_i and its grid neighbours on the rank): its product
+        "local coupling matrix": (lambda z: psi + 0.3 * (Mb @ np.sin(z)), lambda z: sp.csr_matrix(0.3 * Mb @ sp.diags(np.cos(z))),
+                                  lambda z: psi[lo:hi] + 0.3 * (Mb[lo:hi, lo:hi] @ np.sin(z)),
+                                  lambda z: sp.csr_matrix(0.3 * Mb[lo:hi, lo:hi] @ sp.diags(np.cos(z)))),
+        # a diagonal ζ′ with entries 1 (rows ζ_i = z_i − 10, never active: free rows): no LCP system, its product
+        "sin diagonal at 1": (lambda z: shifted(z, psi, free), lambda z: sp.diags(np.where(free, 1.0, 0.2 * np.cos(z))),
+                              lambda z: shifted(z, psi[lo:hi], free[lo:hi]),
+                              lambda z: sp.diags(np.where(free[lo:hi], 1.0, 0.2 * np.cos(z))))}
     out = {}
     for name, (zeta, jac, local_zeta, local_jac) in problems.items():
         for hierarchy in (None, "amg"):
@@ -533,7 +552,6 @@ def case_jacobian():
                     "matrix_free": int(r.counters.get("matrix_free_iterations", 0))}
     last = RANK == SIZE - 1
     bad_jacobians = {
-        "coupling matrix": lambda z: sp.csr_matrix(0.3 * M[lo:hi, lo:hi]),
         "wrong shape on the last rank": lambda z: diag(m + last, np.zeros(m + last)),
         "complex operator": lambda z: LinearOperator((m, m), matvec=lambda v: 1j * v, dtype=complex),
         "a string": lambda z: "J",

@@ -214,8 +214,9 @@ def test_zeta_jacobian_runs_semismooth_newton_on_petsc_with_the_serial_decisions
     """ζ′ as a LinearOperator of this rank's rows (its products communicating, for a nonlocal ζ) or a
     diagonal matrix: the one driver's semismooth Newton on the whole ICP. Cold, the serial member's
     decisions (ζ′ calls, steps) and z; nested (BoomerAMG against pyamg) the same answer; the ICP's own
-    conditions checked in numpy. A coupling sparse ζ′, and an operator of the wrong shape on one rank,
-    are refused on every rank naming zeta_jacobian."""
+    conditions checked in numpy. A sparse ζ′ the engine has no system for acts by its product. Bad
+    Jacobians (wrong shape on one rank, complex, not callable, ...) are refused on every rank naming
+    zeta_jacobian."""
     out = mpirun(np_, "jacobian")
     for name, r in out.items():
         if name == "refused":
@@ -225,13 +226,14 @@ def test_zeta_jacobian_runs_semismooth_newton_on_petsc_with_the_serial_decisions
         assert abs(r["oracle_res"] - r["res"]) <= 1e-6 * r["res"] + 1e-13, (name, r)
         assert 1 <= r["calls"] <= 3, (name, r)
         assert r["err"] < 1e-9, (name, r)
-        if name.endswith(" None"):
+        # the engine solves a sparse ζ′ it has no system for (one that couples rows, or a diagonal with an entry
+        # 1) by its product, where the serial member assembles it: the same answer, its own steps
+        by_product = name.startswith(("local coupling matrix", "sin diagonal at 1"))
+        if name.endswith(" None") and not by_product:
             assert (r["calls"], r["nit"]) == (r["serial_calls"], r["serial_nit"]), (name, r)
-        assert (r["matrix_free"] > 0) == ("operator" in name), (name, r)
+        assert (r["matrix_free"] > 0) == ("operator" in name or by_product), (name, r)
     for rank in out["refused"]:
         refused = json.loads(rank)
-        kind, message = refused["coupling matrix"]
-        assert kind == "ValueError" and "zeta_jacobian" in message and "linear operator" in message, refused
         kind, message = refused["wrong shape on the last rank"]
         assert kind == "ValueError" and "zeta_jacobian(z) must return" in message, refused
         for name, expected in (("complex operator", "TypeError"), ("a string", "TypeError"),

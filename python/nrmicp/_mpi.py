@@ -53,14 +53,15 @@ def agree(comm, exc: BaseException | None) -> None:
     v.setArray(buf)
     scatter, out = PETSc.Scatter.toAll(v)
     scatter.scatter(v, out, PETSc.InsertMode.INSERT, PETSc.ScatterMode.FORWARD)
-    rows = out.getArray().reshape(size, _MSG_LEN)
-    for r in range(size):
-        if rows[r, 0]:
-            raw = bytes(rows[r][rows[r] > 0].astype(np.uint8)).decode("utf-8", "replace")
-            name, _, msg = raw.partition("\x01")
-            cls = _KNOWN.get(name)
-            err = cls(f"rank {r}: {msg}") if cls else DistributedError(f"rank {r}: {name}: {msg}")
-            raise err from exc
+    rows = out.getArray().reshape(size, _MSG_LEN).copy()
+    for obj in (scatter, out, v):   # destroyed here, on every rank together: the traceback keeps this frame
+        obj.destroy()
+    r = int(np.flatnonzero(rows[:, 0])[0])
+    name, _, msg = bytes(rows[r][rows[r] > 0].astype(np.uint8)).decode("utf-8", "replace").partition("\x01")
+    cls = _KNOWN.get(name)
+    # (no local holds the new exception: a frame -> exception -> traceback -> frame cycle would leave this
+    # frame, and what it holds, to each rank's cyclic garbage collector, at different times)
+    raise (cls(f"rank {r}: {msg}") if cls else DistributedError(f"rank {r}: {name}: {msg}")) from exc
 
 
 def collective(comm, fn, *args):
@@ -69,5 +70,8 @@ def collective(comm, fn, *args):
         out, exc = fn(*args), None
     except Exception as e:  # noqa: BLE001 - re-raised on every rank by agree
         out, exc = None, e
-    agree(comm, exc)
+    try:
+        agree(comm, exc)
+    finally:
+        del exc   # (the caught exception's traceback holds this frame: no cycle through it)
     return out

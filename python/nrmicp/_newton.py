@@ -46,14 +46,17 @@ def check_no_hierarchy(hierarchy, method):
                          f"(got hierarchy={hierarchy!r}; use None)")
 
 
+def auto_builds_amg(n: int, nnz: float) -> bool:
+    """hierarchy='auto''s rule on an n-by-n A storing nnz entries: n >= AUTO_AMG_MIN_N and at most
+    AUTO_AMG_MAX_DENSITY of the n² entries stored (both engines: nrmicp.distributed asks it too)."""
+    return n >= AUTO_AMG_MIN_N and nnz <= AUTO_AMG_MAX_DENSITY * float(n) * n
+
+
 def resolves_to_amg(hierarchy, A) -> bool:
-    """hierarchy= is 'amg', or 'auto' on a sparse A (AUTO_AMG_MAX_DENSITY) of n >= AUTO_AMG_MIN_N
-    with pyamg importable."""
+    """hierarchy= is 'amg', or 'auto' on an A of auto_builds_amg with pyamg importable."""
     if not isinstance(hierarchy, str):
         return False
-    n = A.shape[0]
-    sparse = A.nnz <= AUTO_AMG_MAX_DENSITY * float(n) * n
-    return hierarchy == "amg" or (hierarchy == "auto" and n >= AUTO_AMG_MIN_N and sparse and _has_pyamg())
+    return hierarchy == "amg" or (hierarchy == "auto" and auto_builds_amg(A.shape[0], A.nnz) and _has_pyamg())
 
 
 def amg_levels_or_rows(A, components=None):

@@ -34,7 +34,7 @@ except ImportError as exc:  # the core package needs no MPI; this module does
 
 from . import _bounds, _core, _options
 from ._mpi import DistributedError, collective as _collective, flag_max as _flag_max, flag_sum as _flag_sum
-from ._newton import (AUTO_AMG_MIN_N, POLISH_TOL, check_jacobian, check_polish, core_jacobian, polish_outcome,
+from ._newton import (POLISH_TOL, auto_builds_amg, check_jacobian, check_polish, core_jacobian, polish_outcome,
                       result_fields)
 from ._api import (METHODS as _ALL_METHODS, _SPLITTING, Affine, Result, Status, _Rounds, _checked, _choice, _criterion,
                    _iteration_options, _log_final, _units_parameters, at_rounding_floor,
@@ -220,7 +220,10 @@ def _prepare_matrix(A, comm, o):
             lo = Am.getOwnershipRange()[0]
             raise ValueError(f"A's diagonal must be positive (method {m!r} divides by it); "
                              f"A[{lo + i}, {lo + i}] = {da[i]}")
-    _collective(comm, diagonal)
+    try:
+        _collective(comm, diagonal)
+    finally:
+        d.destroy()   # on every rank together (a raise keeps this frame in its traceback)
     if m == "newton":
         _collective(comm, _owns_rows, Am)
     return Am, m
@@ -268,8 +271,8 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     zeta_jacobian ('newton', a callable zeta): zeta_jacobian(z) of this rank's rows returns ζ′(z) as a
     linear operator on this rank's rows (a LinearOperator, or anything with shape and matvec: semismooth
     Newton on the whole ICP, its Krylov solve preconditioned by the LCP system; each matvec is called on
-    every rank together, so it may communicate) or as a diagonal matrix of them; a matrix that couples
-    rows is refused (no distributed system for it: pass its product as an operator).
+    every rank together, so it may communicate) or as a sparse matrix of them (a diagonal one solves
+    on the LCP system; any other acts by its product: the rank's block, all of a row-local ζ′).
     callback(k, z, res) sees this rank's rows of z; returning True (or raising StopIteration) on any rank stops
     every rank.
     ``options`` are :func:`nrmicp.solve`'s, with its defaults, checked by the same code (one table:
@@ -277,8 +280,8 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     ``_UNSUPPORTED`` (scale, components), for 'newton' also ``_UNSUPPORTED_NEWTON``
     (inner, verbose), for the stationary members ``_UNSUPPORTED_STATIONARY`` (z_update 'solve',
     polish). verbose prints rank 0's progress lines.
-    method='auto' is nrmicp.solve's rule on every rank's rows; hierarchy='auto' is 'amg' from
-    n = 1000 on (BoomerAMG: no pyamg needed).
+    method='auto' is nrmicp.solve's rule on every rank's rows; hierarchy='auto' is nrmicp.solve's rule
+    (n ≥ 1000, at most 10% of A's entries stored), 'amg' there being BoomerAMG's (no pyamg needed).
     tol and rtol both None is nrmicp.solve's default rule (units-free Res_E, rtol 1e-10), applied by
     solving σA, σq (σ from the diagonal's global geometric mean), ``residual`` the paper's Res.
     Returns a :class:`nrmicp.Result` on every rank, with ``z`` and ``w`` as PETSc Vecs
@@ -397,7 +400,8 @@ class Solver:
             t0 = time.perf_counter()
             if self.method == "newton":
                 h = o["hierarchy"]   # 'amg': built by the core (nrmicp/petsc/hierarchy.hpp)
-                amg = h == "amg" or (h == "auto" and Am.getSize()[0] >= AUTO_AMG_MIN_N)
+                nnz = Am.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"]
+                amg = h == "amg" or (h == "auto" and auto_builds_amg(Am.getSize()[0], nnz))
                 Ps = [P.handle for P in h] if isinstance(h, (list, tuple)) else []
                 core = _collective(self.comm, lambda: _petsc.Newton(Am.handle, opts, Ps, amg))
             else:

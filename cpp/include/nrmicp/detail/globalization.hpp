@@ -253,7 +253,7 @@ class Globalized {
     if constexpr (!Plain::set_fixes_step)
       if (jacobian_.outer() && jacobian_.poor()) {  // the Jacobian at z, against ζ's difference quotient
         miss_ = plain_.jacobian_miss();
-        if (miss_ > kJacobianMiss) return give_up_jacobian();
+        if (!(miss_ <= kJacobianMiss)) return give_up_jacobian();  // (a miss that cannot be had: NaN, as a miss)
         plain_steps();
         if (!plain_.linearize()) return stop(Status::ZetaFailed);
       }
@@ -384,10 +384,13 @@ class Globalized {
   /// `check`: the plain steps' verdict, not yet checked against ζ's difference quotient (the outer
   /// steps' is: move_x), is checked at z first (one call of ζ, one product).
   void give_up_jacobian(bool check = false) {
-    jacobian_poor_ = true;
     if constexpr (!Plain::set_fixes_step)
-      if (check) miss_ = plain_.linearize() ? plain_.jacobian_miss() : std::numeric_limits<double>::quiet_NaN();
-    const bool checked = jacobian_.outer() || check;
+      if (check) {
+        if (!plain_.linearize()) return stop(Status::ZetaFailed);
+        miss_ = plain_.jacobian_miss();
+      }
+    jacobian_poor_ = true;
+    const bool checked = (jacobian_.outer() || check) && !std::isnan(miss_);  // (NaN: ζ or J failed at the check)
     std::string why = jacobian_.message(checked && miss_ <= kJacobianMiss);
     if (checked)
       why += ", and zeta_jacobian(z) v misses zeta's difference quotient along the last step v by " + to_text(100 * miss_) + "%";

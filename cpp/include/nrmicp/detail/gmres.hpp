@@ -36,7 +36,7 @@ class Gmres {
   int solve(Apply&& apply, Precondition&& precondition, const Vector& b, Vector& x, double target) {
     int total = 0;
     r_ = b;
-    if (x.squaredNorm() > 0) { apply(x, w_); r_ -= w_; }  // the start's residual (zero start: b)
+    if (comm_->sum(x.squaredNorm()) > 0) { apply(x, w_); r_ -= w_; }  // the start's residual (zero start: b)
     double beta = norm(r_);
     while (beta > target && std::isfinite(beta) && total < max_iterations_) {
       const int k = cycle(apply, precondition, beta, target, total);

@@ -382,7 +382,7 @@ class NewtonLevel {
       return true;
     }
     memo_.z = v;  // (kept before the call: zv may be v itself)
-    if (!zeta.eval(memo_.z, zv)) {
+    if (!comm_.all(zeta.eval(memo_.z, zv))) {  // (failed on any process: on every one)
       memo_.z.resize(0);
       return false;
     }

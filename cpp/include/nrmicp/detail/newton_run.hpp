@@ -590,7 +590,7 @@ class NewtonRun {
     // no M-matrix); the test x ≥ 0 at z picks that step's set instead.
     lin.predict = [this, &q](const Vector& z, const Vector& zeta_z, std::vector<char>& inactive) {
       if (outer_mode_ && !is_outer(z) && !outer_step(q, zeta_z, z)) outer_mode_ = false;
-      const bool use = outer_mode_ && outer_set_ != step_set_;
+      const bool use = outer_mode_ && !comm().all(outer_set_ == step_set_);
       step_set_ = use ? outer_set_ : std::vector<char>();
       if (use) inactive = outer_set_;
       return use;
@@ -666,7 +666,8 @@ class NewtonRun {
     }};
   }
   /// z is the last outer step's solution (its active set is outer_set_).
-  bool is_outer(const Vector& z) const { return outer_z_.size() == z.size() && outer_z_ == z; }
+  /// (on every process: a step taken on some processes only would leave the others waiting)
+  bool is_outer(const Vector& z) const { return comm().all(outer_z_.size() == z.size() && outer_z_ == z); }
   Vector outer_z_;               // the last outer step's solution (semismooth loop)
   std::vector<char> outer_set_;  // its inactive set (the next one starts from it)
   bool outer_ok_ = true;         // the last outer step solved its obstacle problem (the fallback may take one)

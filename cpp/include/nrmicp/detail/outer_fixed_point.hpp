@@ -172,6 +172,7 @@ class OuterFixedPoint {
     z_ = sw.z;
     r_ = run_.icp_residual(z_, psi_);
     judged_ = false;  // the sweeps' iterate is no outer step: its ‖G − z‖ starts the test afresh
+    best_f_ = kNone, since_best_f_ = 0;  // ... and the stall rule's count
     aa_.reset();  // the differences before the sweeps describe another stretch of the map
     if (r_ < best_r_) { best_z_ = z_; best_r_ = r_; }
   }

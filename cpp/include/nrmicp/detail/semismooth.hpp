@@ -83,39 +83,49 @@ struct SemismoothLinearization {
     return r;
   }
   /// ∂ζ(z) and the step's system for it; false when the Jacobian failed. The Jacobian counts as ζ's
-  /// time; a sparse system's analysis as this step's factorization.
+  /// time; a sparse system's analysis as this step's factorization. Every process takes the same branch.
   bool linearize(const Vector& z, const Vector& zeta_z) {
-    if (z_last.size() == z.size() && z_last != z) move = z - z_last;
+    const Comm& comm = level.comm();  // (a process whose rows stood still still takes the move)
+    if (comm.all(z_last.size() == z.size()) && !comm.all(z_last == z)) move = z - z_last;
     z_last = z;
     {
       ScopedTimer t(level.timings().zeta);
-      if (!zeta.derivative(z, J)) return false;
+      if (!comm.all(zeta.derivative(z, J))) return false;
     }
     K.is_matrix_free = J.matrix_free();
-    if (!level.comm().all(K.is_matrix_free) && !level.comm().all(!K.is_matrix_free))
+    if (!comm.all(K.is_matrix_free) && !comm.all(!K.is_matrix_free))
       throw std::invalid_argument("zeta_jacobian returned a linear operator on some processes and a matrix on others");
-    if (K.is_matrix_free) {
-      level.apply(z, minus_w);
-      minus_w = -(minus_w + q);
-      c = zeta_z - z;  // −g
-      K.matrix_free.linearize(std::move(J.product), level.comm().stable_norm(minus_w.cwiseMax(c)));  // Res = ‖min(w, g)‖ = ‖max(−w, −g)‖
-      K.sparse.reset();
-      return true;
+    if (!K.is_matrix_free && !assembled(z, zeta_z)) {  // an engine without J's system: its product, matrix-free
+      J.product = [M = J.matrix](const double* v, double* out, Eigen::Index n) {
+        Eigen::Map<Vector>(out, n).noalias() = M * Eigen::Map<const Vector>(v, n);
+        return true;
+      };
+      K.is_matrix_free = true;
     }
+    if (!K.is_matrix_free) return true;
+    level.apply(z, minus_w);
+    minus_w = -(minus_w + q);
+    c = zeta_z - z;  // −g
+    K.matrix_free.linearize(std::move(J.product), comm.stable_norm(minus_w.cwiseMax(c)));  // Res = ‖min(w, g)‖ = ‖max(−w, −g)‖
+    K.sparse.reset();
+    return true;
+  }
+  /// A sparse ∂ζ(z)'s system: the level's LCP system for a diagonal one (decoupled), else, on an engine
+  /// that has it (the serial one), the union pattern's; false on an engine without it (this process's
+  /// rows of J then act by their product: the rank's block, which is all of a row-local ζ's ∂ζ).
+  bool assembled(const Vector& z, const Vector& zeta_z) {
     c = zeta_z - J.matrix * z;
     K.lcp = nullptr;
+    K.sparse.reset();
     if (level.comm().all(decoupled())) {
-      K.sparse.reset();
       K.lcp = &level.lcp_system();
       return true;
     }
     if constexpr (Engine<MatrixType>::serial) {
       K.sparse = level.affine_system(J.matrix, &Timings::factorization, true);
       return true;
-    } else {
-      throw std::invalid_argument("on this engine zeta_jacobian must return a linear operator (its products) or a "
-                                  "diagonal matrix: a sparse ζ′ that couples rows has no distributed system here");
     }
+    return false;
   }
   /// A diagonal ∂ζ(z) = diag(d) with d ≠ 1 (a local ζ, ζ(z)_i = f_i(z_i)): an active row of the step
   /// fixes z⁺_i = c_i / (1 − d_i) alone, so the step is the LCP's on that bound (c becomes it), on the
@@ -192,7 +202,7 @@ struct SemismoothLinearization {
   /// After a Newton step: the outer step from its result (`project`), kept when it lowers Res (NewtonStep::smooth).
   bool smoothable() const { return static_cast<bool>(project); }
   void smooth(Vector& z, int) const {
-    if (evaluated.size() == z.size() && evaluated == z) return project(z, evaluated_zeta);
+    if (level.comm().all(evaluated.size() == z.size() && evaluated == z)) return project(z, evaluated_zeta);
     Vector zeta_z(z.size());
     if (level.eval_zeta(zeta, z, zeta_z)) project(z, zeta_z);
   }
