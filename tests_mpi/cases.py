@@ -622,6 +622,43 @@ def _bcast(arr, n):
     return full.getArray().copy()
 
 
+def case_jacobian_still_rows():
+    """ζ′ on a block-diagonal ICP whose second block (the last rank's rows on 2 ranks) is all in contact
+    with a constant obstacle, the first a 1D membrane under ζ = ψ + 2 sin z (a review's case): the last
+    rank's rows stand still while the outer step after a Newton step is rejected on the first rank's, so
+    a test on one rank's rows took the collective obstacle solve on one rank only (a hang). Against
+    nrmicp.solve with the same ζ′."""
+    m = 200
+    h = 1.0 / (m + 1)
+    L1 = sp.diags([-np.ones(m - 1), 2 * np.ones(m), -np.ones(m - 1)], [-1, 0, 1]) / h**2
+    A = sp.csr_matrix(sp.block_diag([L1, sp.identity(m) * 4.0]))
+    n = 2 * m
+    x = np.arange(1, m + 1) * h
+    q = np.concatenate([np.full(m, 30.0), np.full(m, 5.0)])
+    psi = np.concatenate([-0.3 - 0.1 * x, np.full(m, 0.25)])
+    cc = np.where(np.arange(n) >= m, 0.0, 2.0)
+    lo, hi = split(n)
+    out = {}
+    for form in ("diagonal", "operator"):
+        def jacobian(z, a=lo, b=hi, form=form):
+            d = cc[a:b] * np.cos(z)
+            if form == "diagonal":
+                return sp.diags(d)
+            from scipy.sparse.linalg import LinearOperator
+            return LinearOperator((b - a, b - a), matvec=lambda v: d * np.ravel(v), dtype=float)
+        r = dist.solve(A[lo:hi], q[lo:hi], lambda z: psi[lo:hi] + cc[lo:hi] * np.sin(z), method="newton",
+                       hierarchy=None, tol=1e-8, zeta_jacobian=jacobian)
+        z = dist.gather(r.z)
+        if RANK == 0:
+            zeta = lambda v: psi + cc * np.sin(v)  # noqa: E731
+            s = nrmicp.solve(A, q, zeta, method="newton", hierarchy=None, tol=1e-8,
+                             zeta_jacobian=lambda v: sp.diags(cc * np.cos(v)))
+            out[form] = {"status": r.status.name, "serial_status": s.status.name,
+                         "numpy": float(np.max(np.abs(np.minimum(A @ z + q, z - zeta(z))))),
+                         "serial_numpy": float(np.max(np.abs(np.minimum(A @ s.z + q, s.z - zeta(s.z)))))}
+    return out
+
+
 def dist_affine(B, c, lo, hi):
     """nrmicp.Affine(B, c) with B as a PETSc Mat in the split's row layout."""
     return nrmicp.Affine(mat(sp.csr_matrix(B), lo, hi), np.full(hi - lo, c))
@@ -928,7 +965,7 @@ if __name__ == "__main__":
     result = {"agreement": lambda: case_agreement(), "partition": case_partition,
               "bad": lambda: case_bad(args[0], args[1]), "boomeramg": case_boomeramg, "dense": case_dense,
               "floor": case_floor, "overshoot": case_overshoot, "sweeps": case_sweeps,
-              "warm": case_warm, "one_sided_contact": case_one_sided_contact, "implicit_upper": case_implicit_upper, "jacobian": case_jacobian, "solver": case_solver, "units": case_units, "engine": lambda: case_engine(*args), "options": case_options,
+              "warm": case_warm, "one_sided_contact": case_one_sided_contact, "implicit_upper": case_implicit_upper, "jacobian": case_jacobian, "jacobian_still_rows": case_jacobian_still_rows, "solver": case_solver, "units": case_units, "engine": lambda: case_engine(*args), "options": case_options,
               "fuzz": lambda: case_fuzz(int(args[0])), "family": case_family, "hooks": case_hooks, "no_rows": case_no_rows}[name]()
     if RANK == 0:
         print("RESULT " + json.dumps(result), flush=True)
