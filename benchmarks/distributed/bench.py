@@ -22,6 +22,9 @@ import subprocess
 import sys
 import tempfile
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from rows import petsc_rows  # noqa: E402
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 
 
@@ -62,10 +65,7 @@ def worker(dim, m, log):
     A, q_all, psi = _scene(dim, m)
     n = A.shape[0]
     rank, size = comm.getRank(), comm.getSize()
-    lo, hi = rank * n // size, (rank + 1) * n // size
-    B = A[lo:hi]
-    M = PETSc.Mat().createAIJ(size=((hi - lo, PETSc.DECIDE), (hi - lo, PETSc.DECIDE)),
-                              csr=(B.indptr.astype(PETSc.IntType), B.indices.astype(PETSc.IntType), B.data), comm=comm)
+    M, lo, hi = petsc_rows(A, comm)
     q = M.createVecLeft()
     q.setArray(q_all[lo:hi])
     import time

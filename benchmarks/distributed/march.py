@@ -13,6 +13,9 @@ import subprocess
 import sys
 import time
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from rows import petsc_rows  # noqa: E402
+
 
 def worker(m, steps):
     """Both marches; rank 0 prints RESULT json."""
@@ -24,10 +27,7 @@ def worker(m, steps):
     pb = obstacle_3d(m, exact=False)
     A, n = sp.csr_matrix(pb.A), pb.n
     rank, size = comm.getRank(), comm.getSize()
-    lo, hi = rank * n // size, (rank + 1) * n // size
-    B = A[lo:hi]
-    M = PETSc.Mat().createAIJ(size=((hi - lo, PETSc.DECIDE), (hi - lo, PETSc.DECIDE)),
-                              csr=(B.indptr.astype(PETSc.IntType), B.indices.astype(PETSc.IntType), B.data), comm=comm)
+    M, lo, hi = petsc_rows(A, comm)
     psi = pb.zeta[lo:hi]
 
     def march(solve):

@@ -773,6 +773,7 @@ namespace {
 /// active points (0 if not scripted), and it records the damping factors it was given.
 struct ScriptedStep {
   static constexpr bool set_fixes_step = true;
+  static constexpr bool smoothing_solves = false;  // (its smoothing: sweeps)
   std::vector<double> trials;
   double level;
   double r;
