@@ -318,6 +318,7 @@ class Solver:
         self.comm = comm = comm or (A.getComm() if isinstance(A, PETSc.Mat) else PETSc.COMM_WORLD)
         _collective(comm, _scoped, options, ("setup", "solve"), "distributed.Solver", "its solve()")
         self._options = {**_options.defaults("setup", "solve"), **options}
+        self._user_A = A
         self.A, self.method = _prepare_matrix(A, comm, {**_options.defaults(), **self._options})
         self._cores = {}   # units (the default rule's σA) -> [the core, its set-up seconds not yet reported]
         self._operators = {False: (self.A, 1.0)}   # units -> (the Mat the core iterates, σ)
@@ -334,7 +335,10 @@ class Solver:
         """Frees the cores (collective: on every rank); a closed Solver's solve raises."""
         for core, _ in self._cores.values():
             core.close()
-        self._cores, self._closed = {}, True
+        for units, (mat, _) in self._operators.items():   # the σA copy, and an A made from scipy row blocks
+            if units or mat is not self._user_A:
+                mat.destroy()
+        self._cores, self._operators, self._closed = {}, {}, True
 
     def solve(self, q, zeta=None, *, upper=None, **options) -> Result:
         """ICP(q, A, ζ) with this Solver's A: :func:`solve`'s arguments but A, comm and the set-up options."""
