@@ -828,6 +828,7 @@ def case_options():
     checked_newton = {"accelerate": "anderson", "phi": 0.5, "theta": 0.5, "z_update": "explicit", "zeta_jacobian": jac}
     refused_stationary = {"scale": True, "components": 2, "z_update": "solve", "polish": True}
     A = sp.diags([-1.0, 4.0, -1.0], [-1, 0, 1], shape=(8, 8), format="csr")
+    L = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(8, 8), format="csr")
     q = np.linspace(-1.0, 1.0, 8)
 
     def outcome(method="newton", zeta=None, **kw):
@@ -864,7 +865,10 @@ def case_options():
             "unknown": outcome(tolerance=1e-8),
             "supported": delivered("newton", polish=True),
             "supported_stationary": {name: delivered(**kw) for name, kw in stationary.items()},
-            "auto": [dist.solve(A, q).method, nrmicp.solve(A, q).method]}
+            "auto": [dist.solve(A, q).method, nrmicp.solve(A, q).method],
+            # a Laplacian's rows are not dominant: newton, unless an option of the stationary members is given
+            "auto_laplacian": {str(kw): [dist.solve(L, q, **kw).method, nrmicp.solve(L, q, **kw).method]
+                               for kw in ({}, {"accelerate": "anderson"}, {"z_update": "explicit"})}}
 
 
 #: The stationary members of the paper's family, with parameters that differ from the defaults; nrm with

@@ -64,3 +64,6 @@ def test_the_serial_loops_options_reach_the_stationary_members(out, name):
 def test_the_defaults_are_nrmicp_solves(out):
     # method 'auto': rows dominant by half their diagonal, so nrmgs, as nrmicp.solve picks
     assert out["auto"] == ["nrmgs", "nrmgs"]
+    # on a Laplacian newton, but nrmgs when an option only the stationary members read is given (per solve)
+    assert out["auto_laplacian"] == {"{}": ["newton", "newton"], "{'accelerate': 'anderson'}": ["nrmgs", "nrmgs"],
+                                     "{'z_update': 'explicit'}": ["nrmgs", "nrmgs"]}, out["auto_laplacian"]

@@ -191,9 +191,19 @@ class _Zeta:
 def _prepare_matrix(A, comm, o):
     """A's checks and the member, with every rank's failure raised on all ranks: (Am, method). The
     set-up options `o` are checked here too (the core's Options, by the serial code), with tol and
-    rtol at their defaults."""
+    rtol at their defaults. A Mat made here from scipy row blocks is destroyed when a check fails."""
     A_in = _collective(comm, _check_mat, A)
     Am = _as_mat(A_in, comm) if sp.issparse(A_in) else A_in
+    try:
+        return Am, _member(Am, comm, o)
+    except Exception:
+        if Am is not A_in:
+            Am.destroy()   # on every rank together (each raises here)
+        raise
+
+
+def _member(Am, comm, o):
+    """The member for Am and the set-up options `o` ('auto': nrmicp.solve's rule), checked on every rank."""
     nloc = Am.getLocalSize()[0]
     method = o["method"]
     if isinstance(method, str) and method.lower() == "auto":
@@ -226,7 +236,7 @@ def _prepare_matrix(A, comm, o):
         d.destroy()   # on every rank together (a raise keeps this frame in its traceback)
     if m == "newton":
         _collective(comm, _owns_rows, Am)
-    return Am, m
+    return m
 
 
 def _prepare_call(Am, m, q, zeta, x0, comm, o, it):
@@ -289,7 +299,7 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     """
     comm = comm or (A.getComm() if isinstance(A, PETSc.Mat) else PETSc.COMM_WORLD)
     _collective(comm, lambda: _options.validate(options, where="distributed.solve", unsupported=_UNSUPPORTED))
-    setup = {k: v for k, v in options.items() if _options.TABLE[k].scope == "setup"}
+    setup = {k: v for k, v in options.items() if _options.TABLE[k].scope != "call"}   # (method='auto' reads both)
     if options.get("zeta_jacobian") is not None and str(setup.get("method", "auto")).lower() == "auto":
         setup["method"] = "newton"   # (nrmicp.solve's rule: a Jacobian is for Newton)
     t0 = time.perf_counter()
@@ -368,7 +378,7 @@ class Solver:
         if opts.rtol > 0:   # the absolute target, on the problem the core iterates (Options::target of Res(0))
             opts.tol = opts.target(_petsc.measure(Am.handle, qa, *problem, np.zeros_like(qa))["residual"])
             opts.rtol = 0.0
-        core, setup = self._core(_petsc, units, Am, opts, o)
+        core, setup, earlier = self._core(_petsc, units, Am, opts, o)
         if m == "newton":
             za, res, status, message, fields = _newton_solve(core, setup, qa, problem, xa, opts, o, jacobian)
         else:
@@ -381,7 +391,7 @@ class Solver:
                 Am.handle, qa, *problem, za, rounding=True)["rounding_level"])
             got = _petsc.measure(A_user.handle, q_user, *problem, za)
             res, wa = got["residual"], got["w"]
-        fields["timings"]["total"] = time.perf_counter() - t_start + setup
+        fields["timings"]["total"] = time.perf_counter() - t_start + earlier   # (the core's build is in this call)
         r = Result(z=_vec(A_user, za), w=_vec(A_user, wa), success=status == Status.CONVERGED, status=Status(status),
                    message=message, residual=float(res), criterion=criterion, method=m, ranks=comm.getSize(), **fields)
         if opts.verbose > 0 and comm.getRank() == 0:
@@ -398,8 +408,9 @@ class Solver:
         return self._operators[units]
 
     def _core(self, _petsc, units, Am, opts, o):
-        """(the core for this scaling, the set-up seconds this solve reports): built on its first solve,
-        which also reports the Solver's own set-up."""
+        """(the core for this scaling, the set-up seconds this solve reports, the Solver's own set-up
+        seconds among them): the core is built on its first solve, which also reports the Solver's set-up
+        (the first solve of all; the build's seconds are the calling solve's own)."""
         if units not in self._cores:
             t0 = time.perf_counter()
             if self.method == "newton":
@@ -412,9 +423,9 @@ class Solver:
                 core = _collective(self.comm, lambda: _petsc.Solver(Am.handle, opts))
             self._cores[units] = [core, time.perf_counter() - t0]
         entry = self._cores[units]
-        setup, entry[1] = entry[1] + self._setup_seconds, 0.0
-        self._setup_seconds = 0.0
-        return entry[0], setup
+        earlier, self._setup_seconds = self._setup_seconds, 0.0
+        setup, entry[1] = entry[1] + earlier, 0.0
+        return entry[0], setup, earlier
 
 
 def _scoped(options, scopes, where, elsewhere):
