@@ -589,13 +589,11 @@ def case_solver():
                 tol = {} if k < 2 else {"tol": 1e-9}   # the default rule twice, then the paper's tol (a second core)
                 x0 = None if z_last is None else z_last[lo:hi]
                 r = solver.solve(q[lo:hi], pb.zeta[lo:hi], x0=x0, **tol)
-                z = dist.gather(r.z)
+                z = z_last = _gather(r.z.getArray(readonly=True), n)   # (every rank's rows, on every rank)
                 if RANK == 0:
                     s = nrmicp.solve(A, q, pb.zeta, method="newton", tol=1e-12)
                     rows.append({"status": r.status.name, "err": float(np.max(np.abs(z - s.z))),
                                  "setup": float(r.timings["setup"]), "res": float(oracle_residual(A, q, z, pb.zeta))})
-                z_last = z if RANK == 0 else None
-                z_last = _bcast(z_last, n)
         out[method] = rows
 
     def refused(make):
@@ -610,16 +608,6 @@ def case_solver():
     solver.close()
     out["closed"] = refused(lambda: solver.solve(pb.q[lo:hi], pb.zeta[lo:hi]))
     return out
-
-
-def _bcast(arr, n):
-    """Rank 0's array of length n on every rank (through a PETSc scatter: no mpi4py needed)."""
-    v = PETSc.Vec().createMPI((n if RANK == 0 else 0, n), comm=COMM)
-    if RANK == 0:
-        v.setArray(arr)
-    sc, full = PETSc.Scatter.toAll(v)
-    sc.scatter(v, full, PETSc.InsertMode.INSERT, PETSc.ScatterMode.FORWARD)
-    return full.getArray().copy()
 
 
 def case_jacobian_still_rows():

@@ -160,6 +160,12 @@ class _Zeta:
         else:
             self.kind, self.c = 1, _local(zeta, A, "zeta", scalar_ok=True, infinite=-1)  # -inf: free below
 
+    @property
+    def user_kind(self):
+        """The kind as nrmicp.solve's checks name it (_core.ZetaKind; an affine ζ is 'affine' here, though
+        core_args hands it to the engine as a callable)."""
+        return (_core.ZetaKind.none, _core.ZetaKind.constant, _core.ZetaKind.affine, _core.ZetaKind.functor)[self.kind]
+
     def _checked(self, z):
         r = self.fn(z)
         if not np.all(np.isfinite(r)):
@@ -328,8 +334,8 @@ class Solver:
         self.comm = comm = comm or (A.getComm() if isinstance(A, PETSc.Mat) else PETSc.COMM_WORLD)
         _collective(comm, _scoped, options, ("setup", "solve"), "distributed.Solver", "its solve()")
         self._options = {**_options.defaults("setup", "solve"), **options}
-        self._user_A = A
         self.A, self.method = _prepare_matrix(A, comm, {**_options.defaults(), **self._options})
+        self._owns_A = self.A is not A   # (made from scipy row blocks)
         self._cores = {}   # units (the default rule's σA) -> [the core, its set-up seconds not yet reported]
         self._operators = {False: (self.A, 1.0)}   # units -> (the Mat the core iterates, σ)
         self._setup_seconds = time.perf_counter() - t0   # reported by the first solve
@@ -346,7 +352,7 @@ class Solver:
         for core, _ in self._cores.values():
             core.close()
         for units, (mat, _) in self._operators.items():   # the σA copy, and an A made from scipy row blocks
-            if units or mat is not self._user_A:
+            if units or self._owns_A:
                 mat.destroy()
         self._cores, self._operators, self._closed = {}, {}, True
 
@@ -465,7 +471,7 @@ def _upper(upper, Am, zf, comm, method):
         return np.full(Am.getLocalSize()[0], np.inf) if free and method != "newton" else None
 
     def local():
-        kind = (_core.ZetaKind.none, _core.ZetaKind.constant, _core.ZetaKind.affine, _core.ZetaKind.functor)[zf.kind]
+        kind = zf.user_kind
         if callable(upper) or isinstance(upper, Affine):   # an implicit upper: the core's outer fixed point
             _bounds.check(kind, None, _bounds.ImplicitUpper(_core.ZetaKind.functor), method, None)
             return _implicit_upper(upper, Am, comm)
@@ -539,8 +545,7 @@ def _jacobian(zeta_jacobian, zf, method, Am, comm):
     """ζ's Jacobian for the core (None: none given): zeta_jacobian(z) of this rank's rows returns a
     linear operator on them (its matvec may communicate: every rank calls it together) or a diagonal
     matrix; nrmicp.solve's checks, each call of the user's code collective."""
-    kind = (_core.ZetaKind.none, _core.ZetaKind.constant, _core.ZetaKind.affine, _core.ZetaKind.functor)[zf.kind]
-    if not _collective(comm, check_jacobian, zeta_jacobian, method, kind):
+    if not _collective(comm, check_jacobian, zeta_jacobian, method, zf.user_kind):
         return None
     return core_jacobian(zeta_jacobian, Am.getLocalSize()[0], PETSc.IntType, collective=functools.partial(_collective, comm))
 

@@ -34,6 +34,11 @@ class Comm {
   double inf_norm(const Eigen::MatrixBase<Derived>& v) const {
     return max(v.size() ? v.template lpNorm<Eigen::Infinity>() : 0.0);
   }
+  /// ‖v‖₂ over every process (as Eigen's norm(): the root of the summed squares).
+  template <typename Derived>
+  double norm(const Eigen::MatrixBase<Derived>& v) const {
+    return std::sqrt(sum(v.squaredNorm()));
+  }
   /// ‖m‖₂ over every process without overflow or underflow: scaled by the largest |mᵢ| anywhere.
   /// m may be an expression (read twice, never formed).
   template <typename Derived>

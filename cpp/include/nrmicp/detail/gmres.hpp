@@ -37,7 +37,7 @@ class Gmres {
     int total = 0;
     r_ = b;
     if (comm_->sum(x.squaredNorm()) > 0) { apply(x, w_); r_ -= w_; }  // the start's residual (zero start: b)
-    double beta = norm(r_);
+    double beta = comm_->norm(r_);
     while (beta > target && std::isfinite(beta) && total < max_iterations_) {
       const int k = cycle(apply, precondition, beta, target, total);
       update(x, k);
@@ -45,7 +45,7 @@ class Gmres {
       r_ = b;  // the true residual for the restart (the estimate drifts from it)
       apply(x, w_);
       r_ -= w_;
-      beta = norm(r_);
+      beta = comm_->norm(r_);
     }
     if (total == 0) residual_ = beta;
     return total;
@@ -73,7 +73,7 @@ class Gmres {
         h_(i, k) = comm_->sum(w_.dot(v_[i]));
         w_ -= h_(i, k) * v_[i];
       }
-      const double w_norm = norm(w_);
+      const double w_norm = comm_->norm(w_);
       h_(k + 1, k) = w_norm;
       for (int i = 0; i < k; ++i) rotate(i, h_(i, k), h_(i + 1, k));
       givens(k);
@@ -108,8 +108,6 @@ class Gmres {
     if (static_cast<int>(v_.size()) <= k) v_.emplace_back(r_.size());
     return v_[k];
   }
-
-  double norm(const Vector& v) const { return std::sqrt(comm_->sum(v.squaredNorm())); }
 
   int restart_, max_iterations_;
   const Comm* comm_;

@@ -121,7 +121,7 @@ class MatrixFreeSystem {
       if (inactive_state(inactive_[i])) rhs_[i] -= av_[i];
     out.setZero(v.size());
     auto& K0 = level_.lcp_system();
-    record_.preconditioner += K0.solve(rhs_, out, K0.iterative() ? kPreconditionerTolerance * std::sqrt(level_.comm().sum(rhs_.squaredNorm())) : 0.0);
+    record_.preconditioner += K0.solve(rhs_, out, K0.iterative() ? kPreconditionerTolerance * level_.comm().norm(rhs_) : 0.0);
   }
 
   NewtonLevel<MatrixType>& level_;

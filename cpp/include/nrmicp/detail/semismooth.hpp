@@ -151,10 +151,9 @@ struct SemismoothLinearization {
   double jacobian_miss(const Vector& z, const Vector& zeta_z) {
     const Eigen::Index n = z.size();
     const Comm& comm = level.comm();
-    auto norm = [&comm](const Vector& v) { return std::sqrt(comm.sum(v.squaredNorm())); };
     const Vector d = comm.all(move.size() == n) && comm.sum(move.squaredNorm()) > 0 ? move : Vector::Ones(n);
-    const double z_norm = norm(z);
-    const double eps = kDifferenceStep * (z_norm > 0 ? z_norm : 1.0) / norm(d);
+    const double z_norm = comm.norm(z);
+    const double eps = kDifferenceStep * (z_norm > 0 ? z_norm : 1.0) / comm.norm(d);
     Vector moved(n), jd;
     if (!level.eval_zeta(zeta, z + eps * d, moved)) return std::numeric_limits<double>::quiet_NaN();
     if (K.is_matrix_free) {
@@ -163,8 +162,8 @@ struct SemismoothLinearization {
       jd = J.matrix * d;
     }
     const Vector quotient = (moved - zeta_z) / eps;
-    const double scale = std::max(norm(quotient), norm(jd));
-    return scale > 0 ? norm(quotient - jd) / scale : 0.0;
+    const double scale = std::max(comm.norm(quotient), comm.norm(jd));
+    return scale > 0 ? comm.norm(quotient - jd) / scale : 0.0;
   }
   static constexpr double kDifferenceStep = 1e-4;
 
