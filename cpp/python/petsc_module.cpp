@@ -64,9 +64,13 @@ class PyPetscNewton {
     core_.emplace(A_, o, levels_.prolongations, levels_.coarse_operators);
     levels_ = {};  // (the core holds what it uses)
   }
-  /// Destroys the core now (collective: a KSP's MUMPS factors are freed by every process together), not
-  /// when the garbage collector takes this object, which it does at a different time on each process.
-  void close() { core_.reset(); }
+  /// Destroys the core and lets go of A now (collective: a KSP's MUMPS factors, a Mat's last reference are
+  /// freed by every process together), not when the garbage collector takes this object, which it does at
+  /// a different time on each process.
+  void close() {
+    core_.reset();
+    A_ = Matrix();
+  }
 
   py::dict solve(py::array q, nrmicp::ZetaKind kind, py::object zeta_c, py::object zeta_fn, py::object upper,
                  py::object x0, py::object callback, const nrmicp::SolveOptions& it, py::object zeta_jacobian) {
@@ -112,7 +116,10 @@ class PyPetscSolver {
  public:
   PyPetscSolver(std::uintptr_t A, const nrmicp::Options& o) : A_(from_handle(A, "A")) { core_.emplace(A_, o); }
   /// As PyPetscNewton::close.
-  void close() { core_.reset(); }
+  void close() {
+    core_.reset();
+    A_ = Matrix();
+  }
 
   py::dict solve(py::array q, nrmicp::ZetaKind kind, py::object zeta_c, py::object zeta_fn, py::object upper,
                  py::object x0, py::object callback, const nrmicp::SolveOptions& it, py::object progress) {

@@ -155,16 +155,15 @@ def polish(solver, problem, z, res, original_residual, dc):
     the original variables), else (None, core result); the core result's status is STAGNATED
     with the floor in its message when the floor was reached.
 
-    `problem` is the core's (q, kind, c, B-indptr, B-indices, B-data, fn) in the core's variables;
-    dc the column scaling (None when unscaled)."""
+    `problem` is the core's solve arguments before x0 in the core's variables (serial: q, kind, c,
+    B-indptr, B-indices, B-data, fn); dc the column scaling (None when unscaled)."""
     t0 = time.perf_counter()
     core = solver._core if solver.method == "newton" else polisher(solver)
     if core is None or not np.isfinite(res):
         return None, None
     built = time.perf_counter() - t0   # the polisher's set-up on first use (else a few µs)
     z0 = z / dc if dc is not None else z
-    qs, kind, cs, bp, bi, bd, fns = problem
-    d = core.polish(qs, kind, cs, bp, bi, bd, fns, np.ascontiguousarray(z0), POLISH_TOL)
+    d = core.polish(*problem, np.ascontiguousarray(z0), POLISH_TOL)
     d["timings"]["setup"] += built
     zp = d["z"] * dc if dc is not None else d["z"]
     wp, rp = original_residual(zp)

@@ -22,6 +22,7 @@ from __future__ import annotations
 import functools
 import math
 import time
+import types
 
 import numpy as np
 import scipy.sparse as sp
@@ -34,10 +35,10 @@ except ImportError as exc:  # the core package needs no MPI; this module does
 
 from . import _bounds, _core, _options
 from ._mpi import DistributedError, collective as _collective, flag_max as _flag_max, flag_sum as _flag_sum
-from ._newton import (POLISH_TOL, auto_builds_amg, check_jacobian, check_polish, core_jacobian, polish_outcome,
+from ._newton import (auto_builds_amg, check_jacobian, check_polish, core_jacobian, polish, polish_outcome,
                       result_fields)
 from ._api import (METHODS as _ALL_METHODS, _SPLITTING, Affine, Result, Status, _Rounds, _checked, _choice, _criterion,
-                   _iteration_options, _log_final, _units_parameters, at_rounding_floor,
+                   _criterion_outcome, _iteration_options, _log_final, _units_parameters,
                    choose_method, dominance_margin)
 from ._scaling import sigma_from_logs
 from ._inputs import as_constant, as_vector
@@ -379,24 +380,15 @@ class Solver:
         if m != "newton":
             _collective(comm, _z_update_applies, opts, m, zf.kind)
         kind, c, fn = zf.core_args(Am)
-        problem = (kind, c, fn, ua)
+        measure = _Measure(_petsc, Am, qa, (kind, c, fn, ua), (A_user, q_user, sigma) if units else None)
         jacobian = _jacobian(o["zeta_jacobian"], zf, m, Am, comm)
         if opts.rtol > 0:   # the absolute target, on the problem the core iterates (Options::target of Res(0))
-            opts.tol = opts.target(_petsc.measure(Am.handle, qa, *problem, np.zeros_like(qa))["residual"])
-            opts.rtol = 0.0
+            opts.tol, opts.rtol = opts.target(measure(np.zeros_like(qa))[1]), 0.0
         core, setup, earlier = self._core(_petsc, units, Am, opts, o)
-        if m == "newton":
-            za, res, status, message, fields = _newton_solve(core, setup, qa, problem, xa, opts, o, jacobian)
-        else:
-            za, res, status, message, fields = _stationary_rounds(_petsc, core, setup, Am, qa, problem, xa, opts, o,
-                                                                  comm, units)
-        criterion = {"measure": "units" if units else "paper", "target": float(opts.tol), "value": float(res)}
-        wa = fields.pop("w")
-        if units:   # the paper's Res, and w, in the user's units
-            status, message = at_rounding_floor(status, message, res, opts.tol, lambda: _petsc.measure(
-                Am.handle, qa, *problem, za, rounding=True)["rounding_level"])
-            got = _petsc.measure(A_user.handle, q_user, *problem, za)
-            res, wa = got["residual"], got["w"]
+        za, wa, res, status, message, fields = _rounds(core, setup, measure, xa, opts, o, jacobian, comm.getRank() == 0)
+        status, message, res, criterion = _criterion_outcome(measure, za, res, opts.tol, status, message)
+        if units:   # w in the user's units (σ a power of two: exactly A z + q)
+            wa = wa / sigma
         fields["timings"]["total"] = time.perf_counter() - t_start + earlier   # (the core's build is in this call)
         r = Result(z=_vec(A_user, za), w=_vec(A_user, wa), success=status == Status.CONVERGED, status=Status(status),
                    message=message, residual=float(res), criterion=criterion, method=m, ranks=comm.getSize(), **fields)
@@ -496,49 +488,72 @@ def _implicit_upper(upper, Am, comm):
     return (_core.ZetaKind.functor, None, None, None, None, fn)
 
 
-def _stationary_rounds(_petsc, core, setup, Am, qa, problem, xa, opts, o, comm, units):
-    """A stationary member: nrmicp::Solver on the PETSc engine (nrmicp._petsc, `core`), the serial loop
-    with its every rule, driven by the serial layer's rounds (_api._Rounds: Res of z re-measured where
-    the core iterated another problem — a constant ζ's shifted LCP, the default rule's σA — and
-    re-solved with a tighter tolerance when it misses tol). Returns (z, Res, status, message, the
-    result's other fields); `setup`: the set-up seconds this solve reports."""
-    kind, c, fn, ua = problem
-    solver = _AsSerialSolver(core, o["method"], len(qa), comm.getRank() == 0)
-    measure = _Measure(_petsc, Am, qa, problem, units) if units or kind == _core.ZetaKind.constant else None
+def _rounds(core, setup, measure, xa, opts, o, jacobian, rank0):
+    """Either member on the PETSc engine (`core`: nrmicp::Newton or nrmicp::Solver over it) driven by
+    the serial layer's rounds and polish (_api._Rounds, _newton.polish: Res of z re-measured where the
+    core iterated another problem — a constant ζ's shifted LCP, the default rule's σA — and re-solved
+    with a tighter tolerance when it misses tol). Returns (z, w, Res, status, message, the result's
+    other fields); `setup`: the set-up seconds this solve reports."""
+    m, qa, (kind, c, fn, ua) = o["method"], measure.qa, measure.problem
+    solver = types.SimpleNamespace(_core=_AsSerialCore(core, m, rank0), method=m, n=len(qa), _dr=None, _dc=None)
+    problem = (qa, kind, c, ua, fn)   # (the order of the serial core's arguments: _AsSerialCore's)
+    verify = measure.weights is not None or kind == _core.ZetaKind.constant
     it = {**{k: o[k] for k in _options.names("solve")}, "tol": opts.tol, "rtol": 0.0}
-    rounds = _Rounds(solver, (qa, kind, c, ua, fn), it, None, {}, measure, xa)
+    rounds = _Rounds(solver, problem, it, None, {} if jacobian is None else {"zeta_jacobian": jacobian},
+                     measure if verify else None, xa)
     rounds.cb = o["callback"]   # (distributed's callback(k, z, res), each rank's rows)
     rounds.run(xa, opts.tol)
-    status, message = rounds.status(rounds.res, opts.tol)
-    timings = dict(rounds.timings, setup=setup + rounds.timings["setup"])
+    polished = polish_core = None
+    if m == "newton" and o["polish"] and ua is None:   # (as nrmicp.solve: polish is the LCP's Newton step)
+        polished, polish_core = polish(solver, problem, rounds.z, rounds.res, measure, None)
+        if polish_core is not None:
+            rounds.add_timings(polish_core["timings"])
+    z, w, res = polished or (rounds.z, rounds.w, rounds.res)
+    status, message = rounds.status(res, opts.tol)
     fields = dict(nit=int(rounds.nit), iterations=int(rounds.done_iters), history=rounds.history(),
-                  inner=rounds.best_d["inner"], counters=rounds.counters, timings=timings, w=rounds.w)
-    return rounds.z, rounds.res, Status(status), message, fields
+                  inner=rounds.best_d["inner"], counters=rounds.counters,
+                  timings=dict(rounds.timings, setup=setup + rounds.timings["setup"]))
+    if m == "newton":
+        fields.update(result_fields(rounds.best_d, core.hierarchy))
+    if m == "newton" and o["polish"]:
+        fields["polished"] = polished is not None
+        status, message = polish_outcome(status, message, res, opts.tol, polished is not None, polish_core)
+    return z, w, res, Status(status), message, fields
 
 
-class _AsSerialSolver:
-    """A _petsc.Solver as _api._Rounds drives a serial Solver (its core's solve, method, n, no scaling);
-    the progress lines are rank 0's."""
+class _AsSerialCore:
+    """A _petsc core as _api._Rounds and _newton.polish call a serial one (its solve and polish); the
+    progress lines are rank 0's. Held by a plain namespace (_serial_view), not by itself: a reference
+    cycle would leave the core's Mats to each rank's garbage collector, at different times (a deadlock)."""
 
-    def __init__(self, core, method, nloc, rank0):
-        self._core, self._petsc_core, self.method, self.n, self.rank0 = self, core, method, nloc, rank0
-        self._dr = self._dc = None
+    def __init__(self, core, method, rank0):
+        self.core, self.method, self.rank0 = core, method, rank0
 
-    def solve(self, q, kind, c, upper, fn, x0, callback, options, progress=None):
-        return self._petsc_core.solve(q, kind, c, fn, upper, x0, callback, options, progress if self.rank0 else None)
+    def solve(self, q, kind, c, upper, fn, x0, callback, options, progress=None, zeta_jacobian=None):
+        if self.method == "newton":
+            return self.core.solve(q, kind, c, fn, upper, x0, callback, options, zeta_jacobian)
+        return self.core.solve(q, kind, c, fn, upper, x0, callback, options, progress if self.rank0 else None)
+
+    def polish(self, q, kind, c, upper, fn, z, tol):
+        return self.core.polish(q, kind, c, fn, upper, z, tol)
 
 
 class _Measure:
-    """(w, Res) of z on the problem the core iterates, every rank's rows (_api._OriginalResidual's
-    part that _Rounds reads; ``weights``: the default rule's, for its label Res_E)."""
+    """(w, Res) of z on the problem the core iterates, every rank's rows, as _api._OriginalResidual
+    for _Rounds and _criterion_outcome: `user` (A, q, σ) under the default rule, whose ``weighted=False``
+    is the paper's Res in the user's units."""
 
-    def __init__(self, _petsc, Am, qa, problem, units):
-        self._petsc, self.Am, self.qa, self.problem = _petsc, Am, qa, problem
-        self.weights = (None, None) if units else None
+    def __init__(self, _petsc, Am, qa, problem, user):
+        self._petsc, self.Am, self.qa, self.problem, self.user = _petsc, Am, qa, problem, user
+        self.weights = None if user is None else (None, None)
 
-    def __call__(self, z):
-        d = self._petsc.measure(self.Am.handle, self.qa, *self.problem, z)
+    def __call__(self, z, weighted=True):
+        A, q = (self.Am, self.qa) if weighted or self.user is None else self.user[:2]
+        d = self._petsc.measure(A.handle, q, *self.problem, z)
         return d["w"], d["residual"]
+
+    def rounding_level(self, z):
+        return self._petsc.measure(self.Am.handle, self.qa, *self.problem, z, rounding=True)["rounding_level"]
 
 
 def _jacobian(zeta_jacobian, zf, method, Am, comm):
@@ -548,31 +563,6 @@ def _jacobian(zeta_jacobian, zf, method, Am, comm):
     if not _collective(comm, check_jacobian, zeta_jacobian, method, zf.user_kind):
         return None
     return core_jacobian(zeta_jacobian, Am.getLocalSize()[0], PETSc.IntType, collective=functools.partial(_collective, comm))
-
-
-def _newton_solve(core, setup, qa, problem, xa, opts, o, jacobian):
-    """The Newton member: nrmicp::Newton on the PETSc engine (nrmicp._petsc, `core`), its every decision
-    the serial member's; polished when asked. Returns (z, Res, status, message, the result's other
-    fields); `setup`: the set-up seconds this solve reports."""
-    t_iter = time.perf_counter()
-    args = (qa, *problem)
-    d = core.solve(*args, xa, o["callback"], opts, jacobian)
-    z, res, status, message, w = d["z"], d["residual"], Status(d["status"]), d["message"], d["w"]
-    polished = None
-    polish = bool(o["polish"])
-    if polish:
-        p = core.polish(*args, z, POLISH_TOL)
-        polished = p["residual"] < res
-        if polished:
-            z, res, w = p["z"], p["residual"], p["w"]
-        status, message = polish_outcome(status, message, res, opts.tol, polished, p)
-        status = Status(status)
-    fields = dict(nit=int(d["nit"]), iterations=int(d["iterations"]), inner=core.inner, counters=dict(d["counters"]),
-                  history=d["history"], timings={"setup": setup, "iterations": time.perf_counter() - t_iter},
-                  w=w, **result_fields(d, core.hierarchy))
-    if polish:
-        fields["polished"] = polished
-    return z, res, status, message, fields
 
 
 def _owns_rows(Am):
