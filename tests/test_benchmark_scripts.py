@@ -135,3 +135,9 @@ def test_bounds_table():
     assert [r[1] for r in contact] == ["272", "1,056"]
     for r in contact:
         assert all(re.match(r"[\d.]+ s, \d+ st$", r[k]) for k in (2, 3, 5, 7)) and r[4].endswith("x"), r
+
+
+def test_hierarchy_reuse_table():
+    # README's options ("a Hierarchy ... set-up"): the command on n = 961, both sides converged
+    rows = table_rows(run("hierarchy_reuse.py", "--m", "31", "--repeat", "1"))
+    assert [r[0] for r in rows] == ["961"] and "CONVERGED" in rows[0][-1], rows

@@ -51,7 +51,7 @@ CORRUPTIONS = [
     ("q", "inf"), ("omega2", "inf"), ("zeta", "inf constant"), ("omega2", "subnormal"), ("polish", "string"),
     ("hierarchy", "rows not n"), ("hierarchy", "not coarser"), ("hierarchy", "second level mismatched"),
     ("hierarchy", "nan entry"), ("hierarchy", "inf entry"), ("hierarchy", "a string"), ("hierarchy", "not a list"),
-    ("hierarchy", "list of strings"), ("hierarchy", "for a stationary method"),
+    ("hierarchy", "list of strings"), ("hierarchy", "for a stationary method"), ("hierarchy", "built on another A"),
     ("zeta_jacobian", "wrong shape"), ("zeta_jacobian", "returns a string"), ("zeta_jacobian", "not callable"),
     ("zeta_jacobian", "raises"), ("zeta_jacobian", "for a stationary method"),
     ("upper", "nan"), ("upper", "-inf"), ("upper", "wrong length"), ("upper", "below lower"), ("upper", "complex"),
@@ -101,7 +101,7 @@ JACOBIAN_FORMATS = ["csr", "dia", "coo", "csc", "dense", "operator"]
 #: Wrong Jacobians of those callables (valid input: a solve may give them up for the outer fixed
 #: point, path 'newton+outer', and must say so; a success is still checked by the oracle).
 WRONG_JACOBIANS = {"negated": -1.0, "10x": 10.0, "zero": 0.0}
-HIERARCHIES = [None, "auto", "amg", "list", "dense list"]
+HIERARCHIES = [None, "auto", "amg", "list", "dense list", "Hierarchy"]
 #: Every (method, ζ kind, hierarchy) the valid cases run; the hierarchy is 'newton''s argument.
 #: Bounds (issue 36), the Newton member's only: 'upper' (ζ None, an upper bound), 'box' (a constant
 #: ζ with -inf entries for rows free below, and an upper bound or none): random_bounds; 'implicit
@@ -191,7 +191,9 @@ def build_case(seed, method, zkind, hierarchy=None, corrupt=None):
     extra = np.random.default_rng([seed, 38])
     if newton:
         newton_options(opts)
-        if hierarchy in ("list", "dense list"):
+        if hierarchy == "Hierarchy":   # the object, built on this A (its operators formed once)
+            opts["hierarchy"] = nrmicp.Hierarchy(A, random_hierarchy(rng, n))
+        elif hierarchy in ("list", "dense list"):
             opts["hierarchy"] = random_hierarchy(rng, n, dense=hierarchy == "dense list")
             if not corrupt and extra.uniform() < 0.3:   # empty coarsest levels: dropped with a warning
                 rows = opts["hierarchy"][-1].shape[1] if opts["hierarchy"] else n
@@ -384,7 +386,7 @@ def apply_corruption(case, zeta):
     elif name == "polish":
         opts["polish"] = "yes"
     elif name == "hierarchy":
-        opts["hierarchy"] = _bad_hierarchy(how, n, case["rng"])
+        opts["hierarchy"] = _bad_hierarchy(how, n, case["rng"], case["A"])
     elif name == "upper":
         lower = case["c"] if case["zkind"] == "constant" else np.zeros(n)
         ok = lower + 1.0
@@ -409,8 +411,10 @@ def apply_corruption(case, zeta):
     return zeta
 
 
-def _bad_hierarchy(how, n, rng):
+def _bad_hierarchy(how, n, rng, A):
     good = random_hierarchy(rng, n) if n > 1 else []
+    if how == "built on another A":
+        return nrmicp.Hierarchy(sp.csr_matrix(A) * 2.0, good)
     P0 = good[0] if good else sp.csr_matrix(np.ones((n, max(n - 1, 1))))
     if how == "rows not n":
         return [sp.csr_matrix(np.ones((n + 1, 1)))]

@@ -6,12 +6,12 @@ complementarity problems ICP(q, A, ζ) and linear complementarity problems LCP(q
     >>> res = nrmicp.solve(A, q, zeta=lambda z: ...)   # ICP
 """
 from ._api import METHODS, Affine, Result, Solver, Status, backends, residual, solve
-from ._hierarchy import HierarchyWarning
+from ._hierarchy import Hierarchy, HierarchyWarning
 from ._inputs import ConversionWarning
 
 __version__ = "0.1.0"
 __all__ = ["solve", "Solver", "Affine", "Result", "Status", "METHODS", "backends", "residual",
-           "ConversionWarning", "HierarchyWarning", "__version__"]
+           "Hierarchy", "ConversionWarning", "HierarchyWarning", "__version__"]
 
 try:  # the certificate module is pure numpy/scipy
     from .certificate import Certificate, convergence_bound  # noqa: F401

@@ -22,7 +22,7 @@ from . import _bounds, _newton, _options
 from ._options import _INT_MAX, _choice, _scalar  # noqa: F401 (the distributed glue imports them from here)
 from ._zeta import CheckedZeta
 from ._decoupled import Reduced, decoupled_rows
-from ._hierarchy import check_components
+from ._hierarchy import Hierarchy, check_components
 from ._result import Result, wants_result
 from ._infeasible import evident_infeasibility
 
@@ -332,7 +332,7 @@ def choose_method(A: sp.csr_matrix, options: dict, margin=None) -> str:
     `margin`: A's dominance_margin when known (nrmicp.distributed reduces it over the ranks)."""
     if any(options.get(k, v) is not None and options.get(k, v) != v for k, v in _STATIONARY_ONLY.items()):
         return "nrmgs"
-    if isinstance(options.get("hierarchy"), (list, tuple)):
+    if isinstance(options.get("hierarchy"), (list, tuple, Hierarchy)):
         return "newton"
     return "nrmgs" if (dominance_margin(A) if margin is None else margin) >= AUTO_MARGIN else "newton"
 
@@ -403,6 +403,8 @@ class Solver:
         if n == 0:
             raise ValueError("A must have at least one row, got shape (0, 0)")
         self.n = n
+        if isinstance(hierarchy, Hierarchy):
+            hierarchy.check_fits(self.A)
         # one label per unknown (None: scalar); a Reduced passes its rows' labels on
         settings["components"] = self._components = check_components(components, n)
         self._dr = self._dc = None
@@ -444,8 +446,10 @@ class Solver:
             built = _newton.amg_levels_or_rows(self.A, self._components)
             if built is None:   # rows scaled apart: equilibrated, the amg hierarchy stays (_newton.py)
                 self.scale = "rows"
-            elif self.scale == "units":
-                built = ([(P, self._units_factor * Ac) for P, Ac in built[0]], built[1])
+        elif self.method == "newton" and self.scale in (None, "units") and isinstance(hierarchy, Hierarchy):
+            built = (list(zip(hierarchy.prolongations, hierarchy.operators[1:])), None)   # formed once, by it
+        if built is not None and self.scale == "units":
+            built = ([(P, self._units_factor * Ac) for P, Ac in built[0]], built[1])
         if self.scale is None:
             self._dr = self._dc = None
             A_core = self.A

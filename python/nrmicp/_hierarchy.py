@@ -29,7 +29,7 @@ import scipy.sparse as sp
 from . import _core
 from ._inputs import ConversionWarning, _warn, as_csr
 
-__all__ = ["amg_prolongations", "amg_levels", "amg_levels_why", "resolve_hierarchy", "HierarchyWarning"]
+__all__ = ["Hierarchy", "amg_prolongations", "amg_levels", "amg_levels_why", "resolve_hierarchy", "HierarchyWarning"]
 
 
 class HierarchyWarning(UserWarning):
@@ -323,10 +323,78 @@ def _levels(A, components, kw) -> tuple:
     return out, None
 
 
+class Hierarchy:
+    """The levels of nested iteration, finest first, built once: A_0 = A, the prolongations P_l
+    (n_l × n_{l+1}), the restrictions R_l = P_lᵀ and the Galerkin operators A_{l+1} = R_l A_l P_l.
+
+    ``Hierarchy(A, prolongations)`` checks the prolongations (as ``hierarchy=[...]`` does) and forms
+    the operators; ``Hierarchy.amg(A, components=None, **options)`` is the ``hierarchy='amg'`` set-up
+    (:func:`amg_levels`). Pass it as ``hierarchy=`` to :func:`nrmicp.solve` or :class:`nrmicp.Solver`
+    with the same A: the set-up then forms nothing (a march of solves, or several Solvers on one A,
+    pays the amg set-up once). ``print(h)`` shows each level's rows and nonzeros."""
+
+    def __init__(self, A, prolongations):
+        self._A = as_csr(A, "A")
+        if self._A.shape[0] != self._A.shape[1]:
+            raise ValueError(f"A must be square, got shape {self._A.shape}")
+        if not isinstance(prolongations, (list, tuple)):
+            raise TypeError(f"prolongations must be a list of sparse matrices, got {type(prolongations).__name__}")
+        Ps = resolve_hierarchy(list(prolongations), self._A) or []
+        operators = [self._A]
+        for P in Ps:
+            operators.append(_canonical(P.T @ (operators[-1] @ P)))
+        self._set(Ps, operators)
+
+    @classmethod
+    def amg(cls, A, components=None, **options) -> "Hierarchy":
+        """The 'amg' hierarchy of A (classical Ruge–Stüben, :func:`amg_levels`; ``options`` as there)."""
+        h = cls.__new__(cls)
+        h._A = as_csr(A, "A")
+        pairs = amg_levels(h._A, components, **options)
+        h._set([P for P, _ in pairs], [h._A] + [Ac for _, Ac in pairs])
+        return h
+
+    def _set(self, prolongations, operators):
+        self.prolongations, self.operators = tuple(prolongations), tuple(operators)
+
+    @property
+    def restrictions(self) -> tuple:
+        """R_l = P_lᵀ (CSR), finest first."""
+        return tuple(sp.csr_matrix(P.T) for P in self.prolongations)
+
+    @property
+    def complexity(self) -> float:
+        """The coarse operators' nonzeros over A's (what a V-cycle adds to a product with A)."""
+        return sum(M.nnz for M in self.operators[1:]) / max(self._A.nnz, 1)
+
+    def __len__(self) -> int:
+        return len(self.operators)
+
+    def __repr__(self) -> str:
+        rows = self.operators[0].shape[0], self.operators[-1].shape[0]
+        return f"Hierarchy({len(self)} levels, {rows[0]:,} -> {rows[1]:,} rows, complexity {self.complexity:.2f})"
+
+    def __str__(self) -> str:
+        lines = [f"  {l:5d} {M.shape[0]:12,d} {M.nnz:14,d}" for l, M in enumerate(self.operators)]
+        return "\n".join([repr(self), "  level         rows       nonzeros", *lines])
+
+    def check_fits(self, A: sp.csr_matrix) -> None:
+        """ValueError naming hierarchy unless it was built on A (the same matrix: its coarse operators
+        are this A's Galerkin products)."""
+        B = self._A
+        same = B is A or (B.shape == A.shape and B.nnz == A.nnz and np.array_equal(B.indptr, A.indptr)
+                          and np.array_equal(B.indices, A.indices) and np.array_equal(B.data, A.data))
+        if not same:
+            raise ValueError(f"hierarchy was built on another matrix than A (shape {B.shape}, {B.nnz} nonzeros, "
+                             f"against A's {A.shape}, {A.nnz}): its coarse operators are that matrix's; build "
+                             "Hierarchy(A, hierarchy.prolongations) for this A, or pass the prolongations as a list")
+
+
 def resolve_hierarchy(hierarchy, A) -> list | None:
     """The ``hierarchy=`` option as a checked list of prolongations, or None.
 
-    Accepts ``"amg"`` (→ :func:`amg_prolongations`), a list or tuple of prolongation
+    Accepts ``"amg"`` (→ :func:`amg_prolongations`), a :class:`Hierarchy` built on A (its
+    prolongations), a list or tuple of prolongation
     matrices P_0, P_1, … (P_l of shape (n_l, n_{l+1}) with n_0 = A's size and each level
     strictly coarser; finite; converted to canonical float64 CSR), or None. An empty list
     means no coarse level (a cold start). A level with no columns (no coarse unknowns) is dropped
@@ -335,13 +403,16 @@ def resolve_hierarchy(hierarchy, A) -> list | None:
     """
     if hierarchy is None:
         return None
+    if isinstance(hierarchy, Hierarchy):
+        hierarchy.check_fits(A)
+        return list(hierarchy.prolongations)
     if isinstance(hierarchy, str):
         if hierarchy == "amg":
             return amg_prolongations(A)
-        raise ValueError(f"hierarchy must be 'amg', a list of prolongation matrices or None, "
+        raise ValueError(f"hierarchy must be 'amg', a Hierarchy, a list of prolongation matrices or None, "
                          f"got {hierarchy!r}")
     if not isinstance(hierarchy, (list, tuple)):
-        raise TypeError(f"hierarchy must be 'amg', a list of prolongation matrices or None, "
+        raise TypeError(f"hierarchy must be 'amg', a Hierarchy, a list of prolongation matrices or None, "
                         f"got {type(hierarchy).__name__}")
     rows = A.shape[0]
     out = []

@@ -8,7 +8,7 @@ import time
 import numpy as np
 
 from . import _core
-from ._hierarchy import HierarchyWarning, amg_levels_why, resolve_hierarchy
+from ._hierarchy import Hierarchy, HierarchyWarning, amg_levels_why, resolve_hierarchy
 from ._inputs import _warn
 from ._zeta import CheckedZeta
 
@@ -72,12 +72,12 @@ def amg_levels_or_rows(A, components=None):
 def levels(hierarchy, A, A_core, dc, built=None, asked=None, components=None) -> tuple:
     """hierarchy= -> (prolongations for the core's matrix A_core (= A, or D_r A D_c when scaled),
     their Galerkin operators or None: the amg set-up forms them (or `built`, amg_levels_why's
-    formed already), a given list leaves them to the core; the levels requested; why some are
+    formed already, or a Hierarchy's), a given list leaves them to the core; the levels requested; why some are
     given up before the core, or None). 'auto': 'amg' for a sparse A of n >= AUTO_AMG_MIN_N when
     pyamg is importable, else none (cold start). `asked`: (levels requested, why) of a list made
     from the user's (the coupled rows' part: _decoupled.py). `components`: the amg set-up's labels
     (_hierarchy.check_components), or None."""
-    if resolves_to_amg(hierarchy, A):
+    if built is not None or resolves_to_amg(hierarchy, A):
         pairs, why = amg_levels_why(A_core, components) if built is None else built
         return [P for P, _ in pairs], [Ac for _, Ac in pairs], len(pairs) + 1 + (why is not None), why
     if isinstance(hierarchy, str) and hierarchy == "auto":
@@ -104,7 +104,8 @@ def warn_shortened(report: dict, hierarchy) -> None:
     """The HierarchyWarning of a set-up whose requested hierarchy was shortened (once per set-up)."""
     if report["reason"] is None:
         return
-    what = f"[{report['requested'] - 1} prolongations]" if isinstance(hierarchy, (list, tuple)) else repr(hierarchy)
+    what = (f"[{report['requested'] - 1} prolongations]" if isinstance(hierarchy, (list, tuple)) else
+            f"a Hierarchy of {len(hierarchy)} levels" if isinstance(hierarchy, Hierarchy) else repr(hierarchy))
     _warn(f"hierarchy={what}: {shortened(report)}", HierarchyWarning)
 
 
