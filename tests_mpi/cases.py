@@ -352,9 +352,9 @@ def case_boomeramg():
 
 
 def case_dense():
-    """The 'amg' hierarchy's rule (nrmicp/petsc/hierarchy.hpp) against hypre's classical hierarchy (any
-    -nrmicp_hierarchy_ option replaces the rule: agg_nl 0 gives hypre's classical set-up): each one's first
-    coarse operator, its rows and its nonzeros over A's."""
+    """The 'amg' hierarchy's rule (nrmicp/petsc/hierarchy.hpp) against hypre's classical hierarchy with the
+    rule's strong threshold (any -nrmicp_hierarchy_ option replaces the rule: one classical set-up): each
+    one's first coarse operator, its rows and its nonzeros over A's."""
     from nrmicp import _petsc
     from nrmicp.scenes.finite_elements import fe_obstacle
     out = {}
@@ -363,9 +363,9 @@ def case_dense():
         A = sp.csr_matrix(pb.A)
         M = mat(A, *split(A.shape[0]))
         hier = PETSc.Options("nrmicp_hierarchy_")
-        hier["pc_hypre_boomeramg_agg_nl"] = 0
+        hier["pc_hypre_boomeramg_strong_threshold"] = _petsc.hierarchy_strong_threshold
         classical = _petsc.amg_levels(M.handle)
-        hier.delValue("pc_hypre_boomeramg_agg_nl")
+        hier.delValue("pc_hypre_boomeramg_strong_threshold")
         chosen = _petsc.amg_levels(M.handle)
         out[name] = {"classical": classical["nonzeros"][0] / A.nnz, "classical_rows": classical["rows"][0],
                      "chosen": chosen["nonzeros"][0] / A.nnz, "chosen_rows": chosen["rows"][0],

@@ -209,6 +209,7 @@ PYBIND11_MODULE(_petsc, m) {
       .def_property_readonly("inner", &PyPetscSolver::inner)
       .def("setup_timings", &PyPetscSolver::setup_timings)
       .def("close", &PyPetscSolver::close, "Destroys the core now, on every process together (collective).");
+  m.attr("hierarchy_strong_threshold") = nrmicp::petsc::kStrongThreshold;  // (the rule's, for its tests)
   m.def("amg_levels", &amg_levels, py::arg("A"),
         "{'rows', 'nonzeros'} of the 'amg' hierarchy's coarse operators, finest first (built and let go).");
   m.def("measure", &measure, py::arg("A"), py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("zeta_fn"),

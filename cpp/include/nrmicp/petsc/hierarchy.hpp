@@ -6,10 +6,11 @@
 //   nrmicp::Newton<nrmicp::petsc::Matrix> newton(A, options, h.prolongations, h.coarse_operators);
 //
 // The rule (the serial amg set-up's fold, python/nrmicp/_hierarchy.py): one classical level first (hypre's
-// Falgout coarsening, classical interpolation); where it holds more than kFoldDensity times A's nonzeros
+// Falgout coarsening, classical interpolation, strong threshold kStrongThreshold); where it holds more than kFoldDensity times A's nonzeros
 // (7-point 3D grids) it is folded into the next (P_0 P_1, its operator not kept) and the levels below it
 // use HMIS coarsening and direct interpolation with at most 4 weights a row (direct, as the serial fold's
-// levels below: its coarse levels and finest steps; ext+i took a fifth step in 3D); elsewhere (2D grids, P1 and P2 elements) the levels below are classical too
+// levels below: its coarse levels and finest steps; ext+i took a fifth step in 3D); elsewhere (2D grids, P1 and P2 elements) the levels below are classical too,
+// with kStrongThreshold
 // (docs/MEASUREMENTS.md, "The nesting hierarchy on PETSc"). PETSc options with the prefix
 // nrmicp_hierarchy_ replace the rule: one set-up of the PC with them (-nrmicp_hierarchy_pc_hypre_boomeramg_...,
 // or -nrmicp_hierarchy_pc_type gamg: any PC with PCGetInterpolations), hypre's defaults otherwise.
@@ -34,6 +35,10 @@ struct AmgHierarchy {
 
 /// PETSc options with this prefix build the hierarchy (the rule of amg_hierarchy gives way to them).
 inline constexpr const char* kHierarchyPrefix = "nrmicp_hierarchy_";
+/// BoomerAMG's strong threshold on the classical levels: with hypre's default, 0.25, P2's first level keeps more
+/// coarse points than the serial set-up's and the nest takes more finest steps (docs/MEASUREMENTS.md, "The
+/// strong threshold of the classical levels").
+inline constexpr const char* kStrongThreshold = "0.1";
 using detail::kFoldDensity;  // (the serial set-up's threshold too)
 
 namespace hierarchy_detail {
@@ -133,13 +138,14 @@ inline AmgHierarchy amg_hierarchy(const Matrix& A, const std::string& prefix = k
   const std::string b = "pc_hypre_boomeramg_";
   if (user_options(prefix)) return set_up(A.get(), prefix, {});
   // the first level alone (its coarse "solve" never runs: no Gaussian elimination of it)
-  const std::string max_levels = b + "max_levels", coarse = b + "relax_type_coarse";
-  AmgHierarchy h = set_up(A.get(), prefix, {{max_levels.c_str(), "2"}, {coarse.c_str(), "symmetric-SOR/Jacobi"}});
+  const std::string max_levels = b + "max_levels", coarse = b + "relax_type_coarse", strong = b + "strong_threshold";
+  AmgHierarchy h = set_up(A.get(), prefix, {{max_levels.c_str(), "2"}, {coarse.c_str(), "symmetric-SOR/Jacobi"},
+                                            {strong.c_str(), kStrongThreshold}});
   if (h.prolongations.empty()) return h;
   const bool dense = static_cast<double>(global_nonzeros(h.coarse_operators[0].get())) >
                      kFoldDensity * static_cast<double>(global_nonzeros(A.get()));
   const std::string coarsen = b + "coarsen_type", interp = b + "interp_type", p_max = b + "P_max";
-  std::vector<Option> below;
+  std::vector<Option> below = {{strong.c_str(), kStrongThreshold}};
   if (dense) below = {{coarsen.c_str(), "HMIS"}, {interp.c_str(), "direct"}, {p_max.c_str(), "4"}};
   AmgHierarchy rest = set_up(h.coarse_operators[0].get(), prefix, below);
   for (auto& P : rest.prolongations) h.prolongations.push_back(std::move(P));
