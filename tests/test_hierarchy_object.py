@@ -96,3 +96,31 @@ def test_bad_input_names_the_argument(problem):
         nrmicp.Hierarchy(A, Ps[0])
     with pytest.raises(ValueError, match="A must be square"):
         nrmicp.Hierarchy(sp.csr_matrix(np.ones((3, 2))), [])
+
+
+def test_an_a_changed_in_place_is_refused_and_another_index_dtype_is_not(problem):
+    A, q, psi, Ps = problem
+    B = A.copy()
+    h = nrmicp.Hierarchy(B, Ps)
+    wide = sp.csr_matrix((B.data, B.indices.astype(np.int64), B.indptr.astype(np.int64)), shape=B.shape)
+    r = nrmicp.solve(wide, q, psi, hierarchy=h, method="newton", tol=1e-9)   # the same matrix, int64 indices
+    assert r.hierarchy["used"] == len(h)
+    B.data *= 3.0   # its coarse operators are now stale
+    with pytest.raises(ValueError, match="or on A before it changed"):
+        nrmicp.solve(B, q, psi, hierarchy=h)
+
+
+def test_a_coarse_operator_the_nest_cannot_use_is_said_when_it_is_built():
+    # P1 elements with their rows scaled apart (D A): the amg levels' PᵀAP loses its positive diagonal
+    # ('amg' equilibrates the rows first; a Hierarchy is built on A as given, so it warns at once)
+    from nrmicp.scenes.finite_elements import fe_obstacle
+    pb = fe_obstacle("P1", 3, exact=False)
+    d = 10.0 ** np.random.default_rng(0).uniform(-1, 1, pb.A.shape[0])
+    A = sp.csr_matrix(sp.diags(d) @ pb.A)
+    A.sort_indices()
+    with pytest.warns(nrmicp.HierarchyWarning, match=r"coarse operator 1 has a_ii = .* <= 0 .* will end at level 0"):
+        h = nrmicp.Hierarchy.amg(A)
+    with pytest.warns(nrmicp.HierarchyWarning, match="1 used, a cold start"):   # and the solve says it again
+        r = nrmicp.solve(A, d * pb.q, pb.zeta, method="newton", hierarchy=h)
+    assert r.success and r.hierarchy["used"] == 1
+    assert repr(nrmicp.Hierarchy(A, [])).startswith("Hierarchy(1 level,")

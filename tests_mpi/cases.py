@@ -744,6 +744,42 @@ def golden_problems():
     return out
 
 
+def case_rounds():
+    """What the serial layer's rounds decide on the PETSc engine as in nrmicp.solve: w under an extreme
+    default-rule σ (A's diagonal 1e-300), polish skipped on free rows, the callback's k counting on over
+    re-solves, the note of a Jacobian given up under the default rule (one rank: a nonlocal ζ)."""
+    out = {}
+    s = 1e-300
+    A = sp.csr_matrix(sp.diags([-0.1 * s, s, -0.1 * s], [-1, 0, 1], shape=(4, 4)))
+    q = np.array([-s, 1e10, -s, 1.0])
+    lo, hi = split(4)
+    for m in ("newton", "nrmgs"):
+        r = dist.solve(A[lo:hi], q[lo:hi], method=m)
+        z, w = dist.gather(r.z), dist.gather(r.w)
+        if RANK == 0:
+            out[f"w_{m}"] = {"w": w.tolist(), "numpy": (A @ z + q).tolist(), "serial": nrmicp.solve(A, q, method=m).w.tolist()}
+    pb = obstacle_2d(31, exact=False)
+    A, c = sp.csr_matrix(pb.A), pb.zeta.copy()
+    c[::3] = -np.inf
+    lo, hi = split(A.shape[0])
+    r = dist.solve(A[lo:hi], pb.q[lo:hi], c[lo:hi], method="newton", hierarchy=None, polish=True, tol=1e-13)
+    ks = []
+    rc = dist.solve(A[lo:hi], pb.q[lo:hi], pb.zeta[lo:hi], method="newton", hierarchy=None, tol=1e-12,
+                    record_history=True, callback=lambda k, z, res: ks.append(k))
+    if RANK == 0:
+        serial = nrmicp.solve(A, pb.q, c, method="newton", hierarchy=None, polish=True, tol=1e-13)
+        out["free"] = {"status": str(r.status), "message": r.message, "polished": r.polished,
+                       "serial_status": str(serial.status), "serial_message": serial.message}
+        out["callback"] = {"ks": ks, "history": rc.history["iteration"].tolist(), "iterations": rc.iterations}
+    if SIZE == 1:
+        from test_wrong_jacobian import averaging_problem
+        A, q, zeta, jacs = averaging_problem(24)
+        r = dist.solve(sp.csr_matrix(A), q, zeta, method="newton", zeta_jacobian=jacs["negated"], hierarchy=None)
+        serial = nrmicp.solve(A, q, zeta, method="newton", zeta_jacobian=jacs["negated"], hierarchy=None)
+        out["jacobian"] = {"path": r.path, "message": r.message, "serial_path": serial.path, "serial_message": serial.message}
+    return out
+
+
 def case_engine(which="engine"):
     """The one Newton driver on the PETSc engine (nrmicp._petsc) against the serial member with the
     same prolongations: status, finest steps, z."""
@@ -957,7 +993,7 @@ if __name__ == "__main__":
     result = {"agreement": lambda: case_agreement(), "partition": case_partition,
               "bad": lambda: case_bad(args[0], args[1]), "boomeramg": case_boomeramg, "dense": case_dense,
               "floor": case_floor, "overshoot": case_overshoot, "sweeps": case_sweeps,
-              "warm": case_warm, "one_sided_contact": case_one_sided_contact, "implicit_upper": case_implicit_upper, "jacobian": case_jacobian, "jacobian_still_rows": case_jacobian_still_rows, "solver": case_solver, "units": case_units, "engine": lambda: case_engine(*args), "options": case_options,
+              "warm": case_warm, "one_sided_contact": case_one_sided_contact, "implicit_upper": case_implicit_upper, "jacobian": case_jacobian, "jacobian_still_rows": case_jacobian_still_rows, "solver": case_solver, "units": case_units, "engine": lambda: case_engine(*args), "options": case_options, "rounds": case_rounds,
               "fuzz": lambda: case_fuzz(int(args[0])), "family": case_family, "hooks": case_hooks, "no_rows": case_no_rows}[name]()
     if RANK == 0:
         print("RESULT " + json.dumps(result), flush=True)

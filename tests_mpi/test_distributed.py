@@ -3,6 +3,7 @@ input on one rank (the same exception on every rank, no hang), nothing mutated."
 import json
 import re
 
+import numpy as np
 import pytest
 
 from conftest import mpirun
@@ -271,3 +272,20 @@ def test_zeta_jacobian_where_one_ranks_rows_stand_still_does_not_hang(np_):
     for form, r in out.items():
         assert r["status"] == r["serial_status"] == "CONVERGED", (form, r)
         assert r["numpy"] < 1e-7 and r["serial_numpy"] < 1e-7, (form, r)
+
+
+@pytest.mark.parametrize("np_", [1, 2])
+def test_the_serial_rounds_decide_as_in_nrmicp_solve(np_):
+    out = mpirun(np_, "rounds")
+    for m in ("newton", "nrmgs"):   # w = A z + q in the user's units, though σ(Az + q) overflows
+        r = out[f"w_{m}"]
+        assert np.all(np.isfinite(r["w"])), r
+        assert np.allclose(r["w"], r["numpy"], rtol=1e-14, atol=0) and np.allclose(r["w"], r["serial"], rtol=1e-14, atol=0), r
+    r = out["free"]   # free rows are bounds: polish is not run, as in nrmicp.solve
+    assert r["polished"] is False and "polish:" not in r["message"] and r["status"] == r["serial_status"], r
+    r = out["callback"]   # k counts on over re-solves, as the history does
+    assert r["ks"] == r["history"] == sorted(r["ks"]) and len(r["ks"]) > 0, r
+    if np_ == 1:   # a Jacobian given up: the note under the default rule too
+        r = out["jacobian"]
+        assert r["path"] == r["serial_path"] == "newton+outer", r
+        assert "looks wrong" in r["message"] and "looks wrong" in r["serial_message"], r

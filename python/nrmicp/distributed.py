@@ -35,8 +35,8 @@ except ImportError as exc:  # the core package needs no MPI; this module does
 
 from . import _bounds, _core, _options
 from ._mpi import DistributedError, collective as _collective, flag_max as _flag_max, flag_sum as _flag_sum
-from ._newton import (auto_builds_amg, check_jacobian, check_polish, core_jacobian, polish, polish_outcome,
-                      result_fields)
+from ._newton import (auto_builds_amg, check_jacobian, check_polish, core_jacobian, hierarchy_report, polish,
+                      polish_outcome, result_fields, with_jacobian_note, with_shortening)
 from ._api import (METHODS as _ALL_METHODS, _SPLITTING, Affine, Result, Status, _Rounds, _checked, _choice, _criterion,
                    _criterion_outcome, _iteration_options, _log_final, _units_parameters,
                    choose_method, dominance_margin)
@@ -371,7 +371,7 @@ class Solver:
         it, units = _criterion({"tol": o["tol"], "rtol": o["rtol"]})
         A_user, m = self.A, self.method
         opts, qa, xa, zf = _prepare_call(A_user, m, q, zeta, o["x0"], comm, o, it)
-        ua = _upper(upper, A_user, zf, comm, m)
+        ua, bounded = _upper(upper, A_user, zf, comm, m)
         q_user = qa
         Am, sigma = self._operator(units)
         if units:   # the iteration runs on σA, σq: its Res is the units-free Res_E
@@ -385,10 +385,13 @@ class Solver:
         if opts.rtol > 0:   # the absolute target, on the problem the core iterates (Options::target of Res(0))
             opts.tol, opts.rtol = opts.target(measure(np.zeros_like(qa))[1]), 0.0
         core, setup, earlier = self._core(_petsc, units, Am, opts, o)
-        za, wa, res, status, message, fields = _rounds(core, setup, measure, xa, opts, o, jacobian, comm.getRank() == 0)
+        za, wa, res, status, message, fields = _rounds(core, setup, measure, xa, opts, o, jacobian, comm.getRank() == 0,
+                                                       bounded)
         status, message, res, criterion = _criterion_outcome(measure, za, res, opts.tol, status, message)
-        if units:   # w in the user's units (σ a power of two: exactly A z + q)
-            wa = wa / sigma
+        if m == "newton":
+            message = with_shortening(status, message, fields["hierarchy"])
+        if units:   # w in the user's units (re-measured: σ(Az + q) / σ may overflow or underflow)
+            wa = measure(za, weighted=False)[0]
         fields["timings"]["total"] = time.perf_counter() - t_start + earlier   # (the core's build is in this call)
         r = Result(z=_vec(A_user, za), w=_vec(A_user, wa), success=status == Status.CONVERGED, status=Status(status),
                    message=message, residual=float(res), criterion=criterion, method=m, ranks=comm.getSize(), **fields)
@@ -456,11 +459,12 @@ def _auto_method(Am, options, comm):
 
 
 def _upper(upper, Am, zf, comm, method):
-    """This rank's rows of the upper bound (None: none). A -inf entry of a constant ζ on any rank
-    (a free row) makes every rank's problem a box problem: upper +inf where none is given."""
+    """(This rank's rows of the upper bound, None: none; whether the problem is bounded, as
+    _bounds.is_bounded on every rank's rows). A -inf entry of a constant ζ on any rank (a free row)
+    makes every rank's problem a box problem: for the stationary members upper +inf where none is given."""
     if upper is None:
         free = zf.kind == 1 and _flag_max(comm, float(np.any(np.isneginf(zf.c)))) > 0
-        return np.full(Am.getLocalSize()[0], np.inf) if free and method != "newton" else None
+        return np.full(Am.getLocalSize()[0], np.inf) if free and method != "newton" else None, free
 
     def local():
         kind = zf.user_kind
@@ -470,7 +474,7 @@ def _upper(upper, Am, zf, comm, method):
         u = _local(upper, Am, "upper", scalar_ok=True, infinite=1)
         _bounds.check(kind, zf.c if zf.kind == 1 else None, u, method, None)
         return u
-    return _collective(comm, local)
+    return _collective(comm, local), True
 
 
 def _implicit_upper(upper, Am, comm):
@@ -488,12 +492,12 @@ def _implicit_upper(upper, Am, comm):
     return (_core.ZetaKind.functor, None, None, None, None, fn)
 
 
-def _rounds(core, setup, measure, xa, opts, o, jacobian, rank0):
+def _rounds(core, setup, measure, xa, opts, o, jacobian, rank0, bounded):
     """Either member on the PETSc engine (`core`: nrmicp::Newton or nrmicp::Solver over it) driven by
     the serial layer's rounds and polish (_api._Rounds, _newton.polish: Res of z re-measured where the
     core iterated another problem — a constant ζ's shifted LCP, the default rule's σA — and re-solved
     with a tighter tolerance when it misses tol). Returns (z, w, Res, status, message, the result's
-    other fields); `setup`: the set-up seconds this solve reports."""
+    other fields); `setup`: the set-up seconds this solve reports; `bounded`: polish is not run."""
     m, qa, (kind, c, fn, ua) = o["method"], measure.qa, measure.problem
     solver = types.SimpleNamespace(_core=_AsSerialCore(core, m, rank0), method=m, n=len(qa), _dr=None, _dc=None)
     problem = (qa, kind, c, ua, fn)   # (the order of the serial core's arguments: _AsSerialCore's)
@@ -501,10 +505,11 @@ def _rounds(core, setup, measure, xa, opts, o, jacobian, rank0):
     it = {**{k: o[k] for k in _options.names("solve")}, "tol": opts.tol, "rtol": 0.0}
     rounds = _Rounds(solver, problem, it, None, {} if jacobian is None else {"zeta_jacobian": jacobian},
                      measure if verify else None, xa)
-    rounds.cb = o["callback"]   # (distributed's callback(k, z, res), each rank's rows)
+    cb = o["callback"]   # (distributed's callback(k, z, res), each rank's rows; k counts on over re-solves)
+    rounds.cb = None if cb is None else (lambda k, z, r: cb(k + rounds.cb_offset[0], z, r))
     rounds.run(xa, opts.tol)
     polished = polish_core = None
-    if m == "newton" and o["polish"] and ua is None:   # (as nrmicp.solve: polish is the LCP's Newton step)
+    if m == "newton" and o["polish"] and not bounded:   # (as nrmicp.solve: polish is the LCP's Newton step)
         polished, polish_core = polish(solver, problem, rounds.z, rounds.res, measure, None)
         if polish_core is not None:
             rounds.add_timings(polish_core["timings"])
@@ -513,11 +518,12 @@ def _rounds(core, setup, measure, xa, opts, o, jacobian, rank0):
     fields = dict(nit=int(rounds.nit), iterations=int(rounds.done_iters), history=rounds.history(),
                   inner=rounds.best_d["inner"], counters=rounds.counters,
                   timings=dict(rounds.timings, setup=setup + rounds.timings["setup"]))
-    if m == "newton":
-        fields.update(result_fields(rounds.best_d, core.hierarchy))
     if m == "newton" and o["polish"]:
         fields["polished"] = polished is not None
         status, message = polish_outcome(status, message, res, opts.tol, polished is not None, polish_core)
+    if m == "newton":   # (nrmicp.solve's note of a Jacobian given up)
+        fields.update(result_fields(rounds.best_d, hierarchy_report(core.hierarchy["requested"], None, core)))
+        message = with_jacobian_note(message, fields["path"], rounds.best_d["message"])
     return z, w, res, Status(status), message, fields
 
 
