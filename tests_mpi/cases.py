@@ -265,6 +265,19 @@ def _fuzz_options(extra, method, A, lo, hi):
     return kw
 
 
+def _aggregation(rng, n):
+    """Random valid prolongations P_l (n_l x n_{l+1}, n_{l+1} < n_l): each coarse unknown aggregates
+    fine ones with positive weights."""
+    Ps, rows = [], n
+    while rows > 2 and rng.random() < 0.7:
+        cols = int(rng.integers(1, rows))
+        agg = np.r_[np.arange(cols), rng.integers(0, cols, rows - cols)]
+        rng.shuffle(agg)
+        Ps.append(sp.csr_matrix((rng.uniform(0.5, 1.5, rows), (np.arange(rows), agg)), shape=(rows, cols)))
+        rows = cols
+    return Ps
+
+
 def _fuzz_jacobian(form):
     """ζ′ of ψ + 0.1 sin z on this rank's rows: a LinearOperator or a sparse diagonal."""
     from scipy.sparse.linalg import LinearOperator
@@ -285,6 +298,7 @@ def case_fuzz(examples):
     seed = int(os.environ.get("NRMICP_FUZZ_SEED", "2026"))
     rng, extra = np.random.default_rng(seed), np.random.default_rng(seed + 1)
     jacobians = np.random.default_rng(seed + 2)   # (drawn last: the problems above unchanged)
+    levels = np.random.default_rng(seed + 3)   # newton's scipy prolongations or nrmicp.Hierarchy
     rows = []
     for k in range(examples):
         n = int(rng.integers(5, 60))
@@ -319,6 +333,9 @@ def case_fuzz(examples):
             # a callable ζ = ψ + 0.1 sin z with ζ′ as an operator of this rank's rows or a diagonal
             zeta, local_zeta = (lambda z, p=zeta: p + 0.1 * np.sin(z)), (lambda z, p=zeta[lo:hi]: p + 0.1 * np.sin(z))
             kw["zeta_jacobian"] = _fuzz_jacobian(str(jacobians.choice(["operator", "diagonal"])))
+        if method == "newton" and levels.random() < 0.4:   # the whole prolongations on every rank
+            Ps = _aggregation(levels, n)
+            kw["hierarchy"] = nrmicp.Hierarchy(A, Ps) if levels.random() < 0.5 else Ps
         r = dist.solve(A[lo:hi], q[lo:hi], local_zeta, method=method, tol=1e-9,
                        maxiter=100000, polish=polish and not callable(upper), upper=local_upper,
                        callback=lambda k, zk, res: calls.append(k) and False, **kw)
@@ -330,7 +347,8 @@ def case_fuzz(examples):
             m = np.minimum(A @ z + q, g) if upper is None else np.minimum(g, np.maximum(z - u, A @ z + q))
             rows.append({"n": n, "method": method, "status": str(r.status), "err": float(np.max(np.abs(z - serial.z))),
                          "res": float(np.linalg.norm(m)), "bounded": upper is not None, "implicit": callable(upper), "called": bool(calls),
-                         "options": sorted(k for k in kw if k != "omega2"), "scale": float(np.max(np.abs(q)))})
+                         "options": sorted(k for k in kw if k != "omega2"), "scale": float(np.max(np.abs(q))),
+                         "hierarchy": type(kw.get("hierarchy")).__name__})
     return rows
 
 
@@ -780,6 +798,24 @@ def case_rounds():
     return out
 
 
+def case_shared_hierarchy():
+    """One nrmicp.Hierarchy (or its prolongations as scipy matrices) given to nrmicp.solve and to
+    distributed.solve: the same levels on both engines, so the same decisions (level steps) and z."""
+    pb = obstacle_2d(63, exact=False)
+    A = sp.csr_matrix(pb.A)
+    lo, hi = split(A.shape[0])
+    out = {}
+    for name, h in (("geometric", nrmicp.Hierarchy(A, pb.prolongations())), ("amg", nrmicp.Hierarchy.amg(A))):
+        for form, given in (("Hierarchy", h), ("list", list(h.prolongations))):
+            r = dist.solve(A[lo:hi], pb.q[lo:hi], pb.zeta[lo:hi], method="newton", hierarchy=given, tol=1e-9)
+            z = dist.gather(r.z)
+            if RANK == 0:
+                s = nrmicp.solve(A, pb.q, pb.zeta, method="newton", hierarchy=h, tol=1e-9, scale=None)
+                out[f"{name} {form}"] = {"steps": r.level_steps, "serial_steps": s.level_steps, "status": str(r.status),
+                                         "serial_status": str(s.status), "err": float(np.max(np.abs(z - s.z)))}
+    return out
+
+
 def case_engine(which="engine"):
     """The one Newton driver on the PETSc engine (nrmicp._petsc) against the serial member with the
     same prolongations: status, finest steps, z."""
@@ -993,7 +1029,7 @@ if __name__ == "__main__":
     result = {"agreement": lambda: case_agreement(), "partition": case_partition,
               "bad": lambda: case_bad(args[0], args[1]), "boomeramg": case_boomeramg, "dense": case_dense,
               "floor": case_floor, "overshoot": case_overshoot, "sweeps": case_sweeps,
-              "warm": case_warm, "one_sided_contact": case_one_sided_contact, "implicit_upper": case_implicit_upper, "jacobian": case_jacobian, "jacobian_still_rows": case_jacobian_still_rows, "solver": case_solver, "units": case_units, "engine": lambda: case_engine(*args), "options": case_options, "rounds": case_rounds,
+              "warm": case_warm, "one_sided_contact": case_one_sided_contact, "implicit_upper": case_implicit_upper, "jacobian": case_jacobian, "jacobian_still_rows": case_jacobian_still_rows, "solver": case_solver, "units": case_units, "engine": lambda: case_engine(*args), "options": case_options, "rounds": case_rounds, "shared_hierarchy": case_shared_hierarchy,
               "fuzz": lambda: case_fuzz(int(args[0])), "family": case_family, "hooks": case_hooks, "no_rows": case_no_rows}[name]()
     if RANK == 0:
         print("RESULT " + json.dumps(result), flush=True)

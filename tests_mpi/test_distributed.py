@@ -289,3 +289,12 @@ def test_the_serial_rounds_decide_as_in_nrmicp_solve(np_):
         r = out["jacobian"]
         assert r["path"] == r["serial_path"] == "newton+outer", r
         assert "looks wrong" in r["message"] and "looks wrong" in r["serial_message"], r
+
+
+@pytest.mark.parametrize("np_", [1, 2, 3])
+def test_one_hierarchy_object_serves_both_engines_with_the_same_decisions(np_):
+    out = mpirun(np_, "shared_hierarchy")
+    assert len(out) == 4
+    for name, r in out.items():
+        assert r["status"] == r["serial_status"] == "CONVERGED" and r["steps"] == r["serial_steps"], (name, r)
+        assert r["err"] < AGREE, (name, r)

@@ -1,6 +1,7 @@
 """Random small problems through the distributed entry points (np = 2, uneven partitions):
 every member against serial nrmicp and a plain numpy Res (bounds: ‖mid(z − ζ, z − u, Az + q)‖);
-bounds (an implicit upper too, on newton), a callable ζ with zeta_jacobian (newton) and a callback on every member, the stationary members with Anderson, phi, theta, the
+bounds (an implicit upper too, on newton), a callable ζ with zeta_jacobian (newton), scipy prolongations or a
+nrmicp.Hierarchy (newton) and a callback on every member, the stationary members with Anderson, phi, theta, the
 history and the stall window drawn at random."""
 import os
 
@@ -21,3 +22,4 @@ def test_distributed_fuzz():
     assert any(r["bounded"] and r["method"] != "newton" for r in rows)
     assert any("accelerate" in r["options"] for r in rows)
     assert any("zeta_jacobian" in r["options"] for r in rows)   # a callable ζ with ζ′ (operator or diagonal)
+    assert {"list", "Hierarchy"} <= {r["hierarchy"] for r in rows if r["method"] == "newton"}   # scipy P's, a Hierarchy

@@ -41,6 +41,7 @@ from ._api import (METHODS as _ALL_METHODS, _SPLITTING, Affine, Result, Status, 
                    _criterion_outcome, _iteration_options, _log_final, _units_parameters,
                    choose_method, dominance_margin)
 from ._scaling import sigma_from_logs
+from ._hierarchy import Hierarchy, resolve_hierarchy
 from ._inputs import as_constant, as_vector
 from ._zeta import CheckedZeta
 
@@ -222,8 +223,9 @@ def _member(Am, comm, o):
         hierarchy = o["hierarchy"]
         if m != "newton" and hierarchy not in (None, "amg", "auto"):
             raise ValueError(f"hierarchy is the nested iteration of method 'newton'; got {hierarchy!r}")
-        if m == "newton" and not (hierarchy in (None, "amg", "auto") or isinstance(hierarchy, (list, tuple))):
-            raise ValueError(f"hierarchy must be 'amg', None or a list of PETSc prolongations; got {hierarchy!r}")
+        if m == "newton" and not (hierarchy in (None, "amg", "auto") or isinstance(hierarchy, (list, tuple, Hierarchy))):
+            raise ValueError(f"hierarchy must be 'amg', None, a nrmicp.Hierarchy or a list of prolongations (PETSc "
+                             f"Mats, or whole scipy matrices on every rank); got {hierarchy!r}")
         if m == "newton":
             check_polish(o["polish"])
         return m
@@ -278,7 +280,9 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     A's layout, c) or a callable mapping this rank's rows of z to this rank's rows of ζ(z)
     (entry-wise or row-local ζ only). method: 'newton' — the serial library's Newton member itself
     (nrmicp::Newton on the PETSc engine, nrmicp._petsc), nested over hypre BoomerAMG's prolongations
-    with hierarchy='amg', cold with None, or over a list of PETSc prolongation Mats, finest first; an
+    with hierarchy='amg', cold with None, or over given prolongations, finest first: a list of PETSc Mats, or
+    a :class:`nrmicp.Hierarchy` or list of whole scipy matrices, the same on every rank (the serial
+    engine's levels: its decisions; the core forms the Galerkin operators of this A); an
     affine ζ runs its outer fixed point — or a stationary member ('nrm', 'nrmm', 'nrmaor', 'nrmsor',
     'nrmgs', 'nrmj', 'mms', 'two_sweep'): the serial loop (nrmicp::Solver on the PETSc engine) as
     synchronous multisplitting, each rank splitting its diagonal block (on one rank, the serial
@@ -418,8 +422,12 @@ class Solver:
                 h = o["hierarchy"]   # 'amg': built by the core (nrmicp/petsc/hierarchy.hpp)
                 nnz = Am.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"]
                 amg = h == "amg" or (h == "auto" and auto_builds_amg(Am.getSize()[0], nnz))
-                Ps = [P.handle for P in h] if isinstance(h, (list, tuple)) else []
-                core = _collective(self.comm, lambda: _petsc.Newton(Am.handle, opts, Ps, amg))
+                Ps, made = _prolongations(h, Am)
+                try:
+                    core = _collective(self.comm, lambda: _petsc.Newton(Am.handle, opts, [P.handle for P in Ps], amg))
+                finally:
+                    for P in made:   # (the core holds its own references), on every rank together
+                        P.destroy()
             else:
                 core = _collective(self.comm, lambda: _petsc.Solver(Am.handle, opts))
             self._cores[units] = [core, time.perf_counter() - t0]
@@ -427,6 +435,31 @@ class Solver:
         earlier, self._setup_seconds = self._setup_seconds, 0.0
         setup, entry[1] = entry[1] + earlier, 0.0
         return entry[0], setup, earlier
+
+
+def _prolongations(hierarchy, Am):
+    """hierarchy= as the core's prolongation Mats, finest first, and those of them made here (the caller
+    destroys them once the core holds its own references): PETSc Mats as given; a nrmicp.Hierarchy's or
+    whole scipy matrices on every rank (checked as nrmicp.solve checks them) as MPIAIJ Mats, level 0's
+    rows in A's layout, each coarser level's split evenly over the ranks. The core forms the Galerkin
+    operators of A itself."""
+    if isinstance(hierarchy, Hierarchy):
+        hierarchy = list(hierarchy.prolongations)
+    if not isinstance(hierarchy, (list, tuple)):
+        return [], []
+    if all(isinstance(P, PETSc.Mat) for P in hierarchy):
+        return list(hierarchy), []
+    comm, n = Am.getComm(), Am.getSize()[0]
+    Ps = _collective(comm, resolve_hierarchy, list(hierarchy), types.SimpleNamespace(shape=(n, n))) or []
+    made, (lo, hi) = [], Am.getOwnershipRange()
+    for P in Ps:
+        layout = PETSc.Vec().createMPI((PETSc.DECIDE, P.shape[1]), comm=comm)   # the coarse level's rows
+        (clo, chi), _ = layout.getOwnershipRange(), layout.destroy()
+        B = P[lo:hi]
+        made.append(PETSc.Mat().createAIJ(size=((hi - lo, P.shape[0]), (chi - clo, P.shape[1])), comm=comm, csr=(
+            B.indptr.astype(PETSc.IntType), B.indices.astype(PETSc.IntType), B.data)))
+        lo, hi = clo, chi
+    return made, made
 
 
 def _scoped(options, scopes, where, elsewhere):
