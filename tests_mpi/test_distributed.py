@@ -285,6 +285,9 @@ def test_the_serial_rounds_decide_as_in_nrmicp_solve(np_):
     assert r["polished"] is False and "polish:" not in r["message"] and r["status"] == r["serial_status"], r
     r = out["callback"]   # k counts on over re-solves, as the history does
     assert r["ks"] == r["history"] == sorted(r["ks"]) and len(r["ks"]) > 0, r
+    r = out["verbose"]   # the Newton member's progress lines: rank 0's, one set
+    assert r["status"] == "CONVERGED" and len(r["lines"]) >= 2 and r["others"] == 0, r
+    assert any("newton" in line for line in r["lines"]), r
     if np_ == 1:   # a Jacobian given up: the note under the default rule too
         r = out["jacobian"]
         assert r["path"] == r["serial_path"] == "newton+outer", r

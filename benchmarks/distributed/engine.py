@@ -48,7 +48,7 @@ def main(m):
     COMM.barrier()
     t0 = time.perf_counter()
     core = _petsc.Newton(M.handle, o, [P.handle for P in mats])
-    r = core.solve(np.array(q[lo:hi]), _core.ZetaKind.constant, np.array(psi[lo:hi]), None, None, None, None, it)
+    r = core.solve(np.array(q[lo:hi]), _core.ZetaKind.constant, np.array(psi[lo:hi]), None, None, None, it)
     COMM.barrier()
     t_petsc = time.perf_counter() - t0
     if RANK == 0:

@@ -49,10 +49,33 @@ Zeta zeta_of(nrmicp::ZetaKind kind, py::object c, py::object fn, py::object jaco
   throw py::value_error("zeta: an affine zeta is not available on the PETSc engine");
 }
 
+/// The progress lines of process 0 (every process runs the same loop: one set of lines).
+nrmicp::detail::Progress rank0_progress(const Matrix& A, const py::object& progress) {
+  MPI_Comm comm;
+  int rank = 0;
+  nrmicp::petsc::check(PetscObjectGetComm(reinterpret_cast<PetscObject>(A.get()), &comm), "PetscObjectGetComm");
+  MPI_Comm_rank(comm, &rank);
+  return rank == 0 ? make_progress(progress) : nrmicp::detail::Progress{};
+}
+
 /// The nesting hierarchy: BoomerAMG's (nrmicp/petsc/hierarchy.hpp) when `amg`, else the given prolongations.
 nrmicp::petsc::AmgHierarchy hierarchy_of(const Matrix& A, const std::vector<std::uintptr_t>& prolongations, bool amg) {
   if (amg) return nrmicp::petsc::amg_hierarchy(A);
   return {from_handles(prolongations, "prolongations"), {}};
+}
+
+/// One solve of either core (nrmicp::Newton or nrmicp::Solver on the PETSc engine) from the binding's arguments.
+template <typename CoreType>
+py::dict solve_with(CoreType& core, const Matrix& A, py::array q, nrmicp::ZetaKind kind, py::object zeta_c,
+                    py::object zeta_fn, py::object x0, py::object callback, const nrmicp::SolveOptions& it,
+                    py::object zeta_jacobian, py::object progress, py::object upper) {
+  const Eigen::VectorXd qv = to_vector(q, "q");
+  std::optional<Eigen::VectorXd> z0;
+  if (!x0.is_none()) z0 = to_vector(x0.cast<py::array>(), "x0");
+  const auto zeta = with_upper(zeta_of(kind, zeta_c, zeta_fn, zeta_jacobian), upper, qv.size());
+  const nrmicp::Result r =
+      core.solve(qv, zeta, z0 ? &*z0 : nullptr, make_callback(callback), {}, &it, rank0_progress(A, progress));
+  return result_dict(r, it.record_history);
 }
 
 /// The Newton member over a PETSc Mat: set up once (the hierarchy, its Galerkin operators), solved
@@ -72,18 +95,14 @@ class PyPetscNewton {
     A_ = Matrix();
   }
 
-  py::dict solve(py::array q, nrmicp::ZetaKind kind, py::object zeta_c, py::object zeta_fn, py::object upper,
-                 py::object x0, py::object callback, const nrmicp::SolveOptions& it, py::object zeta_jacobian) {
-    const Eigen::VectorXd qv = to_vector(q, "q");
-    std::optional<Eigen::VectorXd> z0;
-    if (!x0.is_none()) z0 = to_vector(x0.cast<py::array>(), "x0");
-    const auto zeta = with_upper(zeta_of(kind, zeta_c, zeta_fn, zeta_jacobian), upper, qv.size());
-    const auto cb = make_callback(callback);
-    const nrmicp::Result r = core().solve(qv, zeta, z0 ? &*z0 : nullptr, cb, {}, &it);
-    return result_dict(r, it.record_history);
+  /// The serial core's solve (module.cpp's PyCore::solve) but ζ's B: an affine ζ arrives as a callable.
+  py::dict solve(py::array q, nrmicp::ZetaKind kind, py::object zeta_c, py::object zeta_fn, py::object x0,
+                 py::object callback, const nrmicp::SolveOptions& it, py::object zeta_jacobian, py::object progress,
+                 py::object upper) {
+    return solve_with(core(), A_, q, kind, zeta_c, zeta_fn, x0, callback, it, zeta_jacobian, progress, upper);
   }
-  py::dict polish(py::array q, nrmicp::ZetaKind kind, py::object zeta_c, py::object zeta_fn, py::object upper,
-                  py::array z, double tol) {
+  py::dict polish(py::array q, nrmicp::ZetaKind kind, py::object zeta_c, py::object zeta_fn, py::array z, double tol,
+                  py::object upper) {
     const Eigen::VectorXd qv = to_vector(q, "q");
     const auto zeta = with_upper(zeta_of(kind, zeta_c, zeta_fn), upper, qv.size());
     return result_dict(core().polish(qv, zeta, to_vector(z, "z"), tol), false);
@@ -121,15 +140,11 @@ class PyPetscSolver {
     A_ = Matrix();
   }
 
-  py::dict solve(py::array q, nrmicp::ZetaKind kind, py::object zeta_c, py::object zeta_fn, py::object upper,
-                 py::object x0, py::object callback, const nrmicp::SolveOptions& it, py::object progress) {
-    const Eigen::VectorXd qv = to_vector(q, "q");
-    std::optional<Eigen::VectorXd> z0;
-    if (!x0.is_none()) z0 = to_vector(x0.cast<py::array>(), "x0");
-    const auto zeta = with_upper(zeta_of(kind, zeta_c, zeta_fn), upper, qv.size());
-    const nrmicp::Result r =
-        core().solve(qv, zeta, z0 ? &*z0 : nullptr, make_callback(callback), {}, &it, make_progress(progress));
-    return result_dict(r, it.record_history);
+  /// As PyPetscNewton::solve.
+  py::dict solve(py::array q, nrmicp::ZetaKind kind, py::object zeta_c, py::object zeta_fn, py::object x0,
+                 py::object callback, const nrmicp::SolveOptions& it, py::object zeta_jacobian, py::object progress,
+                 py::object upper) {
+    return solve_with(core(), A_, q, kind, zeta_c, zeta_fn, x0, callback, it, zeta_jacobian, progress, upper);
   }
   py::dict setup_timings() const { return timings_dict(core().setup_timings()); }
   std::string inner() const { return core().inner_name(); }
@@ -193,10 +208,10 @@ PYBIND11_MODULE(_petsc, m) {
       .def(py::init<std::uintptr_t, const nrmicp::Options&, const std::vector<std::uintptr_t>&, bool>(),
            py::arg("A"), py::arg("options"), py::arg("prolongations"), py::arg("amg") = false)
       .def("solve", &PyPetscNewton::solve, py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("zeta_fn"),
-           py::arg("upper"), py::arg("x0"), py::arg("callback"), py::arg("options"),
-           py::arg("zeta_jacobian") = py::none())
+           py::arg("x0"), py::arg("callback"), py::arg("options"), py::arg("zeta_jacobian") = py::none(),
+           py::arg("progress") = py::none(), py::arg("upper") = py::none())
       .def("polish", &PyPetscNewton::polish, py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("zeta_fn"),
-           py::arg("upper"), py::arg("z"), py::arg("tol"))
+           py::arg("z"), py::arg("tol"), py::arg("upper") = py::none())
       .def_property_readonly("levels", &PyPetscNewton::levels)
       .def_property_readonly("hierarchy", &PyPetscNewton::hierarchy)
       .def_property_readonly("inner", &PyPetscNewton::inner)
@@ -205,7 +220,8 @@ PYBIND11_MODULE(_petsc, m) {
   py::class_<PyPetscSolver>(m, "Solver")
       .def(py::init<std::uintptr_t, const nrmicp::Options&>(), py::arg("A"), py::arg("options"))
       .def("solve", &PyPetscSolver::solve, py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("zeta_fn"),
-           py::arg("upper"), py::arg("x0"), py::arg("callback"), py::arg("options"), py::arg("progress") = py::none())
+           py::arg("x0"), py::arg("callback"), py::arg("options"), py::arg("zeta_jacobian") = py::none(),
+           py::arg("progress") = py::none(), py::arg("upper") = py::none())
       .def_property_readonly("inner", &PyPetscSolver::inner)
       .def("setup_timings", &PyPetscSolver::setup_timings)
       .def("close", &PyPetscSolver::close, "Destroys the core now, on every process together (collective).");

@@ -211,6 +211,15 @@ def _scale_choice(scale):
 DEFAULT_RTOL = 1e-10
 
 
+def core_options(values: dict, method: str, n: int, resolved: dict):
+    """The core's Options of `method` on n rows: the splitting and the inner solver from `values`, the
+    per-solve options `resolved` (tol and rtol numbers: _criterion's), checked by the core (both engines)."""
+    opts = _core.Options()
+    opts.method = getattr(_core.Method, method)
+    _options.fill(opts, {k: values[k] for k in _SPLITTING}, n)
+    return _checked(_iteration_options(opts, **resolved), n)
+
+
 def _criterion(it: dict) -> tuple[dict, bool]:
     """(it with numeric tol and rtol, units): units is True for the default rule (tol and rtol both
     None: DEFAULT_RTOL on the units-free measure Res_E); else the paper's Res with max(tol, rtol ·
@@ -413,12 +422,9 @@ class Solver:
         # The paper's NRM fixes Omega2 = I, which only suits diag(A) of order 1; say so on failure.
         self._omega2_hint = _omega2_hint(self.A, self.method, omega2, accelerate)
         self.scale = _scale_choice(scale)
-        opts = _core.Options()
-        opts.method = getattr(_core.Method, self.method)
-        _options.fill(opts, {k: settings[k] for k in _SPLITTING}, n)
         self._defaults = {k: settings[k] for k in _options.names("solve")}
         resolved, units = _criterion(self._defaults)
-        _checked(_iteration_options(opts, **resolved), n)
+        opts = core_options(settings, self.method, n, resolved)
         # the default rule's σ: the whole A's (a Reduced passes it to the solver of its coupled rows)
         self._units_factor = units_factor(self.A) if _units_factor is None else _units_factor
         # Newton: rows with a lone positive diagonal are solved in closed form, the rest on A_FF

@@ -37,8 +37,8 @@ from . import _bounds, _core, _options
 from ._mpi import DistributedError, collective as _collective, flag_max as _flag_max, flag_sum as _flag_sum
 from ._newton import (auto_builds_amg, check_jacobian, check_polish, core_jacobian, hierarchy_report, polish,
                       polish_outcome, result_fields, with_jacobian_note, with_shortening)
-from ._api import (METHODS as _ALL_METHODS, _SPLITTING, Affine, Result, Status, _Rounds, _checked, _choice, _criterion,
-                   _criterion_outcome, _iteration_options, _log_final, _units_parameters,
+from ._api import (METHODS as _ALL_METHODS, Affine, Result, Status, _Rounds, _choice, _criterion,
+                   _criterion_outcome, _log_final, _units_parameters, core_options,
                    choose_method, dominance_margin)
 from ._scaling import sigma_from_logs
 from ._hierarchy import Hierarchy, resolve_hierarchy
@@ -46,6 +46,7 @@ from ._inputs import as_constant, as_vector
 from ._zeta import CheckedZeta
 
 __all__ = ["solve", "Solver", "gather", "METHODS", "DistributedError"]
+_K = _core.ZetaKind
 
 #: The distributed members: every member of nrmicp (the stationary ones as synchronous multisplitting).
 METHODS = _ALL_METHODS
@@ -56,8 +57,7 @@ _UNSUPPORTED = {
     "components": "BoomerAMG builds the hierarchy: PETSc options -nrmicp_hierarchy_pc_hypre_boomeramg_..."}
 #: ... for the Newton member only (the stationary members' loop takes them).
 _UNSUPPORTED_NEWTON = {
-    "inner": "the PETSc engine's reduced solves are its own: PETSc options -nrmicp_inner_...",
-    "verbose": "the Newton member on PETSc has no progress lines"}
+    "inner": "the PETSc engine's reduced solves are its own: PETSc options -nrmicp_inner_..."}
 #: ... for the stationary members only.
 _UNSUPPORTED_STATIONARY = {
     "z_update": "'solve' needs a factorization of the whole A; 'explicit' applies",
@@ -132,15 +132,11 @@ def _core_options(o, method, nloc, it):
     if method != "newton" and o["z_update"] in ("explicit", "auto"):
         refused.pop("z_update")   # ('solve': below, with what 'auto' resolves to)
     _options.validate({k: o[k] for k in refused}, where="distributed.solve", unsupported=refused)
-    opts = _core.Options()
-    opts.method = getattr(_core.Method, method)
-    _options.fill(opts, {k: o[k] for k in _SPLITTING}, nloc)
-    _iteration_options(opts, **{**{k: o[k] for k in _options.names("solve")}, "tol": it["tol"], "rtol": it["rtol"]})
-    return _checked(opts, nloc)
+    return core_options(o, method, nloc, {**{k: o[k] for k in _options.names("solve")}, "tol": it["tol"], "rtol": it["rtol"]})
 
 
 class _Zeta:
-    """ζ on this rank's rows: kind 0 none, 1 constant c, 2 Affine (B Mat, c), 3 callable."""
+    """ζ on this rank's rows: its kind (_core.ZetaKind: none, constant c, affine B Mat and c, functor a callable)."""
 
     def __init__(self, zeta, A, comm, name="zeta", c_infinite=0):
         """Local checks only; `name` in the messages (an Affine upper bound: "upper", its c may hold
@@ -148,9 +144,9 @@ class _Zeta:
         self.comm, self.B, self.c, self.fn = comm, None, None, None
         n = A.getSize()[0]
         if zeta is None:
-            self.kind = 0
+            self.kind = _K.none
         elif isinstance(zeta, Affine):
-            self.kind = 2
+            self.kind = _K.affine
             if not isinstance(zeta.B, PETSc.Mat):
                 raise TypeError(f"{name}.B must be a petsc4py Mat in A's layout, got {type(zeta.B).__name__}")
             if zeta.B.getSize() != (n, n) or zeta.B.getOwnershipRange() != A.getOwnershipRange():
@@ -158,15 +154,9 @@ class _Zeta:
                                  f"rows {zeta.B.getOwnershipRange()}")
             self.B, self.c = zeta.B, _local(zeta.c, A, f"{name}.c", scalar_ok=True, infinite=c_infinite)
         elif callable(zeta):
-            self.kind, self.fn = 3, CheckedZeta(zeta, A.getLocalSize()[0])
+            self.kind, self.fn = _K.functor, CheckedZeta(zeta, A.getLocalSize()[0])
         else:
-            self.kind, self.c = 1, _local(zeta, A, "zeta", scalar_ok=True, infinite=-1)  # -inf: free below
-
-    @property
-    def user_kind(self):
-        """The kind as nrmicp.solve's checks name it (_core.ZetaKind; an affine ζ is 'affine' here, though
-        core_args hands it to the engine as a callable)."""
-        return (_core.ZetaKind.none, _core.ZetaKind.constant, _core.ZetaKind.affine, _core.ZetaKind.functor)[self.kind]
+            self.kind, self.c = _K.constant, _local(zeta, A, "zeta", scalar_ok=True, infinite=-1)  # -inf: free below
 
     def _checked(self, z):
         r = self.fn(z)
@@ -180,19 +170,16 @@ class _Zeta:
         """(kind, c, fn) for the PETSc engine: this rank's c; a callable (or an affine ζ, as its product
         B z + c) as a CheckedZeta of this rank's rows whose every call is collective (a failure on any
         rank raises on all, in the same call of the one driver)."""
-        kinds = _core.ZetaKind
-        if self.kind == 0:
-            return kinds.none, None, None
-        if self.kind == 1:
-            return kinds.constant, self.c, None
-        zv, out, c = A.createVecRight(), A.createVecLeft(), _vec(A, self.c) if self.kind == 2 else None
+        if self.kind in (_K.none, _K.constant):
+            return self.kind, self.c, None
+        zv, out, c = A.createVecRight(), A.createVecLeft(), _vec(A, self.c) if self.kind == _K.affine else None
 
         def affine(z):
             zv.setArray(z)
             self.B.multAdd(zv, c, out)
             return np.array(out.getArray(readonly=True))
-        local = affine if self.kind == 2 else (lambda z: _collective(self.comm, self._checked, z))
-        return kinds.functor, None, CheckedZeta(local, A.getLocalSize()[0])
+        local = affine if self.kind == _K.affine else (lambda z: _collective(self.comm, self._checked, z))
+        return _K.functor, None, CheckedZeta(local, A.getLocalSize()[0])
 
 
 # ----------------------------------------------------------------------------- the entry points
@@ -261,7 +248,7 @@ def _prepare_call(Am, m, q, zeta, x0, comm, o, it):
 def _z_update_applies(opts, method, zeta_kind):
     """The stationary members' z-update on PETSc is 'explicit': 'solve' (asked, or what 'auto' means
     for these options) needs a factorization of the whole A — refused naming z_update."""
-    icp = zeta_kind not in (0, 1)
+    icp = zeta_kind not in (_K.none, _K.constant)
     asked = opts.z_update
     resolved = (_core.resolved_z_update(opts.method, opts.omega2.size > 0, icp) if asked == _core.ZUpdate.auto
                 else asked.name)
@@ -299,7 +286,7 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     ``options`` are :func:`nrmicp.solve`'s, with its defaults, checked by the same code (one table:
     nrmicp._options); those that cannot apply on PETSc raise a ValueError naming them:
     ``_UNSUPPORTED`` (scale, components), for 'newton' also ``_UNSUPPORTED_NEWTON``
-    (inner, verbose), for the stationary members ``_UNSUPPORTED_STATIONARY`` (z_update 'solve',
+    (inner), for the stationary members ``_UNSUPPORTED_STATIONARY`` (z_update 'solve',
     polish). verbose prints rank 0's progress lines.
     method='auto' is nrmicp.solve's rule on every rank's rows; hierarchy='auto' is nrmicp.solve's rule
     (n ≥ 1000, at most 10% of A's entries stored), 'amg' there being BoomerAMG's (no pyamg needed).
@@ -389,8 +376,7 @@ class Solver:
         if opts.rtol > 0:   # the absolute target, on the problem the core iterates (Options::target of Res(0))
             opts.tol, opts.rtol = opts.target(measure(np.zeros_like(qa))[1]), 0.0
         core, setup, earlier = self._core(_petsc, units, Am, opts, o)
-        za, wa, res, status, message, fields = _rounds(core, setup, measure, xa, opts, o, jacobian, comm.getRank() == 0,
-                                                       bounded)
+        za, wa, res, status, message, fields = _rounds(core, setup, measure, xa, opts, o, jacobian, bounded)
         status, message, res, criterion = _criterion_outcome(measure, za, res, opts.tol, status, message)
         if m == "newton":
             message = with_shortening(status, message, fields["hierarchy"])
@@ -496,16 +482,16 @@ def _upper(upper, Am, zf, comm, method):
     _bounds.is_bounded on every rank's rows). A -inf entry of a constant ζ on any rank (a free row)
     makes every rank's problem a box problem: for the stationary members upper +inf where none is given."""
     if upper is None:
-        free = zf.kind == 1 and _flag_max(comm, float(np.any(np.isneginf(zf.c)))) > 0
+        free = zf.kind == _K.constant and _flag_max(comm, float(np.any(np.isneginf(zf.c)))) > 0
         return np.full(Am.getLocalSize()[0], np.inf) if free and method != "newton" else None, free
 
     def local():
-        kind = zf.user_kind
+        kind = zf.kind
         if callable(upper) or isinstance(upper, Affine):   # an implicit upper: the core's outer fixed point
             _bounds.check(kind, None, _bounds.ImplicitUpper(_core.ZetaKind.functor), method, None)
             return _implicit_upper(upper, Am, comm)
         u = _local(upper, Am, "upper", scalar_ok=True, infinite=1)
-        _bounds.check(kind, zf.c if zf.kind == 1 else None, u, method, None)
+        _bounds.check(kind, zf.c if zf.kind == _K.constant else None, u, method, None)
         return u
     return _collective(comm, local), True
 
@@ -525,19 +511,18 @@ def _implicit_upper(upper, Am, comm):
     return (_core.ZetaKind.functor, None, None, None, None, fn)
 
 
-def _rounds(core, setup, measure, xa, opts, o, jacobian, rank0, bounded):
+def _rounds(core, setup, measure, xa, opts, o, jacobian, bounded):
     """Either member on the PETSc engine (`core`: nrmicp::Newton or nrmicp::Solver over it) driven by
     the serial layer's rounds and polish (_api._Rounds, _newton.polish: Res of z re-measured where the
     core iterated another problem — a constant ζ's shifted LCP, the default rule's σA — and re-solved
     with a tighter tolerance when it misses tol). Returns (z, w, Res, status, message, the result's
     other fields); `setup`: the set-up seconds this solve reports; `bounded`: polish is not run."""
     m, qa, (kind, c, fn, ua) = o["method"], measure.qa, measure.problem
-    solver = types.SimpleNamespace(_core=_AsSerialCore(core, m, rank0), method=m, n=len(qa), _dr=None, _dc=None)
-    problem = (qa, kind, c, ua, fn)   # (the order of the serial core's arguments: _AsSerialCore's)
+    solver = types.SimpleNamespace(_core=core, method=m, n=len(qa), _dr=None, _dc=None)   # (a serial Solver's shape)
+    problem = (qa, kind, c, fn)
     verify = measure.weights is not None or kind == _core.ZetaKind.constant
     it = {**{k: o[k] for k in _options.names("solve")}, "tol": opts.tol, "rtol": 0.0}
-    rounds = _Rounds(solver, problem, it, None, {} if jacobian is None else {"zeta_jacobian": jacobian},
-                     measure if verify else None, xa)
+    rounds = _Rounds(solver, problem, it, None, {"upper": ua, "zeta_jacobian": jacobian}, measure if verify else None, xa)
     cb = o["callback"]   # (distributed's callback(k, z, res), each rank's rows; k counts on over re-solves)
     rounds.cb = None if cb is None else (lambda k, z, r: cb(k + rounds.cb_offset[0], z, r))
     rounds.run(xa, opts.tol)
@@ -558,23 +543,6 @@ def _rounds(core, setup, measure, xa, opts, o, jacobian, rank0, bounded):
         fields.update(result_fields(rounds.best_d, hierarchy_report(core.hierarchy["requested"], None, core)))
         message = with_jacobian_note(message, fields["path"], rounds.best_d["message"])
     return z, w, res, Status(status), message, fields
-
-
-class _AsSerialCore:
-    """A _petsc core as _api._Rounds and _newton.polish call a serial one (its solve and polish); the
-    progress lines are rank 0's. Held by a plain namespace (_serial_view), not by itself: a reference
-    cycle would leave the core's Mats to each rank's garbage collector, at different times (a deadlock)."""
-
-    def __init__(self, core, method, rank0):
-        self.core, self.method, self.rank0 = core, method, rank0
-
-    def solve(self, q, kind, c, upper, fn, x0, callback, options, progress=None, zeta_jacobian=None):
-        if self.method == "newton":
-            return self.core.solve(q, kind, c, fn, upper, x0, callback, options, zeta_jacobian)
-        return self.core.solve(q, kind, c, fn, upper, x0, callback, options, progress if self.rank0 else None)
-
-    def polish(self, q, kind, c, upper, fn, z, tol):
-        return self.core.polish(q, kind, c, fn, upper, z, tol)
 
 
 class _Measure:
@@ -599,7 +567,7 @@ def _jacobian(zeta_jacobian, zf, method, Am, comm):
     """ζ's Jacobian for the core (None: none given): zeta_jacobian(z) of this rank's rows returns a
     linear operator on them (its matvec may communicate: every rank calls it together) or a diagonal
     matrix; nrmicp.solve's checks, each call of the user's code collective."""
-    if not _collective(comm, check_jacobian, zeta_jacobian, method, zf.user_kind):
+    if not _collective(comm, check_jacobian, zeta_jacobian, method, zf.kind):
         return None
     return core_jacobian(zeta_jacobian, Am.getLocalSize()[0], PETSc.IntType, collective=functools.partial(_collective, comm))
 
