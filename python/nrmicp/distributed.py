@@ -130,7 +130,7 @@ def _core_options(o, method, nloc, it):
     on PETSc refused naming them."""
     refused = dict(_UNSUPPORTED_NEWTON if method == "newton" else _UNSUPPORTED_STATIONARY)
     if method != "newton" and o["z_update"] in ("explicit", "auto"):
-        refused.pop("z_update")   # ('solve': below, with what 'auto' resolves to)
+        refused.pop("z_update")   # (what 'auto' means: the core refuses 'solve', naming z_update)
     _options.validate({k: o[k] for k in refused}, where="distributed.solve", unsupported=refused)
     return core_options(o, method, nloc, {**{k: o[k] for k in _options.names("solve")}, "tol": it["tol"], "rtol": it["rtol"]})
 
@@ -245,19 +245,6 @@ def _prepare_call(Am, m, q, zeta, x0, comm, o, it):
     return _collective(comm, local)
 
 
-def _z_update_applies(opts, method, zeta_kind):
-    """The stationary members' z-update on PETSc is 'explicit': 'solve' (asked, or what 'auto' means
-    for these options) needs a factorization of the whole A — refused naming z_update."""
-    icp = zeta_kind not in (_K.none, _K.constant)
-    asked = opts.z_update
-    resolved = (_core.resolved_z_update(opts.method, opts.omega2.size > 0, icp) if asked == _core.ZUpdate.auto
-                else asked.name)
-    if resolved == "solve":
-        raise ValueError(f"distributed.solve cannot apply z_update='solve' (what 'auto' means for method "
-                         f"{method!r}{' on an ICP with omega2 = I' if method == 'nrm' else ''}): it needs a "
-                         "factorization of the whole A; pass z_update='explicit'")
-
-
 def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     """Solve ICP(q, A, ζ) on all ranks of A's communicator (call it on every rank).
 
@@ -368,8 +355,6 @@ class Solver:
         if units:   # the iteration runs on σA, σq: its Res is the units-free Res_E
             qa = sigma * qa
             _units_parameters(opts, m, sigma, Am.getLocalSize()[0])
-        if m != "newton":
-            _collective(comm, _z_update_applies, opts, m, zf.kind)
         kind, c, fn = zf.core_args(Am)
         measure = _Measure(_petsc, Am, qa, (kind, c, fn, ua), (A_user, q_user, sigma) if units else None)
         jacobian = _jacobian(o["zeta_jacobian"], zf, m, Am, comm)
