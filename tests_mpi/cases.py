@@ -829,6 +829,48 @@ def case_shared_hierarchy():
     return out
 
 
+def case_hazards():
+    """Failures on one rank only where the others would wait: a hierarchy that differs between the ranks,
+    a progress line (verbose) or the final line that raises on rank 0 only. Every rank's outcome."""
+    import logging
+    pb = obstacle_2d(31, exact=False)
+    A = sp.csr_matrix(pb.A)
+    lo, hi = split(A.shape[0])
+    Ps = pb.prolongations()
+    outcomes = {}
+
+    def run(name, **kw):
+        try:
+            r = dist.solve(A[lo:hi], pb.q[lo:hi], pb.zeta[lo:hi], method="newton", tol=1e-9, **kw)
+            outcomes[name] = ["ok", str(r.status)]
+        except Exception as exc:  # noqa: BLE001 - the outcome is the test's subject
+            outcomes[name] = [type(exc).__name__, str(exc)]
+    run("levels differ", hierarchy=Ps if RANK == 0 else Ps[:1])
+    run("values differ", hierarchy=Ps if RANK == 0 else [2.0 * Ps[0]] + Ps[1:])
+
+    class Boom(logging.Filter):
+        def __init__(self, final):
+            super().__init__()
+            self.final = final
+
+        def filter(self, record):
+            if RANK == 0 and ("iteration" in record.getMessage()) != self.final:
+                raise RuntimeError("the logger failed on rank 0")
+            return True
+    logger = logging.getLogger("nrmicp")
+    logger.addHandler(logging.NullHandler())
+    logger.setLevel(logging.INFO)
+    for final in (False, True):
+        boom = Boom(final)
+        logger.addFilter(boom)
+        run(f"verbose {'final' if final else 'progress'}", hierarchy=None, verbose=1)
+        logger.removeFilter(boom)
+    run("after", hierarchy=Ps)   # the ranks still agree
+    texts = _allgather_text(json.dumps(outcomes))
+    if RANK == 0:
+        return [json.loads(t) for t in texts]
+
+
 def case_engine(which="engine"):
     """The one Newton driver on the PETSc engine (nrmicp._petsc) against the serial member with the
     same prolongations: status, finest steps, z."""
@@ -1042,7 +1084,7 @@ if __name__ == "__main__":
     result = {"agreement": lambda: case_agreement(), "partition": case_partition,
               "bad": lambda: case_bad(args[0], args[1]), "boomeramg": case_boomeramg, "dense": case_dense,
               "floor": case_floor, "overshoot": case_overshoot, "sweeps": case_sweeps,
-              "warm": case_warm, "one_sided_contact": case_one_sided_contact, "implicit_upper": case_implicit_upper, "jacobian": case_jacobian, "jacobian_still_rows": case_jacobian_still_rows, "solver": case_solver, "units": case_units, "engine": lambda: case_engine(*args), "options": case_options, "rounds": case_rounds, "shared_hierarchy": case_shared_hierarchy,
+              "warm": case_warm, "one_sided_contact": case_one_sided_contact, "implicit_upper": case_implicit_upper, "jacobian": case_jacobian, "jacobian_still_rows": case_jacobian_still_rows, "solver": case_solver, "units": case_units, "engine": lambda: case_engine(*args), "options": case_options, "rounds": case_rounds, "shared_hierarchy": case_shared_hierarchy, "hazards": case_hazards,
               "fuzz": lambda: case_fuzz(int(args[0])), "family": case_family, "hooks": case_hooks, "no_rows": case_no_rows}[name]()
     if RANK == 0:
         print("RESULT " + json.dumps(result), flush=True)

@@ -301,3 +301,14 @@ def test_one_hierarchy_object_serves_both_engines_with_the_same_decisions(np_):
     for name, r in out.items():
         assert r["status"] == r["serial_status"] == "CONVERGED" and r["steps"] == r["serial_steps"], (name, r)
         assert r["err"] < AGREE, (name, r)
+
+
+def test_a_failure_on_one_rank_only_raises_on_every_rank_without_a_hang():
+    ranks = mpirun(2, "hazards", timeout=120)
+    assert len(ranks) == 2 and ranks[0] == ranks[1], ranks
+    out = ranks[0]
+    for name in ("levels differ", "values differ"):
+        assert out[name][0] == "ValueError" and "same on every rank" in out[name][1], (name, out[name])
+    for name in ("verbose progress", "verbose final"):
+        assert out[name][0] == "RuntimeError" and "the logger failed on rank 0" in out[name][1], (name, out[name])
+    assert out["after"] == ["ok", "CONVERGED"], out

@@ -809,6 +809,7 @@ class _Rounds:
         self.counters: dict[str, int] = {}
         self.refined = 0
         self.last = None
+        self.progress = _progress_hook   # (method, n) -> the core's progress hook
 
     def run(self, z0s, tol):
         tol_k, x0k = tol, z0s
@@ -838,7 +839,7 @@ class _Rounds:
         solver = self.solver
         self.cb_offset[0] = self.done_iters
         opts = _iteration_options(_core.SolveOptions(), **dict(self.it, tol=tol_k))
-        self.core_kw["progress"] = _progress_hook(solver.method, solver.n) if opts.verbose > 0 else None
+        self.core_kw["progress"] = self.progress(solver.method, solver.n) if opts.verbose > 0 else None
         d = solver._core.solve(*self.problem, x0k, self.cb, opts, **self.core_kw)
         status = Status(d["status"])
         if status == Status.ZETA_FAILED and self.ran_away():

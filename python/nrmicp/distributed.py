@@ -23,6 +23,7 @@ import functools
 import math
 import time
 import types
+import zlib
 
 import numpy as np
 import scipy.sparse as sp
@@ -34,14 +35,14 @@ except ImportError as exc:  # the core package needs no MPI; this module does
                       f"(make mpideps installs them on Debian); {exc}") from exc
 
 from . import _bounds, _core, _options
-from ._mpi import DistributedError, collective as _collective, flag_max as _flag_max, flag_sum as _flag_sum
+from ._mpi import DistributedError, agree, collective as _collective, flag_max as _flag_max, flag_sum as _flag_sum
 from ._newton import (auto_builds_amg, check_jacobian, check_polish, core_jacobian, hierarchy_report, polish,
                       polish_outcome, result_fields, with_jacobian_note, with_shortening)
 from ._api import (METHODS as _ALL_METHODS, Affine, Result, Status, _Rounds, _choice, _criterion,
-                   _criterion_outcome, _log_final, _units_parameters, core_options,
+                   _criterion_outcome, _log_final, _progress_hook, _units_parameters, core_options,
                    choose_method, dominance_margin)
 from ._scaling import sigma_from_logs
-from ._hierarchy import Hierarchy, resolve_hierarchy
+from ._hierarchy import Hierarchy, _fingerprint, resolve_hierarchy
 from ._inputs import as_constant, as_vector
 from ._zeta import CheckedZeta
 
@@ -208,11 +209,13 @@ def _member(Am, comm, o):
         m = _choice(method, METHODS, "method")
         _core_options(o, m, nloc, _criterion({"tol": o["tol"], "rtol": o["rtol"]})[0])
         hierarchy = o["hierarchy"]
-        if m != "newton" and hierarchy not in (None, "amg", "auto"):
+        named = hierarchy is None or (isinstance(hierarchy, str) and hierarchy in ("amg", "auto"))
+        if m != "newton" and not named:
             raise ValueError(f"hierarchy is the nested iteration of method 'newton'; got {hierarchy!r}")
-        if m == "newton" and not (hierarchy in (None, "amg", "auto") or isinstance(hierarchy, (list, tuple, Hierarchy))):
+        if m == "newton" and not (named or isinstance(hierarchy, (list, tuple, Hierarchy))):
+            got = hierarchy if isinstance(hierarchy, str) else type(hierarchy).__name__
             raise ValueError(f"hierarchy must be 'amg', None, a nrmicp.Hierarchy or a list of prolongations (PETSc "
-                             f"Mats, or whole scipy matrices on every rank); got {hierarchy!r}")
+                             f"Mats, or whole scipy matrices on every rank); got {got!r}")
         if m == "newton":
             check_polish(o["polish"])
         return m
@@ -370,8 +373,8 @@ class Solver:
         fields["timings"]["total"] = time.perf_counter() - t_start + earlier   # (the core's build is in this call)
         r = Result(z=_vec(A_user, za), w=_vec(A_user, wa), success=status == Status.CONVERGED, status=Status(status),
                    message=message, residual=float(res), criterion=criterion, method=m, ranks=comm.getSize(), **fields)
-        if opts.verbose > 0 and comm.getRank() == 0:
-            _log_final(m, r, fields["timings"]["total"])
+        if opts.verbose > 0:   # (a logger that raises on rank 0 raises on every rank)
+            _collective(comm, lambda: comm.getRank() == 0 and _log_final(m, r, fields["timings"]["total"]))
         return r
 
     def _operator(self, units):
@@ -410,18 +413,23 @@ class Solver:
 
 def _prolongations(hierarchy, Am):
     """hierarchy= as the core's prolongation Mats, finest first, and those of them made here (the caller
-    destroys them once the core holds its own references): PETSc Mats as given; a nrmicp.Hierarchy's or
-    whole scipy matrices on every rank (checked as nrmicp.solve checks them) as MPIAIJ Mats, level 0's
-    rows in A's layout, each coarser level's split evenly over the ranks. The core forms the Galerkin
-    operators of A itself."""
+    destroys them once the core holds its own references): PETSc Mats as given; a nrmicp.Hierarchy's
+    prolongations or whole scipy matrices, the same on every rank (checked as nrmicp.solve checks a
+    list, and against the other ranks'), as MPIAIJ Mats, level 0's rows in A's layout, each coarser
+    level's split evenly over the ranks. The core forms the Galerkin operators of A itself (so a
+    Hierarchy's own A does not matter here)."""
     if isinstance(hierarchy, Hierarchy):
         hierarchy = list(hierarchy.prolongations)
     if not isinstance(hierarchy, (list, tuple)):
         return [], []
-    if all(isinstance(P, PETSc.Mat) for P in hierarchy):
-        return list(hierarchy), []
     comm, n = Am.getComm(), Am.getSize()[0]
-    Ps = _collective(comm, resolve_hierarchy, list(hierarchy), types.SimpleNamespace(shape=(n, n))) or []
+    petsc = _collective(comm, _petsc_list, hierarchy)
+    _same(comm, float(petsc))
+    Ps = list(hierarchy) if petsc else _collective(comm, resolve_hierarchy, list(hierarchy),
+                                                   types.SimpleNamespace(shape=(n, n))) or []
+    _same(comm, float(zlib.crc32(repr([P.getSize() if petsc else (P.shape, _fingerprint(P)) for P in Ps]).encode())))
+    if petsc:
+        return Ps, []
     made, (lo, hi) = [], Am.getOwnershipRange()
     for P in Ps:
         layout = PETSc.Vec().createMPI((PETSc.DECIDE, P.shape[1]), comm=comm)   # the coarse level's rows
@@ -431,6 +439,22 @@ def _prolongations(hierarchy, Am):
             B.indptr.astype(PETSc.IntType), B.indices.astype(PETSc.IntType), B.data)))
         lo, hi = clo, chi
     return made, made
+
+
+def _same(comm, value: float) -> None:
+    """ValueError naming hierarchy on every rank unless every rank holds this value (its list's kind, or a
+    checksum of its levels: number, shapes, values)."""
+    if _flag_max(comm, value) != -_flag_max(comm, -value):
+        raise ValueError("hierarchy must be the same on every rank (the whole prolongations, or PETSc Mats); the "
+                         "ranks' lists differ in their kind, number of levels, shapes or values")
+
+
+def _petsc_list(hierarchy):
+    """Whether a list of prolongations holds PETSc Mats (True) or matrices to convert (False); not both."""
+    kinds = {isinstance(P, PETSc.Mat) for P in hierarchy}
+    if len(kinds) > 1:
+        raise TypeError("hierarchy must be a list of PETSc Mats or a list of scipy matrices, not both")
+    return kinds == {True}
 
 
 def _scoped(options, scopes, where, elsewhere):
@@ -510,7 +534,10 @@ def _rounds(core, setup, measure, xa, opts, o, jacobian, bounded):
     rounds = _Rounds(solver, problem, it, None, {"upper": ua, "zeta_jacobian": jacobian}, measure if verify else None, xa)
     cb = o["callback"]   # (distributed's callback(k, z, res), each rank's rows; k counts on over re-solves)
     rounds.cb = None if cb is None else (lambda k, z, r: cb(k + rounds.cb_offset[0], z, r))
+    failed = []   # a progress line that raised (rank 0's: the only one the core calls), raised on every rank after
+    rounds.progress = lambda method, n: _deferred(_progress_hook(method, n), failed)
     rounds.run(xa, opts.tol)
+    agree(measure.Am.getComm(), failed[0] if failed else None)
     polished = polish_core = None
     if m == "newton" and o["polish"] and not bounded:   # (as nrmicp.solve: polish is the LCP's Newton step)
         polished, polish_core = polish(solver, problem, rounds.z, rounds.res, measure, None)
@@ -528,6 +555,18 @@ def _rounds(core, setup, measure, xa, opts, o, jacobian, bounded):
         fields.update(result_fields(rounds.best_d, hierarchy_report(core.hierarchy["requested"], None, core)))
         message = with_jacobian_note(message, fields["path"], rounds.best_d["message"])
     return z, w, res, Status(status), message, fields
+
+
+def _deferred(hook, failed):
+    """`hook` keeping its first exception in `failed` (its later calls skipped) instead of raising it: the
+    core calls the progress hook on rank 0 only, between collectives that the other ranks wait in."""
+    def call(*args):
+        if not failed:
+            try:
+                hook(*args)
+            except Exception as exc:  # noqa: BLE001 - raised on every rank once the core returns
+                failed.append(exc)
+    return call
 
 
 class _Measure:
