@@ -318,6 +318,12 @@ class Solver:
         self._options = {**_options.defaults("setup", "solve"), **options}
         self.A, self.method = _prepare_matrix(A, comm, {**_options.defaults(), **self._options})
         self._owns_A = self.A is not A   # (made from scipy row blocks)
+        try:   # given prolongations checked and made PETSc Mats now, once (kept until close)
+            self._levels = _prolongations(self._options["hierarchy"], self.A) if self.method == "newton" else ([], [])
+        except Exception:
+            if self._owns_A:
+                self.A.destroy()   # on every rank together (each raises here)
+            raise
         self._cores = {}   # units (the default rule's σA) -> [the core, its set-up seconds not yet reported]
         self._operators = {False: (self.A, 1.0)}   # units -> (the Mat the core iterates, σ)
         self._setup_seconds = time.perf_counter() - t0   # reported by the first solve
@@ -336,7 +342,9 @@ class Solver:
         for units, (mat, _) in self._operators.items():   # the σA copy, and an A made from scipy row blocks
             if units or self._owns_A:
                 mat.destroy()
-        self._cores, self._operators, self._closed = {}, {}, True
+        for P in self._levels[1]:   # the prolongation Mats made from scipy matrices
+            P.destroy()
+        self._cores, self._operators, self._levels, self._closed = {}, {}, ([], []), True
 
     def solve(self, q, zeta=None, *, upper=None, **options) -> Result:
         """ICP(q, A, ζ) with this Solver's A: :func:`solve`'s arguments but A, comm and the set-up options."""
@@ -396,12 +404,8 @@ class Solver:
                 h = o["hierarchy"]   # 'amg': built by the core (nrmicp/petsc/hierarchy.hpp)
                 nnz = Am.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"]
                 amg = h == "amg" or (h == "auto" and auto_builds_amg(Am.getSize()[0], nnz))
-                Ps, made = _prolongations(h, Am)
-                try:
-                    core = _collective(self.comm, lambda: _petsc.Newton(Am.handle, opts, [P.handle for P in Ps], amg))
-                finally:
-                    for P in made:   # (the core holds its own references), on every rank together
-                        P.destroy()
+                Ps = [P.handle for P in self._levels[0]]
+                core = _collective(self.comm, lambda: _petsc.Newton(Am.handle, opts, Ps, amg))
             else:
                 core = _collective(self.comm, lambda: _petsc.Solver(Am.handle, opts))
             self._cores[units] = [core, time.perf_counter() - t0]
@@ -413,7 +417,7 @@ class Solver:
 
 def _prolongations(hierarchy, Am):
     """hierarchy= as the core's prolongation Mats, finest first, and those of them made here (the caller
-    destroys them once the core holds its own references): PETSc Mats as given; a nrmicp.Hierarchy's
+    destroys them): PETSc Mats as given; a nrmicp.Hierarchy's
     prolongations or whole scipy matrices, the same on every rank (checked as nrmicp.solve checks a
     list, and against the other ranks'), as MPIAIJ Mats, level 0's rows in A's layout, each coarser
     level's split evenly over the ranks. The core forms the Galerkin operators of A itself (so a
