@@ -846,6 +846,14 @@ def case_hazards():
         except Exception as exc:  # noqa: BLE001 - the outcome is the test's subject
             outcomes[name] = [type(exc).__name__, str(exc)]
     run("levels differ", hierarchy=Ps if RANK == 0 else Ps[:1])
+    # the last rank's diagonal block [[1, 2], [2, 1]]: its Cholesky of Omega2 + A fails there only; every rank
+    # raises that rank's own message, not the others' "another process refused its part"
+    B = sp.csr_matrix(sp.block_diag([np.array([[4.0, -1.0], [-1.0, 4.0]])] * (SIZE - 1) + [np.array([[1.0, 2.0], [2.0, 1.0]])]))
+    try:
+        dist.solve(B[2 * RANK:2 * RANK + 2], -np.ones(2), method="nrm", inner="cholmod")
+        outcomes["block refused"] = ["ok", ""]
+    except Exception as exc:  # noqa: BLE001
+        outcomes["block refused"] = [type(exc).__name__, str(exc)]
     run("values differ", hierarchy=Ps if RANK == 0 else [2.0 * Ps[0]] + Ps[1:])
 
     class Boom(logging.Filter):

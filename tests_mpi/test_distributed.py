@@ -312,3 +312,5 @@ def test_a_failure_on_one_rank_only_raises_on_every_rank_without_a_hang():
     for name in ("verbose progress", "verbose final"):
         assert out[name][0] == "RuntimeError" and "the logger failed on rank 0" in out[name][1], (name, out[name])
     assert out["after"] == ["ok", "CONVERGED"], out
+    kind, message = out["block refused"]   # the failing rank's own message, on every rank
+    assert message.startswith("rank 1: ") and "cholmod factorization" in message and "another process" not in message, out

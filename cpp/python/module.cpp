@@ -286,6 +286,7 @@ void bind_vocabulary(py::module_& m) {
   tuning["smoothing_sweeps"] = nrmicp::detail::kSmoothingSweeps;
   tuning["fold_density"] = nrmicp::detail::kFoldDensity;
   m.attr("newton_tuning") = tuning;
+  m.attr("refused_elsewhere") = nrmicp::detail::kRefusedElsewhere;  // (nrmicp._mpi.agree prefers the first-hand message)
   m.def("is_aor_type", &nrmicp::is_aor_type, py::arg("method"),
         "True for the methods whose left matrix is triangular or diagonal (no factorization).");
   m.def("resolved_z_update", [](nrmicp::Method method, bool omega2_given, bool is_icp) {

@@ -6,6 +6,8 @@ from __future__ import annotations
 import numpy as np
 from petsc4py import PETSc
 
+from . import _core
+
 #: Longest error message exchanged between ranks (bytes, UTF-8).
 _MSG_LEN = 1024
 #: Exception types re-raised as themselves on every rank; others become DistributedError.
@@ -40,8 +42,8 @@ def _reduce(comm, value: float, op) -> float:
 
 def agree(comm, exc: BaseException | None) -> None:
     """Every rank calls this after a step that may fail on some ranks only. When any rank
-    failed, every rank raises the same exception (type and message of the lowest failing rank,
-    prefixed 'rank r: '); else returns. Collective: no rank is left waiting."""
+    failed, every rank raises the same exception (type and message of the lowest rank that failed
+    first-hand, prefixed 'rank r: '); else returns. Collective: no rank is left waiting."""
     if not flag_max(comm, 0.0 if exc is None else 1.0):
         return
     size = comm.getSize()
@@ -56,8 +58,10 @@ def agree(comm, exc: BaseException | None) -> None:
     rows = out.getArray().reshape(size, _MSG_LEN).copy()
     for obj in (scatter, out, v):   # destroyed here, on every rank together: the traceback keeps this frame
         obj.destroy()
-    r = int(np.flatnonzero(rows[:, 0])[0])
-    name, _, msg = bytes(rows[r][rows[r] > 0].astype(np.uint8)).decode("utf-8", "replace").partition("\x01")
+    texts = {i: bytes(row[row > 0].astype(np.uint8)).decode("utf-8", "replace") for i, row in enumerate(rows) if row[0]}
+    # the lowest rank that failed first-hand (the others' core says only that another rank refused its part)
+    r = next((i for i, t in texts.items() if _core.refused_elsewhere not in t), min(texts))
+    name, _, msg = texts[r].partition("\x01")
     cls = _KNOWN.get(name)
     # (no local holds the new exception: a frame -> exception -> traceback -> frame cycle would leave this
     # frame, and what it holds, to each rank's cyclic garbage collector, at different times)

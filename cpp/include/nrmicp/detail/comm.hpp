@@ -53,6 +53,10 @@ class Comm {
 /// so that every process throws when one does: a throw on one process alone would leave the others
 /// waiting in the next reduction. The process at fault rethrows its own exception (type and message);
 /// the others throw std::invalid_argument saying so. `check` may take collective calls before it throws.
+/// The message of a process whose own part was accepted when another's was not.
+inline constexpr const char* kRefusedElsewhere =
+    "another process refused its part of the input (its own message names the argument)";
+
 template <typename Check>
 void collective_check(const Comm& comm, Check&& check) {
   std::exception_ptr failed;
@@ -63,7 +67,7 @@ void collective_check(const Comm& comm, Check&& check) {
   }
   if (comm.all(!failed)) return;
   if (failed) std::rethrow_exception(failed);
-  throw std::invalid_argument("another process refused its part of the input (its own message names the argument)");
+  throw std::invalid_argument(kRefusedElsewhere);
 }
 
 /// The one process that owns every row.
