@@ -155,8 +155,9 @@ def test_a_rank_without_rows_newton_refuses_on_every_rank_the_stationary_members
         assert len(out[method]) == 2 and out[method][0] == out[method][1], out[method]   # the same on both ranks
         name, message = out[method][0]
         assert name == "ValueError" and message.startswith("rank 1: A has no rows on this rank"), out[method]
-    for status, err in out["nrmgs"]:
-        assert status == "CONVERGED" and err < 1e-6, out["nrmgs"]
+    for method in ("nrmgs", "nrm_omega2", "nrm_omega2_icp"):
+        for status, err in out[method]:
+            assert status == "CONVERGED" and err < 1e-6, (method, out[method])
 
 
 def test_readme_example_runs_on_two_ranks():

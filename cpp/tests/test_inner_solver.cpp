@@ -47,6 +47,17 @@ TEST_CASE("auto picks Cholesky for SPD, LU otherwise, and LU for an indefinite s
   CHECK(std::string(s.name()) == (have_umfpack() ? "umfpack" : "eigen_lu"));
 }
 
+TEST_CASE("an empty matrix (a process without rows) factorizes to nothing, with every backend") {
+  for (const Inner k : {Inner::Auto, Inner::Cholmod, Inner::Umfpack, Inner::EigenLLT, Inner::EigenLU}) {
+    InnerSolver<int> s;
+    s.compute(testing::SpMat<>(0, 0), k, "the empty block");
+    CHECK(s.ready());
+    Eigen::VectorXd x(3);
+    s.solve(Eigen::VectorXd(0), x);
+    CHECK(x.size() == 0);
+  }
+}
+
 TEST_CASE("a singular matrix is a clear error") {
   testing::SpMat<> Z(4, 4);
   Z.insert(0, 0) = 1.0;

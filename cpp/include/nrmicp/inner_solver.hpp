@@ -269,6 +269,10 @@ class InnerSolver {
   /// solvers without SuiteSparse). `what` names the matrix in error messages.
   void compute(ColMatrix M, Inner kind, const std::string& what) {
     M.makeCompressed();
+    if (M.rows() == 0) {  // (a process without rows: nothing to factorize, and CHOLMOD refuses 0 × 0)
+      impl_ = std::make_unique<Empty>();
+      return;
+    }
     const std::string empty = detail::empty_row_or_column(M);
     if (!empty.empty())
       throw FactorizationError(FactorizationError::Reason::Singular,
@@ -327,6 +331,13 @@ class InnerSolver {
     s.compute(M);
     return detail::factored(s);
   }
+
+  struct Empty : Base {
+    ColMatrix mat;
+    Empty() { this->name = "none"; }
+    void solve(const Vector&, Vector& x) const override { x.resize(0); }
+    const ColMatrix& matrix() const override { return mat; }
+  };
 
   template <typename EigenSolver>
   struct Impl : Base {

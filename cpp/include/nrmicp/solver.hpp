@@ -128,6 +128,8 @@ class Solver {
       detail::ScopedTimer t(setup_factorization_);
       splitting_.emplace(block_, options_.method, params_, options_.inner);
     });
+    // given on any process (one without rows holds an empty Ω2): z_update 'auto' then resolves alike on all
+    omega2_given_ = !comm().all(options_.omega2.size() == 0);
     if (options_.z_update == ZUpdate::Solve) factorize_A();
     setup_timings_.setup = detail::ScopedTimer::seconds_since(t0);
     setup_timings_.factorization = setup_factorization_ + a_factorization_;
@@ -227,7 +229,7 @@ class Solver {
   // z to the callback), or empty; `box` the box problem's modulus (ζ is then none), or null.
   Result iterate(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0, const Hooks& hooks,
                  const Options& o, const Vector& shift, const detail::BoxModulus* box = nullptr) const {
-    const ZUpdate zu = resolve_z_update(o.z_update, options_.method, options_.omega2.size() > 0,
+    const ZUpdate zu = resolve_z_update(o.z_update, options_.method, omega2_given_,
                                         zeta.kind() != ZetaKind::None);
     Result res;
     if (zu == ZUpdate::Solve) {
@@ -297,6 +299,7 @@ class Solver {
   const MatrixType& A_;
   Block block_;
   Options options_;
+  bool omega2_given_ = false;  // Ω2 given (on any process)
   Parameters params_;
   std::optional<Splitting<StorageIndex>> splitting_;
   Timings setup_timings_;
