@@ -64,29 +64,11 @@ nrmicp::petsc::AmgHierarchy hierarchy_of(const Matrix& A, const std::vector<std:
   return {from_handles(prolongations, "prolongations"), {}};
 }
 
-/// One solve of either core (nrmicp::Newton or nrmicp::Solver on the PETSc engine) from the binding's arguments.
+/// What both PETSc cores' bindings share (module.cpp's PyCore on the serial side): A, the core, its solve,
+/// set-up timings and inner solver, and close(). `what` names the core in the error of a closed one.
 template <typename CoreType>
-py::dict solve_with(CoreType& core, const Matrix& A, py::array q, nrmicp::ZetaKind kind, py::object zeta_c,
-                    py::object zeta_fn, py::object x0, py::object callback, const nrmicp::SolveOptions& it,
-                    py::object zeta_jacobian, py::object progress, py::object upper) {
-  const Eigen::VectorXd qv = to_vector(q, "q");
-  std::optional<Eigen::VectorXd> z0;
-  if (!x0.is_none()) z0 = to_vector(x0.cast<py::array>(), "x0");
-  const auto zeta = with_upper(zeta_of(kind, zeta_c, zeta_fn, zeta_jacobian), upper, qv.size());
-  const nrmicp::Result r =
-      core.solve(qv, zeta, z0 ? &*z0 : nullptr, make_callback(callback), {}, &it, rank0_progress(A, progress));
-  return result_dict(r, it.record_history);
-}
-
-/// The Newton member over a PETSc Mat: set up once (the hierarchy, its Galerkin operators), solved
-/// with this process's rows of q, ζ and x0.
-class PyPetscNewton {
+class PyPetscCore {
  public:
-  PyPetscNewton(std::uintptr_t A, const nrmicp::Options& o, const std::vector<std::uintptr_t>& prolongations, bool amg)
-      : A_(from_handle(A, "A")), levels_(hierarchy_of(A_, prolongations, amg)) {
-    core_.emplace(A_, o, levels_.prolongations, levels_.coarse_operators);
-    levels_ = {};  // (the core holds what it uses)
-  }
   /// Destroys the core and lets go of A now (collective: a KSP's MUMPS factors, a Mat's last reference are
   /// freed by every process together), not when the garbage collector takes this object, which it does at
   /// a different time on each process.
@@ -94,12 +76,44 @@ class PyPetscNewton {
     core_.reset();
     A_ = Matrix();
   }
-
   /// The serial core's solve (module.cpp's PyCore::solve) but ζ's B: an affine ζ arrives as a callable.
   py::dict solve(py::array q, nrmicp::ZetaKind kind, py::object zeta_c, py::object zeta_fn, py::object x0,
                  py::object callback, const nrmicp::SolveOptions& it, py::object zeta_jacobian, py::object progress,
                  py::object upper) {
-    return solve_with(core(), A_, q, kind, zeta_c, zeta_fn, x0, callback, it, zeta_jacobian, progress, upper);
+    const Eigen::VectorXd qv = to_vector(q, "q");
+    std::optional<Eigen::VectorXd> z0;
+    if (!x0.is_none()) z0 = to_vector(x0.cast<py::array>(), "x0");
+    const auto zeta = with_upper(zeta_of(kind, zeta_c, zeta_fn, zeta_jacobian), upper, qv.size());
+    const nrmicp::Result r =
+        core().solve(qv, zeta, z0 ? &*z0 : nullptr, make_callback(callback), {}, &it, rank0_progress(A_, progress));
+    return result_dict(r, it.record_history);
+  }
+  py::dict setup_timings() const { return timings_dict(core().setup_timings()); }
+  std::string inner() const { return core().inner_name(); }
+
+ protected:
+  PyPetscCore(std::uintptr_t A, const char* what) : A_(from_handle(A, "A")), what_(what) {}
+  const CoreType& core() const {
+    if (!core_) throw py::value_error(std::string("this PETSc ") + what_ + " was closed");
+    return *core_;
+  }
+  CoreType& core() { return const_cast<CoreType&>(std::as_const(*this).core()); }
+
+  Matrix A_;
+  std::optional<CoreType> core_;
+
+ private:
+  const char* what_;
+};
+
+/// The Newton member over a PETSc Mat: set up once (the hierarchy, its Galerkin operators), solved
+/// with this process's rows of q, ζ and x0.
+class PyPetscNewton : public PyPetscCore<Core> {
+ public:
+  PyPetscNewton(std::uintptr_t A, const nrmicp::Options& o, const std::vector<std::uintptr_t>& prolongations, bool amg)
+      : PyPetscCore(A, "Newton member") {
+    nrmicp::petsc::AmgHierarchy levels = hierarchy_of(A_, prolongations, amg);
+    core_.emplace(A_, o, levels.prolongations, levels.coarse_operators);  // (the core holds what it uses)
   }
   py::dict polish(py::array q, nrmicp::ZetaKind kind, py::object zeta_c, py::object zeta_fn, py::array z, double tol,
                   py::object upper) {
@@ -114,51 +128,13 @@ class PyPetscNewton {
     d["requested"] = h.requested; d["used"] = h.used; d["reason"] = h.reason;
     return d;
   }
-  std::string inner() const { return core().inner_name(); }
-  py::dict setup_timings() const { return timings_dict(core().setup_timings()); }
-
- private:
-  const Core& core() const {
-    if (!core_) throw py::value_error("this PETSc Newton member was closed");
-    return *core_;
-  }
-  Core& core() { return const_cast<Core&>(std::as_const(*this).core()); }
-
-  Matrix A_;
-  nrmicp::petsc::AmgHierarchy levels_;
-  std::optional<Core> core_;
 };
 
 /// A stationary member (nrm, nrmm, nrmaor, nrmsor, nrmgs, nrmj, two_sweep) over a PETSc Mat: the
 /// serial nrmicp::Solver on the PETSc engine, each process's diagonal block split (multisplitting).
-class PyPetscSolver {
+class PyPetscSolver : public PyPetscCore<nrmicp::Solver<Matrix>> {
  public:
-  PyPetscSolver(std::uintptr_t A, const nrmicp::Options& o) : A_(from_handle(A, "A")) { core_.emplace(A_, o); }
-  /// As PyPetscNewton::close.
-  void close() {
-    core_.reset();
-    A_ = Matrix();
-  }
-
-  /// As PyPetscNewton::solve.
-  py::dict solve(py::array q, nrmicp::ZetaKind kind, py::object zeta_c, py::object zeta_fn, py::object x0,
-                 py::object callback, const nrmicp::SolveOptions& it, py::object zeta_jacobian, py::object progress,
-                 py::object upper) {
-    return solve_with(core(), A_, q, kind, zeta_c, zeta_fn, x0, callback, it, zeta_jacobian, progress, upper);
-  }
-  py::dict setup_timings() const { return timings_dict(core().setup_timings()); }
-  std::string inner() const { return core().inner_name(); }
-
- private:
-  using Core = nrmicp::Solver<Matrix>;
-  const Core& core() const {
-    if (!core_) throw py::value_error("this PETSc solver was closed");
-    return *core_;
-  }
-  Core& core() { return const_cast<Core&>(std::as_const(*this).core()); }
-
-  Matrix A_;
-  std::optional<Core> core_;
+  PyPetscSolver(std::uintptr_t A, const nrmicp::Options& o) : PyPetscCore(A, "solver") { core_.emplace(A_, o); }
 };
 
 /// w = Az + q and Res(z) of ICP(q, A, ζ) (with `upper`: the bounded Res, an implicit one at z), every process's rows
