@@ -334,9 +334,7 @@ class Hierarchy:
     pays the amg set-up once). ``print(h)`` shows each level's rows and nonzeros."""
 
     def __init__(self, A, prolongations):
-        self._A = as_csr(A, "A")
-        if self._A.shape[0] != self._A.shape[1]:
-            raise ValueError(f"A must be square, got shape {self._A.shape}")
+        self._A = as_csr(A, "A")   # (square: as_csr's check)
         if not isinstance(prolongations, (list, tuple)):
             raise TypeError(f"prolongations must be a list of sparse matrices, got {type(prolongations).__name__}")
         Ps = resolve_hierarchy(list(prolongations), self._A) or []
@@ -410,8 +408,8 @@ def _fingerprint(A: sp.csr_matrix) -> int:
 def resolve_hierarchy(hierarchy, A) -> list | None:
     """The ``hierarchy=`` option as a checked list of prolongations, or None.
 
-    Accepts ``"amg"`` (→ :func:`amg_prolongations`), a :class:`Hierarchy` built on A (its
-    prolongations), a list or tuple of prolongation
+    Accepts ``"amg"`` (→ :func:`amg_prolongations`), a :class:`Hierarchy` (its prolongations; that it
+    was built on A is the Solver's check, Hierarchy.check_fits), a list or tuple of prolongation
     matrices P_0, P_1, … (P_l of shape (n_l, n_{l+1}) with n_0 = A's size and each level
     strictly coarser; finite; converted to canonical float64 CSR), or None. An empty list
     means no coarse level (a cold start). A level with no columns (no coarse unknowns) is dropped
@@ -420,8 +418,7 @@ def resolve_hierarchy(hierarchy, A) -> list | None:
     """
     if hierarchy is None:
         return None
-    if isinstance(hierarchy, Hierarchy):
-        hierarchy.check_fits(A)
+    if isinstance(hierarchy, Hierarchy):   # (its fit to A: checked once, by the Solver given it)
         return list(hierarchy.prolongations)
     if isinstance(hierarchy, str):
         if hierarchy == "amg":

@@ -367,7 +367,7 @@ class Solver:
             qa = sigma * qa
             _units_parameters(opts, m, sigma, Am.getLocalSize()[0])
         kind, c, fn = zf.core_args(Am)
-        measure = _Measure(_petsc, Am, qa, (kind, c, fn, ua), (A_user, q_user, sigma) if units else None)
+        measure = _Measure(_petsc, Am, qa, (kind, c, fn, ua), (A_user, q_user) if units else None)
         jacobian = _jacobian(o["zeta_jacobian"], zf, m, Am, comm)
         if opts.rtol > 0:   # the absolute target, on the problem the core iterates (Options::target of Res(0))
             opts.tol, opts.rtol = opts.target(measure(np.zeros_like(qa))[1]), 0.0
@@ -575,7 +575,7 @@ def _deferred(hook, failed):
 
 class _Measure:
     """(w, Res) of z on the problem the core iterates, every rank's rows, as _api._OriginalResidual
-    for _Rounds and _criterion_outcome: `user` (A, q, σ) under the default rule, whose ``weighted=False``
+    for _Rounds and _criterion_outcome: `user` (A, q) under the default rule, whose ``weighted=False``
     is the paper's Res in the user's units."""
 
     def __init__(self, _petsc, Am, qa, problem, user):
@@ -583,7 +583,7 @@ class _Measure:
         self.weights = None if user is None else (None, None)
 
     def __call__(self, z, weighted=True):
-        A, q = (self.Am, self.qa) if weighted or self.user is None else self.user[:2]
+        A, q = (self.Am, self.qa) if weighted or self.user is None else self.user
         d = self._petsc.measure(A.handle, q, *self.problem, z)
         return d["w"], d["residual"]
 
