@@ -582,12 +582,7 @@ class Solver:
         tol = it["tol"]
         rounds = _Rounds(self, problem, it, callback, core_kw, measure if verify else None, z0)
         rounds.run(z0s, tol)
-        polished = polish_core = None
-        if self.polish and not bounded:   # (polish is the LCP's Newton step: _newton.polish)
-            polished, polish_core = _newton.polish(self, problem, rounds.z, rounds.res, measure, self._dc)
-            if polish_core is not None:
-                rounds.add_timings(polish_core["timings"])
-        return self._assemble(rounds, polished, polish_core, tol, measure)
+        return self._assemble(rounds, problem, tol, measure, bounded)
 
     def _units_weights(self):
         """(d_r, d_c) of the default rule's measure: the equilibration the core iterates on ('units',
@@ -664,36 +659,51 @@ class Solver:
             bp = bi = bd = None
         return (qs, kind, cs, bp, bi, bd, fns), z0s
 
-    def _assemble(self, rounds: "_Rounds", polished, polish_core, tol: float, measure) -> Result:
-        """The result: the best round's z, the status re-decided as docs/SPEC.md says ("When the
-        Python layer changes the core's status"), the rounds' history, timings and counters."""
-        z, w, res = rounds.z, rounds.w, rounds.res
-        if polished is not None:
-            z, w, res = polished
-        status, message = rounds.status(res, tol)
-        if status != Status.CONVERGED:   # (no parameter or member helps an infeasible problem)
-            infeasible = measure.infeasibility()
-            message += infeasible or self._omega2_hint
-            if not infeasible and status in (Status.MAX_ITERATIONS, Status.STAGNATED):
-                message += _member_hint(self.A, self.method) + _outer_hint(self, measure)
-        extra = {}
+    def _assemble(self, rounds: "_Rounds", problem, tol: float, measure, bounded) -> Result:
+        """The result of the rounds (_settle), with what the serial layer adds: hints where it did not
+        converge, the scaling's rounds, the active mask."""
+        def hint(status):
+            infeasible = measure.infeasibility()   # (no parameter or member helps an infeasible problem)
+            if infeasible or status not in (Status.MAX_ITERATIONS, Status.STAGNATED):
+                return infeasible or self._omega2_hint
+            return self._omega2_hint + _member_hint(self.A, self.method) + _outer_hint(self, measure)
+        fields = _settle(self, rounds, problem, measure, tol, polish=self.polish, bounded=bounded,
+                         report=self._hierarchy, hint=hint)
         if self._dr is not None and self.scale != "units":
-            extra["scaling"] = {"kind": self.scale, "refinements": rounds.refined,
-                                "rounds": [(float(tk), Status(s).name, float(r)) for tk, s, r in rounds.rounds]}
-        if self.polish:
-            extra["polished"] = polished is not None
-            status, message = _newton.polish_outcome(status, message, res, tol, polished is not None, polish_core)
-            status = Status(status)
-        if self.method == "newton":
-            extra.update(_newton.result_fields(rounds.best_d, self._hierarchy))
-            message = _newton.with_jacobian_note(message, extra["path"], rounds.best_d["message"])
-        extra["active_mask"] = measure.active_mask(z)
-        status, message, res, extra["criterion"] = _criterion_outcome(measure, z, res, tol, status, message)
-        message = _newton.with_shortening(status, message, self._hierarchy)
-        return Result(z=z, w=w, success=status == Status.CONVERGED, status=status, message=message,
-                      nit=rounds.nit, iterations=rounds.done_iters, residual=res, history=rounds.history(),
-                      timings=rounds.timings, method=self.method, inner=rounds.best_d["inner"],
-                      counters=rounds.counters, **extra)
+            fields["scaling"] = {"kind": self.scale, "refinements": rounds.refined,
+                                 "rounds": [(float(tk), Status(s).name, float(r)) for tk, s, r in rounds.rounds]}
+        return Result(active_mask=measure.active_mask(fields["z"]), **fields)
+
+
+def _settle(solver, rounds: "_Rounds", problem, measure, tol: float, *, polish: bool, bounded: bool, report,
+            hint=None) -> dict:
+    """The fields of a Result from the core's rounds, both engines: the best round's z or its polish
+    (_newton.polish: not on a bounded problem), the status re-decided as docs/SPEC.md says ("When the
+    Python layer changes the core's status"), then by the polish and the default rule's criterion;
+    the Newton member's fields and notes (`report`: its hierarchy_report); the rounds' history,
+    timings and counters. `hint(status)`: a sentence for a solve that did not converge."""
+    polished = polish_core = None
+    if polish and not bounded:
+        polished, polish_core = _newton.polish(solver, problem, rounds.z, rounds.res, measure, solver._dc)
+        if polish_core is not None:
+            rounds.add_timings(polish_core["timings"])
+    z, w, res = polished or (rounds.z, rounds.w, rounds.res)
+    status, message = rounds.status(res, tol)
+    if status != Status.CONVERGED and hint is not None:
+        message += hint(status)
+    extra = {}
+    if polish:
+        extra["polished"] = polished is not None
+        status, message = _newton.polish_outcome(status, message, res, tol, polished is not None, polish_core)
+    if solver.method == "newton":
+        extra.update(_newton.result_fields(rounds.best_d, report))
+        message = _newton.with_jacobian_note(message, extra["path"], rounds.best_d["message"])
+    status, message, res, extra["criterion"] = _criterion_outcome(measure, z, res, tol, Status(status), message)
+    message = _newton.with_shortening(status, message, report)
+    return dict(z=z, w=w, success=status == Status.CONVERGED, status=Status(status), message=message,
+                nit=int(rounds.nit), iterations=int(rounds.done_iters), residual=res, history=rounds.history(),
+                timings=rounds.timings, method=solver.method, inner=rounds.best_d["inner"], counters=rounds.counters,
+                **extra)
 
 
 class _OriginalResidual:

@@ -36,10 +36,8 @@ except ImportError as exc:  # the core package needs no MPI; this module does
 
 from . import _bounds, _core, _options
 from ._mpi import DistributedError, agree, collective as _collective, flag_max as _flag_max, flag_sum as _flag_sum
-from ._newton import (auto_builds_amg, check_jacobian, check_polish, core_jacobian, hierarchy_report, polish,
-                      polish_outcome, result_fields, with_jacobian_note, with_shortening)
-from ._api import (METHODS as _ALL_METHODS, Affine, Result, Status, _Rounds, _choice, _criterion,
-                   _criterion_outcome, _log_final, _progress_hook, _units_parameters, core_options,
+from ._newton import auto_builds_amg, check_jacobian, check_polish, core_jacobian, hierarchy_report
+from ._api import (METHODS as _ALL_METHODS, Affine, Result, Status, _Rounds, _choice, _criterion, _settle, _log_final, _progress_hook, _units_parameters, core_options,
                    choose_method, dominance_margin)
 from ._scaling import sigma_from_logs
 from ._hierarchy import Hierarchy, _fingerprint, resolve_hierarchy
@@ -372,15 +370,13 @@ class Solver:
         if opts.rtol > 0:   # the absolute target, on the problem the core iterates (Options::target of Res(0))
             opts.tol, opts.rtol = opts.target(measure(np.zeros_like(qa))[1]), 0.0
         core, setup, earlier = self._core(_petsc, units, Am, opts, o)
-        za, wa, res, status, message, fields = _rounds(core, setup, measure, xa, opts, o, jacobian, bounded)
-        status, message, res, criterion = _criterion_outcome(measure, za, res, opts.tol, status, message)
-        if m == "newton":
-            message = with_shortening(status, message, fields["hierarchy"])
+        fields = _rounds(core, measure, xa, opts, o, jacobian, bounded)
         if units:   # w in the user's units (re-measured: σ(Az + q) / σ may overflow or underflow)
-            wa = measure(za, weighted=False)[0]
-        fields["timings"]["total"] = time.perf_counter() - t_start + earlier   # (the core's build is in this call)
-        r = Result(z=_vec(A_user, za), w=_vec(A_user, wa), success=status == Status.CONVERGED, status=Status(status),
-                   message=message, residual=float(res), criterion=criterion, method=m, ranks=comm.getSize(), **fields)
+            fields["w"] = measure(fields["z"], weighted=False)[0]
+        timings = fields["timings"]
+        timings["setup"] += setup
+        timings["total"] = time.perf_counter() - t_start + earlier   # (the core's build is in this call)
+        r = Result(**{**fields, "z": _vec(A_user, fields["z"]), "w": _vec(A_user, fields["w"])}, ranks=comm.getSize())
         if opts.verbose > 0:   # (a logger that raises on rank 0 raises on every rank)
             _collective(comm, lambda: comm.getRank() == 0 and _log_final(m, r, fields["timings"]["total"]))
         return r
@@ -524,12 +520,12 @@ def _implicit_upper(upper, Am, comm):
     return (_core.ZetaKind.functor, None, None, None, None, fn)
 
 
-def _rounds(core, setup, measure, xa, opts, o, jacobian, bounded):
+def _rounds(core, measure, xa, opts, o, jacobian, bounded):
     """Either member on the PETSc engine (`core`: nrmicp::Newton or nrmicp::Solver over it) driven by
-    the serial layer's rounds and polish (_api._Rounds, _newton.polish: Res of z re-measured where the
-    core iterated another problem — a constant ζ's shifted LCP, the default rule's σA — and re-solved
-    with a tighter tolerance when it misses tol). Returns (z, w, Res, status, message, the result's
-    other fields); `setup`: the set-up seconds this solve reports; `bounded`: polish is not run."""
+    the serial layer's rounds (_api._Rounds: Res of z re-measured where the core iterated another problem
+    — a constant ζ's shifted LCP, the default rule's σA — and re-solved with a tighter tolerance when it
+    misses tol) and settled by its _settle (polish, the status, the result's fields); `bounded`: polish
+    is not run."""
     m, qa, (kind, c, fn, ua) = o["method"], measure.qa, measure.problem
     solver = types.SimpleNamespace(_core=core, method=m, n=len(qa), _dr=None, _dc=None)   # (a serial Solver's shape)
     problem = (qa, kind, c, fn)
@@ -542,23 +538,9 @@ def _rounds(core, setup, measure, xa, opts, o, jacobian, bounded):
     rounds.progress = lambda method, n: _deferred(_progress_hook(method, n), failed)
     rounds.run(xa, opts.tol)
     agree(measure.Am.getComm(), failed[0] if failed else None)
-    polished = polish_core = None
-    if m == "newton" and o["polish"] and not bounded:   # (as nrmicp.solve: polish is the LCP's Newton step)
-        polished, polish_core = polish(solver, problem, rounds.z, rounds.res, measure, None)
-        if polish_core is not None:
-            rounds.add_timings(polish_core["timings"])
-    z, w, res = polished or (rounds.z, rounds.w, rounds.res)
-    status, message = rounds.status(res, opts.tol)
-    fields = dict(nit=int(rounds.nit), iterations=int(rounds.done_iters), history=rounds.history(),
-                  inner=rounds.best_d["inner"], counters=rounds.counters,
-                  timings=dict(rounds.timings, setup=setup + rounds.timings["setup"]))
-    if m == "newton" and o["polish"]:
-        fields["polished"] = polished is not None
-        status, message = polish_outcome(status, message, res, opts.tol, polished is not None, polish_core)
-    if m == "newton":   # (nrmicp.solve's note of a Jacobian given up)
-        fields.update(result_fields(rounds.best_d, hierarchy_report(core.hierarchy["requested"], None, core)))
-        message = with_jacobian_note(message, fields["path"], rounds.best_d["message"])
-    return z, w, res, Status(status), message, fields
+    report = hierarchy_report(core.hierarchy["requested"], None, core) if m == "newton" else None
+    return _settle(solver, rounds, problem, measure, opts.tol, polish=m == "newton" and o["polish"], bounded=bounded,
+                   report=report)
 
 
 def _deferred(hook, failed):

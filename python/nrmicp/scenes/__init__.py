@@ -96,6 +96,7 @@ __all__ = [
     "solve_exact_box",
     "two_sided_membrane_1d",
     "two_sided_membrane_2d",
+    "two_sided_membrane_heated_2d",
     "elastic_contact",
     "game_put",
     "game_put_price",

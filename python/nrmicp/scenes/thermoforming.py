@@ -32,7 +32,6 @@ process is transient), large deflections, the mould's mechanical deformation.
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from . import Problem
