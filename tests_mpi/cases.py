@@ -1092,12 +1092,47 @@ def case_hooks():
     return out
 
 
+def case_nonpositive_diagonal():
+    """A with a stored zero and a negative diagonal entry: the PETSc 'amg' set-up gives the hierarchy up
+    (hypre divides by the diagonal) with a HierarchyWarning, as the serial one does, and the Newton member
+    takes the serial cold decisions; a stationary member with hierarchy='amg' is refused as serially."""
+    import warnings
+    n = 3000
+    d = np.full(n, 2.0)
+    d[1700] = -1.0
+    A = sp.diags([np.full(n - 1, -1.0), d, np.full(n - 1, -1.0)], [-1, 0, 1], format="csr")
+    A.data[A.indptr[3] + 1] = 0.0   # a stored zero at A[3, 3]
+    q = -np.ones(n)
+    lo, hi = split(n)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        r = dist.solve(A[lo:hi], q[lo:hi], method="newton", hierarchy="amg")
+    out = {"status": str(r.status), "nit": r.nit, "residual": r.residual, "hierarchy": r.hierarchy,
+           "warned": [str(w.message) for w in caught if w.category is nrmicp.HierarchyWarning]}
+    try:
+        dist.solve(A[lo:hi], q[lo:hi], method="nrmgs", hierarchy="amg")
+        out["stationary"] = None
+    except ValueError as exc:
+        out["stationary"] = str(exc)
+    if RANK == 0:
+        with warnings.catch_warnings(record=True):
+            warnings.simplefilter("always")
+            s = nrmicp.solve(A, q, method="newton", hierarchy="amg")
+        out["serial"] = {"status": str(s.status), "nit": s.nit, "residual": s.residual, "hierarchy": s.hierarchy}
+        try:
+            nrmicp.solve(A, q, method="nrmgs", hierarchy="amg")
+        except ValueError as exc:
+            out["serial_stationary"] = str(exc)
+    return out
+
+
 if __name__ == "__main__":
     name, args = sys.argv[1], sys.argv[2:]
     result = {"agreement": lambda: case_agreement(), "partition": case_partition,
               "bad": lambda: case_bad(args[0], args[1]), "boomeramg": case_boomeramg, "dense": case_dense,
               "floor": case_floor, "overshoot": case_overshoot, "sweeps": case_sweeps,
               "warm": case_warm, "one_sided_contact": case_one_sided_contact, "implicit_upper": case_implicit_upper, "jacobian": case_jacobian, "jacobian_still_rows": case_jacobian_still_rows, "solver": case_solver, "units": case_units, "engine": lambda: case_engine(*args), "options": case_options, "rounds": case_rounds, "shared_hierarchy": case_shared_hierarchy, "hazards": case_hazards,
-              "fuzz": lambda: case_fuzz(int(args[0])), "family": case_family, "hooks": case_hooks, "no_rows": case_no_rows}[name]()
+              "fuzz": lambda: case_fuzz(int(args[0])), "family": case_family, "hooks": case_hooks, "no_rows": case_no_rows,
+              "nonpositive_diagonal": case_nonpositive_diagonal}[name]()
     if RANK == 0:
         print("RESULT " + json.dumps(result), flush=True)

@@ -36,9 +36,10 @@ except ImportError as exc:  # the core package needs no MPI; this module does
 
 from . import _bounds, _core, _options
 from ._mpi import DistributedError, agree, collective as _collective, flag_max as _flag_max, flag_sum as _flag_sum
-from ._newton import auto_builds_amg, check_jacobian, check_polish, core_jacobian, hierarchy_report
-from ._api import (METHODS as _ALL_METHODS, Affine, Result, Status, _Rounds, _choice, _criterion, _settle, _log_final, _progress_hook, _units_parameters, core_options,
-                   choose_method, dominance_margin)
+from ._newton import (auto_builds_amg, check_jacobian, check_no_hierarchy, check_polish, core_jacobian, hierarchy_report,
+                      warn_shortened)
+from ._api import (METHODS as _ALL_METHODS, Affine, Result, Status, _Rounds, _choice, _criterion, _settle, _log_final,
+                   _progress_hook, _units_parameters, core_options, choose_method, dominance_margin)
 from ._scaling import sigma_from_logs
 from ._hierarchy import Hierarchy, _fingerprint, resolve_hierarchy
 from ._inputs import as_constant, as_vector
@@ -197,7 +198,8 @@ def _prepare_matrix(A, comm, o):
 
 
 def _member(Am, comm, o):
-    """The member for Am and the set-up options `o` ('auto': nrmicp.solve's rule), checked on every rank."""
+    """The member for Am and the set-up options `o` ('auto': nrmicp.solve's rule), checked on every rank
+    (A's diagonal by the core: the stationary members' rule, and the 'amg' set-up's, which gives up)."""
     nloc = Am.getLocalSize()[0]
     method = o["method"]
     if isinstance(method, str) and method.lower() == "auto":
@@ -207,33 +209,17 @@ def _member(Am, comm, o):
         m = _choice(method, METHODS, "method")
         _core_options(o, m, nloc, _criterion({"tol": o["tol"], "rtol": o["rtol"]})[0])
         hierarchy = o["hierarchy"]
-        named = hierarchy is None or (isinstance(hierarchy, str) and hierarchy in ("amg", "auto"))
-        if m != "newton" and not named:
-            raise ValueError(f"hierarchy is the nested iteration of method 'newton'; got {hierarchy!r}")
-        if m == "newton" and not (named or isinstance(hierarchy, (list, tuple, Hierarchy))):
+        if m != "newton":
+            check_no_hierarchy(hierarchy, m)
+            return m
+        check_polish(o["polish"])
+        _owns_rows(Am)
+        if not (hierarchy in (None, "amg", "auto") or isinstance(hierarchy, (list, tuple, Hierarchy))):
             got = hierarchy if isinstance(hierarchy, str) else type(hierarchy).__name__
             raise ValueError(f"hierarchy must be 'amg', None, a nrmicp.Hierarchy or a list of prolongations (PETSc "
                              f"Mats, or whole scipy matrices on every rank); got {got!r}")
-        if m == "newton":
-            check_polish(o["polish"])
         return m
-    m = _collective(comm, local)
-    d = Am.getDiagonal()
-
-    def diagonal():
-        da = d.getArray(readonly=True)
-        if np.any(~(da > 0)):
-            i = int(np.flatnonzero(~(da > 0))[0])
-            lo = Am.getOwnershipRange()[0]
-            raise ValueError(f"A's diagonal must be positive (method {m!r} divides by it); "
-                             f"A[{lo + i}, {lo + i}] = {da[i]}")
-    try:
-        _collective(comm, diagonal)
-    finally:
-        d.destroy()   # on every rank together (a raise keeps this frame in its traceback)
-    if m == "newton":
-        _collective(comm, _owns_rows, Am)
-    return m
+    return _collective(comm, local)
 
 
 def _prepare_call(Am, m, q, zeta, x0, comm, o, it):
@@ -402,6 +388,7 @@ class Solver:
                 amg = h == "amg" or (h == "auto" and auto_builds_amg(Am.getSize()[0], nnz))
                 Ps = [P.handle for P in self._levels[0]]
                 core = _collective(self.comm, lambda: _petsc.Newton(Am.handle, opts, Ps, amg))
+                warn_shortened(hierarchy_report(core.hierarchy["requested"], None, core), h)   # (every rank alike)
             else:
                 core = _collective(self.comm, lambda: _petsc.Solver(Am.handle, opts))
             self._cores[units] = [core, time.perf_counter() - t0]

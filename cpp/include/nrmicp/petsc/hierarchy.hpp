@@ -31,6 +31,7 @@ namespace nrmicp::petsc {
 struct AmgHierarchy {
   std::vector<Matrix> prolongations;
   std::vector<Matrix> coarse_operators;
+  std::string reason;  ///< why no level was built ("" when the set-up ran): a cold start, as serially
 };
 
 /// PETSc options with this prefix build the hierarchy (the rule of amg_hierarchy gives way to them).
@@ -129,13 +130,29 @@ inline void fold_first(AmgHierarchy& h) {
   h.coarse_operators.erase(h.coarse_operators.begin());
 }
 
+/// Why A cannot be coarsened (hypre's smoothers and interpolation divide by a_ii; it crashes on a zero one):
+/// the row of its smallest diagonal entry when that is not positive, or "". Collective.
+inline std::string nonpositive_diagonal(Mat A) {
+  Vec d;
+  check(MatCreateVecs(A, nullptr, &d), "MatCreateVecs");
+  PetscInt row = 0;
+  PetscReal least = 0;
+  PetscErrorCode e = MatGetDiagonal(A, d);
+  if (!e) e = VecMin(d, &row, &least);
+  VecDestroy(&d);
+  check(e, "MatGetDiagonal, VecMin");
+  if (least > 0) return "";  // (no value in the words: the core may hold σA)
+  return "A's diagonal is not positive at row " + std::to_string(row) + " (the amg set-up divides by it)";
+}
+
 }  // namespace hierarchy_detail
 
 /// The nesting hierarchy of A by the rule above, or by the user's options under `prefix` when any are
-/// given. Collective on A's communicator; the levels hold their own references (no PC is kept).
+/// given; none, with the reason, where A's diagonal is not positive. Collective on A's communicator; the levels hold their own references (no PC is kept).
 inline AmgHierarchy amg_hierarchy(const Matrix& A, const std::string& prefix = kHierarchyPrefix) {
   using namespace hierarchy_detail;
   const std::string b = "pc_hypre_boomeramg_";
+  if (std::string why = nonpositive_diagonal(A.get()); !why.empty()) return {{}, {}, std::move(why)};
   if (user_options(prefix)) return set_up(A.get(), prefix, {});
   // the first level alone (its coarse "solve" never runs: no Gaussian elimination of it)
   const std::string max_levels = b + "max_levels", coarse = b + "relax_type_coarse", strong = b + "strong_threshold";
