@@ -145,6 +145,11 @@ def _bad(kind):
         D = sp.lil_matrix(A)
         D[n - 1, n - 1] = 0.0
         return mat(sp.csr_matrix(D), lo, hi), q, zeta, kw
+    elif kind in ("complex_A", "corrupt_A"):   # the last rank's scipy row block: complex / an index past n
+        B = A[lo:hi].astype(complex) * (1 + 1j) if kind == "complex_A" else A[lo:hi].copy()
+        if kind == "corrupt_A":
+            B.indices[-1] = n + 5
+        return B if last else A[lo:hi], pb.q[lo:hi], zeta, kw
     elif kind == "nan_q":
         qa = pb.q[lo:hi].copy()
         if last:
@@ -226,8 +231,8 @@ def _snapshot(*objs):
             out.append([a.tolist() for a in o.getValuesCSR()])
         elif isinstance(o, PETSc.Vec):
             out.append(o.getArray().tolist())
-        elif sp.issparse(o):
-            out.append(o.toarray().tolist())
+        elif sp.issparse(o):   # (its arrays: a corrupt one has no toarray)
+            out.append([str(a.tolist()) for a in (o.data, o.indices, o.indptr)])
         elif isinstance(o, np.ndarray):
             out.append(np.nan_to_num(o, nan=1e300).tolist())
         elif isinstance(o, nrmicp.Affine):

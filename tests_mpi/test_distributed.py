@@ -126,6 +126,8 @@ BAD = {
     "nonsquare": ("ValueError", "must together be square"),
     "zero_diagonal": ("ValueError", "diagonal"),   # (newton: stored in every row; nrmgs: positive)
     "nan_q": ("ValueError", "q has a non-finite entry"),
+    "complex_A": ("TypeError", "A must be real"),
+    "corrupt_A": ("ValueError", "A is not a valid sparse matrix"),
     "zeta_raises": ("RuntimeError", "zeta failed here"),
     "callback_raises": ("RuntimeError", "callback failed here"),
     "zeta_nan": ("ValueError", "NaN or Inf"),

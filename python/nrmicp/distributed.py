@@ -42,7 +42,7 @@ from ._api import (METHODS as _ALL_METHODS, Affine, Result, Status, _Rounds, _ch
                    _progress_hook, _units_parameters, core_options, choose_method, dominance_margin)
 from ._scaling import sigma_from_logs
 from ._hierarchy import Hierarchy, _fingerprint, resolve_hierarchy
-from ._inputs import as_constant, as_vector
+from ._inputs import as_constant, as_csr, as_vector
 from ._zeta import CheckedZeta
 
 __all__ = ["solve", "Solver", "gather", "METHODS", "DistributedError"]
@@ -65,7 +65,7 @@ _UNSUPPORTED_STATIONARY = {
 # ----------------------------------------------------------------------------- inputs
 def _check_mat(A):
     """A's local checks: a square AIJ Mat with equal row and column layouts, or a scipy row block
-    (returned as canonical float64 CSR)."""
+    (returned as canonical float64 CSR, checked as nrmicp.solve checks A)."""
     if isinstance(A, PETSc.Mat):
         if "aij" not in A.getType():
             raise TypeError(f"A must be an AIJ (sparse) PETSc matrix, got type {A.getType()!r}")
@@ -78,12 +78,7 @@ def _check_mat(A):
         return A
     if not sp.issparse(A):
         raise TypeError(f"A must be a petsc4py Mat or this rank's scipy.sparse row block, got {type(A).__name__}")
-    B = sp.csr_matrix(A, dtype=np.float64, copy=True)
-    B.sum_duplicates()
-    B.sort_indices()
-    if not np.all(np.isfinite(B.data)):
-        raise ValueError("A must be finite (this rank's rows hold NaN or Inf)")
-    return B
+    return as_csr(A, "A", square=False, warn=False)   # (nrmicp.solve's checks; PETSc copies it)
 
 
 def _as_mat(B, comm):
