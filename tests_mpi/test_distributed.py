@@ -331,3 +331,11 @@ def test_a_nonpositive_diagonal_gives_the_amg_hierarchy_up_as_serially(ranks):
     assert "not positive at row 1700" in out["hierarchy"]["reason"], out
     assert len(out["warned"]) == 1 and "a cold start" in out["warned"][0], out
     assert out["stationary"].endswith(out["serial_stationary"]), out
+
+
+@pytest.mark.parametrize("ranks", [1, 2])
+def test_an_affine_zeta_takes_newton_with_its_b_on_petsc(ranks):
+    out = mpirun(ranks, "affine_newton", timeout=120)
+    assert out["status"] == out["serial_status"] == "CONVERGED", out
+    assert out["nit"] == out["operator_nit"], out   # (the serial member with B as an operator: the same steps)
+    assert out["err"] < 1e-8 and out["res"] < 1e-8, out

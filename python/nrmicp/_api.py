@@ -16,7 +16,7 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike
 
 from . import _core
-from ._inputs import as_constant, as_csr, as_vector
+from ._inputs import WholeRows, as_csr, as_vector
 from ._scaling import SCALINGS, ScaledCallable, equilibrate, scale_matrix, units_factor
 from . import _bounds, _newton, _options
 from ._options import _INT_MAX, _choice, _scalar  # noqa: F401 (the distributed glue imports them from here)
@@ -173,25 +173,25 @@ def _checked(opts, n):
 ZetaKind = _core.ZetaKind  # the C++ core's (zeta.hpp): none, constant, affine, functor
 
 
-def _make_zeta(zeta, n):
+def _make_zeta(zeta, n, read=None):
     """Validate ζ -> (kind, c, B, fn): a ZetaKind, the constant c (constant, affine), B canonical
-    CSR (affine), the callable (functor)."""
+    CSR (affine), the callable (functor). `read`: how B and c are read (_inputs.WholeRows(n) unless
+    given: nrmicp.distributed reads this rank's rows)."""
+    read = read or WholeRows(n)
     if zeta is None:
         return ZetaKind.none, None, None, None
     if isinstance(zeta, Affine):
-        B = as_csr(zeta.B, "zeta.B")
-        if B.shape != (n, n):
-            raise ValueError(f"zeta.B must have shape ({n}, {n}), got {B.shape}")
-        return ZetaKind.affine, as_constant(zeta.c, n, "zeta.c"), B, None
+        B = read.matrix(zeta.B, "zeta.B")
+        return ZetaKind.affine, read.vector(zeta.c, "zeta.c"), B, None
     if callable(zeta):
         return ZetaKind.functor, None, None, zeta
-    return ZetaKind.constant, _bounds.as_lower(zeta, n), None, None
+    return ZetaKind.constant, read.vector(zeta, "zeta", infinite=-1), None, None   # (-inf: free below)
 
 
-def _make_upper(upper, n):
+def _make_upper(upper, n, read=None):
     """``upper=`` checked -> None, a vector (+inf: no bound there) or an implicit upper bound
-    (_bounds.ImplicitUpper: an Affine or a callable)."""
-    return _bounds.as_upper(upper, n, (upper.B, upper.c) if isinstance(upper, Affine) else None)
+    (_bounds.ImplicitUpper: an Affine or a callable); `read` as in _make_zeta."""
+    return _bounds.as_upper(upper, n, (upper.B, upper.c) if isinstance(upper, Affine) else None, read)
 
 
 def _scale_choice(scale):

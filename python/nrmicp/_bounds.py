@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _core
-from ._inputs import as_constant, as_csr
+from ._inputs import WholeRows
 from ._scaling import ScaledCallable, scale_matrix
 from ._zeta import CheckedZeta
 
@@ -62,19 +62,19 @@ class ImplicitUpper:
         return (self.kind, None, None, None, None, fn)
 
 
-def as_upper(upper, n: int, affine: tuple | None = None):
+def as_upper(upper, n: int, affine: tuple | None = None, read=None):
     """``upper=`` -> None (no upper bound), a float64 vector that may hold +inf (no bound there), or an
-    ImplicitUpper: `affine` (B, c) of an Affine upper, or a callable. Errors name ``upper``."""
+    ImplicitUpper: `affine` (B, c) of an Affine upper, or a callable. Errors name ``upper``. `read`: how
+    B and vectors are read (_inputs.WholeRows(n) unless given)."""
     if upper is None or isinstance(upper, ImplicitUpper):   # (the latter already checked: a re-solve)
         return upper
+    read = read or WholeRows(n)
     if affine is not None:
-        B = as_csr(affine[0], "upper.B")
-        if B.shape != (n, n):
-            raise ValueError(f"upper.B must have shape ({n}, {n}), got {B.shape}")
-        return ImplicitUpper(ZetaKind.affine, B=B, c=as_constant(affine[1], n, "upper.c", infinite=1))
+        B = read.matrix(affine[0], "upper.B")
+        return ImplicitUpper(ZetaKind.affine, B=B, c=read.vector(affine[1], "upper.c", infinite=1))
     if callable(upper):
         return ImplicitUpper(ZetaKind.functor, fn=CheckedUpper(upper, n))
-    u = as_constant(upper, n, "upper", infinite=1)
+    u = read.vector(upper, "upper", infinite=1)
     return None if np.all(u == np.inf) else u
 
 
@@ -88,11 +88,6 @@ def core_upper(upper, index_dtype, dc=None):
     if isinstance(upper, ImplicitUpper):
         return upper.core(index_dtype, dc)
     return upper if upper is None or dc is None else upper / dc
-
-
-def as_lower(zeta, n: int) -> np.ndarray:
-    """A constant ζ that may hold -inf (z free below there) -> float64 vector."""
-    return as_constant(zeta, n, "zeta", infinite=-1)
 
 
 def is_bounded(c, upper) -> bool:

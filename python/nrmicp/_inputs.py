@@ -215,6 +215,23 @@ def as_constant(value, n: int, name: str, infinite: int = 0) -> np.ndarray:
     return as_vector(value, n, name, infinite)
 
 
+class WholeRows:
+    """How nrmicp.solve reads the parts of ζ and ``upper`` (a matrix B, a constant or vector): whole, n rows.
+    nrmicp.distributed reads them as this rank's rows of PETSc objects through the same two methods."""
+
+    def __init__(self, n: int):
+        self.n = n
+
+    def matrix(self, B, name: str) -> sp.csr_matrix:
+        B = as_csr(B, name)
+        if B.shape != (self.n, self.n):
+            raise ValueError(f"{name} must have shape ({self.n}, {self.n}), got {B.shape}")
+        return B
+
+    def vector(self, v, name: str, infinite: int = 0) -> np.ndarray:
+        return as_constant(v, self.n, name, infinite)
+
+
 def as_diagonal(v, n: int, name: str, *, positive: bool) -> np.ndarray | None:
     """None, a scalar (times I) or a length-n vector -> float64 vector (or None), checked > 0
     (`positive`) or >= 0."""

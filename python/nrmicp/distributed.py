@@ -38,7 +38,7 @@ from . import _bounds, _core, _options
 from ._mpi import DistributedError, agree, collective as _collective, flag_max as _flag_max, flag_sum as _flag_sum
 from ._newton import (auto_builds_amg, check_jacobian, check_no_hierarchy, check_polish, core_jacobian, hierarchy_report,
                       warn_shortened)
-from ._api import (METHODS as _ALL_METHODS, Affine, Result, Status, _Rounds, _choice, _criterion, _settle, _log_final,
+from ._api import (METHODS as _ALL_METHODS, Result, _make_upper, _make_zeta, Status, _Rounds, _choice, _criterion, _settle, _log_final,
                    _progress_hook, _units_parameters, core_options, choose_method, dominance_margin)
 from ._scaling import sigma_from_logs
 from ._hierarchy import Hierarchy, _fingerprint, resolve_hierarchy
@@ -130,28 +130,33 @@ def _core_options(o, method, nloc, it):
     return core_options(o, method, nloc, {**{k: o[k] for k in _options.names("solve")}, "tol": it["tol"], "rtol": it["rtol"]})
 
 
+class _Rows:
+    """How ζ's and upper's parts are read here (_api._make_zeta, _bounds.as_upper: nrmicp.solve's rules and
+    messages): a matrix as a PETSc Mat in A's layout, a constant or vector as this rank's rows."""
+
+    def __init__(self, A):
+        self.A = A
+
+    def matrix(self, B, name):
+        n, rows = self.A.getSize()[0], self.A.getOwnershipRange()
+        if not isinstance(B, PETSc.Mat):
+            raise TypeError(f"{name} must be a petsc4py Mat in A's layout, got {type(B).__name__}")
+        if B.getSize() != (n, n) or B.getOwnershipRange() != rows:
+            raise ValueError(f"{name} must be ({n}, {n}) with A's row layout, got {B.getSize()} rows {B.getOwnershipRange()}")
+        return B
+
+    def vector(self, v, name, infinite=0):
+        return _local(v, self.A, name, scalar_ok=True, infinite=infinite)
+
+
 class _Zeta:
     """ζ on this rank's rows: its kind (_core.ZetaKind: none, constant c, affine B Mat and c, functor a callable)."""
 
-    def __init__(self, zeta, A, comm, name="zeta", c_infinite=0):
-        """Local checks only; `name` in the messages (an Affine upper bound: "upper", its c may hold
-        +inf: c_infinite=1)."""
-        self.comm, self.B, self.c, self.fn = comm, None, None, None
-        n = A.getSize()[0]
-        if zeta is None:
-            self.kind = _K.none
-        elif isinstance(zeta, Affine):
-            self.kind = _K.affine
-            if not isinstance(zeta.B, PETSc.Mat):
-                raise TypeError(f"{name}.B must be a petsc4py Mat in A's layout, got {type(zeta.B).__name__}")
-            if zeta.B.getSize() != (n, n) or zeta.B.getOwnershipRange() != A.getOwnershipRange():
-                raise ValueError(f"{name}.B must be ({n}, {n}) with A's row layout, got {zeta.B.getSize()} "
-                                 f"rows {zeta.B.getOwnershipRange()}")
-            self.B, self.c = zeta.B, _local(zeta.c, A, f"{name}.c", scalar_ok=True, infinite=c_infinite)
-        elif callable(zeta):
-            self.kind, self.fn = _K.functor, CheckedZeta(zeta, A.getLocalSize()[0])
-        else:
-            self.kind, self.c = _K.constant, _local(zeta, A, "zeta", scalar_ok=True, infinite=-1)  # -inf: free below
+    def __init__(self, zeta, A, comm):
+        """Local checks only."""
+        self.comm, nloc = comm, A.getLocalSize()[0]
+        self.kind, self.c, self.B, fn = _make_zeta(zeta, nloc, _Rows(A))
+        self.fn = None if fn is None else CheckedZeta(fn, nloc)
 
     def _checked(self, z):
         r = self.fn(z)
@@ -167,14 +172,20 @@ class _Zeta:
         rank raises on all, in the same call of the one driver)."""
         if self.kind in (_K.none, _K.constant):
             return self.kind, self.c, None
-        zv, out, c = A.createVecRight(), A.createVecLeft(), _vec(A, self.c) if self.kind == _K.affine else None
-
-        def affine(z):
-            zv.setArray(z)
-            self.B.multAdd(zv, c, out)
-            return np.array(out.getArray(readonly=True))
-        local = affine if self.kind == _K.affine else (lambda z: _collective(self.comm, self._checked, z))
+        local = _affine(self.B, self.c, A) if self.kind == _K.affine else (
+            lambda z: _collective(self.comm, self._checked, z))
         return _K.functor, None, CheckedZeta(local, A.getLocalSize()[0])
+
+
+def _affine(B, c, A):
+    """z ↦ B z + c on this rank's rows (PETSc's product: collective)."""
+    zv, out, cv = A.createVecRight(), A.createVecLeft(), _vec(A, c)
+
+    def product(z):
+        zv.setArray(z)
+        B.multAdd(zv, cv, out)
+        return np.array(out.getArray(readonly=True))
+    return product
 
 
 # ----------------------------------------------------------------------------- the entry points
@@ -347,7 +358,7 @@ class Solver:
             _units_parameters(opts, m, sigma, Am.getLocalSize()[0])
         kind, c, fn = zf.core_args(Am)
         measure = _Measure(_petsc, Am, qa, (kind, c, fn, ua), (A_user, q_user) if units else None)
-        jacobian = _jacobian(o["zeta_jacobian"], zf, m, Am, comm)
+        jacobian = _jacobian(o["zeta_jacobian"], zf, m, Am, comm, bounded)
         if opts.rtol > 0:   # the absolute target, on the problem the core iterates (Options::target of Res(0))
             opts.tol, opts.rtol = opts.target(measure(np.zeros_like(qa))[1]), 0.0
         core, setup, earlier = self._core(_petsc, units, Am, opts, o)
@@ -471,35 +482,24 @@ def _auto_method(Am, options, comm):
 def _upper(upper, Am, zf, comm, method):
     """(This rank's rows of the upper bound, None: none; whether the problem is bounded, as
     _bounds.is_bounded on every rank's rows). A -inf entry of a constant ζ on any rank (a free row)
-    makes every rank's problem a box problem: for the stationary members upper +inf where none is given."""
+    makes every rank's problem a box problem: for the stationary members upper +inf where none is given.
+    An implicit upper (an Affine, B a petsc4py Mat in A's layout, or a callable of this rank's rows) is
+    the core's (make_zeta's tuple: a functor whose every call is collective)."""
+    nloc = Am.getLocalSize()[0]
     if upper is None:
         free = zf.kind == _K.constant and _flag_max(comm, float(np.any(np.isneginf(zf.c)))) > 0
-        return np.full(Am.getLocalSize()[0], np.inf) if free and method != "newton" else None, free
+        return np.full(nloc, np.inf) if free and method != "newton" else None, free
 
     def local():
-        kind = zf.kind
-        if callable(upper) or isinstance(upper, Affine):   # an implicit upper: the core's outer fixed point
-            _bounds.check(kind, None, _bounds.ImplicitUpper(_core.ZetaKind.functor), method, None)
-            return _implicit_upper(upper, Am, comm)
-        u = _local(upper, Am, "upper", scalar_ok=True, infinite=1)
-        _bounds.check(kind, zf.c if zf.kind == _K.constant else None, u, method, None)
-        return u
-    return _collective(comm, local), True
-
-
-def _implicit_upper(upper, Am, comm):
-    """An Affine (B a petsc4py Mat in A's layout) or callable upper bound as the core's implicit one
-    (make_zeta's tuple: a functor of this rank's rows, each call collective, its values checked as
-    nrmicp.solve checks them: _bounds.CheckedUpper)."""
-    nloc = Am.getLocalSize()[0]
-    if isinstance(upper, Affine):
-        u = _Zeta(upper, Am, comm, name="upper", c_infinite=1)   # (c's +inf: no bound on that row)
-        fn = u.core_args(Am)[2]
-    else:
-        checked = _bounds.CheckedUpper(upper, nloc)
-        fn = CheckedZeta(lambda z: _collective(comm, checked, z), nloc)
+        u = _make_upper(upper, nloc, _Rows(Am))
+        _bounds.check(zf.kind, zf.c if zf.kind == _K.constant else None, u, method, None)
+        return np.full(nloc, np.inf) if u is None else u   # (all +inf on this rank: the same core call as the others)
+    u = _collective(comm, local)
+    if not isinstance(u, _bounds.ImplicitUpper):
+        return u, True
+    fn = CheckedZeta(_affine(u.B, u.c, Am) if u.kind == _K.affine else (lambda z: _collective(comm, u.fn, z)), nloc)
     fn.what = "upper(z)"
-    return (_core.ZetaKind.functor, None, None, None, None, fn)
+    return (_K.functor, None, None, None, None, fn), True
 
 
 def _rounds(core, measure, xa, opts, o, jacobian, bounded):
@@ -555,13 +555,21 @@ class _Measure:
         return self._petsc.measure(self.Am.handle, self.qa, *self.problem, z, rounding=True)["rounding_level"]
 
 
-def _jacobian(zeta_jacobian, zf, method, Am, comm):
-    """ζ's Jacobian for the core (None: none given): zeta_jacobian(z) of this rank's rows returns a
-    linear operator on them (its matvec may communicate: every rank calls it together) or a diagonal
-    matrix; nrmicp.solve's checks, each call of the user's code collective."""
-    if not _collective(comm, check_jacobian, zeta_jacobian, method, zf.kind):
+def _jacobian(zeta_jacobian, zf, method, Am, comm, bounded):
+    """ζ's Jacobian for the core (None: none): zeta_jacobian(z) of this rank's rows returns a linear
+    operator on them (its matvec may communicate: every rank calls it together) or a diagonal matrix;
+    nrmicp.solve's checks, each call of the user's code collective. An Affine ζ's is its B (the serial
+    core solves its full system with B; this engine takes B's product, each step's Krylov solve as for
+    any ζ′), without bounds (those take the outer fixed point, as serially)."""
+    given = _collective(comm, check_jacobian, zeta_jacobian, method, zf.kind)
+    nloc = Am.getLocalSize()[0]
+    if zf.kind == _K.affine and method == "newton" and not bounded:
+        from scipy.sparse.linalg import LinearOperator
+        B = LinearOperator((nloc, nloc), matvec=_affine(zf.B, np.zeros(nloc), Am), dtype=np.float64)
+        zeta_jacobian = lambda z: B   # noqa: E731 - a constant Jacobian
+    elif not given:
         return None
-    return core_jacobian(zeta_jacobian, Am.getLocalSize()[0], PETSc.IntType, collective=functools.partial(_collective, comm))
+    return core_jacobian(zeta_jacobian, nloc, PETSc.IntType, collective=functools.partial(_collective, comm))
 
 
 def _owns_rows(Am):
