@@ -177,6 +177,8 @@ def _bad(kind):
         kw = {"upper": upper}
     elif kind == "bad_method":
         kw = {"method": "sor"}
+    elif kind == "array_hierarchy":   # (an array is no hierarchy: named, not numpy's ambiguous truth value)
+        kw = {"hierarchy": np.eye(3)}
     return M, q, zeta, kw
 
 

@@ -133,6 +133,7 @@ BAD = {
     "zeta_nan": ("ValueError", "NaN or Inf"),
     "bad_option": ("ValueError", "tol"),
     "bad_method": ("ValueError", "method must be one of"),
+    "array_hierarchy": ("ValueError", "hierarchy"),
     "crossing_bounds": ("ValueError", "upper"),   # (nrmgs: bounds are method 'newton''s)
 }
 

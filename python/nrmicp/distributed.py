@@ -220,7 +220,8 @@ def _member(Am, comm, o):
             return m
         check_polish(o["polish"])
         _owns_rows(Am)
-        if not (hierarchy in (None, "amg", "auto") or isinstance(hierarchy, (list, tuple, Hierarchy))):
+        named = hierarchy is None or (isinstance(hierarchy, str) and hierarchy in ("amg", "auto"))
+        if not (named or isinstance(hierarchy, (list, tuple, Hierarchy))):
             got = hierarchy if isinstance(hierarchy, str) else type(hierarchy).__name__
             raise ValueError(f"hierarchy must be 'amg', None, a nrmicp.Hierarchy or a list of prolongations (PETSc "
                              f"Mats, or whole scipy matrices on every rank); got {got!r}")
