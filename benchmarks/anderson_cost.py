@@ -6,7 +6,7 @@ one American-put step; tol 1e-8). The README's "Which method for which problem" 
 
     python benchmarks/anderson_cost.py
 """
-import math, sys, nrmicp
+import math, nrmicp
 from nrmicp import scenes
 
 def per_iter(P, acc, iters=1500):

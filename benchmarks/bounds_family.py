@@ -56,7 +56,7 @@ def iteration_counts(ms, tol):
                 if name != "lcp":
                     at_up = int(np.sum(r.active_mask == 1))
             rows.append((n, method, its["lcp"], its["box"], its["box+free"], at_up))
-    print(f"| n | method | LCP | box (upper = 0.75 max z*) | box + free rows | rows at upper |")
+    print("| n | method | LCP | box (upper = 0.75 max z*) | box + free rows | rows at upper |")
     print("|---|---|---|---|---|---|")
     for r in rows:
         print("| " + " | ".join(str(v) for v in r) + " |")

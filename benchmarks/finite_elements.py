@@ -35,7 +35,6 @@ import subprocess
 import sys
 import time
 
-import numpy as np
 
 import other_matrices  # noqa: E402  (this directory is on sys.path when a script here runs)
 

@@ -4,7 +4,6 @@ two_sided_heated_2d) against the constant ceiling (two_sided_2d), method newton,
     OPENBLAS_NUM_THREADS=1 python benchmarks/implicit_upper.py 31 127 255     # grid parameters m (n = m^2)
 """
 import sys, time
-import numpy as np
 import nrmicp
 from nrmicp import scenes
 for m in (int(a) for a in sys.argv[1:]):

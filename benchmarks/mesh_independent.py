@@ -47,7 +47,6 @@ import sys
 import time
 
 import numpy as np
-import scipy.sparse as sp
 from nrmicp.bench.peers import estimate
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -304,7 +303,7 @@ def _one_cell(r):
 
 
 def markdown(rows, meta):
-    out = [f"# Mesh-independent solves (benchmarks/mesh_independent.py)", "",
+    out = ["# Mesh-independent solves (benchmarks/mesh_independent.py)", "",
            f"{meta}", ""]
     obst = [r for r in rows if r["section"] == "obstacle"]
     if obst:

@@ -18,8 +18,6 @@ and time ratio vs plain on Bai μ = 4 problems (tests/problems.py); (3) the docu
 from __future__ import annotations
 
 import argparse
-import os
-import sys
 import time
 import warnings
 

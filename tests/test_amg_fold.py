@@ -17,7 +17,6 @@ import pyamg  # noqa: F401  (required: a missing one fails, not skips)
 
 def rs_first_level(A):
     """pyamg's own first Ruge–Stüben level (θ = 0.25): P_0 and P_0ᵀ A P_0."""
-    import pyamg
     ml = pyamg.ruge_stuben_solver(sp.csr_matrix(A), max_levels=2, max_coarse=10)
     P0 = ml.levels[0].P
     return P0, P0.T @ A @ P0

@@ -119,7 +119,6 @@ def test_newton_polish_and_the_peers_are_in_the_same_sweep(quick_run):
     and their answers agree with the scene's exact discrete solution (policy iteration)."""
     _, proc, _, rows = quick_run
     methods = ["newton", "nrmgs+polish", "psor", _installed_qp()]
-    P = scenes.build("obstacle_2d", "tiny")
     for m in methods:
         rs = _rows(rows, "obstacle_2d", m)
         assert [float(r["tol"]) for r in rs] == list(family.QUICK_TOLS), m

@@ -1,7 +1,6 @@
 """The defaults never mislead (issue 38): a change of units changes neither the answer nor the
 verdict, method='auto' takes the member that works, and the advice in a failed solve's message works
 on the problem that produced it. The reference is a plain primal-dual active-set method written here."""
-import math
 
 import numpy as np
 import pytest

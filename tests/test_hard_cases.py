@@ -29,10 +29,9 @@ printed by ``python tests/test_hard_cases.py``.
 from __future__ import annotations
 
 import itertools
-import math
 import warnings
 from dataclasses import dataclass, field
-from typing import Callable, Optional
+from typing import Optional
 
 import numpy as np
 import pytest
@@ -226,10 +225,10 @@ def _badly_scaled(m, seed, kind):
     # Solution of the scaled problem: z = Dc⁻¹ z_B, w = Dr w_B.
     if kind == "lcp":
         z = g / dc
-        return Case(f"badly-scaled-lcp", A, dr * w - A @ z, None, z, unique=True)
+        return Case("badly-scaled-lcp", A, dr * w - A @ z, None, z, unique=True)
     c = rng.uniform(-1, 1, n) / dc
     z = g / dc + c
-    return Case(f"badly-scaled-obstacle", A, dr * w - A @ z, c, z, unique=True)
+    return Case("badly-scaled-obstacle", A, dr * w - A @ z, c, z, unique=True)
 
 
 def _nonsmooth(m, seed=0):

@@ -3,7 +3,6 @@ as a reader would paste them), and the page keeps its promises about its own sha
 import os
 import re
 
-import pytest
 
 import nrmicp  # noqa: F401  (required: a missing one fails, not skips)
 import pyamg  # noqa: F401  (required: a missing one fails, not skips)

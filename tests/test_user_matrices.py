@@ -3,7 +3,6 @@ and games), a best iterate never worse than the start, ``verbose=True``, and the
 march's first step. Each test failed before its fix."""
 from __future__ import annotations
 
-import logging
 import re
 
 import numpy as np

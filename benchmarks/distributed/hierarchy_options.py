@@ -59,7 +59,6 @@ def worker(name, config, folder):
     """One distributed solve (and at np 1 the serial one); rank 0 prints RESULT json."""
     import petsc4py
     petsc4py.init([])
-    import numpy as np
     from petsc4py import PETSc
     from nrmicp import distributed as dist
     A, q, psi = scene(name, folder)

@@ -12,8 +12,6 @@ of tests/test_hard_cases.py.
     python tests/golden/newton.py after.pkl       # on the new build
     python tests/golden/newton.py --diff before.pkl after.pkl
 """
-import os
-import sys
 
 import numpy as np
 import scipy.sparse as sp
