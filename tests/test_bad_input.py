@@ -151,6 +151,11 @@ def test_wrong_length_vectors(n, m, arg):
         nrmicp.solve(A, q, zeta, **kw)
 
 
+def test_a_one_dimensional_sparse_array_is_not_a_matrix():
+    with pytest.raises(ValueError, match="A must be 2-D"):
+        nrmicp.solve(sp.coo_array(np.ones(5)), np.ones(5))
+
+
 def test_empty_A():
     with pytest.raises(ValueError, match="A"):
         nrmicp.solve(sp.csr_matrix((0, 0)), np.zeros(0))

@@ -1,14 +1,14 @@
 """What this machine gives from np 1 to np 2 without nrmicp: PETSc and hypre alone on the 2D and 3D
-Laplacians of benchmarks/distributed/bench.py (the same A and row blocks), for the ceiling of
-nrmicp.distributed's own scaling (docs/DISTRIBUTED.md, "What was reached and what was not").
+Laplacians of benchmarks/distributed/bench.py (the same A and row blocks), beside which nrmicp.distributed's
+own scaling is read (docs/DISTRIBUTED.md, "What was reached and what was not").
 
-    python benchmarks/distributed/platform.py [--m2 1023] [--m3 99] [--ranks 1 2]
+    python benchmarks/distributed/petsc_alone.py [--m2 1023] [--m3 99] [--ranks 1 2]
 
 Per scene and rank count, CPU seconds of the slowest rank, min of 3 (OPENBLAS_NUM_THREADS=1):
   matmult  100 products A x (PETSc MatMult)
-  setup    BoomerAMG's set-up with hypre's defaults (KSPSetUp of CG + PCHYPRE)
+  setup    BoomerAMG's set-up with PETSc's PCHYPRE defaults (KSPSetUp of CG + PCHYPRE)
   solve    that CG + BoomerAMG solve of A x = 1 to rtol 1e-8
-  whole    setup + solve: one linear solve as a user pays it
+  whole    setup + solve of one repetition: one linear solve as a user pays it
 and each one's ratio np 1 / np k. The load average is printed before and after (a shared machine).
 """
 import argparse
@@ -36,6 +36,7 @@ def worker(dims: int, m: int) -> None:
     best = {}
     for _ in range(3):
         times = _once(PETSc, comm, M, b, x)
+        times["whole"] = times["setup"] + times["solve"]
         for part, t in times.items():
             best[part] = min(best.get(part, float("inf")), _slowest(PETSc, comm, t))
     if comm.getRank() == 0:
@@ -84,9 +85,7 @@ def run(ranks: int, dims: int, m: int) -> dict:
                          check=True).stdout
     line = next(ln for ln in out.splitlines() if ln.startswith("RESULT "))
     words = line.split()[1:]
-    parts = {words[i]: float(words[i + 1]) for i in range(0, len(words), 2)}
-    parts["whole"] = parts["setup"] + parts["solve"]
-    return parts
+    return {words[i]: float(words[i + 1]) for i in range(0, len(words), 2)}
 
 
 def main() -> None:

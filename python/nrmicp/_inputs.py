@@ -37,6 +37,8 @@ def as_csr(A, name: str = "A", *, square: bool = True, warn: bool = True) -> sp.
     note = _warn if warn else (lambda msg: None)
     canonical = None  # unknown
     if sp.issparse(A):
+        if A.ndim != 2:   # (a 1-D sparse array: before its structure is read as rows and columns)
+            raise ValueError(f"{name} must be 2-D, got shape {A.shape}")
         M, canonical = _check_structure(A, name)
         if M.format != "csr":
             note(f"{name}: converting {M.format.upper()} to CSR (copy); pass CSR to avoid it")

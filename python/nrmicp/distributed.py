@@ -78,7 +78,10 @@ def _check_mat(A):
         return A
     if not sp.issparse(A):
         raise TypeError(f"A must be a petsc4py Mat or this rank's scipy.sparse row block, got {type(A).__name__}")
-    return as_csr(A, "A", square=False, warn=False)   # (nrmicp.solve's checks; PETSc copies it)
+    try:
+        return as_csr(A, "A", square=False, warn=False)   # (nrmicp.solve's checks; PETSc copies it)
+    except ValueError as exc:
+        raise ValueError(f"{exc} (of this rank's block of rows: its rows count from the block's first)") from None
 
 
 def _as_mat(B, comm):
@@ -194,6 +197,9 @@ def _prepare_matrix(A, comm, o):
     set-up options `o` are checked here too (the core's Options, by the serial code), with tol and
     rtol at their defaults. A Mat made here from scipy row blocks is destroyed when a check fails."""
     A_in = _collective(comm, _check_mat, A)
+    kind = float(sp.issparse(A_in))
+    mixed = _flag_max(comm, kind) != -_flag_max(comm, -kind)   # (else the ranks would part ways: a hang)
+    _collective(comm, _refuse_mixed, mixed)
     Am = _as_mat(A_in, comm) if sp.issparse(A_in) else A_in
     try:
         return Am, _member(Am, comm, o)
@@ -203,9 +209,14 @@ def _prepare_matrix(A, comm, o):
         raise
 
 
+def _refuse_mixed(mixed):
+    if mixed:
+        raise TypeError("A must be a petsc4py Mat on every rank or a scipy row block on every rank, not both")
+
+
 def _member(Am, comm, o):
-    """The member for Am and the set-up options `o` ('auto': nrmicp.solve's rule), checked on every rank
-    (A's diagonal by the core: the stationary members' rule, and the 'amg' set-up's, which gives up)."""
+    """The member for Am and the set-up options `o` ('auto': nrmicp.solve's rule), checked on every rank;
+    A's diagonal positive (_positive_diagonal)."""
     nloc = Am.getLocalSize()[0]
     method = o["method"]
     if isinstance(method, str) and method.lower() == "auto":
@@ -226,7 +237,27 @@ def _member(Am, comm, o):
             raise ValueError(f"hierarchy must be 'amg', None, a nrmicp.Hierarchy or a list of prolongations (PETSc "
                              f"Mats, or whole scipy matrices on every rank); got {got!r}")
         return m
-    return _collective(comm, local)
+    m = _collective(comm, local)
+    _positive_diagonal(Am, comm)
+    return m
+
+
+def _positive_diagonal(Am, comm):
+    """ValueError on every rank naming the first row whose a_ii is not positive (NaN included): the PETSc
+    engine's smoothers, CG and splittings divide by the diagonal, where the serial member has rules for
+    such rows (its Ω2, the Krylov choice), which this engine does not have."""
+    d = Am.getDiagonal()
+
+    def check():
+        da, lo = d.getArray(readonly=True), Am.getOwnershipRange()[0]
+        if np.any(~(da > 0)):
+            i = int(np.flatnonzero(~(da > 0))[0])
+            raise ValueError(f"A's diagonal must be positive on the PETSc engine (its smoothers, Krylov solves and "
+                             f"splittings divide by it); A[{lo + i}, {lo + i}] = {da[i]}")
+    try:
+        _collective(comm, check)
+    finally:
+        d.destroy()   # on every rank together (a raise keeps this frame in its traceback)
 
 
 def _prepare_call(Am, m, q, zeta, x0, comm, o, it):
@@ -243,7 +274,8 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     """Solve ICP(q, A, ζ) on all ranks of A's communicator (call it on every rank).
 
     A: petsc4py Mat (AIJ, square, same row and column layout) or this rank's scipy.sparse row
-    block (n_local, n). q, x0, upper: petsc4py Vec in A's row layout or this rank's rows. zeta: None,
+    block (n_local, n), of one kind on every rank (refused otherwise; without ``comm`` each rank's default
+    is its A's communicator or PETSc.COMM_WORLD, so a mix of kinds cannot be seen). q, x0, upper: petsc4py Vec in A's row layout or this rank's rows. zeta: None,
     a constant (scalar, this rank's rows or a Vec), :class:`nrmicp.Affine` (B a petsc4py Mat in
     A's layout, c) or a callable mapping this rank's rows of z to this rank's rows of ζ(z)
     (entry-wise or row-local ζ only). method: 'newton' — the serial library's Newton member itself
@@ -395,10 +427,11 @@ class Solver:
                 amg = h == "amg" or (h == "auto" and auto_builds_amg(Am.getSize()[0], nnz))
                 Ps = [P.handle for P in self._levels[0]]
                 core = _collective(self.comm, lambda: _petsc.Newton(Am.handle, opts, Ps, amg))
-                warn_shortened(hierarchy_report(core.hierarchy["requested"], None, core), h)   # (every rank alike)
             else:
                 core = _collective(self.comm, lambda: _petsc.Solver(Am.handle, opts))
-            self._cores[units] = [core, time.perf_counter() - t0]
+            self._cores[units] = [core, time.perf_counter() - t0]   # (kept first: close() frees it whatever follows)
+            if self.method == "newton":   # (every rank alike: a warning made an error raises on all)
+                warn_shortened(hierarchy_report(core.hierarchy["requested"], None, core), o["hierarchy"])
         entry = self._cores[units]
         earlier, self._setup_seconds = self._setup_seconds, 0.0
         setup, entry[1] = entry[1] + earlier, 0.0

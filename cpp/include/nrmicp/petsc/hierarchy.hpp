@@ -131,18 +131,26 @@ inline void fold_first(AmgHierarchy& h) {
 }
 
 /// Why A cannot be coarsened (hypre's smoothers and interpolation divide by a_ii; it crashes on a zero one):
-/// the row of its smallest diagonal entry when that is not positive, or "". Collective.
+/// the first row whose diagonal entry is not positive (NaN included), or "". Collective.
 inline std::string nonpositive_diagonal(Mat A) {
+  MPI_Comm comm;
+  check(PetscObjectGetComm(reinterpret_cast<PetscObject>(A), &comm), "PetscObjectGetComm");
   Vec d;
   check(MatCreateVecs(A, nullptr, &d), "MatCreateVecs");
-  PetscInt row = 0;
-  PetscReal least = 0;
+  PetscInt lo = 0, n = 0, first = PETSC_MAX_INT;
+  const PetscScalar* a = nullptr;
   PetscErrorCode e = MatGetDiagonal(A, d);
-  if (!e) e = VecMin(d, &row, &least);
+  if (!e) e = VecGetOwnershipRange(d, &lo, nullptr);
+  if (!e) e = VecGetLocalSize(d, &n);
+  if (!e) e = VecGetArrayRead(d, &a);
+  for (PetscInt i = 0; !e && i < n && first == PETSC_MAX_INT; ++i)
+    if (!(PetscRealPart(a[i]) > 0)) first = lo + i;
+  if (a) VecRestoreArrayRead(d, &a);
+  MPI_Allreduce(MPI_IN_PLACE, &first, 1, MPIU_INT, MPI_MIN, comm);  // (every process, whatever e)
   VecDestroy(&d);
-  check(e, "MatGetDiagonal, VecMin");
-  if (least > 0) return "";  // (no value in the words: the core may hold σA)
-  return "A's diagonal is not positive at row " + std::to_string(row) + " (the amg set-up divides by it)";
+  check(e, "MatGetDiagonal");
+  if (first == PETSC_MAX_INT) return "";  // (the row only: the core may hold σA)
+  return "A's diagonal is not positive at row " + std::to_string(first) + " (the amg set-up divides by it)";
 }
 
 }  // namespace hierarchy_detail
