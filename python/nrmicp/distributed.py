@@ -144,8 +144,10 @@ class _Rows:
         n, rows = self.A.getSize()[0], self.A.getOwnershipRange()
         if not isinstance(B, PETSc.Mat):
             raise TypeError(f"{name} must be a petsc4py Mat in A's layout, got {type(B).__name__}")
-        if B.getSize() != (n, n) or B.getOwnershipRange() != rows:
-            raise ValueError(f"{name} must be ({n}, {n}) with A's row layout, got {B.getSize()} rows {B.getOwnershipRange()}")
+        layout = (B.getOwnershipRange(), B.getOwnershipRangeColumn())
+        if B.getSize() != (n, n) or layout != (rows, self.A.getOwnershipRangeColumn()):
+            raise ValueError(f"{name} must be ({n}, {n}) with A's row and column layout, got {B.getSize()} rows "
+                             f"{layout[0]} columns {layout[1]} on this rank")
         return B
 
     def vector(self, v, name, infinite=0):
@@ -157,6 +159,7 @@ class _Zeta:
 
     def __init__(self, zeta, A, comm):
         """Local checks only."""
+        _not_a_mat(zeta, "zeta")
         self.comm, nloc = comm, A.getLocalSize()[0]
         self.kind, self.c, self.B, fn = _make_zeta(zeta, nloc, _Rows(A))
         self.fn = None if fn is None else CheckedZeta(fn, nloc)
@@ -178,6 +181,12 @@ class _Zeta:
         local = _affine(self.B, self.c, A) if self.kind == _K.affine else (
             lambda z: _collective(self.comm, self._checked, z))
         return _K.functor, None, CheckedZeta(local, A.getLocalSize()[0])
+
+
+def _not_a_mat(v, name):
+    """A Mat is callable in petsc4py: taken for ζ(z) it would fail deep in the solve."""
+    if isinstance(v, PETSc.Mat):
+        raise TypeError(f"{name} must not be a bare petsc4py Mat: pass nrmicp.Affine(B, c) for {name}(z) = B z + c")
 
 
 def _affine(B, c, A):
@@ -238,6 +247,8 @@ def _member(Am, comm, o):
                              f"Mats, or whole scipy matrices on every rank); got {got!r}")
         return m
     m = _collective(comm, local)
+    h = o["hierarchy"]   # (its kind: every rank takes the same branches)
+    _same(comm, float(("amg", "auto").index(h) + 1 if isinstance(h, str) else 0 if h is None else 3) if m == "newton" else 0.)
     _positive_diagonal(Am, comm)
     return m
 
@@ -250,10 +261,11 @@ def _positive_diagonal(Am, comm):
 
     def check():
         da, lo = d.getArray(readonly=True), Am.getOwnershipRange()[0]
-        if np.any(~(da > 0)):
-            i = int(np.flatnonzero(~(da > 0))[0])
-            raise ValueError(f"A's diagonal must be positive on the PETSc engine (its smoothers, Krylov solves and "
-                             f"splittings divide by it); A[{lo + i}, {lo + i}] = {da[i]}")
+        bad = ~(da >= np.finfo(np.float64).tiny)   # (NaN, and subnormal: its reciprocal overflows)
+        if np.any(bad):
+            i = int(np.flatnonzero(bad)[0])
+            raise ValueError(f"A's diagonal must be positive (not subnormal) on the PETSc engine (its smoothers, "
+                             f"Krylov solves and splittings divide by it); A[{lo + i}, {lo + i}] = {da[i]}")
     try:
         _collective(comm, check)
     finally:
@@ -391,7 +403,7 @@ class Solver:
             _units_parameters(opts, m, sigma, Am.getLocalSize()[0])
         kind, c, fn = zf.core_args(Am)
         measure = _Measure(_petsc, Am, qa, (kind, c, fn, ua), (A_user, q_user) if units else None)
-        jacobian = _jacobian(o["zeta_jacobian"], zf, m, Am, comm, bounded)
+        jacobian = _jacobian(o["zeta_jacobian"], zf, m, Am, comm)
         if opts.rtol > 0:   # the absolute target, on the problem the core iterates (Options::target of Res(0))
             opts.tol, opts.rtol = opts.target(measure(np.zeros_like(qa))[1]), 0.0
         core, setup, earlier = self._core(_petsc, units, Am, opts, o)
@@ -471,9 +483,13 @@ def _prolongations(hierarchy, Am):
 def _same(comm, value: float) -> None:
     """ValueError naming hierarchy on every rank unless every rank holds this value (its list's kind, or a
     checksum of its levels: number, shapes, values)."""
-    if _flag_max(comm, value) != -_flag_max(comm, -value):
-        raise ValueError("hierarchy must be the same on every rank (the whole prolongations, or PETSc Mats); the "
-                         "ranks' lists differ in their kind, number of levels, shapes or values")
+    differ = _flag_max(comm, value) != -_flag_max(comm, -value)
+
+    def check():   # (raised through agree: the message every other refusal has, 'rank r: ...')
+        if differ:
+            raise ValueError("hierarchy must be the same on every rank ('amg', 'auto', None, or the whole "
+                             "prolongations, or PETSc Mats); the ranks' differ in kind, number of levels, shapes or values")
+    _collective(comm, check)
 
 
 def _petsc_list(hierarchy):
@@ -525,12 +541,14 @@ def _upper(upper, Am, zf, comm, method):
         return np.full(nloc, np.inf) if free and method != "newton" else None, free
 
     def local():
+        _not_a_mat(upper, "upper")
         u = _make_upper(upper, nloc, _Rows(Am))
         _bounds.check(zf.kind, zf.c if zf.kind == _K.constant else None, u, method, None)
         return np.full(nloc, np.inf) if u is None else u   # (all +inf on this rank: the same core call as the others)
     u = _collective(comm, local)
-    if not isinstance(u, _bounds.ImplicitUpper):
-        return u, True
+    if not isinstance(u, _bounds.ImplicitUpper):   # (+inf on every rank's rows: no upper bound, as serially)
+        bound = _flag_max(comm, float(np.any(u < np.inf)))
+        return (u, True) if bound else _upper(None, Am, zf, comm, method)
     fn = CheckedZeta(_affine(u.B, u.c, Am) if u.kind == _K.affine else (lambda z: _collective(comm, u.fn, z)), nloc)
     fn.what = "upper(z)"
     return (_K.functor, None, None, None, None, fn), True
@@ -589,21 +607,14 @@ class _Measure:
         return self._petsc.measure(self.Am.handle, self.qa, *self.problem, z, rounding=True)["rounding_level"]
 
 
-def _jacobian(zeta_jacobian, zf, method, Am, comm, bounded):
-    """ζ's Jacobian for the core (None: none): zeta_jacobian(z) of this rank's rows returns a linear
-    operator on them (its matvec may communicate: every rank calls it together) or a diagonal matrix;
-    nrmicp.solve's checks, each call of the user's code collective. An Affine ζ's is its B (the serial
-    core solves its full system with B; this engine takes B's product, each step's Krylov solve as for
-    any ζ′), without bounds (those take the outer fixed point, as serially)."""
-    given = _collective(comm, check_jacobian, zeta_jacobian, method, zf.kind)
-    nloc = Am.getLocalSize()[0]
-    if zf.kind == _K.affine and method == "newton" and not bounded:
-        from scipy.sparse.linalg import LinearOperator
-        B = LinearOperator((nloc, nloc), matvec=_affine(zf.B, np.zeros(nloc), Am), dtype=np.float64)
-        zeta_jacobian = lambda z: B   # noqa: E731 - a constant Jacobian
-    elif not given:
+def _jacobian(zeta_jacobian, zf, method, Am, comm):
+    """ζ's Jacobian for the core (None: none given): zeta_jacobian(z) of this rank's rows returns a
+    linear operator on them (its matvec may communicate: every rank calls it together) or a diagonal
+    matrix; nrmicp.solve's checks, each call of the user's code collective. (An Affine ζ takes the outer
+    fixed point here: its B as an operator ζ′ fails where the serial member's factorized B converges.)"""
+    if not _collective(comm, check_jacobian, zeta_jacobian, method, zf.kind):
         return None
-    return core_jacobian(zeta_jacobian, nloc, PETSc.IntType, collective=functools.partial(_collective, comm))
+    return core_jacobian(zeta_jacobian, Am.getLocalSize()[0], PETSc.IntType, collective=functools.partial(_collective, comm))
 
 
 def _owns_rows(Am):
