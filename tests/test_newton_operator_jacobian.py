@@ -166,3 +166,23 @@ def test_zeta_is_not_called_again_at_the_z_of_its_last_call(form):
     repeats = [k for k in range(1, len(core)) if np.array_equal(core[k], core[k - 1])]
     assert not repeats, f"zeta called again at the same z at calls {repeats} of {len(core)}"
     assert complementarity(pb.A, pb.q, lambda z: pb.zeta(z).copy(), res.z) < 1e-9
+
+
+@pytest.mark.parametrize("m, s", [(63, 0.004), (127, 0.001)])
+def test_a_failing_operator_solve_returns_no_iterate_worse_than_its_start(m, s):
+    """ζ = Bz + ψ with B = s·A strong (ζ′ ≈ s·h⁻²-scaled Laplacian): the operator path's first outer step
+    S(ζ(0)) lies far from the answer and its iterates never get below the start's Res; the solve says it
+    did not converge and returns the start (it returned Res 8.7e9 from Res(0) = 2.1)."""
+    pb = scenes.obstacle_2d(m, exact=False)
+    A = sp.csr_matrix(pb.A)
+    B = sp.csr_matrix(s * A)
+    psi = np.asarray(pb.zeta, dtype=float)
+    zeta = lambda z: B @ z + psi   # noqa: E731
+    start = float(np.linalg.norm(np.minimum(pb.q, -zeta(np.zeros(A.shape[0])))))   # Res(0), in numpy
+    r = nrmicp.solve(A, pb.q, zeta, method="newton", tol=1e-8, zeta_jacobian=lambda z: spla.aslinearoperator(B))
+    res = float(np.linalg.norm(np.minimum(A @ r.z + pb.q, r.z - zeta(r.z))))
+    if r.status != nrmicp.Status.CONVERGED:
+        assert res <= start * (1 + 1e-12), (r.status, r.nit, res, start)
+        assert abs(r.residual - res) <= 1e-9 * max(res, 1.0), (r.residual, res)
+    else:
+        assert res < 1e-8

@@ -623,7 +623,7 @@ class NewtonRun {
       tally_.count("matrix_free_iterations", record.iterations);
       tally_.count("matrix_free_preconditioner_iterations", record.preconditioner);
     }
-    if (!out.jacobian_poor) return tally_.finish(out, out.z, q);
+    if (!out.jacobian_poor) return no_worse_than_start(out, q, z_start, psi);
     // the Jacobian does not deliver (detail::JacobianCheck): the path without it, from the best iterate
     tally_.switch_to_outer();
     Result r = solve_outer_fixed_point(q, zeta, &out.z);
@@ -632,6 +632,18 @@ class NewtonRun {
   }
 
  private:
+  /// The semismooth loop's result, or the solve's start z_start (ψ = ζ(z_start)) where the loop did not
+  /// converge and no iterate of it has a lower Res: its first outer step, S(ζ(z_start)), may lie far from
+  /// the answer where ζ′ is large, and the best iterate is the start's.
+  Result no_worse_than_start(const LevelOutcome& out, const Vector& q, const Vector& z_start, const Vector& psi) {
+    Vector w;
+    const double res_start = levels_.finest->icp_residual_at(q, z_start, psi, w);
+    if (out.status == Status::Converged || out.residual <= res_start || !std::isfinite(res_start))
+      return tally_.finish(out, out.z, q);
+    return tally_.finish(z_start, res_start, out.status,
+                         out.message + "; no iterate had a lower Res than the start, which is returned", q);
+  }
+
   /// The start of an affine or semismooth solve: at most this many Newton steps of the obstacle problem.
   static constexpr int start_maxiter = 100;
 
