@@ -183,6 +183,7 @@ def test_a_failing_operator_solve_returns_no_iterate_worse_than_its_start(m, s):
     res = float(np.linalg.norm(np.minimum(A @ r.z + pb.q, r.z - zeta(r.z))))
     if r.status != nrmicp.Status.CONVERGED:
         assert res <= start * (1 + 1e-12), (r.status, r.nit, res, start)
+        assert res < start or "returning the start" in r.message, r.message
         assert abs(r.residual - res) <= 1e-9 * max(res, 1.0), (r.residual, res)
     else:
         assert res < 1e-8

@@ -1167,6 +1167,24 @@ def case_upper_all_inf():
     return {"status": str(r.status), "polished": r.polished}
 
 
+def case_reason_alike():
+    """A given prolongation whose coarse operator has a zero a_ii in the last rank's rows: result.hierarchy's
+    reason is the same words on every rank (it named the row on one and 'another process' on the others)."""
+    import warnings
+    pb = obstacle_2d(15, exact=False)
+    A = sp.csr_matrix(pb.A)
+    n = A.shape[0]
+    lo, hi = split(n)
+    m = n // 2
+    P = sp.csr_matrix((np.ones(n), np.minimum(np.arange(n) // 2, m - 1), np.arange(n + 1)), shape=(n, m + 1))
+    with warnings.catch_warnings():   # (column m is empty: (P^T A P)[m, m] = 0)
+        warnings.simplefilter("ignore")
+        r = dist.solve(mat(A, lo, hi), pb.q[lo:hi], pb.zeta[lo:hi], method="newton", hierarchy=[P], tol=1e-8)
+    reasons = _allgather_text(json.dumps(r.hierarchy))
+    if RANK == 0:
+        return [json.loads(t) for t in reasons]
+
+
 if __name__ == "__main__":
     name, args = sys.argv[1], sys.argv[2:]
     result = {"agreement": lambda: case_agreement(), "partition": case_partition,
@@ -1175,6 +1193,7 @@ if __name__ == "__main__":
               "warm": case_warm, "one_sided_contact": case_one_sided_contact, "implicit_upper": case_implicit_upper, "jacobian": case_jacobian, "jacobian_still_rows": case_jacobian_still_rows, "solver": case_solver, "units": case_units, "engine": lambda: case_engine(*args), "options": case_options, "rounds": case_rounds, "shared_hierarchy": case_shared_hierarchy, "hazards": case_hazards,
               "fuzz": lambda: case_fuzz(int(args[0])), "family": case_family, "hooks": case_hooks, "no_rows": case_no_rows,
               "nonpositive_diagonal": case_nonpositive_diagonal,
-              "upper_all_inf": case_upper_all_inf}[name]()
+              "upper_all_inf": case_upper_all_inf,
+              "reason_alike": case_reason_alike}[name]()
     if RANK == 0:
         print("RESULT " + json.dumps(result), flush=True)

@@ -339,3 +339,8 @@ def test_a_nonpositive_diagonal_is_refused_and_gives_the_amg_set_up_up(ranks):
 def test_an_upper_of_plus_infinity_everywhere_is_no_bound(ranks):
     out = mpirun(ranks, "upper_all_inf", timeout=120)
     assert out == {"status": "CONVERGED", "polished": True}, out
+
+
+def test_a_hierarchy_given_up_on_one_rank_gives_every_rank_the_same_reason():
+    out = mpirun(2, "reason_alike", timeout=120)
+    assert out[0] == out[1] and out[0]["used"] == 1 and "a_ii <= 0" in out[0]["reason"], out

@@ -225,8 +225,9 @@ class Newton {
         level.A.swap(A);
       }
       report_.reason = nonpositive_diagonal(level.A, static_cast<int>(l) + 1);
-      if (!comm_of(levels_.A).all(report_.reason.empty())) {  // (every process gives the level up)
-        if (report_.reason.empty()) report_.reason = "a coarse operator of level " + std::to_string(l + 1) + " has a_ii <= 0 on another process";
+      const detail::Comm& comm = comm_of(levels_.A);
+      if (!comm.all(report_.reason.empty())) {  // (every process gives the level up, in the same words)
+        if (comm.size() > 1) report_.reason = nonpositive_diagonal(level.A, static_cast<int>(l) + 1, &comm);
         hierarchy.pop_back();
         break;
       }
@@ -242,15 +243,18 @@ class Newton {
     for (auto& level : levels_.coarse) level->use_hierarchy(below = below.below());
   }
 
-  /// Why level `l`'s operator A_l cannot be a level (its first entry a_ii <= 0), or "".
-  static std::string nonpositive_diagonal(const RowMatrix& A, int l) {
+  /// Why level `l`'s operator A_l cannot be a level (a_ii <= 0), or "": its first such row, or over the
+  /// processes of `comm` the least a_ii (the same words on each: the rows are each process's own).
+  static std::string nonpositive_diagonal(const RowMatrix& A, int l, const detail::Comm* comm = nullptr) {
     const Vector d = diagonal(A);
-    for (Eigen::Index i = 0; i < d.size(); ++i)
-      if (!(d[i] > 0))
-        return "the coarse operator P^T A P of level " + std::to_string(l) + " (prolongations[" + std::to_string(l - 1) +
-               "]) has a_ii = " + to_text(d[i]) + " <= 0 at row " + std::to_string(i) +
-               " (the active-set test needs a positive diagonal): the hierarchy ends above it";
-    return {};
+    Eigen::Index i = 0;
+    while (i < d.size() && d[i] > 0) ++i;
+    if (!comm && i == d.size()) return {};
+    const double inf = std::numeric_limits<double>::infinity();
+    const std::string what = comm ? " <= 0 (the least: " + to_text(-comm->max(d.size() ? -d.minCoeff() : -inf)) + ")"
+                                  : " = " + to_text(d[i]) + " <= 0 at row " + std::to_string(i);
+    return "the coarse operator P^T A P of level " + std::to_string(l) + " (prolongations[" + std::to_string(l - 1) +
+           "]) has a_ii" + what + " (the active-set test needs a positive diagonal): the hierarchy ends above it";
   }
 
   Result run(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0, const detail::Hooks& hooks,

@@ -492,6 +492,14 @@ class ObstacleSolver {
   NestedStart<MatrixType> start_{levels_, tally_};
 };
 
+/// A loop's message whose "returning the best iterate (iteration k)" is the solve's start instead.
+inline std::string start_returned(std::string message) {
+  const std::string best = "returning the best iterate", start = "returning the start: no iterate had a lower Res";
+  const std::size_t at = message.find(best), end = at == std::string::npos ? at : message.find(')', at);
+  if (at == std::string::npos) return message + "; " + start;
+  return message.replace(at, (end == std::string::npos ? at + best.size() : end + 1) - at, start);
+}
+
 /// One solve: the strategies by ζ, and the statistics they gather over levels and outer steps.
 template <typename MatrixType>
 class NewtonRun {
@@ -640,8 +648,7 @@ class NewtonRun {
     const double res_start = levels_.finest->icp_residual_at(q, z_start, psi, w);
     if (out.status == Status::Converged || out.residual <= res_start || !std::isfinite(res_start))
       return tally_.finish(out, out.z, q);
-    return tally_.finish(z_start, res_start, out.status,
-                         out.message + "; no iterate had a lower Res than the start, which is returned", q);
+    return tally_.finish(z_start, res_start, out.status, start_returned(out.message), q);
   }
 
   /// The start of an affine or semismooth solve: at most this many Newton steps of the obstacle problem.
