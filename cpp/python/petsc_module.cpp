@@ -114,7 +114,6 @@ class PyPetscNewton : public PyPetscCore<Core> {
       : PyPetscCore(A, "Newton member") {
     nrmicp::petsc::AmgHierarchy levels = hierarchy_of(A_, prolongations, amg);
     core_.emplace(A_, o, levels.prolongations, levels.coarse_operators);  // (the core holds what it uses)
-    if (!levels.reason.empty()) abandoned_ = "the amg set-up gave up level 1: " + levels.reason;
   }
   py::dict polish(py::array q, nrmicp::ZetaKind kind, py::object zeta_c, py::object zeta_fn, py::array z, double tol,
                   py::object upper) {
@@ -127,15 +126,8 @@ class PyPetscNewton : public PyPetscCore<Core> {
     const nrmicp::HierarchyReport& h = core().hierarchy();
     py::dict d;
     d["requested"] = h.requested; d["used"] = h.used; d["reason"] = h.reason;
-    if (!abandoned_.empty()) {  // (the 'amg' request given up before the core: the serial report's words)
-      d["requested"] = 2;
-      d["reason"] = abandoned_;
-    }
     return d;
   }
-
- private:
-  std::string abandoned_;
 };
 
 /// A stationary member (nrm, nrmm, nrmaor, nrmsor, nrmgs, nrmj, two_sweep) over a PETSc Mat: the

@@ -206,9 +206,8 @@ def _prepare_matrix(A, comm, o):
     set-up options `o` are checked here too (the core's Options, by the serial code), with tol and
     rtol at their defaults. A Mat made here from scipy row blocks is destroyed when a check fails."""
     A_in = _collective(comm, _check_mat, A)
-    kind = float(sp.issparse(A_in))
-    mixed = _flag_max(comm, kind) != -_flag_max(comm, -kind)   # (else the ranks would part ways: a hang)
-    _collective(comm, _refuse_mixed, mixed)
+    _same(comm, float(sp.issparse(A_in)), TypeError,   # (else the ranks would part ways: a hang)
+          "A must be a petsc4py Mat on every rank or a scipy row block on every rank, not both")
     Am = _as_mat(A_in, comm) if sp.issparse(A_in) else A_in
     try:
         return Am, _member(Am, comm, o)
@@ -216,11 +215,6 @@ def _prepare_matrix(A, comm, o):
         if Am is not A_in:
             Am.destroy()   # on every rank together (each raises here)
         raise
-
-
-def _refuse_mixed(mixed):
-    if mixed:
-        raise TypeError("A must be a petsc4py Mat on every rank or a scipy row block on every rank, not both")
 
 
 def _member(Am, comm, o):
@@ -248,7 +242,8 @@ def _member(Am, comm, o):
         return m
     m = _collective(comm, local)
     h = o["hierarchy"]   # (its kind: every rank takes the same branches)
-    _same(comm, float(("amg", "auto").index(h) + 1 if isinstance(h, str) else 0 if h is None else 3) if m == "newton" else 0.)
+    kind = ("amg", "auto").index(h) + 1 if isinstance(h, str) else 0 if h is None else 3
+    _same(comm, float(kind) if m == "newton" else 0.0, ValueError, _DIFFERENT_HIERARCHY)
     _positive_diagonal(Am, comm)
     return m
 
@@ -354,7 +349,7 @@ class Solver:
         self.A, self.method = _prepare_matrix(A, comm, {**_options.defaults(), **self._options})
         self._owns_A = self.A is not A   # (made from scipy row blocks)
         try:   # given prolongations checked and made PETSc Mats now, once (kept until close)
-            self._levels = _prolongations(self._options["hierarchy"], self.A) if self.method == "newton" else ([], [])
+            self._levels = _prolongations(self._options["hierarchy"], self.A, comm) if self.method == "newton" else ([], [])
         except Exception:
             if self._owns_A:
                 self.A.destroy()   # on every rank together (each raises here)
@@ -450,7 +445,7 @@ class Solver:
         return entry[0], setup, earlier
 
 
-def _prolongations(hierarchy, Am):
+def _prolongations(hierarchy, Am, comm):
     """hierarchy= as the core's prolongation Mats, finest first, and those of them made here (the caller
     destroys them): PETSc Mats as given; a nrmicp.Hierarchy's
     prolongations or whole scipy matrices, the same on every rank (checked as nrmicp.solve checks a
@@ -461,12 +456,13 @@ def _prolongations(hierarchy, Am):
         hierarchy = list(hierarchy.prolongations)
     if not isinstance(hierarchy, (list, tuple)):
         return [], []
-    comm, n = Am.getComm(), Am.getSize()[0]
+    n = Am.getSize()[0]
     petsc = _collective(comm, _petsc_list, hierarchy)
-    _same(comm, float(petsc))
+    _same(comm, float(petsc), ValueError, _DIFFERENT_HIERARCHY)
     Ps = list(hierarchy) if petsc else _collective(comm, resolve_hierarchy, list(hierarchy),
                                                    types.SimpleNamespace(shape=(n, n))) or []
-    _same(comm, float(zlib.crc32(repr([P.getSize() if petsc else (P.shape, _fingerprint(P)) for P in Ps]).encode())))
+    shapes = repr([P.getSize() if petsc else (P.shape, _fingerprint(P)) for P in Ps])
+    _same(comm, float(zlib.crc32(shapes.encode())), ValueError, _DIFFERENT_HIERARCHY)
     if petsc:
         return Ps, []
     made, (lo, hi) = [], Am.getOwnershipRange()
@@ -480,15 +476,19 @@ def _prolongations(hierarchy, Am):
     return made, made
 
 
-def _same(comm, value: float) -> None:
-    """ValueError naming hierarchy on every rank unless every rank holds this value (its list's kind, or a
-    checksum of its levels: number, shapes, values)."""
+#: The refusal of hierarchy options that differ between ranks.
+_DIFFERENT_HIERARCHY = ("hierarchy must be the same on every rank ('amg', 'auto', None, or the whole prolongations, "
+                        "or PETSc Mats); the ranks' differ in kind, number of levels, shapes or values")
+
+
+def _same(comm, value: float, error: type, message: str) -> None:
+    """error(message) raised on every rank (through agree: 'rank r: ...', as every other refusal) unless
+    every rank holds this value (a kind of input, or a checksum of it)."""
     differ = _flag_max(comm, value) != -_flag_max(comm, -value)
 
-    def check():   # (raised through agree: the message every other refusal has, 'rank r: ...')
+    def check():
         if differ:
-            raise ValueError("hierarchy must be the same on every rank ('amg', 'auto', None, or the whole "
-                             "prolongations, or PETSc Mats); the ranks' differ in kind, number of levels, shapes or values")
+            raise error(message)
     _collective(comm, check)
 
 
