@@ -39,6 +39,9 @@ def test_every_scene_has_the_curves_a_user_chooses_between(small_run):
     for scene in ("obstacle_2d", "obstacle_3d", "american_put"):  # LCPs: PSOR runs; not on the QVI
         assert (scene, "psor") in curves
     assert ("thermoforming_2d", "psor") not in curves
+    # Newton on the whole ICP with ζ′ where the scene's ζ has one (the QVI), nowhere else
+    assert [s for s in realistic.SCENES if (s, "newton-jac") in curves] == ["thermoforming_2d"]
+    assert curves[("thermoforming_2d", "newton-jac")][-1][1] < 1e-8
 
 
 def test_newton_curves_reach_the_target_and_the_times_are_cpu_seconds_from_the_call(small_run):

@@ -1185,6 +1185,29 @@ def case_reason_alike():
         return [json.loads(t) for t in reasons]
 
 
+_HINTS = ("uses the paper's Omega2 = I", "the stationary members need O(h^-2) iterations",
+          "may lie below what zeta itself resolves")
+
+
+def case_hints():
+    """A solve that did not converge says on PETSc what it says serially (_api.failure_hint): the nrm and
+    member hints of a stationary member on an h^-2-scaled A, the outer fixed point's default-target hint."""
+    pb = obstacle_2d(15, exact=False)
+    A = sp.csr_matrix(pb.A)
+    lo, hi = split(A.shape[0])
+    psi = np.asarray(pb.zeta)
+    scenes = {"nrm": (psi, dict(method="nrm", maxiter=5)),
+              "outer": (lambda z: psi + 0.2 * np.sin(z), dict(method="newton", maxiter=1, hierarchy=None))}
+    out = {}
+    for name, (zeta, kw) in scenes.items():
+        serial = nrmicp.solve(A, pb.q, zeta, **kw)
+        local = zeta[lo:hi] if name == "nrm" else (lambda z: psi[lo:hi] + 0.2 * np.sin(z))
+        r = dist.solve(mat(A, lo, hi), pb.q[lo:hi], local, **kw)
+        out[name] = [str(serial.status), str(r.status), [h for h in _HINTS if h in serial.message],
+                     [h for h in _HINTS if h in r.message]]
+    return out
+
+
 if __name__ == "__main__":
     name, args = sys.argv[1], sys.argv[2:]
     result = {"agreement": lambda: case_agreement(), "partition": case_partition,
@@ -1194,6 +1217,6 @@ if __name__ == "__main__":
               "fuzz": lambda: case_fuzz(int(args[0])), "family": case_family, "hooks": case_hooks, "no_rows": case_no_rows,
               "nonpositive_diagonal": case_nonpositive_diagonal,
               "upper_all_inf": case_upper_all_inf,
-              "reason_alike": case_reason_alike}[name]()
+              "reason_alike": case_reason_alike, "hints": case_hints}[name]()
     if RANK == 0:
         print("RESULT " + json.dumps(result), flush=True)

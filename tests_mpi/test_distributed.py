@@ -344,3 +344,10 @@ def test_an_upper_of_plus_infinity_everywhere_is_no_bound(ranks):
 def test_a_hierarchy_given_up_on_one_rank_gives_every_rank_the_same_reason():
     out = mpirun(2, "reason_alike", timeout=120)
     assert out[0] == out[1] and out[0]["used"] == 1 and "a_ii <= 0" in out[0]["reason"], out
+
+
+@pytest.mark.parametrize("ranks", [1, 2])
+def test_a_solve_that_does_not_converge_gives_the_serial_hints(ranks):
+    out = mpirun(ranks, "hints", timeout=120)
+    for name, (serial, ours, serial_hints, our_hints) in out.items():
+        assert serial == ours and serial != "CONVERGED" and serial_hints and our_hints == serial_hints, (name, out)

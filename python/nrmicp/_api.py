@@ -265,12 +265,13 @@ def _core_callback(callback: Callable[..., Any], dc: Optional[np.ndarray],
     return hook
 
 
-def _omega2_hint(A, method, omega2, accelerate) -> str:
+def _omega2_hint(diagonal, method, omega2, accelerate) -> str:
     """What to try when the paper's nrm (Omega2 = I) does not converge, added to its message: only
-    advice that applies to this A (omega2=A.diagonal(), nrmm and nrmgs need a positive diagonal)."""
+    advice that applies to this A (omega2=A.diagonal(), nrmm and nrmgs need a positive diagonal).
+    `diagonal`: A's diagonal, or (on PETSc, every a_ii positive) the mean of |a_ii| over all rows."""
     if method != "nrm" or omega2 is not None:
         return ""
-    d = A.diagonal()
+    d = np.atleast_1d(diagonal)
     if not np.all(d > 0):
         i = int(np.flatnonzero(~(d > 0))[0])
         tried = (accelerate or "none").lower() == "anderson"
@@ -346,22 +347,39 @@ def choose_method(A: sp.csr_matrix, options: dict, margin=None) -> str:
     return "nrmgs" if (dominance_margin(A) if margin is None else margin) >= AUTO_MARGIN else "newton"
 
 
-def _outer_hint(solver, measure) -> str:
+def failure_hint(method: str, omega2_hint: str, margin: Callable[[], float], default_rule: bool, kind,
+                 infeasibility: Callable[[], str] = str) -> Callable[[Status], str]:
+    """hint(status) for _settle, both engines: the sentence added to the message of a solve that did not
+    converge — why an infeasible problem has no solution, else the nrm hint (`omega2_hint`), and where the
+    iterations ran out or stalled, the member and outer-fixed-point advice. `margin()`: A's dominance
+    margin, asked only then (on PETSc a reduction: every rank has the same status); `default_rule`: the
+    solve iterated under the default rule (Res_E); `kind`: ζ's ZetaKind as the user gave it."""
+    def hint(status):
+        infeasible = infeasibility()   # (no parameter or member helps an infeasible problem)
+        if infeasible or status not in (Status.MAX_ITERATIONS, Status.STAGNATED):
+            return infeasible or omega2_hint
+        return omega2_hint + _member_hint(margin, method) + _outer_hint(method, default_rule, kind)
+    return hint
+
+
+def _outer_hint(method: str, default_rule: bool, kind) -> str:
     """Advice for a newton solve on a callable ζ without Jacobian (the outer fixed point) that failed
     under the default rule: its target, 1e-10 of Res_E(0), may lie below what ζ's own evaluation
     resolves (a ζ that solves an ill-conditioned problem inside: docs/MEASUREMENTS.md, "The outer
     fixed point in z's units"); tol or rtol sets a target of the user's own."""
-    if solver.method != "newton" or solver.scale != "units" or measure.weights is None \
-            or measure.kind != ZetaKind.functor:
+    if method != "newton" or not default_rule or kind != ZetaKind.functor:
         return ""
     return ("; the default target (Res_E below 1e-10 of its value at z = 0) may lie below what zeta itself resolves "
             "(its outer steps no longer contract there): pass tol (the paper's Res, e.g. tol=1e-8) or rtol")
 
 
-def _member_hint(A: sp.csr_matrix, method: str) -> str:
-    """Advice for a stationary solve that did not converge, when newton is the member for this A."""
-    margin = dominance_margin(A)
-    if method == "newton" or margin >= AUTO_MARGIN:   # choose_method's rule: nrmgs is right for this A
+def _member_hint(margin: Callable[[], float], method: str) -> str:
+    """Advice for a stationary solve that did not converge, when newton is the member for this A
+    (`margin()`: its dominance_margin)."""
+    if method == "newton":
+        return ""
+    margin = margin()
+    if margin >= AUTO_MARGIN:   # choose_method's rule: nrmgs is right for this A
         return ""
     why = ("A has a diagonal entry <= 0" if margin == -math.inf else
            f"A's rows are dominant by only {max(margin, 0.0):.2g} of their diagonal")
@@ -420,7 +438,7 @@ class Solver:
         method = _choice(method, METHOD_CHOICES, "method")
         self.method = choose_method(self.A, settings) if method == "auto" else method
         # The paper's NRM fixes Omega2 = I, which only suits diag(A) of order 1; say so on failure.
-        self._omega2_hint = _omega2_hint(self.A, self.method, omega2, accelerate)
+        self._omega2_hint = _omega2_hint(self.A.diagonal(), self.method, omega2, accelerate)
         self.scale = _scale_choice(scale)
         self._defaults = {k: settings[k] for k in _options.names("solve")}
         resolved, units = _criterion(self._defaults)
@@ -662,11 +680,8 @@ class Solver:
     def _assemble(self, rounds: "_Rounds", problem, tol: float, measure, bounded) -> Result:
         """The result of the rounds (_settle), with what the serial layer adds: hints where it did not
         converge, the scaling's rounds, the active mask."""
-        def hint(status):
-            infeasible = measure.infeasibility()   # (no parameter or member helps an infeasible problem)
-            if infeasible or status not in (Status.MAX_ITERATIONS, Status.STAGNATED):
-                return infeasible or self._omega2_hint
-            return self._omega2_hint + _member_hint(self.A, self.method) + _outer_hint(self, measure)
+        hint = failure_hint(self.method, self._omega2_hint, lambda: dominance_margin(self.A),
+                            self.scale == "units" and measure.weights is not None, measure.kind, measure.infeasibility)
         fields = _settle(self, rounds, problem, measure, tol, polish=self.polish, bounded=bounded,
                          report=self._hierarchy, hint=hint)
         if self._dr is not None and self.scale != "units":

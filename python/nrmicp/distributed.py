@@ -9,8 +9,8 @@ scipy matrix of shape (n_local, n)), q a petsc4py ``Vec`` with A's row layout (o
 rows as a numpy array). The heavy work is PETSc's: products, KSP (CG / BiCGSTAB) preconditioned by
 a V-cycle (PCMG) on the nested iteration's hierarchy, whose prolongations are hypre BoomerAMG's
 (hierarchy='amg': built by the core, nrmicp/petsc/hierarchy.hpp; PETSc options -nrmicp_hierarchy_...
-replace its rule). Option names, their checks, the statuses and the result fields are the
-serial library's (nrmicp._api, nrmicp._core): one definition.
+replace its rule). Option names, their checks, the statuses, the result fields and the advice a
+solve that did not converge gives are the serial library's (nrmicp._api, nrmicp._core): one definition.
 
 What is distributed: everything per iteration (products, reductions, the reduced solves, the
 stationary members' splittings of each rank's diagonal block, ζ on each rank's rows). What is not: the hierarchy's set-up is hypre's (itself parallel); a callable
@@ -39,7 +39,8 @@ from ._mpi import DistributedError, agree, collective as _collective, flag_max a
 from ._newton import (auto_builds_amg, check_jacobian, check_no_hierarchy, check_polish, core_jacobian, hierarchy_report,
                       warn_shortened)
 from ._api import (METHODS as _ALL_METHODS, Result, _make_upper, _make_zeta, Status, _Rounds, _choice, _criterion, _settle, _log_final,
-                   _progress_hook, _units_parameters, core_options, choose_method, dominance_margin)
+                   _omega2_hint, _progress_hook, _units_parameters, core_options, choose_method, dominance_margin,
+                   failure_hint)
 from ._scaling import sigma_from_logs
 from ._hierarchy import Hierarchy, _fingerprint, resolve_hierarchy
 from ._inputs import as_constant, as_csr, as_vector
@@ -348,6 +349,9 @@ class Solver:
         self._options = {**_options.defaults("setup", "solve"), **options}
         self.A, self.method = _prepare_matrix(A, comm, {**_options.defaults(), **self._options})
         self._owns_A = self.A is not A   # (made from scipy row blocks)
+        o = {**_options.defaults(), **self._options}   # (every rank alike: the mean is a reduction)
+        self._omega2_hint = _omega2_hint(_mean_abs_diagonal(self.A) if self.method == "nrm" else 1.0, self.method,
+                                         o["omega2"], o["accelerate"])
         try:   # given prolongations checked and made PETSc Mats now, once (kept until close)
             self._levels = _prolongations(self._options["hierarchy"], self.A, comm) if self.method == "newton" else ([], [])
         except Exception:
@@ -402,7 +406,8 @@ class Solver:
         if opts.rtol > 0:   # the absolute target, on the problem the core iterates (Options::target of Res(0))
             opts.tol, opts.rtol = opts.target(measure(np.zeros_like(qa))[1]), 0.0
         core, setup, earlier = self._core(_petsc, units, Am, opts, o)
-        fields = _rounds(core, measure, xa, opts, o, jacobian, bounded)
+        hint = failure_hint(m, self._omega2_hint, lambda: _margin(A_user, comm), units, zf.kind)
+        fields = _rounds(core, measure, xa, opts, o, jacobian, bounded, hint)
         if units:   # w in the user's units (re-measured: σ(Az + q) / σ may overflow or underflow)
             fields["w"] = measure(fields["z"], weighted=False)[0]
         timings = fields["timings"]
@@ -522,11 +527,15 @@ def _collective_callback(comm, callback):
 
 def _auto_method(Am, options, comm):
     """nrmicp.solve's method='auto' (choose_method), A's dominance margin reduced over the ranks."""
+    return choose_method(None, options, _margin(Am, comm))
+
+
+def _margin(Am, comm):
+    """A's dominance_margin over every rank's rows (collective; a rank without rows has no say)."""
     indptr, _, vals = Am.getValuesCSR()
     rows = sp.csr_matrix((vals, np.zeros_like(vals, dtype=np.int32), indptr), shape=(len(indptr) - 1, 1))
     local = dominance_margin(rows, np.array(Am.getDiagonal().getArray(readonly=True))) if rows.shape[0] else math.inf
-    margin = -_flag_max(comm, -local)   # (a rank without rows has no say)
-    return choose_method(None, options, margin)
+    return -_flag_max(comm, -local)
 
 
 def _upper(upper, Am, zf, comm, method):
@@ -554,12 +563,12 @@ def _upper(upper, Am, zf, comm, method):
     return (_K.functor, None, None, None, None, fn), True
 
 
-def _rounds(core, measure, xa, opts, o, jacobian, bounded):
+def _rounds(core, measure, xa, opts, o, jacobian, bounded, hint):
     """Either member on the PETSc engine (`core`: nrmicp::Newton or nrmicp::Solver over it) driven by
     the serial layer's rounds (_api._Rounds: Res of z re-measured where the core iterated another problem
     — a constant ζ's shifted LCP, the default rule's σA — and re-solved with a tighter tolerance when it
     misses tol) and settled by its _settle (polish, the status, the result's fields); `bounded`: polish
-    is not run."""
+    is not run; `hint(status)`: _api.failure_hint's."""
     m, qa, (kind, c, fn, ua) = o["method"], measure.qa, measure.problem
     solver = types.SimpleNamespace(_core=core, method=m, n=len(qa), _dr=None, _dc=None)   # (a serial Solver's shape)
     problem = (qa, kind, c, fn)
@@ -574,7 +583,7 @@ def _rounds(core, measure, xa, opts, o, jacobian, bounded):
     agree(measure.Am.getComm(), failed[0] if failed else None)
     report = hierarchy_report(core.hierarchy["requested"], None, core) if m == "newton" else None
     return _settle(solver, rounds, problem, measure, opts.tol, polish=m == "newton" and o["polish"], bounded=bounded,
-                   report=report)
+                   report=report, hint=hint)
 
 
 def _deferred(hook, failed):
@@ -631,6 +640,13 @@ def _units_sigma(Am):
     comm = Am.getComm()
     logs = _flag_sum(comm, float(np.sum(np.log2(a[a > 0]))))
     return sigma_from_logs(logs, int(round(_flag_sum(comm, float(np.count_nonzero(a > 0))))))
+
+
+def _mean_abs_diagonal(Am):
+    """mean |a_ii| over every rank's rows (collective)."""
+    d = Am.getDiagonal()
+    total, _ = _flag_sum(Am.getComm(), float(np.sum(np.abs(d.getArray(readonly=True))))), d.destroy()
+    return total / Am.getSize()[0]
 
 
 def gather(v):

@@ -11,7 +11,8 @@ Rannacher start-up: 102 LCPs with one matrix): the scene registry's size "realis
 (nrmicp.scenes.SIZES). ``--small`` takes its "tiny" sizes, what a test can afford.
 
 Curves: the handful a user chooses between — ``newton`` with the grid's geometric hierarchy and
-with ``hierarchy="amg"``, ``nrmgs`` + Anderson, plain ``nrmgs`` (the default stationary member;
+with ``hierarchy="amg"`` (on the QVI the outer fixed point on ζ, and Newton on the whole ICP with ζ′, the scene's
+exact Jacobian as a ``LinearOperator``: ``newton-jac``), ``nrmgs`` + Anderson, plain ``nrmgs`` (the default stationary member;
 ``nrmicp bench --family`` compares it with the others), red-black projected SOR (numpy, SOR's optimal ω) and
 a QP solver (PIQP, else OSQP, when installed; symmetric LCPs only). x = CPU seconds from the
 call (set-up, hierarchy and factorizations included), y = Res. A stationary curve is one solve
@@ -28,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import importlib
 import os
 import time
 from typing import Optional
@@ -55,12 +57,17 @@ N_TIME = 100
 CURVES = {
     "newton-geo": ("newton, geometric hierarchy", dict(method="newton", hierarchy="geo")),
     "newton-amg": ("newton, hierarchy='amg'", dict(method="newton", hierarchy="amg")),
+    "newton-jac": ("newton + ζ′ (LinearOperator), geometric hierarchy",
+                   dict(method="newton", hierarchy="geo", zeta_jacobian="scene")),
     "nrmgs+anderson": ("nrmgs + Anderson", dict(method="nrmgs", accelerate="anderson")),
     "nrmgs": ("nrmgs (stationary)", dict(method="nrmgs")),
     "psor": ("red-black PSOR (numpy)", "psor"),
     "qp": ("QP solver ({solver})", "qp"),
 }
-COLOURS = {"newton-geo": "#1f77b4", "newton-amg": "#17becf", "nrmgs+anderson": "#2ca02c",
+#: Scenes whose ζ has a Jacobian (the curve 'newton-jac': Newton on the whole ICP; the others run the
+#: outer fixed point on ζ): its maker, problem -> zeta_jacobian.
+JACOBIANS = {"thermoforming_2d": "thermoforming.thermoforming_zeta_jacobian"}
+COLOURS = {"newton-geo": "#1f77b4", "newton-jac": "#08306b", "newton-amg": "#17becf", "nrmgs+anderson": "#2ca02c",
            "nrmgs": "#98df8a", "psor": "#d62728", "qp": "#9467bd"}
 
 
@@ -72,8 +79,14 @@ def build(scene: str, small: bool = False):
     return scenes.build(scene, SIZE[small], exact=False)
 
 
-def _options(problem, options):
+def _options(problem, options, scene):
+    """nrmicp.solve's options of a curve on this scene's problem; None: the curve does not apply."""
     opts = dict(options)
+    if opts.get("zeta_jacobian") == "scene":
+        if scene not in JACOBIANS:
+            return None
+        module, name = JACOBIANS[scene].rsplit(".", 1)
+        opts["zeta_jacobian"] = getattr(importlib.import_module(f"nrmicp.scenes.{module}"), name)(problem)
     if opts.get("hierarchy") == "geo":
         opts["hierarchy"] = problem.prolongations()
         if opts["hierarchy"] is None:
@@ -217,6 +230,8 @@ def run(scenes=tuple(SCENES), curves=tuple(CURVES), budget=30.0, small=False, pr
                     continue
             if curve == "psor" and (callable(problem.zeta) or getattr(problem, "upper", None) is not None):
                 continue   # (the peers solve the LCP only)
+            if "zeta_jacobian" in options and scene not in JACOBIANS:
+                continue
             t0 = time.perf_counter()
             if scene == "american_put":
                 pts = _march_curve(problem, curve, small)
@@ -225,7 +240,7 @@ def run(scenes=tuple(SCENES), curves=tuple(CURVES), budget=30.0, small=False, pr
             elif curve == "qp":
                 pts = _qp_curve(problem, budget)
             else:
-                opts = _options(problem, options)
+                opts = _options(problem, options, scene)
                 if opts is None:
                     continue
                 pts = _solve_curve(problem, opts, budget)
@@ -247,6 +262,8 @@ def curve_label(curve: str, scene: str) -> str:
         label = label.format(solver=_qp_solver())
     if scene == "american_put" and curve == "newton-amg":
         label = "newton, hierarchy='amg' (warm starts, V-cycle inner solves)"
+    if scene in JACOBIANS and curve in ("newton-geo", "newton-amg"):
+        label += ", no ζ′"   # (the outer fixed point on ζ)
     if scene == "american_put" and curve == "newton-geo":
         label = "newton (nested first step, warm starts, direct solves)"
     return label
