@@ -12,7 +12,7 @@ Rannacher start-up: 102 LCPs with one matrix): the scene registry's size "realis
 
 Curves: the handful a user chooses between — ``newton`` with the grid's geometric hierarchy and
 with ``hierarchy="amg"`` (on the QVI the outer fixed point on ζ, and Newton on the whole ICP with ζ′, the scene's
-exact Jacobian as a ``LinearOperator``: ``newton-jac``), ``nrmgs`` + Anderson, plain ``nrmgs`` (the default stationary member;
+exact Jacobian as a ``LinearOperator``, the grid's hierarchy: ``newton-jac``), ``nrmgs`` + Anderson, plain ``nrmgs`` (the default stationary member;
 ``nrmicp bench --family`` compares it with the others), red-black projected SOR (numpy, SOR's optimal ω) and
 a QP solver (PIQP, else OSQP, when installed; symmetric LCPs only). x = CPU seconds from the
 call (set-up, hierarchy and factorizations included), y = Res. A stationary curve is one solve
@@ -57,8 +57,7 @@ N_TIME = 100
 CURVES = {
     "newton-geo": ("newton, geometric hierarchy", dict(method="newton", hierarchy="geo")),
     "newton-amg": ("newton, hierarchy='amg'", dict(method="newton", hierarchy="amg")),
-    "newton-jac": ("newton + ζ′ (LinearOperator), geometric hierarchy",
-                   dict(method="newton", hierarchy="geo", zeta_jacobian="scene")),
+    "newton-jac": ("newton + ζ′ (LinearOperator)", dict(method="newton", hierarchy="scene", zeta_jacobian="scene")),
     "nrmgs+anderson": ("nrmgs + Anderson", dict(method="nrmgs", accelerate="anderson")),
     "nrmgs": ("nrmgs (stationary)", dict(method="nrmgs")),
     "psor": ("red-black PSOR (numpy)", "psor"),
@@ -87,10 +86,11 @@ def _options(problem, options, scene):
             return None
         module, name = JACOBIANS[scene].rsplit(".", 1)
         opts["zeta_jacobian"] = getattr(importlib.import_module(f"nrmicp.scenes.{module}"), name)(problem)
-    if opts.get("hierarchy") == "geo":
-        opts["hierarchy"] = problem.prolongations()
-        if opts["hierarchy"] is None:
+    if opts.get("hierarchy") in ("geo", "scene"):   # 'scene': the grid's where it has one, else the default
+        P = problem.prolongations()
+        if P is None and opts["hierarchy"] == "geo":
             return None
+        opts["hierarchy"] = "auto" if P is None else P
     return opts
 
 
