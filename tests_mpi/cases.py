@@ -244,6 +244,16 @@ def case_no_rows():
             outcome = [type(exc).__name__, str(exc)]
         got = _allgather_text(json.dumps(outcome))
         out[method] = [json.loads(t) for t in got] if RANK == 0 else None
+    # a stationary solve that does not converge asks A's dominance margin for its advice, and method='auto'
+    # for its choice: a reduction every rank takes part in (the rank without rows skipped a collective: a hang)
+    for method, extra in (("nrmgs_short", {"maxiter": 5}), ("auto", {})):
+        try:
+            r = dist.solve(M, q, pb.zeta[lo:hi], method=method.split("_")[0], tol=1e-8, **extra)
+            outcome = [str(r.status), "stationary members need" in r.message]
+        except Exception as exc:  # noqa: BLE001 - the outcome is the test's subject
+            outcome = [type(exc).__name__, str(exc)]
+        got = _allgather_text(json.dumps(outcome))
+        out[method] = [json.loads(t) for t in got] if RANK == 0 else None
     return out
 
 

@@ -167,6 +167,8 @@ def test_a_rank_without_rows_newton_refuses_on_every_rank_the_stationary_members
     for method in ("nrmgs", "nrm_omega2", "nrm_omega2_icp"):
         for status, err in out[method]:
             assert status == "CONVERGED" and err < 1e-6, (method, out[method])
+    assert out["nrmgs_short"] == [["MAX_ITERATIONS", True]] * 2, out["nrmgs_short"]   # the member's advice
+    assert out["auto"][0] == out["auto"][1] and out["auto"][0][1].startswith("rank 1: A has no rows"), out["auto"]
 
 
 def test_readme_example_runs_on_two_ranks():

@@ -534,7 +534,9 @@ def _margin(Am, comm):
     """A's dominance_margin over every rank's rows (collective; a rank without rows has no say)."""
     indptr, _, vals = Am.getValuesCSR()
     rows = sp.csr_matrix((vals, np.zeros_like(vals, dtype=np.int32), indptr), shape=(len(indptr) - 1, 1))
-    local = dominance_margin(rows, np.array(Am.getDiagonal().getArray(readonly=True))) if rows.shape[0] else math.inf
+    d = Am.getDiagonal()   # (collective: on every rank, rows or none)
+    diagonal, _ = np.array(d.getArray(readonly=True)), d.destroy()
+    local = dominance_margin(rows, diagonal) if rows.shape[0] else math.inf
     return -_flag_max(comm, -local)
 
 

@@ -588,7 +588,7 @@ class NewtonRun {
     outer_z_.resize(0), outer_set_.clear(), step_set_.clear();  // (a new run's outer-step state)
     outer_ok_ = outer_mode_ = true;
     if (!(z0 && !nest_))  // (a given start keeps the frozen nest: its bounds are the better guess than a coarse answer's)
-      outer_solve(q, psi, z0, nest_, std::min(start_maxiter, o_.maxiter), z0 ? RefreshedBounds{} : zeta_bounds(zeta), o_.tol);
+      outer_solve(q, psi, z0, nest_, std::min(start_maxiter, o_.maxiter), z0 ? RefreshedBounds{} : zeta_bounds(zeta));
     const Vector start = (z0 && !nest_) ? *z0 : outer_z_;
     const auto t0 = std::chrono::steady_clock::now();
     SemismoothRecord record;
@@ -655,15 +655,13 @@ class NewtonRun {
   static constexpr int start_maxiter = 100;
 
   /// The obstacle problem's solution S(ψ) from z (null: zeros, nested when `nest`), from the active
-  /// set of the last one, to a settled set (or to Res < tol); kept with its inactive set (outer_z_,
-  /// outer_set_): the semismooth loop's outer steps. `fresh`: ψ = ζ(z), taken afresh a level when nested
-  /// (the solution is then S(ζ(z_f)): the start of the Newton steps, wherever it came from).
-  /// The start's solve stops at the solve's tol: the ICP's Res there is ζ's move from z_f, far above
-  /// it, and the steps to a settled set after that polish an answer the Newton step moves anyway
-  /// (docs/MEASUREMENTS.md, "The QVI's start stops at tol"). Returns its Res (of the obstacle problem).
+  /// set of the last one, to a settled set; kept with its inactive set (outer_z_, outer_set_): the
+  /// semismooth loop's outer steps. `fresh`: ψ = ζ(z), taken afresh a level when nested (the
+  /// solution is then S(ζ(z_f)): the start of the Newton steps, wherever it came from).
+  /// Returns its Res (of the obstacle problem).
   double outer_solve(const Vector& q, const Vector& psi, const Vector* z, bool nest, int maxiter,
-                     RefreshedBounds fresh = {}, double tol = 0.0) {
-    Result inner = solve_obstacle(q, psi, z, nest, tol, maxiter, false, &outer_set_, nullptr,
+                     RefreshedBounds fresh = {}) {
+    Result inner = solve_obstacle(q, psi, z, nest, 0.0, maxiter, false, &outer_set_, nullptr,
                                   nest && fresh.at ? &fresh : nullptr);
     outer_z_.swap(inner.z);
     return inner.residual;

@@ -82,8 +82,7 @@ class OuterFixedPoint {
   /// or G(z)); or a run of the fallback member when a plain step is not acceptable.
   void move_x(Iterate&) {
     if (floor_end_) return void(end_ = floor_end_);  // (after the Monitor has looked at the iterate that met it)
-    // the first inner solve to the solve's tol (G(z_f) − z_f is far above it: ζ's move), the later to a settled set
-    Result inner = run_.obstacle(psi_, given_ || !first_ ? &z_ : nullptr, first_, first_ ? run_.tol() : 0.0);
+    Result inner = run_.obstacle(psi_, given_ || !first_ ? &z_ : nullptr, first_, 0.0);
     // a nested first solve whose start took ζ at z_f solved S(ζ(z_f)): G of z_f, the iterate it judges
     // (z_f is not a best iterate: the Monitor never saw it, and the floor's message quotes the best)
     if (first_) run_.moved_start(z_, psi_, r_);
