@@ -94,6 +94,11 @@ inline constexpr int kPoorGrowthSteps = 2;
 /// A Jacobian that misses ζ's difference quotient along the last move by more than this fraction
 /// (Plain::jacobian_miss) is not ζ's derivative: negated misses by 1, ten times too large 0.9, zero 1.
 inline constexpr double kJacobianMiss = 0.5;
+/// Steps of a Jacobian that matches ζ's difference quotient, stalling while they move z by less than
+/// this fraction of its size, stall at what ζ itself resolves (a ζ computed by an inner solve): the outer
+/// fixed point goes no further, and the solve ends there (docs/MEASUREMENTS.md, "A Jacobian that matches,
+/// at what ζ resolves"). The ratio is in z's units: a change of A's units changes no decision.
+inline constexpr double kResolvedMove = 1e-8;
 /// With outer steps (NewtonControl::outer_steps) a step is slow when it does not reduce Res by this
 /// factor, on any active set (no peeling excuses it): with ζ's derivative the steps reduce it far more,
 /// a poor Jacobian's only as the outer map does (docs/MEASUREMENTS.md, "Matrix-free Newton steps").
@@ -389,11 +394,17 @@ class Globalized {
         if (!plain_.linearize()) return stop(Status::ZetaFailed);
         miss_ = plain_.jacobian_miss();
       }
-    jacobian_poor_ = true;
     const bool checked = (jacobian_.outer() || check) && !std::isnan(miss_);  // (NaN: ζ or J failed at the check)
-    std::string why = jacobian_.message(checked && miss_ <= kJacobianMiss);
+    const bool matched = checked && miss_ <= kJacobianMiss;
+    double move = std::numeric_limits<double>::infinity();
+    if constexpr (!Plain::set_fixes_step)
+      if (matched) move = plain_.move_ratio();
+    jacobian_poor_ = !(move <= kResolvedMove);  // (poor: the outer fixed point goes on without it)
+    std::string why = jacobian_.message(matched);
     if (checked)
       why += ", and zeta_jacobian(z) v misses zeta's difference quotient along the last step v by " + to_text(100 * miss_) + "%";
+    if (!jacobian_poor_)
+      why += "; its last step moved z by " + to_text(move) + " of its size: the solve ends at what zeta resolves";
     end_ = StepEnd{Status::Stagnated, why};
   }
   // The active set repeated, z stood still, or a step at the rounding level did not reduce Res.

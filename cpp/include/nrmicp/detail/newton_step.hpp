@@ -131,6 +131,8 @@ class NewtonStep {
   bool linearize() { return lin_.linearize(z_, zeta_z_); }
   /// How far ζ's Jacobian at z misses ζ's difference quotient (SemismoothLinearization::jacobian_miss).
   double jacobian_miss() { return lin_.jacobian_miss(z_, zeta_z_); }
+  /// How far the last linearization moved z, relative to its size (SemismoothLinearization::move_ratio).
+  double move_ratio() const { return lin_.move_ratio(z_); }
   /// The reduced system of the piece `inactive`; false when it is singular.
   bool factorize(const std::vector<char>& inactive) {
     ScopedTimer t(level_.timings().factorization);  // direct: numeric factorization; cg: the V-cycle's update

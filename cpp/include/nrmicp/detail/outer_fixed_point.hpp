@@ -141,8 +141,8 @@ class OuterFixedPoint {
     if (r_ < best_r_) { best_z_ = z_; best_r_ = r_; }
   }
   /// A rejected mix whose ‖G − z‖ is at most this factor of its origin's is as good a point to step
-  /// from, and its step is known (impulse control's rejected mixes: 1.03; the hard cases' 2–17, from
-  /// which the step did worse: docs/MEASUREMENTS.md, "A rejected mix's own step").
+  /// from, and its step is known; well above it the step from the mix did worse (docs/MEASUREMENTS.md,
+  /// "A rejected mix's own step").
   static constexpr double kReuseMix = 1.1;
   /// The plain step to v = G(z) (z stays when ζ fails at v: the Monitor ends the solve).
   void take(Vector& v) {

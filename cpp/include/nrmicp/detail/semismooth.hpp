@@ -166,6 +166,13 @@ struct SemismoothLinearization {
     return scale > 0 ? comm.norm(quotient - jd) / scale : 0.0;
   }
   static constexpr double kDifferenceStep = 1e-4;
+  /// ‖z − z_before‖₂ / ‖z‖₂: how far the last linearization moved z (∞: no move known), in z's units.
+  double move_ratio(const Vector& z) const {
+    const Comm& comm = level.comm();
+    if (!comm.all(move.size() == z.size())) return std::numeric_limits<double>::infinity();
+    const double z_norm = comm.norm(z);
+    return z_norm > 0 ? comm.norm(move) / z_norm : std::numeric_limits<double>::infinity();
+  }
 
   /// The step's right-hand side: for z⁺ (sparse: −q on ℐ, c on 𝒜), or for the correction d = z⁺ − z
   /// (matrix-free: −w on ℐ, −g on 𝒜).

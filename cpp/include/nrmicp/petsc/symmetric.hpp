@@ -1,8 +1,8 @@
 // nrmicp — the serial rule for "A is symmetric" (detail::is_symmetric: ‖M − Mᵀ‖_F ≤ 1e-14 ‖M‖_F, a
 // mirror that is not stored counting as 0) on a PETSc AIJ Mat. PETSc's MatIsSymmetric applies another
 // rule (each entry within an absolute tolerance) and on several processes gathers the off-process
-// blocks as submatrices (MatIsTranspose: 0.16 s a million rows on 2 processes, more than a V-cycle's
-// set-up; docs/MEASUREMENTS.md). Here each process reads its own rows, an entry whose mirror another
+// blocks as submatrices (MatIsTranspose: more than a V-cycle's set-up at a million rows;
+// docs/MEASUREMENTS.md). Here each process reads its own rows, an entry whose mirror another
 // process owns is sent to it (one exchange of the off-diagonal blocks' entries), two sums are reduced.
 #pragma once
 
