@@ -94,11 +94,13 @@ inline constexpr int kPoorGrowthSteps = 2;
 /// A Jacobian that misses ζ's difference quotient along the last move by more than this fraction
 /// (Plain::jacobian_miss) is not ζ's derivative: negated misses by 1, ten times too large 0.9, zero 1.
 inline constexpr double kJacobianMiss = 0.5;
-/// Steps of a Jacobian that matches ζ's difference quotient, stalling while they move z by less than
-/// this fraction of its size, stall at what ζ itself resolves (a ζ computed by an inner solve): the outer
-/// fixed point goes no further, and the solve ends there (docs/MEASUREMENTS.md, "A Jacobian that matches,
-/// at what ζ resolves"). The ratio is in z's units: a change of A's units changes no decision.
+/// Slow steps of a Jacobian that is ζ's derivative (its miss at most kResolvedMiss), stalling while they
+/// move z by less than kResolvedMove of its size, stall at what ζ itself resolves (a ζ computed by an
+/// inner solve): the outer fixed point goes no further, and the solve ends there. An approximate Jacobian
+/// (a miss of 20–50%) stalls by converging linearly, which the outer fixed point cures (docs/MEASUREMENTS.md,
+/// "A Jacobian that matches, at what ζ resolves"). Both ratios are in z's units: A's units change no decision.
 inline constexpr double kResolvedMove = 1e-8;
+inline constexpr double kResolvedMiss = 1e-3;
 /// With outer steps (NewtonControl::outer_steps) a step is slow when it does not reduce Res by this
 /// factor, on any active set (no peeling excuses it): with ζ's derivative the steps reduce it far more,
 /// a poor Jacobian's only as the outer map does (docs/MEASUREMENTS.md, "Matrix-free Newton steps").
@@ -116,6 +118,8 @@ class JacobianCheck {
   /// A step rejected by the acceptance test (Res grew beyond the non-monotone reference, or is not finite).
   void rejected(bool same_set) { grew_ += same_set || outer_; }
   bool poor() const { return slow_ >= kPoorSlowSteps || grew_ >= kPoorGrowthSteps; }
+  /// Poor by slow accepted steps (their last move is the step's; a growth stall's trials were rejected).
+  bool slow_stall() const { return slow_ >= kPoorSlowSteps; }
   /// Why (the start of the solve's message). `matches`: ζ′ was found to match ζ's difference quotient
   /// (kJacobianMiss), so the steps, not the Jacobian, failed: said as such.
   std::string message(bool matches = false) const {
@@ -398,7 +402,7 @@ class Globalized {
     const bool matched = checked && miss_ <= kJacobianMiss;
     double move = std::numeric_limits<double>::infinity();
     if constexpr (!Plain::set_fixes_step)
-      if (matched) move = plain_.move_ratio();
+      if (matched && miss_ <= kResolvedMiss && jacobian_.slow_stall()) move = plain_.move_ratio();
     jacobian_poor_ = !(move <= kResolvedMove);  // (poor: the outer fixed point goes on without it)
     std::string why = jacobian_.message(matched);
     if (checked)
