@@ -524,7 +524,9 @@ class Solver:
     @property
     def levels(self) -> int:
         """Levels of nested iteration (method 'newton': 1 + the number of prolongations used, fewer
-        than requested when the set-up gave some up (a HierarchyWarning said why); else 1)."""
+        than requested when the set-up gave some up (a HierarchyWarning said why); else 1). A count: the
+        levels themselves are the :class:`nrmicp.Hierarchy` a caller builds once and passes as ``hierarchy=``
+        (``Hierarchy.amg(A)`` is the 'amg' set-up): one set-up for every Solver of that A."""
         if self._reduced is not None:
             return self._reduced.inner.levels
         return self._core.levels if self.method == "newton" else 1
