@@ -253,19 +253,16 @@ def _positive_diagonal(Am, comm):
     """ValueError on every rank naming the first row whose a_ii is not positive (NaN included): the PETSc
     engine's smoothers, CG and splittings divide by the diagonal, where the serial member has rules for
     such rows (its Ω2, the Krylov choice), which this engine does not have."""
-    d = Am.getDiagonal()
+    da = _diagonal(Am)
 
     def check():
-        da, lo = d.getArray(readonly=True), Am.getOwnershipRange()[0]
+        lo = Am.getOwnershipRange()[0]
         bad = ~(da >= np.finfo(np.float64).tiny)   # (NaN, and subnormal: its reciprocal overflows)
         if np.any(bad):
             i = int(np.flatnonzero(bad)[0])
             raise ValueError(f"A's diagonal must be positive (not subnormal) on the PETSc engine (its smoothers, "
                              f"Krylov solves and splittings divide by it); A[{lo + i}, {lo + i}] = {da[i]}")
-    try:
-        _collective(comm, check)
-    finally:
-        d.destroy()   # on every rank together (a raise keeps this frame in its traceback)
+    _collective(comm, check)
 
 
 def _prepare_call(Am, m, q, zeta, x0, comm, o, it):
@@ -534,8 +531,7 @@ def _margin(Am, comm):
     """A's dominance_margin over every rank's rows (collective; a rank without rows has no say)."""
     indptr, _, vals = Am.getValuesCSR()
     rows = sp.csr_matrix((vals, np.zeros_like(vals, dtype=np.int32), indptr), shape=(len(indptr) - 1, 1))
-    d = Am.getDiagonal()   # (collective: on every rank, rows or none)
-    diagonal, _ = np.array(d.getArray(readonly=True)), d.destroy()
+    diagonal = _diagonal(Am)   # (collective: on every rank, rows or none)
     local = dominance_margin(rows, diagonal) if rows.shape[0] else math.inf
     return -_flag_max(comm, -local)
 
@@ -638,7 +634,7 @@ def _owns_rows(Am):
 
 def _units_sigma(Am):
     """The default rule's σ (nrmicp._scaling.units_factor) from global sums over the diagonal."""
-    a = np.abs(Am.getDiagonal().getArray(readonly=True))
+    a = np.abs(_diagonal(Am))
     comm = Am.getComm()
     logs = _flag_sum(comm, float(np.sum(np.log2(a[a > 0]))))
     return sigma_from_logs(logs, int(round(_flag_sum(comm, float(np.count_nonzero(a > 0))))))
@@ -646,9 +642,15 @@ def _units_sigma(Am):
 
 def _mean_abs_diagonal(Am):
     """mean |a_ii| over every rank's rows (collective)."""
+    return _flag_sum(Am.getComm(), float(np.sum(np.abs(_diagonal(Am))))) / Am.getSize()[0]
+
+
+def _diagonal(Am):
+    """This rank's a_ii as a numpy array (collective: the Vec PETSc makes is destroyed on every rank
+    together, not left to each rank's garbage collector)."""
     d = Am.getDiagonal()
-    total, _ = _flag_sum(Am.getComm(), float(np.sum(np.abs(d.getArray(readonly=True))))), d.destroy()
-    return total / Am.getSize()[0]
+    out, _ = np.array(d.getArray(readonly=True)), d.destroy()
+    return out
 
 
 def gather(v):

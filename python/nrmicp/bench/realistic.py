@@ -79,11 +79,9 @@ def build(scene: str, small: bool = False):
 
 
 def _options(problem, options, scene):
-    """nrmicp.solve's options of a curve on this scene's problem; None: the curve does not apply."""
+    """nrmicp.solve's options of a curve on this scene's problem; None: the curve does not apply (no grid)."""
     opts = dict(options)
-    if opts.get("zeta_jacobian") == "scene":
-        if scene not in JACOBIANS:
-            return None
+    if opts.get("zeta_jacobian") == "scene":   # (run() skips the scenes without one)
         module, name = JACOBIANS[scene].rsplit(".", 1)
         opts["zeta_jacobian"] = getattr(importlib.import_module(f"nrmicp.scenes.{module}"), name)(problem)
     if opts.get("hierarchy") in ("geo", "scene"):   # 'scene': the grid's where it has one, else the default
