@@ -1,21 +1,8 @@
-"""nrmicp beyond one machine: every member on PETSc over MPI — the Newton member (nrmicp::Newton) and
-the stationary members (nrmicp::Solver, as synchronous multisplitting), the serial library's C++ on
-the PETSc engine (nrmicp._petsc). This module is glue: argument checks and conversion, layouts, the
-call into the core.
-
-Run under ``mpirun -n P python script.py``; every rank calls :func:`solve` with the same
-arguments for its own rows. A is a petsc4py ``Mat`` (MPIAIJ; or each rank's CSR row block, a
-scipy matrix of shape (n_local, n)), q a petsc4py ``Vec`` with A's row layout (or each rank's
-rows as a numpy array). The heavy work is PETSc's: products, KSP (CG / BiCGSTAB) preconditioned by
-a V-cycle (PCMG) on the nested iteration's hierarchy, whose prolongations are hypre BoomerAMG's
-(hierarchy='amg': built by the core, nrmicp/petsc/hierarchy.hpp; PETSc options -nrmicp_hierarchy_...
-replace its rule). Option names, their checks, the statuses, the result fields and the advice a
-solve that did not converge gives are the serial library's (nrmicp._api, nrmicp._core): one definition.
-
-What is distributed: everything per iteration (products, reductions, the reduced solves, the
-stationary members' splittings of each rank's diagonal block, ζ on each rank's rows). What is not: the hierarchy's set-up is hypre's (itself parallel); a callable
-ζ sees only the rank's own rows (an entry-wise or row-local ζ); :func:`gather` copies z to
-rank 0 (small problems only).
+"""nrmicp on PETSc over MPI: every member is the serial library's C++ (nrmicp::Newton, and nrmicp::Solver as
+synchronous multisplitting) on the PETSc engine (nrmicp._petsc), settled by the serial layer's code (nrmicp._api).
+This module is glue: argument checks and conversion, layouts, the calls into the core. Every rank calls
+:func:`solve` (``mpirun -n P python script.py``) with the same arguments for its own rows; a failure on any
+rank raises on every rank. What runs where, and how it scales: docs/DISTRIBUTED.md.
 """
 from __future__ import annotations
 
@@ -87,17 +74,20 @@ def _check_mat(A):
 
 def _as_mat(B, comm):
     """This rank's CSR rows -> an MPIAIJ Mat (collective); ValueError when not square in all."""
-    mat = PETSc.Mat().createAIJ(size=((B.shape[0], PETSc.DECIDE), (B.shape[0], PETSc.DECIDE)), comm=comm)
-    N = mat.getSize()[1]
+    N = int(_flag_sum(comm, float(B.shape[0])))
 
     def columns():
         if B.shape[1] != N:
             raise ValueError(f"A's row blocks must together be square: this rank's block has {B.shape[1]} "
                              f"columns, the blocks have {N} rows in all")
     _collective(comm, columns)
-    mat.setPreallocationCSR((B.indptr.astype(PETSc.IntType), B.indices.astype(PETSc.IntType), B.data))
-    mat.assemble()
-    return mat
+    return _aij(B, (B.shape[0], N), (B.shape[0], N), comm)
+
+
+def _aij(B, rows, cols, comm):
+    """This rank's CSR rows B as an MPIAIJ Mat of (local, global) `rows` and `cols` (collective)."""
+    return PETSc.Mat().createAIJ(size=(rows, cols), comm=comm,
+                                 csr=(B.indptr.astype(PETSc.IntType), B.indices.astype(PETSc.IntType), B.data))
 
 
 def _local(v, A, name, *, scalar_ok=False, infinite=0):
@@ -155,33 +145,34 @@ class _Rows:
         return _local(v, self.A, name, scalar_ok=True, infinite=infinite)
 
 
-class _Zeta:
-    """ζ on this rank's rows: its kind (_core.ZetaKind: none, constant c, affine B Mat and c, functor a callable)."""
+def _zeta(zeta, A, comm):
+    """ζ on this rank's rows, read by nrmicp.solve's rules: (kind, c, the core's (kind, c, fn)), an affine or
+    callable ζ handed over as a functor whose every call is collective."""
+    _not_a_mat(zeta, "zeta")
+    kind, c, B, fn = _make_zeta(zeta, A.getLocalSize()[0], _Rows(A))
+    if kind in (_K.none, _K.constant):
+        return kind, c, (kind, c, None)
+    finite = None if fn is None else functools.partial(_finite, CheckedZeta(fn, A.getLocalSize()[0]))
+    return kind, c, (_K.functor, None, _functor(kind, B, c, finite, A, comm, "zeta(z)"))
 
-    def __init__(self, zeta, A, comm):
-        """Local checks only."""
-        _not_a_mat(zeta, "zeta")
-        self.comm, nloc = comm, A.getLocalSize()[0]
-        self.kind, self.c, self.B, fn = _make_zeta(zeta, nloc, _Rows(A))
-        self.fn = None if fn is None else CheckedZeta(fn, nloc)
 
-    def _checked(self, z):
-        r = self.fn(z)
-        if not np.all(np.isfinite(r)):
-            i = int(np.flatnonzero(~np.isfinite(r))[0])
-            raise ValueError(f"{_core.status_message(int(Status.ZETA_FAILED))} (NaN or Inf: zeta(z)[{i}] of this "
-                             f"rank's rows = {r[i]})")
-        return r
+def _finite(zeta, z):
+    """ζ(z) checked finite on this rank's rows (the core's ZETA_FAILED, decided on every rank together)."""
+    r = zeta(z)
+    if not np.all(np.isfinite(r)):
+        i = int(np.flatnonzero(~np.isfinite(r))[0])
+        raise ValueError(f"{_core.status_message(int(Status.ZETA_FAILED))} (NaN or Inf: zeta(z)[{i}] of this "
+                         f"rank's rows = {r[i]})")
+    return r
 
-    def core_args(self, A):
-        """(kind, c, fn) for the PETSc engine: this rank's c; a callable (or an affine ζ, as its product
-        B z + c) as a CheckedZeta of this rank's rows whose every call is collective (a failure on any
-        rank raises on all, in the same call of the one driver)."""
-        if self.kind in (_K.none, _K.constant):
-            return self.kind, self.c, None
-        local = _affine(self.B, self.c, A) if self.kind == _K.affine else (
-            lambda z: _collective(self.comm, self._checked, z))
-        return _K.functor, None, CheckedZeta(local, A.getLocalSize()[0])
+
+def _functor(kind, B, c, fn, A, comm, what):
+    """An affine part (B z + c, PETSc's product) or a callable as the core's functor of this rank's rows, every
+    call collective (a failure on any rank raises on all, in the same call of the driver)."""
+    out = CheckedZeta(_affine(B, c, A) if kind == _K.affine else functools.partial(_collective, comm, fn),
+                      A.getLocalSize()[0])
+    out.what = what
+    return out
 
 
 def _not_a_mat(v, name):
@@ -203,15 +194,14 @@ def _affine(B, c, A):
 
 # ----------------------------------------------------------------------------- the entry points
 def _prepare_matrix(A, comm, o):
-    """A's checks and the member, with every rank's failure raised on all ranks: (Am, method). The
-    set-up options `o` are checked here too (the core's Options, by the serial code), with tol and
-    rtol at their defaults. A Mat made here from scipy row blocks is destroyed when a check fails."""
+    """A's checks and the member, every rank's failure raised on all: (Am, method, this rank's a_ii); the
+    set-up options `o` checked too (tol, rtol at their defaults). A Mat made here is destroyed on failure."""
     A_in = _collective(comm, _check_mat, A)
     _same(comm, float(sp.issparse(A_in)), TypeError,   # (else the ranks would part ways: a hang)
           "A must be a petsc4py Mat on every rank or a scipy row block on every rank, not both")
     Am = _as_mat(A_in, comm) if sp.issparse(A_in) else A_in
     try:
-        return Am, _member(Am, comm, o)
+        return (Am, *_member(Am, comm, o))
     except Exception:
         if Am is not A_in:
             Am.destroy()   # on every rank together (each raises here)
@@ -219,12 +209,11 @@ def _prepare_matrix(A, comm, o):
 
 
 def _member(Am, comm, o):
-    """The member for Am and the set-up options `o` ('auto': nrmicp.solve's rule), checked on every rank;
-    A's diagonal positive (_positive_diagonal)."""
-    nloc = Am.getLocalSize()[0]
-    method = o["method"]
+    """(the member for Am and the set-up options `o`, checked on every rank ('auto': nrmicp.solve's rule, A's
+    dominance margin reduced over the ranks), this rank's a_ii, checked positive)."""
+    nloc, method, diagonal = Am.getLocalSize()[0], o["method"], _diagonal(Am)
     if isinstance(method, str) and method.lower() == "auto":
-        method = _auto_method(Am, o, comm)
+        method = choose_method(None, o, _margin(Am, comm, diagonal))
 
     def local():
         m = _choice(method, METHODS, "method")
@@ -245,24 +234,18 @@ def _member(Am, comm, o):
     h = o["hierarchy"]   # (its kind: every rank takes the same branches)
     kind = ("amg", "auto").index(h) + 1 if isinstance(h, str) else 0 if h is None else 3
     _same(comm, float(kind) if m == "newton" else 0.0, ValueError, _DIFFERENT_HIERARCHY)
-    _positive_diagonal(Am, comm)
-    return m
+    _collective(comm, _positive, diagonal, Am.getOwnershipRange()[0])
+    return m, diagonal
 
 
-def _positive_diagonal(Am, comm):
-    """ValueError on every rank naming the first row whose a_ii is not positive (NaN included): the PETSc
-    engine's smoothers, CG and splittings divide by the diagonal, where the serial member has rules for
-    such rows (its Ω2, the Krylov choice), which this engine does not have."""
-    da = _diagonal(Am)
-
-    def check():
-        lo = Am.getOwnershipRange()[0]
-        bad = ~(da >= np.finfo(np.float64).tiny)   # (NaN, and subnormal: its reciprocal overflows)
-        if np.any(bad):
-            i = int(np.flatnonzero(bad)[0])
-            raise ValueError(f"A's diagonal must be positive (not subnormal) on the PETSc engine (its smoothers, "
-                             f"Krylov solves and splittings divide by it); A[{lo + i}, {lo + i}] = {da[i]}")
-    _collective(comm, check)
+def _positive(diagonal, lo):
+    """ValueError naming the first row whose a_ii is not positive (NaN, subnormal: its reciprocal overflows):
+    the PETSc engine's smoothers, Krylov solves and splittings divide by it (the serial member has other rules)."""
+    bad = ~(diagonal >= np.finfo(np.float64).tiny)
+    if np.any(bad):
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"A's diagonal must be positive (not subnormal) on the PETSc engine (its smoothers, "
+                         f"Krylov solves and splittings divide by it); A[{lo + i}, {lo + i}] = {diagonal[i]}")
 
 
 def _prepare_call(Am, m, q, zeta, x0, comm, o, it):
@@ -271,47 +254,28 @@ def _prepare_call(Am, m, q, zeta, x0, comm, o, it):
 
     def local():
         return _core_options(o, m, nloc, it), _local(q, Am, "q"), None if x0 is None else _local(x0, Am, "x0"), \
-            _Zeta(zeta, Am, comm)
+            _zeta(zeta, Am, comm)
     return _collective(comm, local)
 
 
 def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
-    """Solve ICP(q, A, ζ) on all ranks of A's communicator (call it on every rank).
+    """Solve ICP(q, A, ζ) on every rank of A's communicator (call it on every rank) with :func:`nrmicp.solve`'s
+    options, defaults and checks; those PETSc cannot apply (``_UNSUPPORTED``, ``_UNSUPPORTED_NEWTON``,
+    ``_UNSUPPORTED_STATIONARY``) raise a ValueError naming them.
 
-    A: petsc4py Mat (AIJ, square, same row and column layout) or this rank's scipy.sparse row
-    block (n_local, n), of one kind on every rank (refused otherwise; without ``comm`` each rank's default
-    is its A's communicator or PETSc.COMM_WORLD, so a mix of kinds cannot be seen). q, x0, upper: petsc4py Vec in A's row layout or this rank's rows. zeta: None,
-    a constant (scalar, this rank's rows or a Vec), :class:`nrmicp.Affine` (B a petsc4py Mat in
-    A's layout, c) or a callable mapping this rank's rows of z to this rank's rows of ζ(z)
-    (entry-wise or row-local ζ only). method: 'newton' — the serial library's Newton member itself
-    (nrmicp::Newton on the PETSc engine, nrmicp._petsc), nested over hypre BoomerAMG's prolongations
-    with hierarchy='amg', cold with None, or over given prolongations, finest first: a list of PETSc Mats, or
-    a :class:`nrmicp.Hierarchy` or list of whole scipy matrices, the same on every rank (the serial
-    engine's levels: its decisions; the core forms the Galerkin operators of this A); an
-    affine ζ runs its outer fixed point — or a stationary member ('nrm', 'nrmm', 'nrmaor', 'nrmsor',
-    'nrmgs', 'nrmj', 'mms', 'two_sweep'): the serial loop (nrmicp::Solver on the PETSc engine) as
-    synchronous multisplitting, each rank splitting its diagonal block (on one rank, the serial
-    member's iterates; 'nrmj' takes them on any number). upper: z ≤ upper, as in :func:`nrmicp.solve`: a constant,
-    or an implicit upper bound ('newton' only; its outer fixed point) — :class:`nrmicp.Affine` (B a petsc4py
-    Mat in A's layout) or a callable of this rank's rows, as zeta.
-    zeta_jacobian ('newton', a callable zeta): zeta_jacobian(z) of this rank's rows returns ζ′(z) as a
-    linear operator on this rank's rows (a LinearOperator, or anything with shape and matvec: semismooth
-    Newton on the whole ICP, its Krylov solve preconditioned by the LCP system; each matvec is called on
-    every rank together, so it may communicate) or as a sparse matrix of them (a diagonal one solves
-    on the LCP system; any other acts by its product: the rank's block, all of a row-local ζ′).
-    callback(k, z, res) sees this rank's rows of z; returning True (or raising StopIteration) on any rank stops
-    every rank.
-    ``options`` are :func:`nrmicp.solve`'s, with its defaults, checked by the same code (one table:
-    nrmicp._options); those that cannot apply on PETSc raise a ValueError naming them:
-    ``_UNSUPPORTED`` (scale, components), for 'newton' also ``_UNSUPPORTED_NEWTON``
-    (inner), for the stationary members ``_UNSUPPORTED_STATIONARY`` (z_update 'solve',
-    polish). verbose prints rank 0's progress lines.
-    method='auto' is nrmicp.solve's rule on every rank's rows; hierarchy='auto' is nrmicp.solve's rule
-    (n ≥ 1000, at most 10% of A's entries stored), 'amg' there being BoomerAMG's (no pyamg needed).
-    tol and rtol both None is nrmicp.solve's default rule (units-free Res_E, rtol 1e-10), applied by
-    solving σA, σq (σ from the diagonal's global geometric mean), ``residual`` the paper's Res.
-    Returns a :class:`nrmicp.Result` on every rank, with ``z`` and ``w`` as PETSc Vecs
-    (:func:`gather` copies one to rank 0). A failure on any rank raises on every rank.
+    A: a petsc4py Mat (AIJ, square, equal row and column layouts) or this rank's scipy.sparse row block
+    (n_local, n), of one kind on every rank (without ``comm`` each rank's default is its A's communicator or
+    PETSc.COMM_WORLD, so a mix of kinds cannot be seen). q, x0 and a vector upper: a Vec in A's row layout or
+    this rank's rows. zeta, and an implicit upper: None, a constant, :class:`nrmicp.Affine` (B a petsc4py Mat
+    in A's layout) or a callable of this rank's rows (a row-local ζ). zeta_jacobian(z) of this rank's rows: a
+    linear operator on them (its matvec is called on every rank together: it may communicate) or a sparse
+    matrix. hierarchy ('newton'): 'amg' (BoomerAMG's), 'auto', None, or prolongations, finest first: PETSc
+    Mats, or a :class:`nrmicp.Hierarchy` or whole scipy matrices, the same on every rank. callback(k, z, res)
+    sees this rank's rows; True on any rank stops every rank. The stationary members run as synchronous
+    multisplitting of each rank's diagonal block.
+
+    Returns a :class:`nrmicp.Result` on every rank, ``z`` and ``w`` as PETSc Vecs (:func:`gather`). A failure
+    on any rank raises on every rank. What runs, the options, the scaling: docs/DISTRIBUTED.md.
     """
     comm = comm or (A.getComm() if isinstance(A, PETSc.Mat) else PETSc.COMM_WORLD)
     _collective(comm, lambda: _options.validate(options, where="distributed.solve", unsupported=_UNSUPPORTED))
@@ -326,37 +290,38 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
 
 
 class Solver:
-    """:class:`nrmicp.Solver` on PETSc: A set up once — checked, its member chosen, and on the first solve
-    that needs it the core (nrmicp::Newton or nrmicp::Solver on the PETSc engine: the hierarchy, its
-    Galerkin operators, the reduced systems' solvers) — then solved for many q, ζ, x0 (a time march, an
-    outer loop of the user's). :func:`solve` is one Solver's one solve.
+    """:class:`nrmicp.Solver` on PETSc: A checked and its member chosen once, the core (nrmicp::Newton or
+    nrmicp::Solver on the PETSc engine: hierarchy, Galerkin operators, reduced solvers) built on the first solve
+    that needs it and kept, then solved for many q, ζ, x0. :func:`solve` is one Solver's one solve.
 
-    ``Solver(A, *, comm=None, **options)`` takes :func:`solve`'s set-up options (method, hierarchy, the
-    splitting, ...) and per-solve defaults (tol, maxiter, ...); ``solve(q, zeta=None, *, upper=None,
-    **options)`` the per-solve ones and each call's own (x0, callback, zeta_jacobian), as
-    :meth:`nrmicp.Solver.solve`. Call both on every rank. The default rule (tol and rtol None) iterates on
-    σA, the paper's tol on A: one core each, kept. ``close()`` (or ``with``) frees the cores on every
-    rank together: their KSPs' MUMPS factors are freed collectively, and left to each rank's garbage
-    collector that happens at different times (a deadlock); a closed Solver raises on solve."""
+    ``Solver(A, *, comm=None, **options)`` takes :func:`solve`'s set-up options and per-solve defaults;
+    ``solve(q, zeta=None, *, upper=None, **options)`` the per-solve ones and each call's own (x0, callback,
+    zeta_jacobian), as :meth:`nrmicp.Solver.solve`. Call both on every rank. The default rule (tol and rtol
+    None) iterates on σA, the paper's tol on A: one core each. ``close()`` (or ``with``) frees the cores on
+    every rank together (PETSc frees MUMPS factors collectively: a garbage collector's timing deadlocks);
+    a closed Solver raises on solve."""
 
     def __init__(self, A, *, comm=None, **options):
         t0 = time.perf_counter()
         self.comm = comm = comm or (A.getComm() if isinstance(A, PETSc.Mat) else PETSc.COMM_WORLD)
         _collective(comm, _scoped, options, ("setup", "solve"), "distributed.Solver", "its solve()")
         self._options = {**_options.defaults("setup", "solve"), **options}
-        self.A, self.method = _prepare_matrix(A, comm, {**_options.defaults(), **self._options})
+        o = {**_options.defaults(), **self._options}
+        self.A, self.method, diagonal = _prepare_matrix(A, comm, o)
         self._owns_A = self.A is not A   # (made from scipy row blocks)
-        o = {**_options.defaults(), **self._options}   # (every rank alike: the mean is a reduction)
-        self._omega2_hint = _omega2_hint(_mean_abs_diagonal(self.A) if self.method == "nrm" else 1.0, self.method,
-                                         o["omega2"], o["accelerate"])
+        n = self.A.getSize()[0]
+        logs, total = (_flag_sum(comm, float(np.sum(f(diagonal)))) for f in (np.log2, np.abs))
+        self._sigma = sigma_from_logs(logs, n)   # the default rule's σ (units_factor: every a_ii > 0 here)
+        self._omega2_hint = _omega2_hint(total / max(n, 1), self.method, o["omega2"], o["accelerate"])
+        self._margin = functools.partial(_margin, self.A, comm, diagonal)
         try:   # given prolongations checked and made PETSc Mats now, once (kept until close)
-            self._levels = _prolongations(self._options["hierarchy"], self.A, comm) if self.method == "newton" else ([], [])
+            self._levels = _prolongations(o["hierarchy"], self.A, comm) if self.method == "newton" else ([], [])
         except Exception:
             if self._owns_A:
                 self.A.destroy()   # on every rank together (each raises here)
             raise
         self._cores = {}   # units (the default rule's σA) -> [the core, its set-up seconds not yet reported]
-        self._operators = {False: (self.A, 1.0)}   # units -> (the Mat the core iterates, σ)
+        self._operators = {False: self.A}   # units -> the Mat the core iterates
         self._setup_seconds = time.perf_counter() - t0   # reported by the first solve
         self._closed = False
 
@@ -370,7 +335,7 @@ class Solver:
         """Frees the cores (collective: on every rank); a closed Solver's solve raises."""
         for core, _ in self._cores.values():
             core.close()
-        for units, (mat, _) in self._operators.items():   # the σA copy, and an A made from scipy row blocks
+        for units, mat in self._operators.items():   # the σA copy, and an A made from scipy row blocks
             if units or self._owns_A:
                 mat.destroy()
         for P in self._levels[1]:   # the prolongation Mats made from scipy matrices
@@ -380,54 +345,44 @@ class Solver:
     def solve(self, q, zeta=None, *, upper=None, **options) -> Result:
         """ICP(q, A, ζ) with this Solver's A: :func:`solve`'s arguments but A, comm and the set-up options."""
         from . import _petsc
-        comm = self.comm
+        comm, A, m = self.comm, self.A, self.method
         if self._closed:
             raise ValueError("this distributed.Solver was closed")
         _collective(comm, _scoped, options, ("solve", "call"), "distributed.Solver.solve", "distributed.Solver()")
-        o = {**_options.defaults(), **self._options, **options, "method": self.method}
-        if o["callback"] is not None:
-            o["callback"] = _collective_callback(comm, o["callback"])
+        o = {**_options.defaults(), **self._options, **options, "method": m}
         t_start = time.perf_counter()
         it, units = _criterion({"tol": o["tol"], "rtol": o["rtol"]})
-        A_user, m = self.A, self.method
-        opts, qa, xa, zf = _prepare_call(A_user, m, q, zeta, o["x0"], comm, o, it)
-        ua, bounded = _upper(upper, A_user, zf, comm, m)
-        q_user = qa
-        Am, sigma = self._operator(units)
+        opts, q_user, xa, (kind, c, core_zeta) = _prepare_call(A, m, q, zeta, o["x0"], comm, o, it)
+        upper, bounded = _upper(upper, A, (kind, c), comm, m)
+        Am, sigma = self._operator(units), self._sigma if units else 1.0
         if units:   # the iteration runs on σA, σq: its Res is the units-free Res_E
-            qa = sigma * qa
-            _units_parameters(opts, m, sigma, Am.getLocalSize()[0])
-        kind, c, fn = zf.core_args(Am)
-        measure = _Measure(_petsc, Am, qa, (kind, c, fn, ua), (A_user, q_user) if units else None)
-        jacobian = _jacobian(o["zeta_jacobian"], zf, m, Am, comm)
+            _units_parameters(opts, m, sigma, len(q_user))
+        measure = _Measure(_petsc, Am, sigma * q_user, (*core_zeta, upper), (A, q_user) if units else None)
+        jacobian = _jacobian(o["zeta_jacobian"], kind, m, Am, comm)
         if opts.rtol > 0:   # the absolute target, on the problem the core iterates (Options::target of Res(0))
-            opts.tol, opts.rtol = opts.target(measure(np.zeros_like(qa))[1]), 0.0
+            opts.tol, opts.rtol = opts.target(measure(np.zeros_like(q_user))[1]), 0.0
         core, setup, earlier = self._core(_petsc, units, Am, opts, o)
-        hint = failure_hint(m, self._omega2_hint, lambda: _margin(A_user, comm), units, zf.kind)
+        hint = failure_hint(m, self._omega2_hint, self._margin, units, kind)
         fields = _rounds(core, measure, xa, opts, o, jacobian, bounded, hint)
         if units:   # w in the user's units (re-measured: σ(Az + q) / σ may overflow or underflow)
             fields["w"] = measure(fields["z"], weighted=False)[0]
-        timings = fields["timings"]
-        timings["setup"] += setup
-        timings["total"] = time.perf_counter() - t_start + earlier   # (the core's build is in this call)
-        r = Result(**{**fields, "z": _vec(A_user, fields["z"]), "w": _vec(A_user, fields["w"])}, ranks=comm.getSize())
+        fields["timings"]["setup"] += setup
+        fields["timings"]["total"] = time.perf_counter() - t_start + earlier   # (the core's build is in this call)
+        r = Result(**{**fields, "z": _vec(A, fields["z"]), "w": _vec(A, fields["w"])}, ranks=comm.getSize())
         if opts.verbose > 0:   # (a logger that raises on rank 0 raises on every rank)
-            _collective(comm, lambda: comm.getRank() == 0 and _log_final(m, r, fields["timings"]["total"]))
+            _collective(comm, lambda: comm.getRank() == 0 and _log_final(m, r, r.timings["total"]))
         return r
 
     def _operator(self, units):
-        """(the Mat the core iterates, σ): A, or under the default rule σA (a copy, made once)."""
+        """The Mat the core iterates: A, or under the default rule σA (a copy, made once)."""
         if units not in self._operators:
-            sigma = _units_sigma(self.A)
-            scaled = self.A.copy()
-            scaled.scale(sigma)
-            self._operators[units] = (scaled, sigma)
+            self._operators[units] = self.A.copy()
+            self._operators[units].scale(self._sigma)
         return self._operators[units]
 
     def _core(self, _petsc, units, Am, opts, o):
-        """(the core for this scaling, the set-up seconds this solve reports, the Solver's own set-up
-        seconds among them): the core is built on its first solve, which also reports the Solver's set-up
-        (the first solve of all; the build's seconds are the calling solve's own)."""
+        """(the core for this scaling, built on its first solve; the set-up seconds this solve reports; the
+        Solver's own among them: reported by its first solve)."""
         if units not in self._cores:
             t0 = time.perf_counter()
             if self.method == "newton":
@@ -448,12 +403,9 @@ class Solver:
 
 
 def _prolongations(hierarchy, Am, comm):
-    """hierarchy= as the core's prolongation Mats, finest first, and those of them made here (the caller
-    destroys them): PETSc Mats as given; a nrmicp.Hierarchy's
-    prolongations or whole scipy matrices, the same on every rank (checked as nrmicp.solve checks a
-    list, and against the other ranks'), as MPIAIJ Mats, level 0's rows in A's layout, each coarser
-    level's split evenly over the ranks. The core forms the Galerkin operators of A itself (so a
-    Hierarchy's own A does not matter here)."""
+    """(the core's prolongation Mats, finest first; those made here, destroyed by the caller): PETSc Mats as
+    given; a nrmicp.Hierarchy's or whole scipy matrices, checked as nrmicp.solve checks a list and against the
+    other ranks', as MPIAIJ Mats (level 0's rows in A's layout, each coarser level's split evenly)."""
     if isinstance(hierarchy, Hierarchy):
         hierarchy = list(hierarchy.prolongations)
     if not isinstance(hierarchy, (list, tuple)):
@@ -471,9 +423,7 @@ def _prolongations(hierarchy, Am, comm):
     for P in Ps:
         layout = PETSc.Vec().createMPI((PETSc.DECIDE, P.shape[1]), comm=comm)   # the coarse level's rows
         (clo, chi), _ = layout.getOwnershipRange(), layout.destroy()
-        B = P[lo:hi]
-        made.append(PETSc.Mat().createAIJ(size=((hi - lo, P.shape[0]), (chi - clo, P.shape[1])), comm=comm, csr=(
-            B.indptr.astype(PETSc.IntType), B.indices.astype(PETSc.IntType), B.data)))
+        made.append(_aij(P[lo:hi], (hi - lo, P.shape[0]), (chi - clo, P.shape[1]), comm))
         lo, hi = clo, chi
     return made, made
 
@@ -522,59 +472,46 @@ def _collective_callback(comm, callback):
     return functools.partial(_collective, comm, call)
 
 
-def _auto_method(Am, options, comm):
-    """nrmicp.solve's method='auto' (choose_method), A's dominance margin reduced over the ranks."""
-    return choose_method(None, options, _margin(Am, comm))
-
-
-def _margin(Am, comm):
+def _margin(Am, comm, diagonal):
     """A's dominance_margin over every rank's rows (collective; a rank without rows has no say)."""
     indptr, _, vals = Am.getValuesCSR()
     rows = sp.csr_matrix((vals, np.zeros_like(vals, dtype=np.int32), indptr), shape=(len(indptr) - 1, 1))
-    diagonal = _diagonal(Am)   # (collective: on every rank, rows or none)
-    local = dominance_margin(rows, diagonal) if rows.shape[0] else math.inf
-    return -_flag_max(comm, -local)
+    return -_flag_max(comm, -(dominance_margin(rows, diagonal) if rows.shape[0] else math.inf))
 
 
-def _upper(upper, Am, zf, comm, method):
-    """(This rank's rows of the upper bound, None: none; whether the problem is bounded, as
-    _bounds.is_bounded on every rank's rows). A -inf entry of a constant ζ on any rank (a free row)
-    makes every rank's problem a box problem: for the stationary members upper +inf where none is given.
-    An implicit upper (an Affine, B a petsc4py Mat in A's layout, or a callable of this rank's rows) is
-    the core's (make_zeta's tuple: a functor whose every call is collective)."""
-    nloc = Am.getLocalSize()[0]
+def _upper(upper, Am, zeta, comm, method):
+    """(this rank's rows of the upper bound, or the core's functor of an implicit one, or None; whether the
+    problem is bounded, as _bounds.is_bounded over every rank's rows). `zeta`: (kind, c). A -inf entry of a
+    constant ζ on any rank (a free row) makes every rank's problem a box problem."""
+    nloc, (kind, c) = Am.getLocalSize()[0], zeta
     if upper is None:
-        free = zf.kind == _K.constant and _flag_max(comm, float(np.any(np.isneginf(zf.c)))) > 0
+        free = kind == _K.constant and _flag_max(comm, float(np.any(np.isneginf(c)))) > 0
         return np.full(nloc, np.inf) if free and method != "newton" else None, free
 
     def local():
         _not_a_mat(upper, "upper")
         u = _make_upper(upper, nloc, _Rows(Am))
-        _bounds.check(zf.kind, zf.c if zf.kind == _K.constant else None, u, method, None)
+        _bounds.check(kind, c if kind == _K.constant else None, u, method, None)
         return np.full(nloc, np.inf) if u is None else u   # (all +inf on this rank: the same core call as the others)
     u = _collective(comm, local)
     if not isinstance(u, _bounds.ImplicitUpper):   # (+inf on every rank's rows: no upper bound, as serially)
         bound = _flag_max(comm, float(np.any(u < np.inf)))
-        return (u, True) if bound else _upper(None, Am, zf, comm, method)
-    fn = CheckedZeta(_affine(u.B, u.c, Am) if u.kind == _K.affine else (lambda z: _collective(comm, u.fn, z)), nloc)
-    fn.what = "upper(z)"
-    return (_K.functor, None, None, None, None, fn), True
+        return (u, True) if bound else _upper(None, Am, zeta, comm, method)
+    return (_K.functor, None, None, None, None, _functor(u.kind, u.B, u.c, u.fn, Am, comm, "upper(z)")), True
 
 
 def _rounds(core, measure, xa, opts, o, jacobian, bounded, hint):
-    """Either member on the PETSc engine (`core`: nrmicp::Newton or nrmicp::Solver over it) driven by
-    the serial layer's rounds (_api._Rounds: Res of z re-measured where the core iterated another problem
-    — a constant ζ's shifted LCP, the default rule's σA — and re-solved with a tighter tolerance when it
-    misses tol) and settled by its _settle (polish, the status, the result's fields); `bounded`: polish
-    is not run; `hint(status)`: _api.failure_hint's."""
+    """The fields of a Result: `core` (either member on the PETSc engine) run by the serial layer's rounds
+    (_api._Rounds: Res re-measured where the core iterated another problem, re-solved when it misses tol) and
+    settled by its _settle (polish unless `bounded`, the status, `hint(status)`: _api.failure_hint's)."""
     m, qa, (kind, c, fn, ua) = o["method"], measure.qa, measure.problem
     solver = types.SimpleNamespace(_core=core, method=m, n=len(qa), _dr=None, _dc=None)   # (a serial Solver's shape)
     problem = (qa, kind, c, fn)
     verify = measure.weights is not None or kind == _core.ZetaKind.constant
     it = {**{k: o[k] for k in _options.names("solve")}, "tol": opts.tol, "rtol": 0.0}
     rounds = _Rounds(solver, problem, it, None, {"upper": ua, "zeta_jacobian": jacobian}, measure if verify else None, xa)
-    cb = o["callback"]   # (distributed's callback(k, z, res), each rank's rows; k counts on over re-solves)
-    rounds.cb = None if cb is None else (lambda k, z, r: cb(k + rounds.cb_offset[0], z, r))
+    cb = None if o["callback"] is None else _collective_callback(measure.Am.getComm(), o["callback"])
+    rounds.cb = None if cb is None else (lambda k, z, r: cb(k + rounds.cb_offset[0], z, r))   # (k counts on)
     failed = []   # a progress line that raised (rank 0's: the only one the core calls), raised on every rank after
     rounds.progress = lambda method, n: _deferred(_progress_hook(method, n), failed)
     rounds.run(xa, opts.tol)
@@ -614,12 +551,10 @@ class _Measure:
         return self._petsc.measure(self.Am.handle, self.qa, *self.problem, z, rounding=True)["rounding_level"]
 
 
-def _jacobian(zeta_jacobian, zf, method, Am, comm):
-    """ζ's Jacobian for the core (None: none given): zeta_jacobian(z) of this rank's rows returns a
-    linear operator on them (its matvec may communicate: every rank calls it together) or a diagonal
-    matrix; nrmicp.solve's checks, each call of the user's code collective. (An Affine ζ takes the outer
-    fixed point here: its B as an operator ζ′ fails where the serial member's factorized B converges.)"""
-    if not _collective(comm, check_jacobian, zeta_jacobian, method, zf.kind):
+def _jacobian(zeta_jacobian, kind, method, Am, comm):
+    """ζ's Jacobian for the core (None: none given), nrmicp.solve's checks; every call of the user's code
+    collective (an operator's matvec may communicate). An Affine ζ runs the outer fixed point here."""
+    if not _collective(comm, check_jacobian, zeta_jacobian, method, kind):
         return None
     return core_jacobian(zeta_jacobian, Am.getLocalSize()[0], PETSc.IntType, collective=functools.partial(_collective, comm))
 
@@ -630,19 +565,6 @@ def _owns_rows(Am):
     if Am.getLocalSize()[0] == 0:
         raise ValueError("A has no rows on this rank: method 'newton' needs at least one row of A on every rank "
                          "(the stationary members, e.g. method='nrmgs', do not)")
-
-
-def _units_sigma(Am):
-    """The default rule's σ (nrmicp._scaling.units_factor) from global sums over the diagonal."""
-    a = np.abs(_diagonal(Am))
-    comm = Am.getComm()
-    logs = _flag_sum(comm, float(np.sum(np.log2(a[a > 0]))))
-    return sigma_from_logs(logs, int(round(_flag_sum(comm, float(np.count_nonzero(a > 0))))))
-
-
-def _mean_abs_diagonal(Am):
-    """mean |a_ii| over every rank's rows (collective)."""
-    return _flag_sum(Am.getComm(), float(np.sum(np.abs(_diagonal(Am))))) / Am.getSize()[0]
 
 
 def _diagonal(Am):
