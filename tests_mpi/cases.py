@@ -198,6 +198,10 @@ def _bad(kind):
         kw = {"upper": upper}
     elif kind == "bad_method":
         kw = {"method": "sor"}
+    elif kind == "q_length_affine":   # q one entry too long on the last rank beside an Affine ζ: ζ's product,
+        # collective (PETSc Vecs), is made only after every rank's checks passed (hung when made among them)
+        qa = np.append(pb.q[lo:hi], 0.0) if last else pb.q[lo:hi]
+        return M, qa, nrmicp.Affine(mat(A * 0.01, lo, hi), zeta), kw
     elif kind == "array_hierarchy":   # (an array is no hierarchy: named, not numpy's ambiguous truth value)
         kw = {"hierarchy": np.eye(3)}
     return M, q, zeta, kw

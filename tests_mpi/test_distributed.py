@@ -141,6 +141,7 @@ BAD = {
     "hierarchy_kinds": ("ValueError", "hierarchy"),   # (newton: the same on every rank; nrmgs: none)
     "nonfinite_A": ("ValueError", "this rank's block of rows"),
     "crossing_bounds": ("ValueError", "upper"),   # (nrmgs: bounds are method 'newton''s)
+    "q_length_affine": ("ValueError", "q must have length"),
 }
 
 

@@ -52,8 +52,7 @@ _UNSUPPORTED_STATIONARY = {
     "polish": "polishing is a Newton step: use method 'newton'"}
 # ----------------------------------------------------------------------------- inputs
 def _check_mat(A):
-    """A's local checks: a square AIJ Mat with equal row and column layouts, or a scipy row block
-    (returned as canonical float64 CSR, checked as nrmicp.solve checks A)."""
+    """A's local checks: a square AIJ Mat with equal layouts, or a scipy row block (as nrmicp.solve checks A)."""
     if isinstance(A, PETSc.Mat):
         if "aij" not in A.getType():
             raise TypeError(f"A must be an AIJ (sparse) PETSc matrix, got type {A.getType()!r}")
@@ -91,8 +90,7 @@ def _aij(B, rows, cols, comm):
 
 
 def _local(v, A, name, *, scalar_ok=False, infinite=0):
-    """q, zeta's c, x0, upper -> this rank's rows as a new float64 array (local checks only: no rank
-    waits for another here; the user's object is never modified); `infinite`: as in as_constant."""
+    """A Vec in A's row layout or this rank's rows -> a new float64 array (`infinite`: as in as_constant)."""
     lo, hi = A.getOwnershipRange()
     if isinstance(v, PETSc.Vec):
         if v.getOwnershipRange() != (lo, hi) or v.getSize() != A.getSize()[0]:
@@ -113,10 +111,8 @@ def _vec(A, arr):
 
 
 def _core_options(o, method, nloc, it):
-    """The core's Options from nrmicp.solve's options `o` (this rank's rows of the diagonals; tol and
-    rtol as _criterion resolved them in `it`), checked by the serial library's code (the one table,
-    nrmicp._options, and the core's Options.check), and the options that cannot apply to this member
-    on PETSc refused naming them."""
+    """The core's Options from nrmicp.solve's options `o` (tol, rtol as resolved in `it`), checked by the serial
+    code; the options that cannot apply to this member on PETSc refused naming them."""
     refused = dict(_UNSUPPORTED_NEWTON if method == "newton" else _UNSUPPORTED_STATIONARY)
     if method != "newton" and o["z_update"] in ("explicit", "auto"):
         refused.pop("z_update")   # (what 'auto' means: the core refuses 'solve', naming z_update)
@@ -125,8 +121,7 @@ def _core_options(o, method, nloc, it):
 
 
 class _Rows:
-    """How ζ's and upper's parts are read here (_api._make_zeta, _bounds.as_upper: nrmicp.solve's rules and
-    messages): a matrix as a PETSc Mat in A's layout, a constant or vector as this rank's rows."""
+    """How _api._make_zeta and _bounds.as_upper read ζ's and upper's parts: a Mat in A's layout, this rank's rows."""
 
     def __init__(self, A):
         self.A = A
@@ -145,15 +140,13 @@ class _Rows:
         return _local(v, self.A, name, scalar_ok=True, infinite=infinite)
 
 
-def _zeta(zeta, A, comm):
-    """ζ on this rank's rows, read by nrmicp.solve's rules: (kind, c, the core's (kind, c, fn)), an affine or
-    callable ζ handed over as a functor whose every call is collective."""
-    _not_a_mat(zeta, "zeta")
-    kind, c, B, fn = _make_zeta(zeta, A.getLocalSize()[0], _Rows(A))
+def _core_zeta(kind, c, B, fn, A, comm):
+    """The core's (kind, c, fn) of ζ as _make_zeta read it: an affine or callable ζ as a functor whose every call
+    is collective (made after every rank's checks: its Vecs are collective)."""
     if kind in (_K.none, _K.constant):
-        return kind, c, (kind, c, None)
+        return kind, c, None
     finite = None if fn is None else functools.partial(_finite, CheckedZeta(fn, A.getLocalSize()[0]))
-    return kind, c, (_K.functor, None, _functor(kind, B, c, finite, A, comm, "zeta(z)"))
+    return _K.functor, None, _functor(kind, B, c, finite, A, comm, "zeta(z)")
 
 
 def _finite(zeta, z):
@@ -249,12 +242,14 @@ def _positive(diagonal, lo):
 
 
 def _prepare_call(Am, m, q, zeta, x0, comm, o, it):
-    """A solve's checks, every rank's failure raised on all: (core Options, this rank's q and x0, ζ)."""
+    """A solve's local checks, every rank's failure raised on all: (core Options, this rank's q and x0, ζ's parts
+    as _make_zeta reads them: kind, c, B, fn)."""
     nloc = Am.getLocalSize()[0]
 
     def local():
-        return _core_options(o, m, nloc, it), _local(q, Am, "q"), None if x0 is None else _local(x0, Am, "x0"), \
-            _zeta(zeta, Am, comm)
+        checked = _core_options(o, m, nloc, it), _local(q, Am, "q"), None if x0 is None else _local(x0, Am, "x0")
+        _not_a_mat(zeta, "zeta")
+        return (*checked, _make_zeta(zeta, nloc, _Rows(Am)))
     return _collective(comm, local)
 
 
@@ -352,8 +347,9 @@ class Solver:
         o = {**_options.defaults(), **self._options, **options, "method": m}
         t_start = time.perf_counter()
         it, units = _criterion({"tol": o["tol"], "rtol": o["rtol"]})
-        opts, q_user, xa, (kind, c, core_zeta) = _prepare_call(A, m, q, zeta, o["x0"], comm, o, it)
+        opts, q_user, xa, (kind, c, B, fn) = _prepare_call(A, m, q, zeta, o["x0"], comm, o, it)
         upper, bounded = _upper(upper, A, (kind, c), comm, m)
+        core_zeta = _core_zeta(kind, c, B, fn, A, comm)
         Am, sigma = self._operator(units), self._sigma if units else 1.0
         if units:   # the iteration runs on σA, σq: its Res is the units-free Res_E
             _units_parameters(opts, m, sigma, len(q_user))
@@ -434,8 +430,7 @@ _DIFFERENT_HIERARCHY = ("hierarchy must be the same on every rank ('amg', 'auto'
 
 
 def _same(comm, value: float, error: type, message: str) -> None:
-    """error(message) raised on every rank (through agree: 'rank r: ...', as every other refusal) unless
-    every rank holds this value (a kind of input, or a checksum of it)."""
+    """error(message) on every rank unless every rank holds this value (a kind of input, or a checksum of it)."""
     differ = _flag_max(comm, value) != -_flag_max(comm, -value)
 
     def check():
@@ -453,8 +448,7 @@ def _petsc_list(hierarchy):
 
 
 def _scoped(options, scopes, where, elsewhere):
-    """TypeError naming the options of `options` outside these scopes (they belong `elsewhere`), then
-    the table's checks (_options.validate) with the options PETSc cannot apply refused."""
+    """TypeError naming the options outside these scopes (they belong `elsewhere`); then _options.validate."""
     misplaced = sorted(k for k in options if k in _options.TABLE and _options.TABLE[k].scope not in scopes)
     if misplaced:
         raise TypeError(f"{where}() does not take {misplaced}: pass them to {elsewhere}")
@@ -462,8 +456,7 @@ def _scoped(options, scopes, where, elsewhere):
 
 
 def _collective_callback(comm, callback):
-    """callback(k, z, res) with each call collective (a failure on one rank raises on all, no rank left
-    waiting); StopIteration stops the solve as True does (nrmicp.solve's rule)."""
+    """callback(k, z, res), each call collective; StopIteration stops the solve as True does (nrmicp.solve's rule)."""
     def call(k, z, res):
         try:
             return callback(k, z, res)
@@ -522,8 +515,8 @@ def _rounds(core, measure, xa, opts, o, jacobian, bounded, hint):
 
 
 def _deferred(hook, failed):
-    """`hook` keeping its first exception in `failed` (its later calls skipped) instead of raising it: the
-    core calls the progress hook on rank 0 only, between collectives that the other ranks wait in."""
+    """`hook` keeping its first exception in `failed`, not raising it (the core calls it on rank 0 only, between
+    collectives)."""
     def call(*args):
         if not failed:
             try:
@@ -534,9 +527,8 @@ def _deferred(hook, failed):
 
 
 class _Measure:
-    """(w, Res) of z on the problem the core iterates, every rank's rows, as _api._OriginalResidual
-    for _Rounds and _criterion_outcome: `user` (A, q) under the default rule, whose ``weighted=False``
-    is the paper's Res in the user's units."""
+    """_api._OriginalResidual on PETSc: (w, Res) of z on the problem the core iterates; ``weighted=False``: the
+    paper's Res in the user's units (A, q) under the default rule."""
 
     def __init__(self, _petsc, Am, qa, problem, user):
         self._petsc, self.Am, self.qa, self.problem, self.user = _petsc, Am, qa, problem, user
@@ -560,16 +552,14 @@ def _jacobian(zeta_jacobian, kind, method, Am, comm):
 
 
 def _owns_rows(Am):
-    """The Newton member's driver takes its per-level decisions from each rank's rows: a rank without
-    any would take other branches than its peers (a stationary member works there)."""
+    """The Newton driver decides from each rank's rows: a rank without any would part ways with its peers."""
     if Am.getLocalSize()[0] == 0:
         raise ValueError("A has no rows on this rank: method 'newton' needs at least one row of A on every rank "
                          "(the stationary members, e.g. method='nrmgs', do not)")
 
 
 def _diagonal(Am):
-    """This rank's a_ii as a numpy array (collective: the Vec PETSc makes is destroyed on every rank
-    together, not left to each rank's garbage collector)."""
+    """This rank's a_ii (collective: PETSc's Vec destroyed on every rank together, not by a garbage collector)."""
     d = Am.getDiagonal()
     out, _ = np.array(d.getArray(readonly=True)), d.destroy()
     return out

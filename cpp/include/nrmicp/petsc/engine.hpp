@@ -99,8 +99,8 @@ class Matrix {
     const PlacedArray x(s.x, v.data()), y(s.y, out.data());
     check(add ? MatMultAdd(s.A, s.x, s.y, s.y) : MatMult(s.A, s.x, s.y), "MatMult");
   }
-  /// out += |A| v, read off A's own rows (a copy |A| cost more than the products: it was 10% of a
-  /// nested solve, docs/MEASUREMENTS.md); the off-diagonal block's columns of v from their owners.
+  /// out += |A| v, read off A's own rows (a copy |A| cost more than the products: docs/MEASUREMENTS.md);
+  /// the off-diagonal block's columns of v from their owners.
   void abs_multiply_add(const Eigen::VectorXd& v, Eigen::VectorXd& out) const {
     const Eigen::VectorXd ghost = ghosts(v);
     const LocalRows rows(get(), false);
