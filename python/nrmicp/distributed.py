@@ -204,12 +204,14 @@ def _prepare_matrix(A, comm, o):
 def _member(Am, comm, o):
     """(the member for Am and the set-up options `o`, checked on every rank ('auto': nrmicp.solve's rule, A's
     dominance margin reduced over the ranks), this rank's a_ii, checked positive)."""
-    nloc, method, diagonal = Am.getLocalSize()[0], o["method"], _diagonal(Am)
+    nloc, method = Am.getLocalSize()[0], o["method"]
     if isinstance(method, str) and method.lower() == "auto":
-        method = choose_method(None, o, _margin(Am, comm, diagonal))
+        method = choose_method(None, o, _margin(Am, comm))
 
     def local():
         m = _choice(method, METHODS, "method")
+        if Am.getSize()[0] == 0:
+            raise ValueError("A must have at least one row, got shape (0, 0)")
         _core_options(o, m, nloc, _criterion({"tol": o["tol"], "rtol": o["rtol"]})[0])
         hierarchy = o["hierarchy"]
         if m != "newton":
@@ -227,6 +229,7 @@ def _member(Am, comm, o):
     h = o["hierarchy"]   # (its kind: every rank takes the same branches)
     kind = ("amg", "auto").index(h) + 1 if isinstance(h, str) else 0 if h is None else 3
     _same(comm, float(kind) if m == "newton" else 0.0, ValueError, _DIFFERENT_HIERARCHY)
+    diagonal = _diagonal(Am)   # (read once the options are checked: an unassembled Mat fails here)
     _collective(comm, _positive, diagonal, Am.getOwnershipRange()[0])
     return m, diagonal
 
@@ -305,10 +308,8 @@ class Solver:
         self.A, self.method, diagonal = _prepare_matrix(A, comm, o)
         self._owns_A = self.A is not A   # (made from scipy row blocks)
         n = self.A.getSize()[0]
-        logs, total = (_flag_sum(comm, float(np.sum(f(diagonal)))) for f in (np.log2, np.abs))
-        self._sigma = sigma_from_logs(logs, n)   # the default rule's σ (units_factor: every a_ii > 0 here)
-        self._omega2_hint = _omega2_hint(total / max(n, 1), self.method, o["omega2"], o["accelerate"])
-        self._margin = functools.partial(_margin, self.A, comm, diagonal)
+        mean = _flag_sum(comm, float(np.sum(diagonal))) / n   # (every a_ii > 0: _positive)
+        self._omega2_hint = _omega2_hint(mean, self.method, o["omega2"], o["accelerate"])
         try:   # given prolongations checked and made PETSc Mats now, once (kept until close)
             self._levels = _prolongations(o["hierarchy"], self.A, comm) if self.method == "newton" else ([], [])
         except Exception:
@@ -316,7 +317,7 @@ class Solver:
                 self.A.destroy()   # on every rank together (each raises here)
             raise
         self._cores = {}   # units (the default rule's σA) -> [the core, its set-up seconds not yet reported]
-        self._operators = {False: self.A}   # units -> the Mat the core iterates
+        self._operators = {False: (self.A, 1.0)}   # units -> (the Mat the core iterates, σ)
         self._setup_seconds = time.perf_counter() - t0   # reported by the first solve
         self._closed = False
 
@@ -330,7 +331,7 @@ class Solver:
         """Frees the cores (collective: on every rank); a closed Solver's solve raises."""
         for core, _ in self._cores.values():
             core.close()
-        for units, mat in self._operators.items():   # the σA copy, and an A made from scipy row blocks
+        for units, (mat, _) in self._operators.items():   # the σA copy, and an A made from scipy row blocks
             if units or self._owns_A:
                 mat.destroy()
         for P in self._levels[1]:   # the prolongation Mats made from scipy matrices
@@ -350,7 +351,7 @@ class Solver:
         opts, q_user, xa, (kind, c, B, fn) = _prepare_call(A, m, q, zeta, o["x0"], comm, o, it)
         upper, bounded = _upper(upper, A, (kind, c), comm, m)
         core_zeta = _core_zeta(kind, c, B, fn, A, comm)
-        Am, sigma = self._operator(units), self._sigma if units else 1.0
+        Am, sigma = self._operator(units)
         if units:   # the iteration runs on σA, σq: its Res is the units-free Res_E
             _units_parameters(opts, m, sigma, len(q_user))
         measure = _Measure(_petsc, Am, sigma * q_user, (*core_zeta, upper), (A, q_user) if units else None)
@@ -358,7 +359,7 @@ class Solver:
         if opts.rtol > 0:   # the absolute target, on the problem the core iterates (Options::target of Res(0))
             opts.tol, opts.rtol = opts.target(measure(np.zeros_like(q_user))[1]), 0.0
         core, setup, earlier = self._core(_petsc, units, Am, opts, o)
-        hint = failure_hint(m, self._omega2_hint, self._margin, units, kind)
+        hint = failure_hint(m, self._omega2_hint, lambda: _margin(A, comm), units, kind)
         fields = _rounds(core, measure, xa, opts, o, jacobian, bounded, hint)
         if units:   # w in the user's units (re-measured: σ(Az + q) / σ may overflow or underflow)
             fields["w"] = measure(fields["z"], weighted=False)[0]
@@ -370,10 +371,13 @@ class Solver:
         return r
 
     def _operator(self, units):
-        """The Mat the core iterates: A, or under the default rule σA (a copy, made once)."""
+        """(the Mat the core iterates, σ): A, or under the default rule σA (a copy, made once; σ units_factor's,
+        from global sums over A's diagonal then)."""
         if units not in self._operators:
-            self._operators[units] = self.A.copy()
-            self._operators[units].scale(self._sigma)
+            a, comm = np.abs(_diagonal(self.A)), self.comm
+            sigma = sigma_from_logs(*(_flag_sum(comm, float(v)) for v in (np.sum(np.log2(a[a > 0])), np.sum(a > 0))))
+            self._operators[units] = (self.A.copy(), sigma)
+            self._operators[units][0].scale(sigma)
         return self._operators[units]
 
     def _core(self, _petsc, units, Am, opts, o):
@@ -465,10 +469,11 @@ def _collective_callback(comm, callback):
     return functools.partial(_collective, comm, call)
 
 
-def _margin(Am, comm, diagonal):
+def _margin(Am, comm):
     """A's dominance_margin over every rank's rows (collective; a rank without rows has no say)."""
     indptr, _, vals = Am.getValuesCSR()
     rows = sp.csr_matrix((vals, np.zeros_like(vals, dtype=np.int32), indptr), shape=(len(indptr) - 1, 1))
+    diagonal = _diagonal(Am)   # (collective: on every rank, rows or none)
     return -_flag_max(comm, -(dominance_margin(rows, diagonal) if rows.shape[0] else math.inf))
 
 
