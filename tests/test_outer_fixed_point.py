@@ -176,7 +176,6 @@ def test_an_explicit_tol_is_reached_through_krylov_inner_solves():
     assert w.min() > -1e-8 and g.min() > -1e-8
 
 
-
 def test_a_power_of_two_change_of_units_takes_the_same_steps_on_a_box_under_the_papers_tol():
     # A, q times 2^k are exact, and the inner obstacle solves of the outer fixed point run to a settled
     # active set (not to a Res that weighs w, in A's units, against z - zeta(z)): every decision is the

@@ -307,9 +307,8 @@ class Solver:
         o = {**_options.defaults(), **self._options}
         self.A, self.method, diagonal = _prepare_matrix(A, comm, o)
         self._owns_A = self.A is not A   # (made from scipy row blocks)
-        n = self.A.getSize()[0]
-        mean = _flag_sum(comm, float(np.sum(diagonal))) / n   # (every a_ii > 0: _positive)
-        self._omega2_hint = _omega2_hint(mean, self.method, o["omega2"], o["accelerate"])
+        mean = _flag_sum(comm, float(np.sum(diagonal))) / self.A.getSize()[0] if self.method == "nrm" else 1.0
+        self._omega2_hint = _omega2_hint(mean, self.method, o["omega2"], o["accelerate"])   # (nrm's only)
         try:   # given prolongations checked and made PETSc Mats now, once (kept until close)
             self._levels = _prolongations(o["hierarchy"], self.A, comm) if self.method == "newton" else ([], [])
         except Exception:
@@ -349,12 +348,12 @@ class Solver:
         t_start = time.perf_counter()
         it, units = _criterion({"tol": o["tol"], "rtol": o["rtol"]})
         opts, q_user, xa, (kind, c, B, fn) = _prepare_call(A, m, q, zeta, o["x0"], comm, o, it)
-        upper, bounded = _upper(upper, A, (kind, c), comm, m)
+        core_upper, bounded = _upper(upper, A, (kind, c), comm, m)
         core_zeta = _core_zeta(kind, c, B, fn, A, comm)
         Am, sigma = self._operator(units)
         if units:   # the iteration runs on σA, σq: its Res is the units-free Res_E
             _units_parameters(opts, m, sigma, len(q_user))
-        measure = _Measure(_petsc, Am, sigma * q_user, (*core_zeta, upper), (A, q_user) if units else None)
+        measure = _Measure(_petsc, Am, sigma * q_user, (*core_zeta, core_upper), (A, q_user) if units else None)
         jacobian = _jacobian(o["zeta_jacobian"], kind, m, Am, comm)
         if opts.rtol > 0:   # the absolute target, on the problem the core iterates (Options::target of Res(0))
             opts.tol, opts.rtol = opts.target(measure(np.zeros_like(q_user))[1]), 0.0
@@ -371,13 +370,12 @@ class Solver:
         return r
 
     def _operator(self, units):
-        """(the Mat the core iterates, σ): A, or under the default rule σA (a copy, made once; σ units_factor's,
-        from global sums over A's diagonal then)."""
+        """(the Mat the core iterates, σ): A, or under the default rule σA (a copy, made once)."""
         if units not in self._operators:
-            a, comm = np.abs(_diagonal(self.A)), self.comm
-            sigma = sigma_from_logs(*(_flag_sum(comm, float(v)) for v in (np.sum(np.log2(a[a > 0])), np.sum(a > 0))))
-            self._operators[units] = (self.A.copy(), sigma)
-            self._operators[units][0].scale(sigma)
+            sigma = _units_sigma(self.A)
+            scaled = self.A.copy()
+            scaled.scale(sigma)
+            self._operators[units] = (scaled, sigma)
         return self._operators[units]
 
     def _core(self, _petsc, units, Am, opts, o):
@@ -561,6 +559,14 @@ def _owns_rows(Am):
     if Am.getLocalSize()[0] == 0:
         raise ValueError("A has no rows on this rank: method 'newton' needs at least one row of A on every rank "
                          "(the stationary members, e.g. method='nrmgs', do not)")
+
+
+def _units_sigma(Am):
+    """The default rule's σ (nrmicp._scaling.units_factor) from global sums over the diagonal."""
+    a = np.abs(_diagonal(Am))
+    comm = Am.getComm()
+    logs = _flag_sum(comm, float(np.sum(np.log2(a[a > 0]))))
+    return sigma_from_logs(logs, int(round(_flag_sum(comm, float(np.count_nonzero(a > 0))))))
 
 
 def _diagonal(Am):
