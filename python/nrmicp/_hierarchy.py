@@ -28,6 +28,7 @@ import scipy.sparse as sp
 
 from . import _core
 from ._inputs import ConversionWarning, _warn, as_csr
+from ._scaling import units_factor
 
 __all__ = ["Hierarchy", "amg_prolongations", "amg_levels", "amg_levels_why", "resolve_hierarchy", "HierarchyWarning"]
 
@@ -167,11 +168,11 @@ def _canonical(P) -> sp.csr_matrix:
     return P
 
 
-def nonpositive_diagonal(M, what: str):
-    """Why `what` (a matrix M) cannot be a level: its first entry a_ii <= 0, or None."""
+def nonpositive_diagonal(M, what: str, unit: float = 1.0):
+    """Why `what` (a matrix M, `unit` times the user's) cannot be a level: its first entry a_ii <= 0, or None."""
     d = M.diagonal()
     bad = np.flatnonzero(~(d > 0))
-    return None if bad.size == 0 else f"{what} has a_ii = {d[bad[0]]:.3g} <= 0 at row {bad[0]}"
+    return None if bad.size == 0 else f"{what} has a_ii = {d[bad[0]] / unit:.3g} <= 0 at row {bad[0]}"
 
 
 def check_components(components, n: int) -> np.ndarray | None:
@@ -211,12 +212,12 @@ def same_component(A: sp.csr_matrix, components) -> sp.csr_matrix:
     return sp.csr_matrix((A.data[keep], A.indices[keep], indptr), shape=A.shape)
 
 
-def _auxiliary_level(A, theta, sweeps, truncate):
+def _auxiliary_level(A, theta, sweeps, truncate, unit):
     """One prolongation of A built on :func:`auxiliary_m_matrix`, or None when the splitting
     leaves no coarse (or no fine) point, or why the level is given up (a str)."""
     B = auxiliary_m_matrix(A)
     # the weights divide by its diagonal (and Newton needs it > 0 anyway)
-    why = nonpositive_diagonal(B, "auxiliary M-matrix (its positive off-diagonals lumped into the diagonal)")
+    why = nonpositive_diagonal(B, "auxiliary M-matrix (its positive off-diagonals lumped into the diagonal)", unit)
     if why is not None:
         return why
     # norm='min': only negative couplings are strong ('abs' counts P2's positive ones: P < 0, many steps)
@@ -292,16 +293,21 @@ def amg_levels_why(A, components=None, **opts) -> tuple:
     if unknown:
         raise TypeError(f"amg_prolongations got unknown options {sorted(unknown)}; known: {sorted(_RS_DEFAULTS)}")
     labels = check_components(components, A.shape[0])
+    unit = units_factor(A)   # (a power of two: σA's levels are A's exactly; pyamg's kernels print at A's extremes)
     with _small_pages():
-        return _levels(A, labels, {**_RS_DEFAULTS, **opts})
+        levels, why = _levels(unit * A, labels, {**_RS_DEFAULTS, **opts}, unit)
+    for _, Ac in levels:
+        Ac.data /= unit
+    return levels, why
 
 
-def _levels(A, components, kw) -> tuple:
-    """amg_levels_why's (levels, why) of A with the labels `components` (or None) and the options kw (all given)."""
+def _levels(A, components, kw, unit) -> tuple:
+    """amg_levels_why's (levels, why) of A (`unit` times the user's) with the labels `components` (or None) and
+    the options kw (all given)."""
     out = []
     while len(out) < kw["aux_levels"] and A.shape[0] > kw["max_coarse"] and len(out) < kw["max_levels"] - 1:
         # by component on every level (on the first only: 12-48 CG iterations a solve; docs/MEASUREMENTS.md)
-        level = _auxiliary_level(same_component(A, components), kw["theta"], kw["sweeps"], kw["truncate"])
+        level = _auxiliary_level(same_component(A, components), kw["theta"], kw["sweeps"], kw["truncate"], unit)
         if level is None or isinstance(level, str):
             why = None if level is None else f"the amg set-up gave up level {len(out) + 1}: level {len(out)}'s {level}"
             return out, why
