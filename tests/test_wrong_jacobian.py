@@ -118,3 +118,20 @@ def test_the_exact_jacobian_of_a_nonlinear_zeta_is_not_flagged():
                        tol=1e-10)
     assert res.success and res.path == "newton" and FLAG not in res.message
     assert complementarity(A, q, zeta, res.z) < 1e-10
+
+
+@pytest.mark.parametrize("scale", [-3.0, -1.0, 1.0, 2.0])
+def test_a_jacobian_whose_every_step_fails_is_given_up_too(scale):
+    """Found by review: ζ′ = scale · I for ζ = ψ + 0.2 sin z (true ζ′ = 0.2 cos z) made the first Newton step's Res
+    grow (or, at I, left I − ζ′ singular on the active rows) and the fallback gave up: STAGNATED at the start
+    with no word on ζ′, as no step was judged. The fallback's end now checks ζ′ against ζ's difference quotient."""
+    n = 200
+    A = sp.csr_matrix(sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(n, n)) * (n + 1) ** 2)
+    x = np.linspace(0, 1, n + 2)[1:-1]
+    psi, q = -2 + 2 * (x - 0.5) ** 2, 50 * np.ones(n)
+
+    def zeta(z):
+        return psi + 0.2 * np.sin(z)
+    res = nrmicp.solve(A, q, zeta, method="newton", zeta_jacobian=lambda z: scale * sp.identity(n, format="csr"))
+    assert res.success and res.path == "newton+outer" and FLAG in res.message, res.message
+    assert complementarity(A, q, zeta, res.z) < 1e-8

@@ -123,6 +123,8 @@ class JacobianCheck {
   /// Why (the start of the solve's message). `matches`: ζ′ was found to match ζ's difference quotient
   /// (kJacobianMiss), so the steps, not the Jacobian, failed: said as such.
   std::string message(bool matches = false) const {
+    if (!matches && slow_ < kPoorSlowSteps && !grew_)  // (the fallback gave up: no step was judged)
+      return "zeta_jacobian looks wrong: its Newton steps did not reduce Res, nor did the fallback from the best iterate";
     if (matches)
       return "the Newton steps with zeta_jacobian stopped converging (" +
              (slow_ >= kPoorSlowSteps ? std::to_string(slow_) + " in a row each reduced Res by less than a factor " +
@@ -389,7 +391,13 @@ class Globalized {
     test_.reset(r);
     if (r < best_r_) { best_r_ = r; best_z_ = plain_.z(); }
   }
-  void give_up() { stop(runs_.give_up(sweeps_)); }
+  // The fallback could not go on. With ζ′ given, a ζ′ that misses ζ's difference quotient is the likelier cause
+  // (no step accepted, so JacobianCheck had nothing to judge): the outer fixed point goes on without it.
+  void give_up() {
+    if constexpr (!Plain::set_fixes_step)
+      if (plain_.linearize() && !(plain_.jacobian_miss() <= kJacobianMiss)) return give_up_jacobian(true);
+    stop(runs_.give_up(sweeps_));
+  }
   /// `check`: the plain steps' verdict, not yet checked against ζ's difference quotient (the outer
   /// steps' is: move_x), is checked at z first (one call of ζ, one product).
   void give_up_jacobian(bool check = false) {
