@@ -268,6 +268,19 @@ def test_polish_takes_a_member_stopped_at_1e6_to_rounding_level(zeta_kind):
     assert polished.residual == pytest.approx(reference_residual(problem.A, q, polished.z, zeta), rel=1e-6, abs=1e-14)
 
 
+@pytest.mark.parametrize("rule", [{"rtol": 1e-4}, {"tol": 1e-3}])
+def test_newton_polish_steps_under_any_target(rule):
+    """Found by review: Newton::polish kept the set-up's rtol, a target its start already met, so polish=True
+    took no step under rtol (or the default rule). Rows scaled apart, every row free at the answer: the
+    first Newton step leaves z[2] 2% off within these targets; the polish takes it to rounding."""
+    A = sp.csr_matrix([[3.847e4, 4.448e3, -1.297e4], [5.756e-4, 3.233e-3, 7.759e-4], [-1.770e-3, 8.182e-4, 7.021e-3]])
+    q = np.array([-5.078e4, -4.652e-3, 1.064e-3])
+    exact = np.linalg.solve(A.toarray(), -q)
+    res = nrmicp.solve(A, q, method="newton", polish=True, **rule)
+    assert res.success and res.polished, res.message
+    np.testing.assert_allclose(res.z, exact, rtol=1e-12)
+
+
 def test_polish_is_refused_when_it_does_not_help():
     A = sp.csr_matrix(np.array([[2.0]]))
     res = nrmicp.solve(A, np.array([-4.0]), method="nrmgs", polish=True)

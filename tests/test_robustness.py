@@ -347,6 +347,31 @@ def test_item9_zeta_failed_message_says_it_once():
     assert msg.startswith("zeta(z)") and msg.count("non-finite") == 1, msg
 
 
+@pytest.mark.parametrize("member", ["newton", "newton+jacobian", "newton+hierarchy", "nrmgs"])
+@pytest.mark.parametrize("call", [1, 4])
+def test_a_zeta_returning_nan_at_any_call_raises_naming_it(member, call):
+    """Found by review: the Newton member's outer and semismooth paths took a NaN of zeta's later calls for a
+    failed step (DIVERGED "overflowed", STAGNATED, or CONVERGED past a single NaN entry); README: a ζ returning
+    NaN/Inf raises ValueError, in every member and at whichever call."""
+    n = 1200 if member == "newton+hierarchy" else 200
+    A = sp.csr_matrix(sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(n, n)) * (n + 1) ** 2)
+    x = np.linspace(0, 1, n + 2)[1:-1]
+    psi, calls = -2 + 2 * (x - 0.5) ** 2, []
+
+    def zeta(z):
+        calls.append(1)
+        out = psi + 0.2 * np.sin(z)
+        if len(calls) == call:
+            out[7] = np.nan
+        return out
+    options = {"method": member.split("+")[0],
+               "zeta_jacobian": (lambda z: sp.diags(0.2 * np.cos(z))) if member == "newton+jacobian" else None,
+               "hierarchy": "amg" if member == "newton+hierarchy" else None}
+    with pytest.raises(ValueError, match=r"^zeta\(z\) returned non-finite values \(NaN or Inf\): zeta\(z\)\[7\] = nan$"):
+        nrmicp.solve(A, 50 * np.ones(n), zeta, **options)
+    assert len(calls) == call   # (raised at that call)
+
+
 def test_item9_small_values_are_shown_as_g():
     A = sp.csr_matrix(np.diag([-1e-7, 1.0]))
     with pytest.raises(ValueError, match=r"A\[0,0\] = -1e-07"):

@@ -740,23 +740,26 @@ def case_warm():
 
 def case_units():
     """The default rule (no tol, no rtol) on the 2D obstacle in three units (A and q scaled by
-    1e-6, 1, 1e6): the same verdict and answer as the serial default, the paper's Res reported."""
+    1e-6, 1, 1e6) and with its rows in units of their own (scaled by 10^±8: the same answer): the same
+    verdict and answer as the serial default, the paper's Res reported."""
     pb = obstacle_2d(31, exact=False)
     A = sp.csr_matrix(pb.A)
     lo, hi = split(A.shape[0])
     out = {}
-    for s in (1e-6, 1.0, 1e6):
+    rows = 10.0 ** np.random.default_rng(5).uniform(-8, 8, A.shape[0])
+    for s in (1e-6, 1.0, 1e6, rows):
         for method in ("newton", "nrmgs"):
-            r = dist.solve(s * A[lo:hi], s * pb.q[lo:hi], pb.zeta[lo:hi], method=method, maxiter=100000)
+            S = sp.diags(np.broadcast_to(s, A.shape[0]))
+            r = dist.solve(sp.csr_matrix(S @ A)[lo:hi], (S @ pb.q)[lo:hi], pb.zeta[lo:hi], method=method, maxiter=100000)
             z = dist.gather(r.z)
             if RANK == 0:
                 exact = nrmicp.solve(A, pb.q, pb.zeta, method="newton", tol=1e-12)
-                out[f"{method} {s:g}"] = {
+                out[f"{method} {'rows' if s is rows else f'{s:g}'}"] = {
                     "status": str(r.status), "criterion": r.criterion["measure"],
                     "err": float(np.max(np.abs(z - exact.z)) / np.max(np.abs(exact.z))),
                     # equal up to the rounding of w = Az + q at z (its summation order differs by rank)
-                    "res_is_papers": bool(abs(r.residual - oracle_residual(s * A, s * pb.q, z, pb.zeta)) <=
-                                          1e-6 * r.residual + 1e-15 * np.linalg.norm(abs(s * A) @ abs(z) + abs(s * pb.q)))}
+                    "res_is_papers": bool(abs(r.residual - oracle_residual(S @ A, S @ pb.q, z, pb.zeta)) <=
+                                          1e-6 * r.residual + 1e-15 * np.linalg.norm(abs(S @ A) @ abs(z) + abs(S @ pb.q)))}
     return out
 
 

@@ -333,7 +333,7 @@ def test_a_failure_on_one_rank_only_raises_on_every_rank_without_a_hang():
 def test_a_nonpositive_diagonal_is_refused_and_gives_the_amg_set_up_up(ranks):
     out = mpirun(ranks, "nonpositive_diagonal", timeout=120)
     for case in ("newton amg", "newton None", "nrm auto"):
-        assert out[case] is not None and "diagonal must be positive" in out[case] and "A[3, 3] = 0.0" in out[case], out
+        assert out[case] is not None and "diagonal must be positive" in out[case] and out[case].endswith("A[3, 3] = 0"), out
     assert out["nrmgs amg"].endswith(out["serial_stationary"]), out
     assert out["levels"] == {"zero": [], "nan": []}, out
 

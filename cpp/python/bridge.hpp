@@ -111,10 +111,11 @@ auto without_gil(F&& f) -> decltype(f()) {
 struct CallableZeta {
   py::object checked, fn;
   std::shared_ptr<py::array_t<double>> zbuf;
-  bool finite = false;  // a non-finite result goes to output() too, which raises (zeta_jacobian's products)
+  bool finite = false;  // a non-finite result goes to output() too, which raises (checked.finite: ζ, ζ′'s products)
 
   CallableZeta(py::object z, bool finite = false)
-      : checked(z), fn(z.attr("fn")), zbuf(std::make_shared<py::array_t<double>>()), finite(finite) {}
+      : checked(z), fn(z.attr("fn")), zbuf(std::make_shared<py::array_t<double>>()),
+        finite(finite || py::getattr(z, "finite", py::bool_(false)).cast<bool>()) {}
 
   bool operator()(const double* z, double* out, Eigen::Index n) {
     py::gil_scoped_acquire gil;
@@ -139,7 +140,7 @@ struct CallableZeta {
       checked.attr("output")(r);  // raises, naming the call
       return false;
     }
-    return true;  // ζ's finiteness is checked by the core (status ZetaFailed)
+    return true;  // (else output() let it through: a run-away iterate's NaN, the core's ZetaFailed)
   }
 
   template <typename T>

@@ -204,6 +204,8 @@ PYBIND11_MODULE(_petsc, m) {
   m.attr("hierarchy_strong_threshold") = nrmicp::petsc::kStrongThreshold;  // (the rule's, for its tests)
   m.def("amg_levels", &amg_levels, py::arg("A"),
         "{'rows', 'nonzeros'} of the 'amg' hierarchy's coarse operators, finest first (built and let go).");
+  m.def("check_operator", [](std::uintptr_t A) { nrmicp::petsc::check_operator(from_handle(A, "A")); }, py::arg("A"),
+        "ValueError naming this process's first row of A the PETSc engine refuses (a_ii not positive and normal).");
   m.def("measure", &measure, py::arg("A"), py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("zeta_fn"),
         py::arg("upper"), py::arg("z"), py::arg("rounding") = false,
         "{'w', 'residual'[, 'rounding_level']} of z: w = Az + q and Res(z) over every process's rows.");

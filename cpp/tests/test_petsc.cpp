@@ -533,6 +533,15 @@ TEST_CASE("an input one process alone gets wrong is refused on every process (no
   {
     const petsc::Matrix Dm(D);
     CHECK_THROWS_AS(Solver<petsc::Matrix>(Dm, nrmgs_options), std::invalid_argument);
+    // the engine's own rule (petsc::check_operator), for the Newton member too: its smoothers divide by a_ii
+    const std::string row = std::to_string(Z.rows() - 1), own = "A[" + row + ", " + row + "] = 0";
+    try {
+      Newton<petsc::Matrix> refused(Dm, newton_options);
+      CHECK(false);
+    } catch (const std::invalid_argument& e) {
+      const std::string what = e.what();
+      CHECK((rank_of() == size_of() - 1 ? what.find(own) : what.find("another process")) != std::string::npos);
+    }
   }
   MatDestroy(&D);
   if (size_of() < 2) return;

@@ -17,7 +17,7 @@ from numpy.typing import ArrayLike
 
 from . import _core
 from ._inputs import WholeRows, as_csr, as_vector
-from ._scaling import SCALINGS, ScaledCallable, equilibrate, scale_matrix, units_factor
+from ._scaling import SCALINGS, ScaledCallable, equilibrate, scale_matrix, units_factor, units_weights
 from . import _bounds, _newton, _options
 from ._options import _INT_MAX, _choice, _scalar  # noqa: F401 (the distributed glue imports them from here)
 from ._zeta import CheckedZeta
@@ -205,8 +205,8 @@ def _scale_choice(scale):
 
 
 #: The default stopping rule (tol and rtol both left None): Res measured in the units of z,
-#: Res_E(z) = ‖min(σ(Az + q), z − ζ(z))‖₂ with σ = 1/(the size of A's entries) (_scaling.units_factor),
-#: below DEFAULT_RTOL · Res_E(0): a change of units of A and q, or of z, changes nothing. The value is
+#: Res_E(z) = ‖min(D(Az + q), z − ζ(z))‖₂ with D_ii = 1/(the size of row i) (_scaling.units_weights),
+#: below DEFAULT_RTOL · Res_E(0): a change of units of A and q, of a row, or of z, changes nothing. The value is
 #: the loosest that keeps the stationary members' error below 1e-6 (docs/MEASUREMENTS.md, "DEFAULT_RTOL").
 DEFAULT_RTOL = 1e-10
 
@@ -445,6 +445,7 @@ class Solver:
         opts = core_options(settings, self.method, n, resolved)
         # the default rule's σ: the whole A's (a Reduced passes it to the solver of its coupled rows)
         self._units_factor = units_factor(self.A) if _units_factor is None else _units_factor
+        self._row_weights = None   # the default rule's measure (_units_weights), formed on its first solve
         # Newton: rows with a lone positive diagonal are solved in closed form, the rest on A_FF
         # (python/nrmicp/_decoupled.py); another ζ than none/constant solves on A (self._whole).
         D = decoupled_rows(self.A) if self.method == "newton" and _decouple else None
@@ -605,11 +606,13 @@ class Solver:
         return self._assemble(rounds, problem, tol, measure, bounded)
 
     def _units_weights(self):
-        """(d_r, d_c) of the default rule's measure: the equilibration the core iterates on ('units',
-        or the user's 'rows'/'both'), else σI (a Solver set up for the paper's tol)."""
-        if self._dr is not None:
+        """(d_r, d_c) of the default rule's measure: the user's equilibration ('rows'/'both') the core iterates
+        on, else each row's weight (_scaling.units_weights; the core iterates on σA: one number, A symmetric)."""
+        if self._dr is not None and self.scale != "units":
             return self._dr, self._dc
-        return np.full(self.n, self._units_factor), np.ones(self.n)
+        if self._row_weights is None:
+            self._row_weights = units_weights(self.A, self._units_factor)
+        return self._row_weights, np.ones(self.n)
 
     def _solve_reduced(self, qv, c, zD, z0, callback, it, checked_opts, units) -> Result:
         """Solve on the coupled rows (self._reduced); z, w, Res and the status of the whole problem,
@@ -1013,10 +1016,10 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
         ``x0``). ``tol=0`` with ``rtol > 0`` is a purely relative target.
 
         **Default (both None): a rule that does not depend on units.** Res is measured in the
-        units of z, Res_E(z) = ‖min(σ(Az + q), z − ζ(z))‖₂ with σ = 1/(geometric mean of |a_ii|), a
-        power of two, and the solve stops when Res_E(z) < 1e-10 · Res_E(0) (``DEFAULT_RTOL``), or when
-        Res_E is within 100x of the rounding level of double precision at z. Scaling A and q
-        together, or z, changes neither the iterates nor the decision. ``result.criterion`` says
+        units of z, Res_E(z) = ‖min(D(Az + q), z − ζ(z))‖₂ with D_ii = 1/max_j |a_ij|, a power of
+        two, and the solve stops when Res_E(z) < 1e-10 · Res_E(0) (``DEFAULT_RTOL``), or when Res_E is
+        within 100x of the rounding level of double precision at z. Scaling A and q together, or z,
+        changes neither the iterates nor the decision; scaling a row (its equation's units) not the decision. ``result.criterion`` says
         which rule decided, its target and value; ``residual`` is always the paper's Res of ``z``.
     maxiter : int >= 0, default 10000
         At most this many x-updates (method 'newton': Newton steps on the finest level, which also

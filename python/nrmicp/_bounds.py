@@ -22,6 +22,7 @@ class CheckedUpper(CheckedZeta):
     never NaN or -inf. The core calls ``fn`` itself, so the value check is part of ``fn``."""
 
     what = "upper(z)"
+    finite = False   # (+inf: no bound on that row; NaN and -inf refused by _call)
 
     def __init__(self, user, n: int):
         super().__init__(self._call, n)
@@ -58,7 +59,7 @@ class ImplicitUpper:
             return (self.kind, c, B.indptr.astype(index_dtype, copy=False), B.indices.astype(index_dtype, copy=False),
                     B.data, None)
         fn = self.fn if dc is None or np.all(dc == 1.0) else CheckedZeta(ScaledCallable(self.fn, dc), self.fn.n)
-        fn.what = "upper(z)"
+        fn.what, fn.finite = "upper(z)", False   # (its values checked by the CheckedUpper it calls)
         return (self.kind, None, None, None, None, fn)
 
 

@@ -227,7 +227,7 @@ class JacobianProduct(CheckedZeta):
     """The product v ↦ J v of a ``zeta_jacobian(z)`` returned as a linear operator, for one solve (its
     ``fn`` is the current Newton step's): the core calls ``fn`` on its own read-only buffer, as it
     calls a CheckedZeta's, and hands a result that is not a finite float64 vector of length n to
-    :meth:`output`, which converts it or raises naming zeta_jacobian."""
+    :meth:`CheckedZeta.output`, which converts it or raises naming zeta_jacobian."""
 
     what = "zeta_jacobian(z).matvec(v)"
 
@@ -244,13 +244,6 @@ class JacobianProduct(CheckedZeta):
                 raise ValueError(f"{self.what} failed: {exc}") from exc
             return y if dc is None else self.output(y) / dc
         return fn
-
-    def output(self, r) -> np.ndarray:
-        arr = super().output(r)
-        bad = np.flatnonzero(~np.isfinite(arr))
-        if bad.size:
-            raise ValueError(f"{self.what} returned a non-finite value {arr[bad[0]]} at index {int(bad[0])}")
-        return arr
 
 
 def is_matrix(J) -> bool:

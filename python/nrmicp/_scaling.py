@@ -13,8 +13,9 @@ Every factor is a power of two, so D_r A D_c, D_r q, z = D_c y are computed with
 (barring over/underflow) and scaling adds no error of its own.
 
 kinds:
-  'units' D_r = σI, D_c = I with σ = units_factor(A): the default stopping rule's measure (nrmicp's
-          default tol/rtol, README "What you get back"), one number so that A keeps its symmetry.
+  'units' D_r = σI, D_c = I with σ = units_factor(A): what the default stopping rule iterates on (nrmicp's
+          default tol/rtol, README "What you get back"), one number so that A keeps its symmetry; the rule
+          measures each row in its own units (units_weights).
   'rows'  D_r = 1/max_j |a_ij| (rows that are entirely zero keep factor 1), D_c = I; ζ unchanged.
   'both'  Ruiz equilibration: a few sweeps of D_r ← D_r/√(row max), D_c ← D_c/√(column max) of
           the current scaled matrix, until every nonzero row and column has max |entry| in
@@ -43,6 +44,17 @@ def units_factor(A: sp.csr_matrix) -> float:
     if d.size == 0:
         d = np.abs(A.data[A.data != 0])
     return sigma_from_logs(float(np.sum(np.log2(d))), d.size)
+
+
+def units_weights(A: sp.csr_matrix, sigma: float) -> np.ndarray:
+    """The default rule's row weights d: 1/max_j |a_ij| of each row as a power of two (σ for a row of zeros), so
+    that d_i w_i is row i's residual in the units of z whatever that row's units (σ alone is one number: a row
+    far below A's typical size went unmeasured)."""
+    r = _row_max(A)
+    d = np.full(A.shape[0], sigma)
+    nz = (r > 0) & np.isfinite(r)
+    d[nz] = np.clip(_pow2(1.0 / r[nz]), 2.0 ** -1022, 2.0 ** 1023)
+    return d
 
 
 def sigma_from_logs(sum_log2: float, count: int) -> float:

@@ -28,6 +28,9 @@ class CheckedZeta:
 
     #: How messages name the call.
     what = "zeta(z)"
+    #: Its values must be finite: NaN or ±inf raises ValueError at the call that returned it, in every member
+    #: (the core hands a non-finite result to :meth:`output`); an upper bound's +inf is no bound, its own rule.
+    finite = True
 
     def __init__(self, fn, n: int):
         self.fn = fn
@@ -75,4 +78,10 @@ class CheckedZeta:
                 warnings.warn(f"{self.what} returned dtype {arr.dtype}; converting it to float64 at every call "
                               "(a float32 result also limits the accuracy Res can reach): return float64",
                               ConversionWarning, stacklevel=2)
-        return np.ascontiguousarray(arr, dtype=np.float64)
+        out = np.ascontiguousarray(arr, dtype=np.float64)
+        if self.finite and not getattr(self.fn, "overflowed", False):   # (a run-away iterate: the core's DIVERGED)
+            bad = np.flatnonzero(~np.isfinite(out))
+            if bad.size:
+                raise ValueError(f"{self.what} returned non-finite values (NaN or Inf): {self.what}[{int(bad[0])}] = "
+                                 f"{out[bad[0]]}")
+        return out

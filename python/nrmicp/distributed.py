@@ -25,10 +25,10 @@ from . import _bounds, _core, _options
 from ._mpi import DistributedError, agree, collective as _collective, flag_max as _flag_max, flag_sum as _flag_sum
 from ._newton import (auto_builds_amg, check_jacobian, check_no_hierarchy, check_polish, core_jacobian, hierarchy_report,
                       warn_shortened)
-from ._api import (METHODS as _ALL_METHODS, Result, _make_upper, _make_zeta, Status, _Rounds, _choice, _criterion, _settle, _log_final,
+from ._api import (METHODS as _ALL_METHODS, Result, _make_upper, _make_zeta, _Rounds, _choice, _criterion, _settle, _log_final,
                    _omega2_hint, _progress_hook, _units_parameters, core_options, choose_method, dominance_margin,
                    failure_hint)
-from ._scaling import sigma_from_logs
+from ._scaling import sigma_from_logs, units_weights
 from ._hierarchy import Hierarchy, _fingerprint, resolve_hierarchy
 from ._inputs import as_constant, as_csr, as_vector
 from ._zeta import CheckedZeta
@@ -145,18 +145,8 @@ def _core_zeta(kind, c, B, fn, A, comm):
     is collective (made after every rank's checks: its Vecs are collective)."""
     if kind in (_K.none, _K.constant):
         return kind, c, None
-    finite = None if fn is None else functools.partial(_finite, CheckedZeta(fn, A.getLocalSize()[0]))
-    return _K.functor, None, _functor(kind, B, c, finite, A, comm, "zeta(z)")
-
-
-def _finite(zeta, z):
-    """ζ(z) checked finite on this rank's rows (the core's ZETA_FAILED, decided on every rank together)."""
-    r = zeta(z)
-    if not np.all(np.isfinite(r)):
-        i = int(np.flatnonzero(~np.isfinite(r))[0])
-        raise ValueError(f"{_core.status_message(int(Status.ZETA_FAILED))} (NaN or Inf: zeta(z)[{i}] of this "
-                         f"rank's rows = {r[i]})")
-    return r
+    checked = None if fn is None else CheckedZeta(fn, A.getLocalSize()[0])   # (NaN raises: on every rank)
+    return _K.functor, None, _functor(kind, B, c, checked, A, comm, "zeta(z)")
 
 
 def _functor(kind, B, c, fn, A, comm, what):
@@ -164,7 +154,7 @@ def _functor(kind, B, c, fn, A, comm, what):
     call collective (a failure on any rank raises on all, in the same call of the driver)."""
     out = CheckedZeta(_affine(B, c, A) if kind == _K.affine else functools.partial(_collective, comm, fn),
                       A.getLocalSize()[0])
-    out.what = what
+    out.what, out.finite = what, False   # (fn checks its values; an overflowing B z + c is the core's to judge)
     return out
 
 
@@ -187,14 +177,14 @@ def _affine(B, c, A):
 
 # ----------------------------------------------------------------------------- the entry points
 def _prepare_matrix(A, comm, o):
-    """A's checks and the member, every rank's failure raised on all: (Am, method, this rank's a_ii); the
-    set-up options `o` checked too (tol, rtol at their defaults). A Mat made here is destroyed on failure."""
+    """A's checks and the member, every rank's failure raised on all: (Am, method); the set-up options `o`
+    checked too (tol, rtol at their defaults). A Mat made here is destroyed on failure."""
     A_in = _collective(comm, _check_mat, A)
     _same(comm, float(sp.issparse(A_in)), TypeError,   # (else the ranks would part ways: a hang)
           "A must be a petsc4py Mat on every rank or a scipy row block on every rank, not both")
     Am = _as_mat(A_in, comm) if sp.issparse(A_in) else A_in
     try:
-        return (Am, *_member(Am, comm, o))
+        return Am, _member(Am, comm, o)
     except Exception:
         if Am is not A_in:
             Am.destroy()   # on every rank together (each raises here)
@@ -202,8 +192,8 @@ def _prepare_matrix(A, comm, o):
 
 
 def _member(Am, comm, o):
-    """(the member for Am and the set-up options `o`, checked on every rank ('auto': nrmicp.solve's rule, A's
-    dominance margin reduced over the ranks), this rank's a_ii, checked positive)."""
+    """The member for Am and the set-up options `o`, checked on every rank ('auto': nrmicp.solve's rule, A's
+    dominance margin reduced over the ranks), and A as the PETSc engine needs it."""
     nloc, method = Am.getLocalSize()[0], o["method"]
     if isinstance(method, str) and method.lower() == "auto":
         method = choose_method(None, o, _margin(Am, comm))
@@ -229,19 +219,9 @@ def _member(Am, comm, o):
     h = o["hierarchy"]   # (its kind: every rank takes the same branches)
     kind = ("amg", "auto").index(h) + 1 if isinstance(h, str) else 0 if h is None else 3
     _same(comm, float(kind) if m == "newton" else 0.0, ValueError, _DIFFERENT_HIERARCHY)
-    diagonal = _diagonal(Am)   # (read once the options are checked: an unassembled Mat fails here)
-    _collective(comm, _positive, diagonal, Am.getOwnershipRange()[0])
-    return m, diagonal
-
-
-def _positive(diagonal, lo):
-    """ValueError naming the first row whose a_ii is not positive (NaN, subnormal: its reciprocal overflows):
-    the PETSc engine's smoothers, Krylov solves and splittings divide by it (the serial member has other rules)."""
-    bad = ~(diagonal >= np.finfo(np.float64).tiny)
-    if np.any(bad):
-        i = int(np.flatnonzero(bad)[0])
-        raise ValueError(f"A's diagonal must be positive (not subnormal) on the PETSc engine (its smoothers, "
-                         f"Krylov solves and splittings divide by it); A[{lo + i}, {lo + i}] = {diagonal[i]}")
+    from . import _petsc   # (the engine's own rule, as its cores check it; after the options: an unassembled Mat fails here)
+    _collective(comm, _petsc.check_operator, Am.handle)
+    return m
 
 
 def _prepare_call(Am, m, q, zeta, x0, comm, o, it):
@@ -305,9 +285,9 @@ class Solver:
         _collective(comm, _scoped, options, ("setup", "solve"), "distributed.Solver", "its solve()")
         self._options = {**_options.defaults("setup", "solve"), **options}
         o = {**_options.defaults(), **self._options}
-        self.A, self.method, diagonal = _prepare_matrix(A, comm, o)
+        self.A, self.method = _prepare_matrix(A, comm, o)
         self._owns_A = self.A is not A   # (made from scipy row blocks)
-        mean = _flag_sum(comm, float(np.sum(diagonal))) / self.A.getSize()[0] if self.method == "nrm" else 1.0
+        mean = _flag_sum(comm, float(np.sum(_diagonal(self.A)))) / self.A.getSize()[0] if self.method == "nrm" else 1.0
         self._omega2_hint = _omega2_hint(mean, self.method, o["omega2"], o["accelerate"])   # (nrm's only)
         try:   # given prolongations checked and made PETSc Mats now, once (kept until close)
             self._levels = _prolongations(o["hierarchy"], self.A, comm) if self.method == "newton" else ([], [])
@@ -316,7 +296,7 @@ class Solver:
                 self.A.destroy()   # on every rank together (each raises here)
             raise
         self._cores = {}   # units (the default rule's σA) -> [the core, its set-up seconds not yet reported]
-        self._operators = {False: (self.A, 1.0)}   # units -> (the Mat the core iterates, σ)
+        self._operators = {False: (self.A, 1.0, None)}   # units -> (the Mat the core iterates, σ, the rule's D A, D)
         self._setup_seconds = time.perf_counter() - t0   # reported by the first solve
         self._closed = False
 
@@ -330,9 +310,11 @@ class Solver:
         """Frees the cores (collective: on every rank); a closed Solver's solve raises."""
         for core, _ in self._cores.values():
             core.close()
-        for units, (mat, _) in self._operators.items():   # the σA copy, and an A made from scipy row blocks
+        for units, (mat, _, weighted) in self._operators.items():   # σA, D A, and an A made from scipy row blocks
             if units or self._owns_A:
                 mat.destroy()
+            if weighted is not None:
+                weighted[0].destroy()
         for P in self._levels[1]:   # the prolongation Mats made from scipy matrices
             P.destroy()
         self._cores, self._operators, self._levels, self._closed = {}, {}, ([], []), True
@@ -350,10 +332,11 @@ class Solver:
         opts, q_user, xa, (kind, c, B, fn) = _prepare_call(A, m, q, zeta, o["x0"], comm, o, it)
         core_upper, bounded = _upper(upper, A, (kind, c), comm, m)
         core_zeta = _core_zeta(kind, c, B, fn, A, comm)
-        Am, sigma = self._operator(units)
-        if units:   # the iteration runs on σA, σq: its Res is the units-free Res_E
+        Am, sigma, weighted = self._operator(units)
+        if units:   # the iteration runs on σA, σq; Res_E is measured on D A, D q (_scaling.units_weights)
             _units_parameters(opts, m, sigma, len(q_user))
-        measure = _Measure(_petsc, Am, sigma * q_user, (*core_zeta, core_upper), (A, q_user) if units else None)
+            weighted = (weighted[0], weighted[1] * q_user)
+        measure = _Measure(_petsc, sigma * q_user, (*core_zeta, core_upper), (A, q_user), weighted)
         jacobian = _jacobian(o["zeta_jacobian"], kind, m, Am, comm)
         if opts.rtol > 0:   # the absolute target, on the problem the core iterates (Options::target of Res(0))
             opts.tol, opts.rtol = opts.target(measure(np.zeros_like(q_user))[1]), 0.0
@@ -370,12 +353,18 @@ class Solver:
         return r
 
     def _operator(self, units):
-        """(the Mat the core iterates, σ): A, or under the default rule σA (a copy, made once)."""
+        """(the Mat the core iterates, σ, the default rule's (D A, D) or None): A, or under the default rule σA and
+        D A (copies, made once)."""
         if units not in self._operators:
             sigma = _units_sigma(self.A)
-            scaled = self.A.copy()
+            scaled, weighted = self.A.copy(), self.A.copy()
             scaled.scale(sigma)
-            self._operators[units] = (scaled, sigma)
+            indptr, cols, vals = self.A.getValuesCSR()
+            d = units_weights(sp.csr_matrix((vals, cols, indptr), shape=(len(indptr) - 1, self.A.getSize()[1])), sigma)
+            rows = _vec(self.A, d)
+            weighted.diagonalScale(L=rows)
+            rows.destroy()   # (on every rank together)
+            self._operators[units] = (scaled, sigma, (weighted, d))
         return self._operators[units]
 
     def _core(self, _petsc, units, Am, opts, o):
@@ -506,12 +495,12 @@ def _rounds(core, measure, xa, opts, o, jacobian, bounded, hint):
     verify = measure.weights is not None or kind == _core.ZetaKind.constant
     it = {**{k: o[k] for k in _options.names("solve")}, "tol": opts.tol, "rtol": 0.0}
     rounds = _Rounds(solver, problem, it, None, {"upper": ua, "zeta_jacobian": jacobian}, measure if verify else None, xa)
-    cb = None if o["callback"] is None else _collective_callback(measure.Am.getComm(), o["callback"])
+    cb = None if o["callback"] is None else _collective_callback(measure.user[0].getComm(), o["callback"])
     rounds.cb = None if cb is None else (lambda k, z, r: cb(k + rounds.cb_offset[0], z, r))   # (k counts on)
     failed = []   # a progress line that raised (rank 0's: the only one the core calls), raised on every rank after
     rounds.progress = lambda method, n: _deferred(_progress_hook(method, n), failed)
     rounds.run(xa, opts.tol)
-    agree(measure.Am.getComm(), failed[0] if failed else None)
+    agree(measure.user[0].getComm(), failed[0] if failed else None)
     report = hierarchy_report(core.hierarchy["requested"], None, core) if m == "newton" else None
     return _settle(solver, rounds, problem, measure, opts.tol, polish=m == "newton" and o["polish"], bounded=bounded,
                    report=report, hint=hint)
@@ -530,20 +519,21 @@ def _deferred(hook, failed):
 
 
 class _Measure:
-    """_api._OriginalResidual on PETSc: (w, Res) of z on the problem the core iterates; ``weighted=False``: the
-    paper's Res in the user's units (A, q) under the default rule."""
+    """_api._OriginalResidual on PETSc: (w, Res) of z, the paper's on the user's (A, q), or the default rule's Res_E
+    on `weighted` (D A, D q) unless ``weighted=False``. `qa`: the q of the problem the core iterates."""
 
-    def __init__(self, _petsc, Am, qa, problem, user):
-        self._petsc, self.Am, self.qa, self.problem, self.user = _petsc, Am, qa, problem, user
-        self.weights = None if user is None else (None, None)
+    def __init__(self, _petsc, qa, problem, user, weighted):
+        self._petsc, self.qa, self.problem, self.user, self.weighted = _petsc, qa, problem, user, weighted
+        self.weights = None if weighted is None else (None, None)
 
     def __call__(self, z, weighted=True):
-        A, q = (self.Am, self.qa) if weighted or self.user is None else self.user
+        A, q = self.weighted if weighted and self.weighted is not None else self.user
         d = self._petsc.measure(A.handle, q, *self.problem, z)
         return d["w"], d["residual"]
 
     def rounding_level(self, z):
-        return self._petsc.measure(self.Am.handle, self.qa, *self.problem, z, rounding=True)["rounding_level"]
+        A, q = self.weighted
+        return self._petsc.measure(A.handle, q, *self.problem, z, rounding=True)["rounding_level"]
 
 
 def _jacobian(zeta_jacobian, kind, method, Am, comm):

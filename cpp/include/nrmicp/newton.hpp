@@ -91,12 +91,13 @@ class Newton {
   Newton(const MatrixType& A, Options options, std::vector<RowMatrix> prolongations = {},
          std::vector<RowMatrix> coarse_operators = {})
       : options_(as_newton(std::move(options))), levels_{A, {}, {}, {}} {
-    using detail::comm_of;  // (rows and columns below: this process's)
+    using detail::comm_of, detail::check_operator;  // (rows and columns below: this process's)
     detail::collective_check(comm_of(A), [&] {
       if (A.rows() != A.cols() || (!A.rows() && comm_of(A).size() > 1))  // (each process decides on its rows)
         throw std::invalid_argument("Newton: A must be square with rows on every process, got " + std::to_string(A.rows()) + "x" + std::to_string(A.cols()));
       options_.check(A.rows());
     });
+    detail::collective_check(comm_of(A), [&] { check_operator(A); });  // (collective calls: once every process's shape passed)
     check_shapes([&] { using detail::global_rows; return global_rows(A); }(), prolongations, coarse_operators);
     const auto t0 = std::chrono::steady_clock::now();
     levels_.finest = std::make_unique<detail::NewtonLevel<MatrixType>>(A, options_);  // checks Ω1, Ω2
@@ -139,7 +140,7 @@ class Newton {
   Result polish(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector& z, double tol) const {
     const Busy busy(*this);
     Options o = options_;
-    o.tol = tol;
+    o.tol = tol, o.rtol = 0.0;  // (tol is the polish's target: a set-up's rtol, met at z already, takes no step)
     o.maxiter = polish_steps;
     o.record_history = false;
     const Callback no_callback;

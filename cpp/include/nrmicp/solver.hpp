@@ -122,6 +122,7 @@ class Solver {
                                     std::to_string(A.cols()));
       options_.check(A.rows());
     });
+    detail::collective_check(comm(), [&] { using detail::check_operator; check_operator(A); });  // (collective calls)
     const auto t0 = std::chrono::steady_clock::now();
     detail::collective_check(comm(), [&] {  // (Ω2 = diag(A) and the splitting read this process's rows)
       params_ = resolve_parameters(A, options_);

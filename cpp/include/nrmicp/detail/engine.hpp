@@ -4,6 +4,7 @@
 // this file is the Eigen/SuiteSparse engine, cpp/include/nrmicp/petsc/engine.hpp the PETSc one.
 //   comm_of(A)                     the global reductions (detail/comm.hpp)
 //   row_offset(A)                  the global index of the first row this process owns
+//   check_operator(A)              what the engine needs of A (throws naming a row of this process)
 //   global_rows(A), global_cols(A) the sizes of the whole matrix
 //   multiply(A, v, out)            out = A v (this process's rows); multiply_add: out += A v
 //   diagonal_block(A)              the rows and columns this process owns, as a serial matrix (the
@@ -43,6 +44,10 @@ template <typename Derived>
 Eigen::Index row_offset(const Eigen::SparseMatrixBase<Derived>&) {
   return 0;
 }
+/// What an engine needs of A beyond the member's own rules (throws naming this process's offending row):
+/// nothing serially; the PETSc engine's, petsc/engine.hpp. Run under collective_check by the constructors.
+template <typename Derived>
+void check_operator(const Eigen::SparseMatrixBase<Derived>&) {}
 /// The rows and columns of the whole matrix (every process's).
 template <typename Derived>
 Eigen::Index global_rows(const Eigen::SparseMatrixBase<Derived>& A) {

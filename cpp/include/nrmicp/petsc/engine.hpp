@@ -274,6 +274,17 @@ inline Matrix galerkin(const Matrix&, const Matrix& A, const Matrix& P) {
   return out;
 }
 inline Eigen::VectorXd diagonal(const Matrix& A) { return A.diagonal(); }
+/// Every member on this engine divides by a_ii (V-cycle smoothers, Krylov solves, splittings): this process's
+/// diagonal positive and normal (a subnormal one's reciprocal overflows); the serial member has other rules.
+inline void check_operator(const Matrix& A) {
+  const Eigen::VectorXd d = A.diagonal();
+  for (Eigen::Index i = 0; i < d.size(); ++i)
+    if (!(d[i] >= std::numeric_limits<double>::min())) {
+      const std::string row = std::to_string(A.row_offset() + i);
+      throw std::invalid_argument("A's diagonal must be positive (not subnormal) on the PETSc engine (its smoothers, "
+                                  "Krylov solves and splittings divide by it); A[" + row + ", " + row + "] = " + to_text(d[i]));
+    }
+}
 /// The diagonal block (a view of A's own arrays): the stationary members split it (multisplitting).
 inline Matrix::Block diagonal_block(const Matrix& A) { return A.block(); }
 inline Eigen::VectorXd row_max_abs(const Matrix& A) { return A.row_max_abs(); }
