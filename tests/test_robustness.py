@@ -14,6 +14,7 @@ import warnings
 import numpy as np
 import pytest
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
 import nrmicp
 
@@ -370,6 +371,32 @@ def test_a_zeta_returning_nan_at_any_call_raises_naming_it(member, call):
     with pytest.raises(ValueError, match=r"^zeta\(z\) returned non-finite values \(NaN or Inf\): zeta\(z\)\[7\] = nan$"):
         nrmicp.solve(A, 50 * np.ones(n), zeta, **options)
     assert len(calls) == call   # (raised at that call)
+
+
+def test_a_nan_of_zeta_at_a_non_finite_z_is_the_iterations_not_zetas():
+    """Found by review of the rule above: in z-units of 1e200 the Newton member handed ζ a non-finite trial z
+    once (call 11), whose NaN the rule blamed on ζ; the solve converges when the core judges that trial."""
+    m, t = 300, 1e200
+    A = sp.csr_matrix(sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(m, m)) * (m + 1) ** 2)
+    x = np.linspace(0, 1, m + 2)[1:-1]
+    psi = 0.3 - 2 * (x - 0.5) ** 2
+    inputs = []
+
+    def zeta(z):
+        inputs.append(bool(np.all(np.isfinite(z))))
+        return t * (psi + 0.05 * np.sin(z / t * 10))
+
+    def jacobian(z):
+        c = 0.5 * np.cos(z / t * 10)
+        return spla.LinearOperator((m, m), matvec=lambda v: c * np.ravel(v), dtype=float)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)   # (sin of the non-finite trial)
+        res = nrmicp.solve(A / t, 8.0 * np.ones(m), zeta, method="newton", zeta_jacobian=jacobian)
+    assert res.success, res.message
+    assert not all(inputs)   # (else this test no longer reaches the case)
+    z = res.z
+    d = t / (2 * (m + 1) ** 2)   # (w in z's units: 1 / max_j |a_ij|; max, not a 2-norm: squares of 1e199 overflow)
+    assert np.abs(np.minimum(d * (A / t @ z + 8.0), z - zeta(z))).max() < 1e-8 * np.abs(z).max()
 
 
 def test_item9_small_values_are_shown_as_g():

@@ -137,8 +137,8 @@ struct CallableZeta {
     if (!is_vector<double>(r, n)) r = checked.attr("output")(r);
     std::memcpy(out, py::array(r).data(), sizeof(double) * n);
     if (finite && !Eigen::Map<const Eigen::VectorXd>(out, n).allFinite()) {
-      checked.attr("output")(r);  // raises, naming the call
-      return false;
+      if (Eigen::Map<const Eigen::VectorXd>(z, n).allFinite()) checked.attr("output")(r);  // raises, naming the call
+      return false;  // (at a non-finite z the iteration failed, not the call: the core judges it)
     }
     return true;  // (else output() let it through: a run-away iterate's NaN, the core's ZetaFailed)
   }

@@ -28,8 +28,8 @@ class CheckedZeta:
 
     #: How messages name the call.
     what = "zeta(z)"
-    #: Its values must be finite: NaN or ±inf raises ValueError at the call that returned it, in every member
-    #: (the core hands a non-finite result to :meth:`output`); an upper bound's +inf is no bound, its own rule.
+    #: Its values at a finite z must be finite: NaN or ±inf raises ValueError at the call that returned it, in
+    #: every member (the core hands a non-finite result to :meth:`output`); an upper bound's +inf is no bound.
     finite = True
 
     def __init__(self, fn, n: int):
@@ -38,14 +38,15 @@ class CheckedZeta:
         self.warned = False
 
     def __call__(self, z) -> np.ndarray:
+        v = read_only_copy(z)
         try:
-            r = self.fn(read_only_copy(z))
+            r = self.fn(v)
         except ValueError as exc:
             msg = self.read_only_message(exc)
             if msg is None:
                 raise
             raise ValueError(msg) from exc
-        return self.output(r)
+        return self.output(r, finite_input=bool(np.all(np.isfinite(v))))
 
     def read_only_message(self, exc) -> str | None:
         """The message naming zeta for numpy's bare 'assignment destination is read-only', else None
@@ -56,7 +57,7 @@ class CheckedZeta:
         return (f"{self.what} tried to modify its input {arg}, which is read-only (nrmicp reuses it); "
                 f"compute on a copy ({arg} = {arg}.copy()) or return a new array ({exc})")
 
-    def output(self, r) -> np.ndarray:
+    def output(self, r, finite_input: bool = True) -> np.ndarray:
         """ζ's return value as a C-contiguous float64 vector of length n (shapes as every vector input:
         _inputs.flat_vector); TypeError/ValueError naming zeta otherwise. Other real dtypes are
         converted, with one ConversionWarning per solve."""
@@ -79,7 +80,8 @@ class CheckedZeta:
                               "(a float32 result also limits the accuracy Res can reach): return float64",
                               ConversionWarning, stacklevel=2)
         out = np.ascontiguousarray(arr, dtype=np.float64)
-        if self.finite and not getattr(self.fn, "overflowed", False):   # (a run-away iterate: the core's DIVERGED)
+        # (at a non-finite z, or one whose scaling overflowed, the iteration ran away: the core's to judge)
+        if self.finite and finite_input and not getattr(self.fn, "overflowed", False):
             bad = np.flatnonzero(~np.isfinite(out))
             if bad.size:
                 raise ValueError(f"{self.what} returned non-finite values (NaN or Inf): {self.what}[{int(bad[0])}] = "
