@@ -70,6 +70,27 @@ def test_infeasible_one_by_one_lcp_says_so(method):
     assert "try method" not in res.message  # no parameter advice for a problem without solution
 
 
+@pytest.mark.parametrize("q3, bounds", [(-50.0, "free"), (-50.0, "lower"), (50.0, "free_upper")])
+def test_a_zero_row_no_bound_can_hold_is_named_in_a_box_problem(q3, bounds):
+    """Found by review: the infeasibility rule skipped bounded problems. Row 3 of A zero: w_3 = q_3 for every z,
+    which vanishes nowhere; q_3 < 0 needs an upper bound to rest at, q_3 > 0 a lower one."""
+    n = 6
+    A = sp.lil_matrix(sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(n, n)) * 49)
+    A[3, :] = 0
+    A = sp.csr_matrix(A)
+    lower, upper = np.zeros(n), None
+    if bounds != "lower":
+        lower[3] = -np.inf
+    if bounds == "free_upper":
+        upper = np.full(n, 1.0)
+    if bounds == "lower":   # (a bounded problem by its upper bound elsewhere; row 3 has lower 0, no upper)
+        upper = np.where(np.arange(n) == 3, np.inf, 1.0)
+    res = nrmicp.solve(A, np.full(n, q3), lower, upper=upper, method="newton")
+    assert not res.success
+    side = "upper" if q3 < 0 else "lower"
+    assert f"row 3 of A is zero and q[3] = {q3:g}: w_3 = q_3 never vanishes and z_3 has no {side} bound" in res.message
+
+
 @pytest.mark.parametrize("method", nrmicp.METHODS)
 def test_row_without_positive_entry_and_negative_q_is_named(method):
     """Row 1 = (1, 3, 0) with q_1 < 0 is feasible; row 2 = (0, -1, -0.5) with q_2 = -0.5 gives

@@ -24,7 +24,7 @@ from ._zeta import CheckedZeta
 from ._decoupled import Reduced, decoupled_rows
 from ._hierarchy import Hierarchy, check_components
 from ._result import Result, wants_result
-from ._infeasible import evident_infeasibility
+from ._infeasible import box_infeasibility, evident_infeasibility
 
 __all__ = ["solve", "Solver", "Affine", "Result", "Status", "METHODS", "residual", "backends"]
 
@@ -737,10 +737,14 @@ class _OriginalResidual:
         self._last = None   # (z, w, g, u) of the last call: the paper's Res of the returned z calls no ζ, u again
 
     def infeasibility(self) -> str:
-        """The message part naming a row that makes the problem evidently infeasible, or "" (always
-        for bounds: the rule is the LCP's)."""
+        """The message part naming a row that makes the problem evidently infeasible, or "" (bounds: constant
+        ones only)."""
         if self.bounded:
-            return ""
+            if self.kind not in (ZetaKind.none, ZetaKind.constant) or isinstance(self.upper, _bounds.ImplicitUpper):
+                return ""
+            n = len(self.qv)
+            lower = np.zeros(n) if self.kind == ZetaKind.none else self.c
+            return box_infeasibility(self.A, self.qv, lower, np.full(n, np.inf) if self.upper is None else self.upper)
         lcp = self.kind in (ZetaKind.none, ZetaKind.constant)
         return evident_infeasibility(self.A, self.qv, lcp, self.c if self.kind == ZetaKind.constant else None)
 

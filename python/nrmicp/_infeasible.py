@@ -4,7 +4,9 @@ converge (it costs one pass over A, and only then).
 Row i of ICP(q, A, ζ) has no solution when w_i = (Az + q)_i can never be >= 0:
   - any ζ: row i of A is zero and q_i < 0 (w_i = q_i for every z);
   - an LCP (ζ = 0, z >= 0): no entry of row i is positive and q_i < 0 (w_i <= q_i);
-  - ζ = c (z >= c, z = y + c with y >= 0): no entry of row i is positive and (q + Ac)_i < 0.
+  - ζ = c (z >= c, z = y + c with y >= 0): no entry of row i is positive and (q + Ac)_i < 0;
+  - bounds lo <= z <= u (w_i >= 0 at lo_i, <= 0 at u_i, 0 between): row i of A is zero and q_i > 0 with
+    lo_i = -inf, or q_i < 0 with u_i = +inf (w_i = q_i never vanishes, and no bound holds z_i).
 """
 from __future__ import annotations
 
@@ -44,3 +46,16 @@ def evident_infeasibility(A: sp.csr_matrix, q: np.ndarray, lcp: bool, c=None) ->
     what, bound = (f"q[{i}]", "z >= 0") if c is None else (f"(q + A c)[{i}]", "z >= c")
     return (f"; row {i} of A has no positive entry and {what} = {qs[i]:.3g} < 0: w_{i} <= {what} < 0 for every "
             f"{bound}, the problem has no solution{others}")
+
+
+def box_infeasibility(A: sp.csr_matrix, q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> str:
+    """evident_infeasibility's rule for the bounds lower <= z <= upper (vectors; ±inf: none)."""
+    _, size = _row_extremes(A)
+    bad = np.flatnonzero((size == 0) & (((q > 0) & np.isneginf(lower)) | ((q < 0) & np.isposinf(upper))))
+    if bad.size == 0:
+        return ""
+    i = int(bad[0])
+    others = f" (and {bad.size - 1} more such row(s))" if bad.size > 1 else ""
+    side = "lower" if q[i] > 0 else "upper"
+    return (f"; row {i} of A is zero and q[{i}] = {q[i]:.3g}: w_{i} = q_{i} never vanishes and z_{i} has no {side} "
+            f"bound to rest at, the problem has no solution{others}")
