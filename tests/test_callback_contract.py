@@ -91,6 +91,20 @@ def test_last_callback_is_the_converged_iterate_newton_nested():
     _check_last_call_is_the_result(res, calls)
 
 
+def test_the_semismooth_loops_iterates_are_numbered_as_the_history_and_nit_count_them():
+    """Found by review: with zeta_jacobian the callback saw k = 10, 11, 12, 13 and the history said 15, 16, 17, 18
+    (nit 18): the outer steps between the Newton steps were counted into the history only. Each iterate is now
+    numbered when it is looked at, the outer steps before it included."""
+    n = 200
+    A = sp.csr_matrix(sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(n, n)) * (n + 1) ** 2)
+    x = np.linspace(0, 1, n + 2)[1:-1]
+    psi = -2 + 2 * (x - 0.5) ** 2
+    res, calls = _record(A=A, q=50 * np.ones(n), zeta=lambda z: psi + 0.2 * np.sin(z), method="newton",
+                         zeta_jacobian=lambda z: sp.diags(0.2 * np.cos(z)))
+    _check_last_call_is_the_result(res, calls)
+    assert res.outer_iterations > 0 and calls[-1][0] == res.nit
+
+
 def test_callback_is_called_at_the_last_iterate_of_a_non_converged_solve():
     A, q = _bai()
     res, calls = _record(A=A, q=q, method="nrm", maxiter=7, tol=1e-300)

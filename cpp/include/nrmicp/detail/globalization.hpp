@@ -226,6 +226,7 @@ struct NewtonControl {
   Poll poll;
   Progress progress;  ///< finest level only: the verbose report (solve.verbose seconds apart)
   const Eigen::VectorXd* shift = nullptr;  ///< the constant obstacle of a shifted LCP (for the callback)
+  const int* number_from = nullptr;  ///< iterates numbered *number_from + k (Monitor::number_from), else k
 
  private:
   /// An inner loop's options: no tol (to a settled active set), 50 steps, silent.

@@ -48,6 +48,7 @@ struct LevelOutcome : Result {
   bool settled = false;        ///< the active set repeated: z solves the problem to rounding
   std::vector<char> inactive;  ///< the inactive set of z's last step (empty if no step was taken)
   bool jacobian_poor = false;  ///< ζ's Jacobian did not deliver (JacobianCheck): the loop gave up on it
+  bool numbered = false;       ///< its history is numbered already (NewtonControl::number_from)
 };
 
 /// The Newton member on one level: the plain step `plain` (at its start), globalized, in the
@@ -62,6 +63,7 @@ LevelOutcome newton_loop(Plain& plain, const NewtonControl& ctl, const Eigen::Ve
   Monitor monitor(mo, ctl.callback, ctl.poll, ctl.progress, ctl.shift ? *ctl.shift : no_shift, o, plain.size());
   Iterate s;
   monitor.reduce_with(plain.comm());
+  if (ctl.number_from) monitor.number_from(ctl.number_from);
   Globalized<Plain> step(plain, ctl, s);
   loop(step, s, monitor);
   monitor.finish(z_start);
@@ -69,6 +71,7 @@ LevelOutcome newton_loop(Plain& plain, const NewtonControl& ctl, const Eigen::Ve
   o.settled = step.settled();
   o.inactive = step.inactive();
   o.jacobian_poor = step.jacobian_poor();
+  o.numbered = ctl.number_from != nullptr;
   o.newton.fallback_sweeps = step.sweeps();
   o.newton.linear_solves = plain.solves();
   o.newton.inner_iterations = plain.inner_iterations();
@@ -147,7 +150,7 @@ class NewtonTally {
     if (level != 0) return;
     tally_.newton.fallback_sweeps += out.newton.fallback_sweeps;
     for (std::size_t i = 0; i < out.history_iteration.size(); ++i) {
-      tally_.history_iteration.push_back(tally_.nit + out.history_iteration[i]);
+      tally_.history_iteration.push_back((out.numbered ? 0 : tally_.nit) + out.history_iteration[i]);
       tally_.history_seconds.push_back(out.history_seconds[i]);
       tally_.history_residual.push_back(out.history_residual[i]);
     }
@@ -424,9 +427,9 @@ class ObstacleSolver {
     c.solve.record_history = report && o_.record_history;
     c.solve.verbose = report ? o_.verbose : 0;
     c.sweep_budget = o_.maxiter;
-    if (report) {  // the callback's k counts on from the steps before this loop, as tally_.absorb()'s history does
-      if (hooks_.callback)
-        c.callback = [&cb = hooks_.callback, base = tally_.nit()](int k, const Vector& z, double r) { return cb(base + k, z, r); };
+    if (report) {  // its iterates numbered as nit counts them when each is looked at (history, callback, progress)
+      c.callback = hooks_.callback;
+      c.number_from = tally_.nit_counter();
       c.progress = hooks_.progress;
     }
     c.shift = &shift;

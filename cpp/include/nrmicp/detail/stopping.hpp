@@ -154,6 +154,8 @@ class Monitor {
   /// z-update rewrites it).
   bool stop(int k, double r, Iterate& s) {
     if (count_) k = *count_;
+    const bool first = k == 0;  // (the loop's first iterate, however numbered: its progress line)
+    if (offset_) k += *offset_;
     if (!s.finite) return finish_with(Status::Diverged, k);
     if (!s.zeta_ok) return finish_with(Status::ZetaFailed, k);
     record(k, r);
@@ -171,7 +173,7 @@ class Monitor {
       poll_();
       last_poll_ = clock::now();
     }
-    if (progress_ && (k == 0 || ScopedTimer::seconds_since(last_report_) >= o_.verbose)) {
+    if (progress_ && (first || ScopedTimer::seconds_since(last_report_) >= o_.verbose)) {
       progress_(k, r, best_, seconds(), std::string());
       last_report_ = clock::now();
     }
@@ -185,6 +187,9 @@ class Monitor {
   /// best iterate's number): the outer fixed point numbers them by the Newton steps taken, as
   /// its nit counts them.
   void number_by(const int* count) { count_ = count; }
+  /// Number iterate k as *offset + k: a loop whose steps interleave steps counted elsewhere (the semismooth
+  /// loop's outer steps), numbered as nit counts them when each iterate is looked at.
+  void number_from(const int* offset) { offset_ = offset; }
   /// The processes that own the other rows of s.x and s.z (detail/comm.hpp; serial by default):
   /// the norms the rules read are theirs together, and a callback that asks to stop on one stops all.
   void reduce_with(const Comm& comm) { comm_ = &comm; }
@@ -308,6 +313,7 @@ class Monitor {
   bool x_runaway_ = false;
   int x_ref_k_ = -1;
   const int* count_ = nullptr;
+  const int* offset_ = nullptr;
   const Comm* comm_ = &serial_comm();
   double x_scale_ = 0, x_ref_ = 0;
   double last_r_ = std::numeric_limits<double>::quiet_NaN();
