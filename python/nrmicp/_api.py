@@ -1069,7 +1069,9 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
         Initial guess for z (warm start); default zeros.
     callback : callable, default None
         Called once for every iterate k = 0 (the start), 1, 2, ..., the last one too whatever ended
-        the solve (the iterates of ``result.history``; method 'newton': the finest-level ones), by
+        the solve (the iterates of ``result.history``; method 'newton': the finest-level ones, numbered
+        as ``nit`` counts them: an Affine or callable ζ's Newton steps from the last step of their start's
+        obstacle solve on, with the outer steps' steps between them), by
         scipy's rule: ``callback(intermediate_result)`` (the only parameter named exactly so)
         receives a :class:`Result` with ``z`` (alias ``x``), ``nit`` (= k) and ``residual``; any
         other callable is called as ``callback(zk)`` with the iterate. For a converged solve the
