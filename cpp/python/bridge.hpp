@@ -111,11 +111,11 @@ auto without_gil(F&& f) -> decltype(f()) {
 struct CallableZeta {
   py::object checked, fn;
   std::shared_ptr<py::array_t<double>> zbuf;
-  bool finite = false;  // a non-finite result goes to output() too, which raises (checked.finite: ζ, ζ′'s products)
+  bool finite;  // checked.finite: a non-finite result at a finite z goes to output() too, which raises (ζ, ζ′'s products)
 
-  CallableZeta(py::object z, bool finite = false)
+  explicit CallableZeta(py::object z)
       : checked(z), fn(z.attr("fn")), zbuf(std::make_shared<py::array_t<double>>()),
-        finite(finite || py::getattr(z, "finite", py::bool_(false)).cast<bool>()) {}
+        finite(py::getattr(z, "finite", py::bool_(false)).cast<bool>()) {}
 
   bool operator()(const double* z, double* out, Eigen::Index n) {
     py::gil_scoped_acquire gil;
@@ -171,7 +171,7 @@ struct CallableJacobian {
     py::gil_scoped_acquire gil;
     const py::object r = state->fn(py::array_t<double>(z.size(), z.data()));
     if (!py::isinstance<py::tuple>(r)) {
-      state->product.emplace(r, true);
+      state->product.emplace(r);  // (a JacobianProduct: finite)
       d.product = [s = state](const double* v, double* out, Eigen::Index n) { return (*s->product)(v, out, n); };
       return true;
     }

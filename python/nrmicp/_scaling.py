@@ -50,8 +50,13 @@ def units_weights(A: sp.csr_matrix, sigma: float) -> np.ndarray:
     """The default rule's row weights d: 1/max_j |a_ij| of each row as a power of two (σ for a row of zeros), so
     that d_i w_i is row i's residual in the units of z whatever that row's units (σ alone is one number: a row
     far below A's typical size went unmeasured)."""
+    return _row_factors(A, sigma)
+
+
+def _row_factors(A: sp.csr_matrix, none: float) -> np.ndarray:
+    """1/max_j |a_ij| of each row as a power of two within float's range (`none` for a row of zeros)."""
     r = _row_max(A)
-    d = np.full(A.shape[0], sigma)
+    d = np.full(A.shape[0], none)
     nz = (r > 0) & np.isfinite(r)
     d[nz] = np.clip(_pow2(1.0 / r[nz]), 2.0 ** -1022, 2.0 ** 1023)
     return d
@@ -79,11 +84,7 @@ def equilibrate(A: sp.csr_matrix, kind: str) -> tuple[np.ndarray, np.ndarray]:
     if kind == "units":
         return np.full(n, units_factor(A)), np.ones(n)
     if kind == "rows":
-        r = _row_max(A)
-        dr = np.ones(n)
-        nz = r > 0
-        dr[nz] = _pow2(1.0 / r[nz])
-        return dr, np.ones(n)
+        return _row_factors(A, 1.0), np.ones(n)
     if kind != "both":  # pragma: no cover - validated by the caller
         raise ValueError(f"unknown scaling {kind!r}")
     dr = np.ones(n)

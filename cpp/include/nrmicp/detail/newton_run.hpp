@@ -48,7 +48,6 @@ struct LevelOutcome : Result {
   bool settled = false;        ///< the active set repeated: z solves the problem to rounding
   std::vector<char> inactive;  ///< the inactive set of z's last step (empty if no step was taken)
   bool jacobian_poor = false;  ///< ζ's Jacobian did not deliver (JacobianCheck): the loop gave up on it
-  bool numbered = false;       ///< its history is numbered already (NewtonControl::number_from)
 };
 
 /// The Newton member on one level: the plain step `plain` (at its start), globalized, in the
@@ -71,7 +70,6 @@ LevelOutcome newton_loop(Plain& plain, const NewtonControl& ctl, const Eigen::Ve
   o.settled = step.settled();
   o.inactive = step.inactive();
   o.jacobian_poor = step.jacobian_poor();
-  o.numbered = ctl.number_from != nullptr;
   o.newton.fallback_sweeps = step.sweeps();
   o.newton.linear_solves = plain.solves();
   o.newton.inner_iterations = plain.inner_iterations();
@@ -141,7 +139,7 @@ class NewtonTally {
     append(tally_.history_residual, from.history_residual);
   }
 
-  /// A level's loop into the tally (the finest level's history too, numbered on).
+  /// A level's loop into the tally (the finest level's history too, numbered by its Monitor: NewtonControl::number_from).
   void absorb(const LevelOutcome& out, int level, double seconds) {
     tally_.newton.level_steps[level] += out.steps;
     tally_.newton.level_seconds[level] += seconds;
@@ -150,7 +148,7 @@ class NewtonTally {
     if (level != 0) return;
     tally_.newton.fallback_sweeps += out.newton.fallback_sweeps;
     for (std::size_t i = 0; i < out.history_iteration.size(); ++i) {
-      tally_.history_iteration.push_back((out.numbered ? 0 : tally_.nit) + out.history_iteration[i]);
+      tally_.history_iteration.push_back(out.history_iteration[i]);  // (numbered as nit counts: finest_control)
       tally_.history_seconds.push_back(out.history_seconds[i]);
       tally_.history_residual.push_back(out.history_residual[i]);
     }
