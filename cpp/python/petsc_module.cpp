@@ -138,24 +138,31 @@ class PyPetscSolver : public PyPetscCore<nrmicp::Solver<Matrix>> {
 };
 
 /// w = Az + q and Res(z) of ICP(q, A, ζ) (with `upper`: the bounded Res, an implicit one at z), every process's rows
-/// together; with `rounding`, also Res's rounding level at z (the Newton member's floor,
-/// detail::NewtonLevel::rounding_level). For the distributed entry point's re-measures: its target
-/// (Res at z = 0), the paper's Res in the user's units, the default rule's floor.
+/// together; with `rows` (weights d > 0), the default rule's Res_E on d∘w (w itself unweighted); with `rounding`,
+/// also Res's rounding level at z (the Newton member's floor, detail::NewtonLevel::rounding_level). For the
+/// distributed entry point's re-measures: its target (Res at z = 0), the paper's Res, the default rule's floor.
 py::dict measure(std::uintptr_t A, py::array q, nrmicp::ZetaKind kind, py::object zeta_c, py::object zeta_fn,
-                 py::object upper, py::array z, bool rounding) {
+                 py::object upper, py::array z, bool rounding, py::object rows) {
   const Matrix M = from_handle(A, "A");
   nrmicp::Options o;
   o.method = nrmicp::Method::Newton;
   const nrmicp::detail::NewtonLevel<Matrix> level(M, o);
   const Eigen::VectorXd qv = to_vector(q, "q"), zv = to_vector(z, "z");
+  const Eigen::VectorXd d = rows.is_none() ? Eigen::VectorXd() : to_vector(rows.cast<py::array>(), "rows");
   const Zeta zeta = with_upper(zeta_of(kind, zeta_c, zeta_fn), upper, qv.size());
   Eigen::VectorXd w, zeta_z, u;
   if (!zeta.eval_upper(zv, u)) throw py::value_error("upper(z) failed (or gave NaN or -inf) at the returned z");
-  py::dict d;
-  d["residual"] = level.icp_residual(qv, zeta, zv, zeta_z, w, u);
-  d["w"] = py::array_t<double>(w.size(), w.data());
-  if (rounding) d["rounding_level"] = level.rounding_level(zv, qv, zv - zeta_z, w, u);
-  return d;
+  py::dict d_out;
+  double res = level.icp_residual(qv, zeta, zv, zeta_z, w, u);
+  const Eigen::VectorXd dw = d.size() ? Eigen::VectorXd(d.cwiseProduct(w)) : w;
+  if (d.size() && std::isfinite(res)) {   // (an infinite Res: no certificate, weighted or not)
+    res = nrmicp::detail::bounded_residual(dw, zv - zeta_z, zv, u, M.comm());
+    if (std::isnan(res)) res = std::numeric_limits<double>::infinity();
+  }
+  d_out["residual"] = res;
+  d_out["w"] = py::array_t<double>(w.size(), w.data());
+  if (rounding) d_out["rounding_level"] = level.rounding_level(zv, qv, zv - zeta_z, dw, u, d);
+  return d_out;
 }
 
 /// The 'amg' hierarchy of A (nrmicp/petsc/hierarchy.hpp), built and let go: each coarse operator's rows and
@@ -207,6 +214,6 @@ PYBIND11_MODULE(_petsc, m) {
   m.def("check_operator", [](std::uintptr_t A) { nrmicp::petsc::check_operator(from_handle(A, "A")); }, py::arg("A"),
         "ValueError naming this process's first row of A the PETSc engine refuses (a_ii not positive and normal).");
   m.def("measure", &measure, py::arg("A"), py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("zeta_fn"),
-        py::arg("upper"), py::arg("z"), py::arg("rounding") = false,
+        py::arg("upper"), py::arg("z"), py::arg("rounding") = false, py::arg("rows") = py::none(),
         "{'w', 'residual'[, 'rounding_level']} of z: w = Az + q and Res(z) over every process's rows.");
 }

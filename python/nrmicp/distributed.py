@@ -296,7 +296,7 @@ class Solver:
                 self.A.destroy()   # on every rank together (each raises here)
             raise
         self._cores = {}   # units (the default rule's σA) -> [the core, its set-up seconds not yet reported]
-        self._operators = {False: (self.A, 1.0, None)}   # units -> (the Mat the core iterates, σ, the rule's D A, D)
+        self._operators = {False: (self.A, 1.0, None)}   # units -> (the Mat the core iterates, σ, the rule's row weights)
         self._setup_seconds = time.perf_counter() - t0   # reported by the first solve
         self._closed = False
 
@@ -310,11 +310,9 @@ class Solver:
         """Frees the cores (collective: on every rank); a closed Solver's solve raises."""
         for core, _ in self._cores.values():
             core.close()
-        for units, (mat, _, weighted) in self._operators.items():   # σA, D A, and an A made from scipy row blocks
+        for units, (mat, _, _) in self._operators.items():   # σA, and an A made from scipy row blocks
             if units or self._owns_A:
                 mat.destroy()
-            if weighted is not None:
-                weighted[0].destroy()
         for P in self._levels[1]:   # the prolongation Mats made from scipy matrices
             P.destroy()
         self._cores, self._operators, self._levels, self._closed = {}, {}, ([], []), True
@@ -332,19 +330,16 @@ class Solver:
         opts, q_user, xa, (kind, c, B, fn) = _prepare_call(A, m, q, zeta, o["x0"], comm, o, it)
         core_upper, bounded = _upper(upper, A, (kind, c), comm, m)
         core_zeta = _core_zeta(kind, c, B, fn, A, comm)
-        Am, sigma, weighted = self._operator(units)
-        if units:   # the iteration runs on σA, σq; Res_E is measured on D A, D q (_scaling.units_weights)
+        Am, sigma, rows = self._operator(units)
+        if units:   # the iteration runs on σA, σq; Res_E is measured on D(Az + q) (_scaling.units_weights)
             _units_parameters(opts, m, sigma, len(q_user))
-            weighted = (weighted[0], weighted[1] * q_user)
-        measure = _Measure(_petsc, sigma * q_user, (*core_zeta, core_upper), (A, q_user), weighted)
+        measure = _Measure(_petsc, sigma * q_user, (*core_zeta, core_upper), (A, q_user), rows)
         jacobian = _jacobian(o["zeta_jacobian"], kind, m, Am, comm)
         if opts.rtol > 0:   # the absolute target, on the problem the core iterates (Options::target of Res(0))
             opts.tol, opts.rtol = opts.target(measure(np.zeros_like(q_user))[1]), 0.0
         core, setup, earlier = self._core(_petsc, units, Am, opts, o)
         hint = failure_hint(m, self._omega2_hint, lambda: _margin(A, comm), units, kind)
         fields = _rounds(core, measure, xa, opts, o, jacobian, bounded, hint)
-        if units:   # w in the user's units (re-measured: σ(Az + q) / σ may overflow or underflow)
-            fields["w"] = measure(fields["z"], weighted=False)[0]
         fields["timings"]["setup"] += setup
         fields["timings"]["total"] = time.perf_counter() - t_start + earlier   # (the core's build is in this call)
         r = Result(**{**fields, "z": _vec(A, fields["z"]), "w": _vec(A, fields["w"])}, ranks=comm.getSize())
@@ -353,18 +348,14 @@ class Solver:
         return r
 
     def _operator(self, units):
-        """(the Mat the core iterates, σ, the default rule's (D A, D) or None): A, or under the default rule σA and
-        D A (copies, made once)."""
+        """(the Mat the core iterates, σ, the default rule's row weights D or None): A, or under the default rule σA
+        (a copy, made once) and D."""
         if units not in self._operators:
-            sigma = _units_sigma(self.A)
-            scaled, weighted = self.A.copy(), self.A.copy()
+            sigma, scaled = _units_sigma(self.A), self.A.copy()
             scaled.scale(sigma)
             indptr, cols, vals = self.A.getValuesCSR()
             d = units_weights(sp.csr_matrix((vals, cols, indptr), shape=(len(indptr) - 1, self.A.getSize()[1])), sigma)
-            rows = _vec(self.A, d)
-            weighted.diagonalScale(L=rows)
-            rows.destroy()   # (on every rank together)
-            self._operators[units] = (scaled, sigma, (weighted, d))
+            self._operators[units] = (scaled, sigma, d)
         return self._operators[units]
 
     def _core(self, _petsc, units, Am, opts, o):
@@ -519,21 +510,20 @@ def _deferred(hook, failed):
 
 
 class _Measure:
-    """_api._OriginalResidual on PETSc: (w, Res) of z, the paper's on the user's (A, q), or the default rule's Res_E
-    on `weighted` (D A, D q) unless ``weighted=False``. `qa`: the q of the problem the core iterates."""
+    """_api._OriginalResidual on PETSc: (w, Res) of z on the user's (A, q), w = Az + q: the paper's Res, or the
+    default rule's Res_E on D w (`rows`: D) unless ``weighted=False``. `qa`: the q of the problem the core iterates."""
 
-    def __init__(self, _petsc, qa, problem, user, weighted):
-        self._petsc, self.qa, self.problem, self.user, self.weighted = _petsc, qa, problem, user, weighted
-        self.weights = None if weighted is None else (None, None)
+    def __init__(self, _petsc, qa, problem, user, rows):
+        self._petsc, self.qa, self.problem, self.user, self.rows = _petsc, qa, problem, user, rows
+        self.weights = None if rows is None else (None, None)
 
-    def __call__(self, z, weighted=True):
-        A, q = self.weighted if weighted and self.weighted is not None else self.user
-        d = self._petsc.measure(A.handle, q, *self.problem, z)
-        return d["w"], d["residual"]
+    def __call__(self, z, weighted=True, rounding=False):
+        A, q = self.user
+        d = self._petsc.measure(A.handle, q, *self.problem, z, rounding, self.rows if weighted else None)
+        return (d["w"], d["residual"]) if not rounding else d["rounding_level"]
 
     def rounding_level(self, z):
-        A, q = self.weighted
-        return self._petsc.measure(A.handle, q, *self.problem, z, rounding=True)["rounding_level"]
+        return self(z, rounding=True)
 
 
 def _jacobian(zeta_jacobian, kind, method, Am, comm):

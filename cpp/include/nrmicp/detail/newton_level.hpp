@@ -332,12 +332,14 @@ class NewtonLevel {
   /// (term_rounding: |A||z| + |q| where it is w_i = (Az + q)_i, |z_i| + |ζ_i(z)| where it is
   /// g_i = z_i − ζ_i(z)), below which no step brings Res. Row by row, not the two parts' sums: a Res
   /// made of w's entries alone is not floored by z's size (docs/MEASUREMENTS.md, "The rounding level
-  /// row by row"). `upper`: the bound of bounded_residual (empty: none).
+  /// row by row"). `upper`: the bound of bounded_residual (empty: none); `rows`: weights d > 0 of
+  /// Res's rows, w then being d∘(Az + q) (empty: none; the default rule's Res_E).
   double rounding_level(const Vector& z, const Vector& q, const Vector& g, const Vector& w,
-                        const Vector& upper = Vector()) const {
+                        const Vector& upper = Vector(), const Vector& rows = Vector()) const {
     ScopedTimer timer(timings().spmv);
     Vector t = q.cwiseAbs();
     abs_multiply_add(A_, z.cwiseAbs(), t);
+    if (rows.size()) t.array() *= rows.array();
     for (Eigen::Index i = 0; i < t.size(); ++i) t[i] = term_rounding(t[i], w[i], g[i], z[i], upper, i);
     return std::numeric_limits<double>::epsilon() * comm_.stable_norm(t);
   }
