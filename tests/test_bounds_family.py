@@ -279,3 +279,32 @@ def test_auto_takes_newton_on_a_laplacian_with_bounds():
     r = nrmicp.solve(A, q, np.full(n, -np.inf), upper=np.full(n, 0.05), tol=1e-12)
     assert r.method == "newton" and r.success
     assert mcp_violation(A, q, r.z, np.full(n, -np.inf), np.full(n, 0.05)) < 1e-12
+
+
+@pytest.mark.parametrize("method", ["nrmgs", "nrmsor", "newton"])
+@pytest.mark.parametrize("scale", [None, "rows"])
+def test_polish_lands_a_box_answer_on_the_active_set_solution(method, scale):
+    """polish=True on a box problem: Newton steps within the bounds the member was given (every kind of
+    row, also after the 'rows' equilibration) take a loosely solved answer to the exact one; the answer
+    the member stopped at is not (polished False would mean the polish was skipped)."""
+    A, q, lower, upper, _ = designed_problem(4)
+    exact = active_set_solution(A, q, lower, upper)
+    loose = nrmicp.solve(A, q, lower, upper=upper, method=method, tol=1e-4, scale=scale, maxiter=5000)
+    r = nrmicp.solve(A, q, lower, upper=upper, method=method, tol=1e-4, scale=scale, maxiter=5000, polish=True)
+    assert r.success, r.message
+    if np.abs(loose.z - exact).max() > 1e-12:   # (newton may land on it at once: nothing left to polish)
+        assert r.polished, r.message
+    assert np.abs(r.z - exact).max() < 1e-12
+    assert mcp_violation(A, q, r.z, lower, upper) < 1e-12
+    assert np.all(r.z >= lower) and np.all(r.z <= upper + 2e-16 * np.abs(upper))
+
+
+def test_polish_keeps_an_implicit_upper_bound():
+    """An implicit upper bound u(z) (Newton's polish takes it as the solve did): the polished z solves the
+    box problem at its own bound's value."""
+    A, q, lower, upper, _ = designed_problem(5, symmetric=True)
+    shift = np.where(np.isfinite(upper), upper, 0.0)
+    up = nrmicp.Affine(sp.csr_matrix((N, N)), np.where(np.isfinite(upper), shift, np.inf))
+    r = nrmicp.solve(A, q, lower, upper=up, method="newton", tol=1e-6, polish=True)
+    assert r.success, r.message
+    assert np.abs(r.z - active_set_solution(A, q, lower, upper)).max() < 1e-12

@@ -815,7 +815,7 @@ def golden_problems():
 
 def case_rounds():
     """What the serial layer's rounds decide on the PETSc engine as in nrmicp.solve: w under an extreme
-    default-rule σ (A's diagonal 1e-300), polish skipped on free rows, the callback's k counting on over
+    default-rule σ (A's diagonal 1e-300), polish within free rows' bounds, the callback's k counting on over
     re-solves, the note of a Jacobian given up under the default rule (one rank: a nonlocal ζ)."""
     out = {}
     s = 1e-300
@@ -835,10 +835,13 @@ def case_rounds():
     ks = []
     rc = dist.solve(A[lo:hi], pb.q[lo:hi], pb.zeta[lo:hi], method="newton", hierarchy=None, tol=1e-12,
                     record_history=True, callback=lambda k, z, res: ks.append(k))
+    zf = dist.gather(r.z)
     if RANK == 0:
         serial = nrmicp.solve(A, pb.q, c, method="newton", hierarchy=None, polish=True, tol=1e-13)
         out["free"] = {"status": str(r.status), "message": r.message, "polished": r.polished,
-                       "serial_status": str(serial.status), "serial_message": serial.message}
+                       "serial_status": str(serial.status), "serial_message": serial.message,
+                       "serial_polished": serial.polished, "err": float(np.max(np.abs(zf - serial.z))),
+                       "res": r.residual}
         out["callback"] = {"ks": ks, "history": rc.history["iteration"].tolist(), "iterations": rc.iterations}
     import logging   # verbose: the Newton member's progress lines, rank 0's only
     lines = []

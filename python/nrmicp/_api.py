@@ -698,13 +698,14 @@ class Solver:
 def _settle(solver, rounds: "_Rounds", problem, measure, tol: float, *, polish: bool, bounded: bool, report,
             hint=None) -> dict:
     """The fields of a Result from the core's rounds, both engines: the best round's z or its polish
-    (_newton.polish: not on a bounded problem), the status re-decided as docs/SPEC.md says ("When the
+    (_newton.polish, within the bounds the core was given), the status re-decided as docs/SPEC.md says ("When the
     Python layer changes the core's status"), then by the polish and the default rule's criterion;
     the Newton member's fields and notes (`report`: its hierarchy_report); the rounds' history,
     timings and counters. `hint(status)`: a sentence for a solve that did not converge."""
     polished = polish_core = None
-    if polish and not bounded:
-        polished, polish_core = _newton.polish(solver, problem, rounds.z, rounds.res, measure, solver._dc)
+    if polish:
+        polished, polish_core = _newton.polish(solver, problem, rounds.z, rounds.res, measure, solver._dc,
+                                               rounds.core_kw.get("upper"))
         if polish_core is not None:
             rounds.add_timings(polish_core["timings"])
     z, w, res = polished or (rounds.z, rounds.w, rounds.res)

@@ -150,21 +150,22 @@ def polisher(solver):
     return solver._polisher or None
 
 
-def polish(solver, problem, z, res, original_residual, dc):
+def polish(solver, problem, z, res, original_residual, dc, upper=None):
     """Newton steps from z on its active set (``polish=True``) to the rounding floor of Res (at
     most 3: Newton::polish). Returns (z, w, Res, core result) when they lowered Res (measured in
     the original variables), else (None, core result); the core result's status is STAGNATED
     with the floor in its message when the floor was reached.
 
     `problem` is the core's solve arguments before x0 in the core's variables (serial: q, kind, c,
-    B-indptr, B-indices, B-data, fn); dc the column scaling (None when unscaled)."""
+    B-indptr, B-indices, B-data, fn); dc the column scaling (None when unscaled); `upper` the core's
+    upper bound as its solves took it (None: none)."""
     t0 = time.perf_counter()
     core = solver._core if solver.method == "newton" else polisher(solver)
     if core is None or not np.isfinite(res):
         return None, None
     built = time.perf_counter() - t0   # the polisher's set-up on first use (else a few µs)
     z0 = z / dc if dc is not None else z
-    d = core.polish(*problem, np.ascontiguousarray(z0), POLISH_TOL)
+    d = core.polish(*problem, np.ascontiguousarray(z0), POLISH_TOL, upper=upper)
     d["timings"]["setup"] += built
     zp = d["z"] * dc if dc is not None else d["z"]
     wp, rp = original_residual(zp)
