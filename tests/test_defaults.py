@@ -207,3 +207,64 @@ def test_a_zeta_less_accurate_than_the_default_target_ends_soon_says_so_and_the_
     again = nrmicp.solve(P.A, P.q, zeta, tol=1e-6)
     assert again.success
     assert np.linalg.norm(np.minimum(P.A @ again.z + P.q, again.z - P.zeta(again.z))) < 1e-6
+
+
+def _z_units_cases():
+    """(name, A, q, zeta(s), zeta_jacobian(s) or None, options) on a 2D membrane whose iterative paths take
+    inner products of z's size: CG and BiCGSTAB on a hierarchy (the reduced solves), GMRES (ζ′ an operator)
+    and Anderson (the outer fixed point; a stationary member's acceleration)."""
+    pb = nrmicp.scenes.obstacle_2d(31, exact=False)
+    A, q, psi, n = sp.csr_matrix(pb.A), pb.q, pb.zeta, pb.n
+    convection = sp.csr_matrix(sp.diags([np.full(n - 1, 30.0), np.full(n - 1, -30.0)], [1, -1]))
+    krylov = {"method": "newton", "hierarchy": pb.prolongations(), "inner": "cg"}
+
+    def sin_zeta(s):
+        return lambda z: s * (psi + 0.2 * np.sin(z / s))
+
+    def sin_jacobian(s):
+        return lambda z: spla.LinearOperator((n, n), matvec=lambda v, d=0.2 * np.cos(z / s): d * v.ravel())
+    return [("cg", A, q, lambda s: s * psi, None, krylov),
+            ("bicgstab", A + convection, q, lambda s: s * psi, None, krylov),
+            ("gmres", A, q, sin_zeta, sin_jacobian, krylov),
+            ("outer anderson", A, q, sin_zeta, None, krylov),
+            ("nrmgs anderson", A, q, lambda s: s * psi, None, {"method": "nrmgs", "accelerate": "anderson"})]
+
+
+@pytest.mark.parametrize("case", _z_units_cases(), ids=lambda c: c[0])
+@pytest.mark.parametrize("s", [2.0 ** -700, 2.0 ** 700], ids=["2^-700", "2^700"])
+def test_z_in_extreme_units_takes_the_same_steps(case, s):
+    """z's units a power of two far from 1 (q, ζ scaled by s; A as is): the same steps and the same z / s as
+    in units of 1. Inner products of z's size left float's range: CG's r·r underflowed and every reduced
+    solve stopped at once (STAGNATED, z 5% off at 1e-200), GMRES and Anderson lost their acceleration
+    (the Jacobian given up as 'wrong', 17 steps for 6)."""
+    _, A, q, zeta, jacobian, options = case
+    one = nrmicp.solve(A, q, zeta(1.0), zeta_jacobian=jacobian and jacobian(1.0), **options)
+    r = nrmicp.solve(A, s * q, zeta(s), zeta_jacobian=jacobian and jacobian(s), **options)
+    assert one.success and r.success, (one.message, r.message)
+    assert r.nit == one.nit, (r.nit, one.nit, r.message)
+    assert np.abs(r.z / s - one.z).max() <= 1e-12 * np.abs(one.z).max()
+    if jacobian is not None:
+        assert r.path == one.path == "newton", r.message
+
+
+@pytest.mark.parametrize("t", [1e306, 3e307, 1e308])
+@pytest.mark.parametrize("kind", ["obstacle", "qvi"])
+def test_z_near_floats_limit_is_never_a_false_success(kind, t):
+    """z of 1e307 (A / t, ψ t): the rounding level's terms overflowed to inf and 'Res_E within 100x of the
+    rounding level (inf)' was taken as success, z 5% (QVI, 3e307) and 14% (obstacle, 1e308) off. Now the level
+    is measured in units of 2^600 where it overflows, and an infinite level certifies nothing."""
+    m = 300
+    A = sp.csr_matrix(sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(m, m)) * (m + 1) ** 2)
+    x = np.linspace(0, 1, m + 2)[1:-1]
+    psi, q = 0.3 - 2 * (x - 0.5) ** 2, 8.0 * np.ones(m)
+    if kind == "obstacle":
+        ref, zeta = pdas_obstacle(A, q, psi), t * psi
+    else:
+        ref = nrmicp.solve(A, q, lambda z: psi + 0.05 * np.sin(10 * z), method="newton", tol=1e-13).z
+        zeta = lambda z: t * (psi + 0.05 * np.sin(10 * z / t))   # noqa: E731
+    with np.errstate(over="ignore", invalid="ignore"):
+        r = nrmicp.solve(A / t, q, zeta, method="newton")
+    if t < 1e308 or kind == "obstacle":
+        assert r.success, r.message
+    if r.success:
+        assert np.abs(r.z / t - ref).max() < 1e-9 * np.abs(ref).max(), r.message

@@ -763,6 +763,28 @@ def case_units():
     return out
 
 
+def case_z_units():
+    """z's units a power of two far from 1 (q, ψ scaled; A as is) with the PETSc engine's Krylov solves (hierarchy
+    'amg') and the outer fixed point's Anderson: the steps and z / s of units 1 (the KSP's inner products of z's
+    size left float's range: STAGNATED 5% off)."""
+    pb = obstacle_2d(31, exact=False)
+    A = sp.csr_matrix(pb.A)
+    lo, hi = split(A.shape[0])
+    out = {}
+    for name, zeta in (("obstacle", lambda s: s * pb.zeta[lo:hi]),
+                       ("outer", lambda s: (lambda z, p=pb.zeta[lo:hi]: s * (p + 0.2 * np.sin(z / s))))):
+        runs = {}
+        for s in (1.0, 2.0 ** -700, 2.0 ** 700):
+            r = dist.solve(A[lo:hi], s * pb.q[lo:hi], zeta(s), method="newton", hierarchy="amg")
+            runs[s] = (str(r.status), r.nit, dist.gather(r.z))
+        if RANK == 0:
+            ref = runs[1.0][2]
+            out[name] = {f"{s:g}": {"status": st, "nit": nit, "nit_1": runs[1.0][1],
+                                    "err": float(np.max(np.abs(z / s - ref)) / np.max(np.abs(ref)))}
+                         for s, (st, nit, z) in runs.items()}
+    return out
+
+
 def _pmat(P, lo, hi, clo, chi):
     """P's fine rows lo:hi as this rank's block, its columns laid out as the coarse rows clo:chi."""
     B = sp.csr_matrix(P[lo:hi])
@@ -1233,7 +1255,7 @@ if __name__ == "__main__":
     result = {"agreement": lambda: case_agreement(), "partition": case_partition,
               "bad": lambda: case_bad(args[0], args[1]), "boomeramg": case_boomeramg, "dense": case_dense,
               "floor": case_floor, "overshoot": case_overshoot, "sweeps": case_sweeps,
-              "warm": case_warm, "one_sided_contact": case_one_sided_contact, "implicit_upper": case_implicit_upper, "jacobian": case_jacobian, "jacobian_still_rows": case_jacobian_still_rows, "solver": case_solver, "units": case_units, "engine": lambda: case_engine(*args), "options": case_options, "rounds": case_rounds, "shared_hierarchy": case_shared_hierarchy, "hazards": case_hazards,
+              "warm": case_warm, "one_sided_contact": case_one_sided_contact, "implicit_upper": case_implicit_upper, "jacobian": case_jacobian, "jacobian_still_rows": case_jacobian_still_rows, "solver": case_solver, "units": case_units, "z_units": case_z_units, "engine": lambda: case_engine(*args), "options": case_options, "rounds": case_rounds, "shared_hierarchy": case_shared_hierarchy, "hazards": case_hazards,
               "fuzz": lambda: case_fuzz(int(args[0])), "family": case_family, "hooks": case_hooks, "no_rows": case_no_rows,
               "nonpositive_diagonal": case_nonpositive_diagonal,
               "upper_all_inf": case_upper_all_inf,

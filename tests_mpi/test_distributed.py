@@ -204,6 +204,14 @@ def test_the_default_rule_does_not_depend_on_units(np_):
         assert r["res_is_papers"], (np_, key, r)
 
 
+@pytest.mark.parametrize("np_", [1, 2])
+def test_z_in_extreme_units_takes_the_same_steps(np_):
+    out = mpirun(np_, "z_units")
+    for name, runs in out.items():
+        for s, r in runs.items():
+            assert r["status"] == "CONVERGED" and r["nit"] == r["nit_1"] and r["err"] < 1e-12, (np_, name, s, r)
+
+
 @pytest.mark.parametrize("np_", [2, 3])
 def test_rows_at_a_nonzero_bound_on_one_rank_only_do_not_deadlock(np_):
     out = mpirun(np_, "one_sided_contact", timeout=120)

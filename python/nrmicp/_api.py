@@ -784,11 +784,18 @@ class _OriginalResidual:
         """ε ‖t‖₂, t the rounding of each row's term of Res_E at z (_bounds.term_rounding: d_r(|A||z| + |q|)
         where it is d_r w, (|z| + |ζ(z)|)/d_c where it is g/d_c): what double precision can resolve of Res_E
         (the Newton member's floor, newton_level.hpp, in the default rule's measure)."""
+        level = self._rounding_level(z, 1.0)
+        if math.isfinite(level) or not np.all(np.isfinite(z)):
+            return level
+        return 2.0 ** 600 * self._rounding_level(z, 2.0 ** -600)   # terms near float's limit overflowed (z of 1e307)
+
+    def _rounding_level(self, z, s):
+        """rounding_level with every term times `s` (a power of two), over s."""
         dr, dc = self.weights
         w, g, u = self._wg(z)
         with np.errstate(over="ignore", invalid="ignore"):
-            tw = dr * (abs(self.A) @ np.abs(z) + np.abs(self.qv))
-            t = _bounds.term_rounding(tw, z / dc, dr * w, g / dc, None if u is None else u / dc)
+            tw = dr * (abs(self.A) @ (s * np.abs(z)) + s * np.abs(self.qv))
+            t = _bounds.term_rounding(tw, s * z / dc, dr * (s * w), s * g / dc, None if u is None else s * u / dc)
         return float(np.finfo(float).eps * _norm(t))
 
 
@@ -819,7 +826,7 @@ def at_rounding_floor(status, message, res, tol, level):
     if not (status == Status.STAGNATED and "rounding floor" in message and math.isfinite(res)):
         return status, message
     lv = level()
-    if not res <= FLOOR_FACTOR * lv:
+    if not (math.isfinite(lv) and res <= FLOOR_FACTOR * lv):   # (an overflowing level certifies nothing)
         return status, message
     return Status.CONVERGED, (f"converged to the rounding level: Res_E(z) = {res:.3g} is within {FLOOR_FACTOR:g}x "
                               f"of what double precision resolves ({lv:.3g}), above the default target {tol:.3g}")

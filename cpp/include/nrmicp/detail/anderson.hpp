@@ -35,6 +35,8 @@ class Anderson {
       const int s = (head_ + count_) % m_;  // slot of the new difference (overwrites the oldest when full)
       dx_[s] = x - x_prev_;
       df_[s] = f - f_prev_;
+      if (count_ == 0) tau_ = comm_.units(df_[s]);  // the memory's units (Comm::units), until it restarts
+      if (tau_ != 1.0) df_[s] /= tau_;
       if (count_ < m_) ++count_; else head_ = (head_ + 1) % m_;
       Eigen::VectorXd dots(count_);
       for (int i = 0; i < count_; ++i) dots[i] = df_[s].dot(df_[slot(i)]);
@@ -51,7 +53,7 @@ class Anderson {
     Eigen::MatrixXd Gk(k, k);
     Eigen::VectorXd b(k);
     for (int i = 0; i < k; ++i) {
-      b[i] = df_[slot(i)].dot(f);
+      b[i] = df_[slot(i)].dot(f) / tau_;
       for (int j = 0; j < k; ++j) Gk(i, j) = G_(slot(i), slot(j));
     }
     comm_.sum(b.data(), k);
@@ -59,7 +61,7 @@ class Anderson {
     Gk.diagonal().array() += reg;
     const Eigen::VectorXd g = Gk.ldlt().solve(b);
     if (!g.allFinite()) return;
-    for (int i = 0; i < k; ++i) x_next -= g[i] * (dx_[slot(i)] + df_[slot(i)]);
+    for (int i = 0; i < k; ++i) x_next -= g[i] * (dx_[slot(i)] + tau_ * df_[slot(i)]);
   }
 
   /// Forget the differences (after a rejected step); the last (x, f) pair is kept.
@@ -79,6 +81,7 @@ class Anderson {
   int m_;
   int head_ = 0, count_ = 0;
   bool has_prev_ = false;
+  double tau_ = 1.0;  // the units df_ is kept in
   Vector x_prev_, f_prev_;
   std::vector<Vector> dx_, df_;
   Eigen::MatrixXd G_;

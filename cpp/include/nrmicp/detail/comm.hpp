@@ -47,6 +47,15 @@ class Comm {
     if (!(scale > 0) || !std::isfinite(scale)) return std::sqrt(sum(m.size() ? m.squaredNorm() : 0.0));
     return scale * std::sqrt(sum(m.size() ? (m / scale).squaredNorm() : 0.0));
   }
+  /// 1, or a power of two near the largest |vᵢ| anywhere where the squares of v's size would leave
+  /// float's range: the units a Krylov solve or a least-squares fit takes its vectors in (z in units
+  /// of 1e-200: CG's r·r underflowed to 0 and each solve stopped at once); exact but for subnormals.
+  template <typename Derived>
+  double units(const Eigen::MatrixBase<Derived>& v) const {
+    const double m = max(v.size() ? v.cwiseAbs().maxCoeff() : 0.0);
+    constexpr double low = 0x1p-400, high = 0x1p400;
+    return !(m > 0) || !std::isfinite(m) || (m > low && m < high) ? 1.0 : std::ldexp(1.0, std::ilogb(m));
+  }
 };
 
 /// Runs `check` (which may throw for this process's input: its rows' lengths, its layout, its diagonal)

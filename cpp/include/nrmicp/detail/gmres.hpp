@@ -34,6 +34,20 @@ class Gmres {
   /// last residual estimate.
   template <typename Apply, typename Precondition>
   int solve(Apply&& apply, Precondition&& precondition, const Vector& b, Vector& x, double target) {
+    const double tau = comm_->units(b);
+    if (tau == 1.0) return solve_in_units(apply, precondition, b, x, target);
+    const Vector bt = b / tau;   // K (x/τ) = b/τ: the norms and inner products within float's range
+    x /= tau;
+    const int k = solve_in_units(apply, precondition, bt, x, target / tau);
+    x *= tau;
+    residual_ *= tau;
+    return k;
+  }
+  double residual() const { return residual_; }
+
+ private:
+  template <typename Apply, typename Precondition>
+  int solve_in_units(Apply& apply, Precondition& precondition, const Vector& b, Vector& x, double target) {
     int total = 0;
     r_ = b;
     if (comm_->sum(x.squaredNorm()) > 0) { apply(x, w_); r_ -= w_; }  // the start's residual (zero start: b)
@@ -50,9 +64,6 @@ class Gmres {
     if (total == 0) residual_ = beta;
     return total;
   }
-  double residual() const { return residual_; }
-
- private:
   /// One cycle from r_ (‖r_‖ = beta): Arnoldi (modified Gram–Schmidt) with Givens rotations
   /// until the residual estimate |g_{k}| ≤ target, a breakdown, `restart` or max_iterations. Returns k.
   template <typename Apply, typename Precondition>

@@ -211,6 +211,20 @@ class FallbackMember {
   std::optional<typename Engine<MatrixType>::Fallback> fallback_;
 };
 
+/// NewtonLevel::rounding_level of the vectors times `s` (a power of two), over s.
+template <typename MatrixType>
+double scaled_rounding_level(const MatrixType& A, const Comm& comm, double s, const Eigen::VectorXd& z,
+                             const Eigen::VectorXd& q, const Eigen::VectorXd& g, const Eigen::VectorXd& w,
+                             const Eigen::VectorXd& upper, const Eigen::VectorXd& rows) {
+  Eigen::VectorXd t = s * q.cwiseAbs(), scaled_upper;
+  abs_multiply_add(A, s * z.cwiseAbs(), t);
+  if (rows.size()) t.array() *= rows.array();
+  if (s != 1.0 && upper.size()) scaled_upper = s * upper;
+  const Eigen::VectorXd& u = scaled_upper.size() ? scaled_upper : upper;
+  for (Eigen::Index i = 0; i < t.size(); ++i) t[i] = term_rounding(t[i], s * w[i], s * g[i], s * z[i], u, i);
+  return std::numeric_limits<double>::epsilon() * comm.stable_norm(t);
+}
+
 /// One level: its matrix, the weights Ω1/Ω2 of the active-set test, the reduced LCP system
 /// (analysed on first use, then only refactorized) and the fallback member (nrm, Ω2 as Newton's).
 template <typename MatrixType>
@@ -337,11 +351,11 @@ class NewtonLevel {
   double rounding_level(const Vector& z, const Vector& q, const Vector& g, const Vector& w,
                         const Vector& upper = Vector(), const Vector& rows = Vector()) const {
     ScopedTimer timer(timings().spmv);
-    Vector t = q.cwiseAbs();
-    abs_multiply_add(A_, z.cwiseAbs(), t);
-    if (rows.size()) t.array() *= rows.array();
-    for (Eigen::Index i = 0; i < t.size(); ++i) t[i] = term_rounding(t[i], w[i], g[i], z[i], upper, i);
-    return std::numeric_limits<double>::epsilon() * comm_.stable_norm(t);
+    const double level = scaled_rounding_level(A_, comm_, 1.0, z, q, g, w, upper, rows);
+    if (std::isfinite(level) || !comm_.all(z.allFinite() && q.allFinite())) return level;
+    // terms near float's limit overflowed (z of 1e307): the same in units of 2^600, exact but for subnormals
+    constexpr double units = 0x1p600;
+    return units * scaled_rounding_level(A_, comm_, 1.0 / units, z, q, g, w, upper, rows);
   }
   /// The same for the box problem lo ≤ y ≤ hi (Box::residual's terms).
   double rounding_level(const Vector& y, const Vector& q, const Box& box, const Vector& w) const {

@@ -151,9 +151,9 @@ struct SemismoothLinearization {
   double jacobian_miss(const Vector& z, const Vector& zeta_z) {
     const Eigen::Index n = z.size();
     const Comm& comm = level.comm();
-    const Vector d = comm.all(move.size() == n) && comm.sum(move.squaredNorm()) > 0 ? move : Vector::Ones(n);
-    const double z_norm = comm.norm(z);
-    const double eps = kDifferenceStep * (z_norm > 0 ? z_norm : 1.0) / comm.norm(d);
+    const Vector d = comm.all(move.size() == n) && comm.inf_norm(move) > 0 ? move : Vector::Ones(n);
+    const double z_norm = comm.stable_norm(z);   // (stable: squares of z's size may leave float's range)
+    const double eps = kDifferenceStep * (z_norm > 0 ? z_norm : 1.0) / comm.stable_norm(d);
     Vector moved(n), jd;
     if (!level.eval_zeta(zeta, z + eps * d, moved)) return std::numeric_limits<double>::quiet_NaN();
     if (K.is_matrix_free) {
@@ -162,16 +162,16 @@ struct SemismoothLinearization {
       jd = J.matrix * d;
     }
     const Vector quotient = (moved - zeta_z) / eps;
-    const double scale = std::max(comm.norm(quotient), comm.norm(jd));
-    return scale > 0 ? comm.norm(quotient - jd) / scale : 0.0;
+    const double scale = std::max(comm.stable_norm(quotient), comm.stable_norm(jd));
+    return scale > 0 ? comm.stable_norm(quotient - jd) / scale : 0.0;
   }
   static constexpr double kDifferenceStep = 1e-4;
   /// ‖z − z_before‖₂ / ‖z‖₂: how far the last linearization moved z (∞: no move known), in z's units.
   double move_ratio(const Vector& z) const {
     const Comm& comm = level.comm();
     if (!comm.all(move.size() == z.size())) return std::numeric_limits<double>::infinity();
-    const double z_norm = comm.norm(z);
-    return z_norm > 0 ? comm.norm(move) / z_norm : std::numeric_limits<double>::infinity();
+    const double z_norm = comm.stable_norm(z);
+    return z_norm > 0 ? comm.stable_norm(move) / z_norm : std::numeric_limits<double>::infinity();
   }
 
   /// The step's right-hand side: for z⁺ (sparse: −q on ℐ, c on 𝒜), or for the correction d = z⁺ − z

@@ -463,6 +463,14 @@ class System {
   /// 1e-12 ‖b‖ when target is 0 (MultigridKrylov::rtol). Returns the Krylov iterations (0 for LU;
   /// max_iterations + 1 when the solve did not converge).
   int solve(const Eigen::VectorXd& b, Eigen::VectorXd& z, double target = 0) const {
+    const double tau = A_.comm().units(b);  // (the KSP's inner products within float's range: Comm::units)
+    if (tau != 1.0) {
+      const Eigen::VectorXd bt = b / tau;
+      z /= tau;
+      const int k = solve(bt, z, target / tau);
+      z *= tau;
+      return k;
+    }
     for (Eigen::Index i = 0; i < z.size(); ++i)
       if (!detail::inactive_state(inactive_[i])) z[i] = b[i];
     const PlacedArray placed_b(bv_, b.data()), placed_z(zv_, z.data());
