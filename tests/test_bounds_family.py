@@ -299,12 +299,18 @@ def test_polish_lands_a_box_answer_on_the_active_set_solution(method, scale):
     assert np.all(r.z >= lower) and np.all(r.z <= upper + 2e-16 * np.abs(upper))
 
 
-def test_polish_keeps_an_implicit_upper_bound():
-    """An implicit upper bound u(z) (Newton's polish takes it as the solve did): the polished z solves the
-    box problem at its own bound's value."""
-    A, q, lower, upper, _ = designed_problem(5, symmetric=True)
-    shift = np.where(np.isfinite(upper), upper, 0.0)
-    up = nrmicp.Affine(sp.csr_matrix((N, N)), np.where(np.isfinite(upper), shift, np.inf))
-    r = nrmicp.solve(A, q, lower, upper=up, method="newton", tol=1e-6, polish=True)
-    assert r.success, r.message
-    assert np.abs(r.z - active_set_solution(A, q, lower, upper)).max() < 1e-12
+@pytest.mark.parametrize("kind", ["affine", "callable"])
+def test_polish_keeps_an_implicit_upper_bound(kind):
+    """An implicit upper bound u(z) = u0 + 0.05 z (Affine or callable; Newton's polish takes it as the solve did):
+    a loose answer (tol 1e-2, z 2e-4 off, outside u(z) by as much) is polished onto the answer of a tight solve,
+    within its own bound."""
+    from nrmicp.scenes.obstacle import obstacle_2d
+    pb = obstacle_2d(15, exact=False)
+    A, psi, q = sp.csr_matrix(pb.A), pb.zeta, pb.q
+    u0 = psi + 0.02
+    up = nrmicp.Affine(0.05 * sp.identity(pb.n, format="csr"), u0) if kind == "affine" else (lambda z: u0 + 0.05 * z)
+    tight = nrmicp.solve(A, q, psi, upper=up, method="newton", tol=1e-13)
+    r = nrmicp.solve(A, q, psi, upper=up, method="newton", tol=1e-2, polish=True)
+    assert r.success and r.polished, r.message
+    assert np.abs(r.z - tight.z).max() < 1e-12
+    assert np.all(r.z >= psi) and np.all(r.z <= u0 + 0.05 * r.z + 1e-15)

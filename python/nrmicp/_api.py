@@ -17,7 +17,7 @@ from numpy.typing import ArrayLike
 
 from . import _core
 from ._inputs import WholeRows, as_csr, as_vector
-from ._scaling import SCALINGS, ScaledCallable, equilibrate, scale_matrix, units_factor, units_weights
+from ._scaling import SCALINGS, ScaledCallable, equilibrate, scale_matrix, row_spread, units_factor, units_weights
 from . import _bounds, _newton, _options
 from ._options import _INT_MAX, _choice, _scalar  # noqa: F401 (the distributed glue imports them from here)
 from ._zeta import CheckedZeta
@@ -348,18 +348,36 @@ def choose_method(A: sp.csr_matrix, options: dict, margin=None) -> str:
 
 
 def failure_hint(method: str, omega2_hint: str, margin: Callable[[], float], default_rule: bool, kind,
-                 infeasibility: Callable[[], str] = str) -> Callable[[Status], str]:
+                 infeasibility: Callable[[], str] = str, spread: Callable[[], float] = lambda: 1.0
+                 ) -> Callable[[Status], str]:
     """hint(status) for _settle, both engines: the sentence added to the message of a solve that did not
     converge — why an infeasible problem has no solution, else the nrm hint (`omega2_hint`), and where the
-    iterations ran out or stalled, the member and outer-fixed-point advice. `margin()`: A's dominance
-    margin, asked only then (on PETSc a reduction: every rank has the same status); `default_rule`: the
-    solve iterated under the default rule (Res_E); `kind`: ζ's ZetaKind as the user gave it."""
+    iterations ran out or stalled, the member, outer-fixed-point and row-scaling advice. `margin()`: A's
+    dominance margin, asked only then (on PETSc a reduction: every rank has the same status); `default_rule`:
+    the solve iterated under the default rule (Res_E); `kind`: ζ's ZetaKind as the user gave it; `spread()`:
+    how far A's rows lie apart in size (_scaling.row_spread), 1 where scale='rows' cannot help (given a
+    scaling, or on PETSc, which has no scale option)."""
     def hint(status):
         infeasible = infeasibility()   # (no parameter or member helps an infeasible problem)
         if infeasible or status not in (Status.MAX_ITERATIONS, Status.STAGNATED):
             return infeasible or omega2_hint
-        return omega2_hint + _member_hint(margin, method) + _outer_hint(method, default_rule, kind)
+        return (omega2_hint + _member_hint(margin, method) + _outer_hint(method, default_rule, kind)
+                + _rows_hint(spread))
     return hint
+
+
+#: Rows whose sizes (max_j |a_ij|) lie further apart than this get the scale='rows' advice.
+ROWS_APART = 1e4
+
+
+def _rows_hint(spread: Callable[[], float]) -> str:
+    """Advice for a solve that did not converge on an A whose rows lie far apart in size: the members weigh
+    every row by one factor (σ under the default rule), so the large rows steer the steps and their Res."""
+    s = spread()
+    if not s > ROWS_APART:
+        return ""
+    return (f"; A's rows differ in size by a factor up to {s:.2g} (max_j |a_ij|), and the iteration weighs them "
+            f"alike, so the large rows steer it: scale='rows' equilibrates them")
 
 
 def _outer_hint(method: str, default_rule: bool, kind) -> str:
@@ -686,7 +704,8 @@ class Solver:
         """The result of the rounds (_settle), with what the serial layer adds: hints where it did not
         converge, the scaling's rounds, the active mask."""
         hint = failure_hint(self.method, self._omega2_hint, lambda: dominance_margin(self.A),
-                            self.scale == "units" and measure.weights is not None, measure.kind, measure.infeasibility)
+                            self.scale == "units" and measure.weights is not None, measure.kind, measure.infeasibility,
+                            lambda: row_spread(self.A) if self.scale in (None, "units") else 1.0)
         fields = _settle(self, rounds, problem, measure, tol, polish=self.polish, bounded=bounded,
                          report=self._hierarchy, hint=hint)
         if self._dr is not None and self.scale != "units":

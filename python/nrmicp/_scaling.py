@@ -53,6 +53,13 @@ def units_weights(A: sp.csr_matrix, sigma: float) -> np.ndarray:
     return _row_factors(A, sigma)
 
 
+def row_spread(A: sp.csr_matrix) -> float:
+    """The largest over the smallest nonzero row size max_j |a_ij| (1 for fewer than two such rows)."""
+    r = _row_max(A)
+    r = r[(r > 0) & np.isfinite(r)]
+    return float(r.max() / r.min()) if r.size > 1 else 1.0
+
+
 def _row_factors(A: sp.csr_matrix, none: float) -> np.ndarray:
     """1/max_j |a_ij| of each row as a power of two within float's range (`none` for a row of zeros)."""
     r = _row_max(A)
