@@ -58,6 +58,22 @@ class Comm {
   }
 };
 
+/// solve(b, z, target) of a linear system K z = b from z, taken in z's units τ = comm.units(b): on K (z/τ) = b/τ
+/// to target/τ, so that the Krylov method's inner products stay within float's range. Returns solve's count;
+/// `units` (optional) receives τ.
+template <typename Solve>
+int solve_in_units(const Comm& comm, const Eigen::VectorXd& b, Eigen::VectorXd& z, double target, Solve&& solve,
+                   double* units = nullptr) {
+  const double tau = comm.units(b);
+  if (units) *units = tau;
+  if (tau == 1.0) return solve(b, z, target);
+  const Eigen::VectorXd bt = b / tau;
+  z /= tau;
+  const int k = solve(bt, z, target / tau);
+  z *= tau;
+  return k;
+}
+
 /// Runs `check` (which may throw for this process's input: its rows' lengths, its layout, its diagonal)
 /// so that every process throws when one does: a throw on one process alone would leave the others
 /// waiting in the next reduction. The process at fault rethrows its own exception (type and message);

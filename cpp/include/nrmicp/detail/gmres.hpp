@@ -34,20 +34,19 @@ class Gmres {
   /// last residual estimate.
   template <typename Apply, typename Precondition>
   int solve(Apply&& apply, Precondition&& precondition, const Vector& b, Vector& x, double target) {
-    const double tau = comm_->units(b);
-    if (tau == 1.0) return solve_in_units(apply, precondition, b, x, target);
-    const Vector bt = b / tau;   // K (x/τ) = b/τ: the norms and inner products within float's range
-    x /= tau;
-    const int k = solve_in_units(apply, precondition, bt, x, target / tau);
-    x *= tau;
+    double tau = 1.0;
+    const int k = solve_in_units(*comm_, b, x, target, [&](const Vector& bt, Vector& xt, double t) {
+      return cycles(apply, precondition, bt, xt, t);
+    }, &tau);
     residual_ *= tau;
     return k;
   }
   double residual() const { return residual_; }
 
  private:
+  /// solve() in units where b's size is near 1 (Comm::units).
   template <typename Apply, typename Precondition>
-  int solve_in_units(Apply& apply, Precondition& precondition, const Vector& b, Vector& x, double target) {
+  int cycles(Apply& apply, Precondition& precondition, const Vector& b, Vector& x, double target) {
     int total = 0;
     r_ = b;
     if (comm_->sum(x.squaredNorm()) > 0) { apply(x, w_); r_ -= w_; }  // the start's residual (zero start: b)

@@ -153,10 +153,10 @@ class MultigridKrylov {
   /// (absolute), or ≤ rtol ‖b‖ when target is 0: CG for a symmetric K, else BiCGSTAB. Returns
   /// the number of iterations (max_iterations + 1 when not converged or broken down).
   int solve(const Vector& b, Vector& z, double target = 0) const {
-    const double tau = serial_comm().units(b);
-    if (tau != 1.0) return solve_in_units(b, z, target, tau);
-    const double stop = target > 0 ? target : rtol * b.norm();
-    return symmetric_ ? cg(b, z, stop) : krylov(b, z, stop);
+    return solve_in_units(serial_comm(), b, z, target, [this](const Vector& bt, Vector& zt, double t) {
+      const double stop = t > 0 ? t : rtol * bt.norm();
+      return symmetric_ ? cg(bt, zt, stop) : krylov(bt, zt, stop);
+    });
   }
 
   /// e = one V-cycle applied to r (≈ K⁻¹ r).
@@ -211,15 +211,6 @@ class MultigridKrylov {
     if (!x.allFinite()) return max_iterations_ + 1;
     z.swap(x);
     return s.info() == Eigen::Success ? k : max_iterations_ + 1;
-  }
-
-  /// solve() on K (z/τ) = b/τ, τ = Comm::units(b).
-  int solve_in_units(const Vector& b, Vector& z, double target, double tau) const {
-    const Vector bt = b / tau;
-    z /= tau;
-    const int k = solve(bt, z, target / tau);
-    z *= tau;
-    return k;
   }
 
   /// The fine operator, row-major: K's own storage when symmetric, else its row copy.

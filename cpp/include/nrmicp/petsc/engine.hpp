@@ -463,20 +463,15 @@ class System {
   /// 1e-12 ‖b‖ when target is 0 (MultigridKrylov::rtol). Returns the Krylov iterations (0 for LU;
   /// max_iterations + 1 when the solve did not converge).
   int solve(const Eigen::VectorXd& b, Eigen::VectorXd& z, double target = 0) const {
-    const double tau = A_.comm().units(b);  // (the KSP's inner products within float's range: Comm::units)
-    if (tau != 1.0) {
-      const Eigen::VectorXd bt = b / tau;
-      z /= tau;
-      const int k = solve(bt, z, target / tau);
-      z *= tau;
-      return k;
-    }
-    for (Eigen::Index i = 0; i < z.size(); ++i)
-      if (!detail::inactive_state(inactive_[i])) z[i] = b[i];
-    const PlacedArray placed_b(bv_, b.data()), placed_z(zv_, z.data());
-    int its = 0;
-    if (!run(ksp_, bv_, zv_, target, max_iterations_, its)) its = max_iterations_ + 1;
-    return lu_ ? 0 : its;
+    // (in z's units: the KSP's inner products stay within float's range)
+    return detail::solve_in_units(A_.comm(), b, z, target, [this](const Eigen::VectorXd& bt, Eigen::VectorXd& zt, double t) {
+      for (Eigen::Index i = 0; i < zt.size(); ++i)
+        if (!detail::inactive_state(inactive_[i])) zt[i] = bt[i];
+      const PlacedArray placed_b(bv_, bt.data()), placed_z(zv_, zt.data());
+      int its = 0;
+      if (!run(ksp_, bv_, zv_, t, max_iterations_, its)) its = max_iterations_ + 1;
+      return lu_ ? 0 : its;
+    });
   }
   void restore_hierarchy() {}
   /// "lu", or the Krylov method and the preconditioner ("cg+mg", "bicgstab+hypre", ...).
