@@ -517,13 +517,16 @@ class _Measure:
         self._petsc, self.qa, self.problem, self.user, self.rows = _petsc, qa, problem, user, rows
         self.weights = None if rows is None else (None, None)
 
-    def __call__(self, z, weighted=True, rounding=False):
-        A, q = self.user
-        d = self._petsc.measure(A.handle, q, *self.problem, z, rounding, self.rows if weighted else None)
-        return (d["w"], d["residual"]) if not rounding else d["rounding_level"]
+    def __call__(self, z, weighted=True):
+        d = self._measure(z, self.rows if weighted else None)
+        return d["w"], d["residual"]
 
     def rounding_level(self, z):
-        return self(z, rounding=True)
+        return self._measure(z, self.rows, rounding=True)["rounding_level"]
+
+    def _measure(self, z, rows, rounding=False):
+        A, q = self.user
+        return self._petsc.measure(A.handle, q, *self.problem, z, rounding, rows)
 
 
 def _jacobian(zeta_jacobian, kind, method, Am, comm):
