@@ -1024,7 +1024,7 @@ def case_options():
     # options of the stationary members only: the core's Options.check refuses them for newton, naming them;
     # zeta_jacobian without a callable zeta, nrmicp.solve's check
     checked_newton = {"accelerate": "anderson", "phi": 0.5, "theta": 0.5, "z_update": "explicit", "zeta_jacobian": jac}
-    refused_stationary = {"scale": True, "components": 2, "z_update": "solve", "polish": True}
+    refused_stationary = {"scale": True, "components": 2, "polish": True}
     A = sp.diags([-1.0, 4.0, -1.0], [-1, 0, 1], shape=(8, 8), format="csr")
     L = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(8, 8), format="csr")
     q = np.linspace(-1.0, 1.0, 8)
@@ -1051,8 +1051,8 @@ def case_options():
                   "nrm inner": dict(method="nrm", inner="eigen_lu", omega2=4.0),
                   "nrmm verbose": dict(method="nrmm", verbose=1),
                   "mms": dict(method="mms"), "nrmj explicit": dict(method="nrmj", z_update="explicit")}
-    return {"unsupported": sorted(set(dist._UNSUPPORTED) | set(dist._UNSUPPORTED_NEWTON)),
-            "unsupported_stationary": sorted(set(dist._UNSUPPORTED) | set(dist._UNSUPPORTED_STATIONARY)),
+    return {"unsupported": sorted(table.distributed_refusals("newton")),
+            "unsupported_stationary": sorted(table.distributed_refusals("nrmgs")),
             "other": sorted(refused_newton), "other_stationary": sorted(refused_stationary),
             "table": list(table.names()),
             "refused": {name: outcome(**{name: value}) for name, value in refused_newton.items()},
@@ -1060,6 +1060,7 @@ def case_options():
             "refused_stationary": {name: outcome("nrmgs", **{name: value}) for name, value in refused_stationary.items()},
             "jacobian_stationary": outcome("nrmgs", lambda z: 0 * z, zeta_jacobian=jac),
             "auto_solve": outcome("nrm", lambda z: 0 * z, tol=1e-10),   # nrm, Omega2 = I, an ICP: 'auto' means 'solve'
+            "solve_stationary": outcome("nrmgs", z_update="solve"),   # the engine's core refuses it, naming it
             "unknown": outcome(tolerance=1e-8),
             "supported": delivered("newton", polish=True),
             "supported_stationary": {name: delivered(**kw) for name, kw in stationary.items()},

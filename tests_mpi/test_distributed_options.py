@@ -34,9 +34,10 @@ def test_zeta_jacobian_of_a_stationary_member_is_refused_naming_it(out):
     assert kind == "ValueError" and "zeta_jacobian" in message and "newton" in message, out["jacobian_stationary"]
 
 
-def test_z_update_auto_that_means_solve_is_refused_naming_it(out):
-    kind, message = out["auto_solve"]
-    assert kind == "ValueError" and "z_update" in message and "explicit" in message, out["auto_solve"]
+@pytest.mark.parametrize("case", ["auto_solve", "solve_stationary"])
+def test_z_update_solve_or_auto_that_means_it_is_refused_naming_it(out, case):
+    kind, message = out[case]
+    assert kind == "ValueError" and "z_update" in message and "explicit" in message, out[case]
 
 
 def test_an_unknown_option_is_a_type_error_naming_it(out):

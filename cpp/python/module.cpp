@@ -367,6 +367,9 @@ py::dict option_row(const nrmicp::OptionSpec& spec) {
   d["high_open"] = r.high_open;
   d["finite"] = r.finite;
   d["note"] = r.note ? py::object(py::str(r.note)) : py::object(py::none());
+  static const char* distributed[] = {"every", "stationary", "newton", "neither"};
+  d["distributed"] = distributed[static_cast<int>(spec.distributed)];
+  d["distributed_why"] = spec.distributed_why ? py::object(py::str(spec.distributed_why)) : py::object(py::none());
   return d;
 }
 

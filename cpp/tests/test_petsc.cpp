@@ -564,6 +564,26 @@ TEST_CASE("an input one process alone gets wrong is refused on every process (no
   MatDestroy(&C);
 }
 
+TEST_CASE("an option the PETSc engine cannot apply to a member is refused naming it (the option table's column)") {
+  const Case c = membrane(7, 20.0, false, 0);
+  Mat A = to_petsc(c.A);
+  {
+    const petsc::Matrix Am(A);
+    Options o = with_method(Method::Newton);
+    o.inner = Inner::CG;  // the Newton member's reduced solves are the engine's (KSP)
+    try {
+      Newton<petsc::Matrix> refused(Am, o);
+      CHECK(false);
+    } catch (const std::invalid_argument& e) {
+      CHECK(std::string(e.what()).find("inner cannot apply to method 'newton'") != std::string::npos);
+    }
+    o.method = Method::NRM;  // the stationary members take it (each process's block factorized its way)
+    o.inner = Inner::EigenLU;
+    CHECK_NOTHROW(Solver<petsc::Matrix>(Am, o));
+  }
+  MatDestroy(&A);
+}
+
 // Its own main: doctest runs between PetscInitialize and PetscFinalize (MPI's lifetime).
 int main(int argc, char** argv) {
   if (PetscInitialize(&argc, &argv, nullptr, nullptr)) return 1;

@@ -43,6 +43,8 @@ class Option:
     note: Optional[str]
     type: Optional[str]
     doc: str
+    distributed: str   # the members that take it on PETSc: 'every', 'stationary', 'newton' or 'neither'
+    distributed_why: Optional[str]   # why the others cannot
 
     def range_text(self) -> str:
         """What a number (or each diagonal entry) may be, as the docs write it: '> 0', 'in [0, 1)'."""
@@ -81,6 +83,12 @@ TABLE = _read_table()
 def names(*scopes: str) -> tuple[str, ...]:
     """The options of these scopes (all when none is named), in the table's order."""
     return tuple(n for n, o in TABLE.items() if not scopes or o.scope in scopes)
+
+
+def distributed_refusals(method: Optional[str] = None) -> dict[str, str]:
+    """{name: why} of the options nrmicp.distributed cannot apply to `method` (None: to any member)."""
+    takes = ("every", "newton" if method == "newton" else "stationary") if method else ("every", "newton", "stationary")
+    return {n: o.distributed_why for n, o in TABLE.items() if o.distributed not in takes}
 
 
 def defaults(*scopes: str) -> dict[str, Any]:

@@ -38,18 +38,6 @@ _K = _core.ZetaKind
 
 #: The distributed members: every member of nrmicp (the stationary ones as synchronous multisplitting).
 METHODS = _ALL_METHODS
-#: nrmicp.solve's options that cannot apply on PETSc for any member, and why (refused naming them
-#: unless at their defaults).
-_UNSUPPORTED = {
-    "scale": "the default rule's units scaling is the one scaling here",
-    "components": "BoomerAMG builds the hierarchy: PETSc options -nrmicp_hierarchy_pc_hypre_boomeramg_..."}
-#: ... for the Newton member only (the stationary members' loop takes them).
-_UNSUPPORTED_NEWTON = {
-    "inner": "the PETSc engine's reduced solves are its own: PETSc options -nrmicp_inner_..."}
-#: ... for the stationary members only.
-_UNSUPPORTED_STATIONARY = {
-    "z_update": "'solve' needs a factorization of the whole A; 'explicit' applies",
-    "polish": "polishing is a Newton step: use method 'newton'"}
 # ----------------------------------------------------------------------------- inputs
 def _check_mat(A):
     """A's local checks: a square AIJ Mat with equal layouts, or a scipy row block (as nrmicp.solve checks A)."""
@@ -112,10 +100,8 @@ def _vec(A, arr):
 
 def _core_options(o, method, nloc, it):
     """The core's Options from nrmicp.solve's options `o` (tol, rtol as resolved in `it`), checked by the serial
-    code; the options that cannot apply to this member on PETSc refused naming them."""
-    refused = dict(_UNSUPPORTED_NEWTON if method == "newton" else _UNSUPPORTED_STATIONARY)
-    if method != "newton" and o["z_update"] in ("explicit", "auto"):
-        refused.pop("z_update")   # (what 'auto' means: the core refuses 'solve', naming z_update)
+    code; those PETSc cannot apply to this member (the option table's `distributed` column) refused naming them."""
+    refused = _options.distributed_refusals(method)
     _options.validate({k: o[k] for k in refused}, where="distributed.solve", unsupported=refused)
     return core_options(o, method, nloc, {**{k: o[k] for k in _options.names("solve")}, "tol": it["tol"], "rtol": it["rtol"]})
 
@@ -238,8 +224,8 @@ def _prepare_call(Am, m, q, zeta, x0, comm, o, it):
 
 def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     """Solve ICP(q, A, ζ) on every rank of A's communicator (call it on every rank) with :func:`nrmicp.solve`'s
-    options, defaults and checks; those PETSc cannot apply (``_UNSUPPORTED``, ``_UNSUPPORTED_NEWTON``,
-    ``_UNSUPPORTED_STATIONARY``) raise a ValueError naming them.
+    options, defaults and checks; those PETSc cannot apply (the option table's ``distributed`` column,
+    ``nrmicp._options.distributed_refusals``) raise a ValueError naming them.
 
     A: a petsc4py Mat (AIJ, square, equal row and column layouts) or this rank's scipy.sparse row block
     (n_local, n), of one kind on every rank (without ``comm`` each rank's default is its A's communicator or
@@ -256,7 +242,8 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     on any rank raises on every rank. What runs, the options, the scaling: docs/DISTRIBUTED.md.
     """
     comm = comm or (A.getComm() if isinstance(A, PETSc.Mat) else PETSc.COMM_WORLD)
-    _collective(comm, lambda: _options.validate(options, where="distributed.solve", unsupported=_UNSUPPORTED))
+    _collective(comm, lambda: _options.validate(options, where="distributed.solve",
+                                                         unsupported=_options.distributed_refusals()))
     setup = {k: v for k, v in options.items() if _options.TABLE[k].scope != "call"}   # (method='auto' reads both)
     if options.get("zeta_jacobian") is not None and str(setup.get("method", "auto")).lower() == "auto":
         setup["method"] = "newton"   # (nrmicp.solve's rule: a Jacobian is for Newton)
@@ -434,7 +421,7 @@ def _scoped(options, scopes, where, elsewhere):
     misplaced = sorted(k for k in options if k in _options.TABLE and _options.TABLE[k].scope not in scopes)
     if misplaced:
         raise TypeError(f"{where}() does not take {misplaced}: pass them to {elsewhere}")
-    _options.validate(options, where=where, unsupported=_UNSUPPORTED)
+    _options.validate(options, where=where, unsupported=_options.distributed_refusals())
 
 
 def _collective_callback(comm, callback):

@@ -282,6 +282,10 @@ constexpr Range noted(Range r, const char* note, bool (*exempt)(const Options&) 
 }
 }  // namespace range
 
+/// Which members take an option on a distributed engine (nrmicp/petsc/): every member, the stationary
+/// members only, the Newton member only, or none (OptionSpec::distributed; its reason, distributed_why).
+enum class Distributed { Every, Stationary, Newton, Neither };
+
 /// The Options member an option sets; none for the Python layer's own options.
 using OptionField = std::variant<std::monostate, double Options::*, int Options::*, bool Options::*,
                                  Method Options::*, ZUpdate Options::*, Inner Options::*, Accelerate Options::*,
@@ -296,6 +300,8 @@ struct OptionSpec {
   const char* python_default = nullptr;    ///< as Python writes it, where it is not the field's default
   const char* python_type = nullptr;       ///< the type of an option without field, as Python's docs write it
   bool python = true;                      ///< false: C++ only (nrmicp.solve has no such keyword)
+  Distributed distributed = Distributed::Every;  ///< the members that take it on a distributed engine
+  const char* distributed_why = nullptr;   ///< why the others cannot (said in the refusal)
 };
 
 namespace detail {
@@ -329,7 +335,9 @@ inline constexpr OptionSpec option_table[] = {
     {"z_update", &Options::z_update, Scope::Solve, range::none(),
      "how z is recovered from the modulus vector x (stationary members)"},
     {"inner", &Options::inner, Scope::Setup, range::none(),
-     "how the linear systems are solved: a sparse factorization, or newton's multigrid-preconditioned Krylov"},
+     "how the linear systems are solved: a sparse factorization, or newton's multigrid-preconditioned Krylov",
+     nullptr, nullptr, true, Distributed::Stationary,
+     "the PETSc engine's reduced solves are its own: PETSc options -nrmicp_inner_..."},
     {"accelerate", &Options::accelerate, Scope::Solve, range::none(),
      "safeguarded Anderson acceleration of the fixed-point map (stationary members)"},
     {"anderson_m", &Options::anderson_m, Scope::Solve, range::between(1, 100, false, false),
@@ -343,7 +351,7 @@ inline constexpr OptionSpec option_table[] = {
     {"stall_iterations", &Options::stall_iterations, Scope::Solve, range::at_least(1),
      "the window of the no-progress rules (STAGNATED)"},
     {"scale", {}, Scope::Setup, range::none(), "diagonal equilibration of badly scaled problems", "False",
-     "False, True, 'rows' or 'both'"},
+     "False, True, 'rows' or 'both'", true, Distributed::Neither, "the default rule's units scaling is the one scaling here"},
     {"verbose", &Options::verbose, Scope::Solve,
      range::noted(range::at_least(0), "seconds between progress lines; 0: silent"),
      "a progress line every this many seconds (0: silent)"},
@@ -351,9 +359,10 @@ inline constexpr OptionSpec option_table[] = {
      "'auto', 'amg', list of sparse matrices, or None"},
     {"components", {}, Scope::Setup, range::none(),
      "the components of a vector problem's unknowns, for the 'amg' hierarchy (each coarsened by itself)", "None",
-     "None, int or array_like of int (n,)"},
+     "None, int or array_like of int (n,)", true, Distributed::Neither,
+     "BoomerAMG builds the hierarchy: PETSc options -nrmicp_hierarchy_pc_hypre_boomeramg_..."},
     {"polish", {}, Scope::Setup, range::none(), "Newton steps on the answer's active set after the method stops",
-     "False", "bool"},
+     "False", "bool", true, Distributed::Newton, "polishing is a Newton step: use method 'newton'"},
     {"zeta_jacobian", {}, Scope::Call, range::none(),
      "a generalized Jacobian of a callable ζ, for method 'newton' on the whole ICP", "None", "callable"},
     {"divergence_factor", &Options::divergence_factor, Scope::Solve, range::above(1),
@@ -430,6 +439,31 @@ inline void check_option(const OptionSpec& spec, const Options& o, Eigen::Index 
     else if constexpr (std::is_same_v<F, Eigen::VectorXd Options::*>)
       check_diagonal(spec, o.*field, n);
   }, spec.field);
+}
+
+/// Whether `method` takes the option of row `spec` on a distributed engine.
+inline bool distributed_takes(const OptionSpec& spec, Method method) {
+  const bool newton = method == Method::Newton;
+  return spec.distributed == Distributed::Every || spec.distributed == (newton ? Distributed::Newton : Distributed::Stationary);
+}
+
+template <typename T>
+bool same_value(const T& a, const T& b) {
+  if constexpr (std::is_same_v<T, Eigen::VectorXd>) return a.size() == b.size() && a == b;
+  else return a == b;
+}
+
+/// The options a distributed engine cannot apply to o.method refused, naming the first set away from its
+/// default (the rows with an Options field: the Python layer checks its own rows).
+inline void check_distributed(const Options& o) {
+  static const Options defaults;
+  for (const OptionSpec& spec : option_table)
+    std::visit([&](auto field) {
+      if constexpr (!std::is_same_v<decltype(field), std::monostate>)
+        if (!distributed_takes(spec, o.method) && !same_value(o.*field, defaults.*field))
+          throw std::invalid_argument(std::string("Options: ") + spec.name + " cannot apply to method '" +
+                                      to_string(o.method) + "' on a distributed engine (" + spec.distributed_why + ")");
+    }, spec.field);
 }
 
 }  // namespace detail
