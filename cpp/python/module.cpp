@@ -380,7 +380,7 @@ void bind_options(py::module_& m) {
   py::class_<Options, SolveOptions> options(m, "Options");
   options.def(py::init<>())
       .def("target", &Options::target, py::arg("res0"))
-      .def("check", &Options::check, py::arg("n"));
+      .def("check", &Options::check, py::arg("n"), py::arg("serial_engine") = true);
   for (const nrmicp::OptionSpec& spec : nrmicp::option_table)
     std::visit([&](auto field) {
       using F = decltype(field);

@@ -95,8 +95,7 @@ class Newton {
     detail::collective_check(comm_of(A), [&] {
       if (A.rows() != A.cols() || (!A.rows() && comm_of(A).size() > 1))  // (each process decides on its rows)
         throw std::invalid_argument("Newton: A must be square with rows on every process, got " + std::to_string(A.rows()) + "x" + std::to_string(A.cols()));
-      options_.check(A.rows());
-      if constexpr (!detail::Engine<MatrixType>::serial) detail::check_distributed(options_);
+      options_.check(A.rows(), detail::Engine<MatrixType>::serial);
     });
     detail::collective_check(comm_of(A), [&] { check_operator(A); });  // (collective calls: once every process's shape passed)
     check_shapes([&] { using detail::global_rows; return global_rows(A); }(), prolongations, coarse_operators);

@@ -128,8 +128,9 @@ struct Options : SolveOptions {
   }
 
   /// Throws std::invalid_argument naming the offending field, its value and what is accepted:
-  /// each option against its row of option_table, then the rules that tie options together.
-  void check(Eigen::Index n) const;
+  /// each option against its row of option_table, then the rules that tie options together; on a
+  /// distributed engine (`serial_engine` false) also those it cannot apply (OptionSpec::distributed).
+  void check(Eigen::Index n, bool serial_engine = true) const;
 
  private:
   /// The options of the stationary members that the Newton member does not have.
@@ -441,6 +442,14 @@ inline void check_option(const OptionSpec& spec, const Options& o, Eigen::Index 
   }, spec.field);
 }
 
+/// A row that a distributed engine refuses for some member says why (check_distributed's message).
+constexpr bool distributed_refusals_say_why() {
+  for (const OptionSpec& spec : option_table)
+    if (spec.distributed != Distributed::Every && spec.distributed_why == nullptr) return false;
+  return true;
+}
+static_assert(distributed_refusals_say_why(), "OptionSpec::distributed_why is missing");
+
 /// Whether `method` takes the option of row `spec` on a distributed engine.
 inline bool distributed_takes(const OptionSpec& spec, Method method) {
   const bool newton = method == Method::Newton;
@@ -468,7 +477,7 @@ inline void check_distributed(const Options& o) {
 
 }  // namespace detail
 
-inline void Options::check(Eigen::Index n) const {
+inline void Options::check(Eigen::Index n, bool serial_engine) const {
   auto fail = [](const std::string& msg) { throw std::invalid_argument("Options: " + msg); };
   // A row whose range another option relaxes (tol by rtol) comes after the others: that one is valid.
   for (const bool relaxed : {false, true})
@@ -481,6 +490,7 @@ inline void Options::check(Eigen::Index n) const {
     fail("method '" + std::string(to_string(method)) + "' fixes omega1 = I and phi = 0; use an NRM-family "
          "method to set them");
   if (method == Method::Newton) check_newton(fail);
+  if (!serial_engine) detail::check_distributed(*this);
 }
 
 /// The z-update a solve uses. Auto = Explicit: measured faster (no solve with A: 4-10x on ICPs

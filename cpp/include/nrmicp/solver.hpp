@@ -120,8 +120,7 @@ class Solver {
       if (A.rows() != A.cols())
         throw std::invalid_argument("Solver: A must be square, got " + std::to_string(A.rows()) + "x" +
                                     std::to_string(A.cols()));
-      options_.check(A.rows());
-      if constexpr (!detail::Engine<MatrixType>::serial) detail::check_distributed(options_);
+      options_.check(A.rows(), detail::Engine<MatrixType>::serial);
     });
     detail::collective_check(comm(), [&] { using detail::check_operator; check_operator(A); });  // (collective calls)
     const auto t0 = std::chrono::steady_clock::now();
