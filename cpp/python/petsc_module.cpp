@@ -213,6 +213,10 @@ PYBIND11_MODULE(_petsc, m) {
         "{'rows', 'nonzeros'} of the 'amg' hierarchy's coarse operators, finest first (built and let go).");
   m.def("check_operator", [](std::uintptr_t A) { nrmicp::petsc::check_operator(from_handle(A, "A")); }, py::arg("A"),
         "ValueError naming this process's first row of A the PETSc engine refuses (a_ii not positive and normal).");
+  m.def("row_max_abs", [](std::uintptr_t A) {
+    const Eigen::VectorXd r = from_handle(A, "A").row_max_abs();
+    return py::array_t<double>(r.size(), r.data());
+  }, py::arg("A"), "max_j |a_ij| of this process's rows of A (PETSc's MatGetRowMaxAbs).");
   m.def("measure", &measure, py::arg("A"), py::arg("q"), py::arg("zeta_kind"), py::arg("zeta_c"), py::arg("zeta_fn"),
         py::arg("upper"), py::arg("z"), py::arg("rounding") = false, py::arg("rows") = py::none(),
         "{'w', 'residual'[, 'rounding_level']} of z: w = Az + q and Res(z) over every process's rows.");

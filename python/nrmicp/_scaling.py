@@ -50,7 +50,16 @@ def units_weights(A: sp.csr_matrix, sigma: float) -> np.ndarray:
     """The default rule's row weights d: 1/max_j |a_ij| of each row as a power of two (σ for a row of zeros), so
     that d_i w_i is row i's residual in the units of z whatever that row's units (σ alone is one number: a row
     far below A's typical size went unmeasured)."""
-    return _row_factors(A, sigma)
+    return weights_of_rows(_row_max(A), sigma)
+
+
+def weights_of_rows(row_max: np.ndarray, none: float) -> np.ndarray:
+    """1/r_i as a power of two within float's range for each row size r_i = max_j |a_ij| (`none` for a row of
+    zeros): units_weights from the row sizes alone (nrmicp.distributed's, PETSc's MatGetRowMaxAbs)."""
+    d = np.full(len(row_max), none)
+    nz = (row_max > 0) & np.isfinite(row_max)
+    d[nz] = np.clip(_pow2(1.0 / row_max[nz]), 2.0 ** -1022, 2.0 ** 1023)
+    return d
 
 
 def row_spread(A: sp.csr_matrix) -> float:
@@ -58,15 +67,6 @@ def row_spread(A: sp.csr_matrix) -> float:
     r = _row_max(A)
     r = r[(r > 0) & np.isfinite(r)]
     return float(r.max() / r.min()) if r.size > 1 else 1.0
-
-
-def _row_factors(A: sp.csr_matrix, none: float) -> np.ndarray:
-    """1/max_j |a_ij| of each row as a power of two within float's range (`none` for a row of zeros)."""
-    r = _row_max(A)
-    d = np.full(A.shape[0], none)
-    nz = (r > 0) & np.isfinite(r)
-    d[nz] = np.clip(_pow2(1.0 / r[nz]), 2.0 ** -1022, 2.0 ** 1023)
-    return d
 
 
 def sigma_from_logs(sum_log2: float, count: int) -> float:
@@ -91,7 +91,7 @@ def equilibrate(A: sp.csr_matrix, kind: str) -> tuple[np.ndarray, np.ndarray]:
     if kind == "units":
         return np.full(n, units_factor(A)), np.ones(n)
     if kind == "rows":
-        return _row_factors(A, 1.0), np.ones(n)
+        return weights_of_rows(_row_max(A), 1.0), np.ones(n)
     if kind != "both":  # pragma: no cover - validated by the caller
         raise ValueError(f"unknown scaling {kind!r}")
     dr = np.ones(n)

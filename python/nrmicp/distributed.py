@@ -28,7 +28,7 @@ from ._newton import (auto_builds_amg, check_jacobian, check_no_hierarchy, check
 from ._api import (METHODS as _ALL_METHODS, Result, _make_upper, _make_zeta, _Rounds, _choice, _criterion, _settle, _log_final,
                    _omega2_hint, _progress_hook, _units_parameters, core_options, choose_method, dominance_margin,
                    failure_hint)
-from ._scaling import sigma_from_logs, units_weights
+from ._scaling import sigma_from_logs, weights_of_rows
 from ._hierarchy import Hierarchy, _fingerprint, resolve_hierarchy
 from ._inputs import as_constant, as_csr, as_vector
 from ._zeta import CheckedZeta
@@ -338,11 +338,10 @@ class Solver:
         """(the Mat the core iterates, σ, the default rule's row weights D or None): A, or under the default rule σA
         (a copy, made once) and D."""
         if units not in self._operators:
+            from . import _petsc
             sigma, scaled = _units_sigma(self.A), self.A.copy()
             scaled.scale(sigma)
-            indptr, cols, vals = self.A.getValuesCSR()
-            d = units_weights(sp.csr_matrix((vals, cols, indptr), shape=(len(indptr) - 1, self.A.getSize()[1])), sigma)
-            self._operators[units] = (scaled, sigma, d)
+            self._operators[units] = (scaled, sigma, weights_of_rows(_petsc.row_max_abs(self.A.handle), sigma))
         return self._operators[units]
 
     def _core(self, _petsc, units, Am, opts, o):
