@@ -493,13 +493,9 @@ inline void Options::check(Eigen::Index n, bool serial_engine) const {
   if (!serial_engine) detail::check_distributed(*this);
 }
 
-/// The z-update a solve uses. Auto = Explicit: measured faster (no solve with A: 4-10x on ICPs
-/// at equal iteration counts) and more robust (it converged on unshifted-Laplacian and
-/// thermoforming ICPs where Solve stagnated). Except the paper's NRM (Ω2 = I, far from diag A)
-/// on an ICP (ζ not constant): there Explicit stagnated on Bai's ICPs and Solve converged (~145
-/// iterations). Solve is also needed when ζ's Lipschitz constant is about 1 (README). MMS is the
-/// Zheng–Vong baseline, whose definition includes the Solve update: Auto keeps it on an ICP
-/// (else it equals NRMGS).
+/// The z-update a solve uses. Auto = Explicit (no solve with A: faster, and more robust on ICPs),
+/// except the paper's NRM (Ω2 = I, far from diag A) on an ICP, where only Solve converges, and MMS,
+/// the Zheng–Vong baseline whose definition includes Solve (docs/MEASUREMENTS.md, "The z-update 'auto'").
 inline ZUpdate resolve_z_update(ZUpdate asked, Method method, bool omega2_given, bool icp) {
   if (asked != ZUpdate::Auto) return asked;
   const bool paper_update = icp && ((method == Method::NRM && !omega2_given) || method == Method::MMS);
