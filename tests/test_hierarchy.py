@@ -190,7 +190,7 @@ def test_a_newton_solve_with_an_empty_coarsest_level_uses_the_others():
 
 
 @pytest.mark.parametrize("bad, match", [
-    ("geometric", "hierarchy must be 'amg'"),
+    ("geometric", "hierarchy must be 'auto', 'amg'"),
 ])
 def test_resolve_rejects_unknown_strings(bad, match):
     with pytest.raises(ValueError, match=match):

@@ -133,7 +133,7 @@ BAD = {
     "zeta_nan": ("ValueError", "NaN or Inf"),
     "bad_option": ("ValueError", "tol"),
     "bad_method": ("ValueError", "method must be one of"),
-    "array_hierarchy": ("ValueError", "hierarchy"),
+    "array_hierarchy": ("TypeError", "hierarchy"),   # (a wrong type for any member, as nrmicp.solve says)
     "mixed_kinds": ("TypeError", "not both"),
     "mat_as_zeta": ("TypeError", "nrmicp.Affine"),
     "B_columns": ("ValueError", "zeta.B must be"),

@@ -411,10 +411,25 @@ def _fingerprint(A: sp.csr_matrix) -> int:
     return crc
 
 
+def hierarchy_kind(hierarchy) -> str:
+    """The hierarchy= option's kind, both engines' one check: 'none', 'auto', 'amg' or 'levels' (a Hierarchy, or
+    a list or tuple of prolongations); ValueError for another string, TypeError for another type, naming it."""
+    takes = "hierarchy must be 'auto', 'amg', None, a Hierarchy or a list of prolongation matrices"
+    if hierarchy is None:
+        return "none"
+    if isinstance(hierarchy, str):
+        if hierarchy in ("auto", "amg"):
+            return hierarchy
+        raise ValueError(f"{takes}, got {hierarchy!r}")
+    if isinstance(hierarchy, (Hierarchy, list, tuple)):
+        return "levels"
+    raise TypeError(f"{takes}, got {type(hierarchy).__name__}")
+
+
 def resolve_hierarchy(hierarchy, A) -> list | None:
     """The ``hierarchy=`` option as a checked list of prolongations, or None.
 
-    Accepts ``"amg"`` (→ :func:`amg_prolongations`), a :class:`Hierarchy` (its prolongations; that it
+    Accepts ``"amg"`` (→ :func:`amg_prolongations`), ``"auto"`` or None (no list: None), a :class:`Hierarchy` (its prolongations; that it
     was built on A is the Solver's check, Hierarchy.check_fits), a list or tuple of prolongation
     matrices P_0, P_1, … (P_l of shape (n_l, n_{l+1}) with n_0 = A's size and each level
     strictly coarser; finite; converted to canonical float64 CSR), or None. An empty list
@@ -422,18 +437,13 @@ def resolve_hierarchy(hierarchy, A) -> list | None:
     with the levels after it, with a ConversionWarning. Raises TypeError/ValueError naming ``hierarchy``
     and the offending level.
     """
-    if hierarchy is None:
+    kind = hierarchy_kind(hierarchy)
+    if kind in ("none", "auto"):   # ('auto' not building amg: the caller's rule, _newton.resolves_to_amg)
         return None
     if isinstance(hierarchy, Hierarchy):   # (its fit to A: checked once, by the Solver given it)
         return list(hierarchy.prolongations)
-    if isinstance(hierarchy, str):
-        if hierarchy == "amg":
-            return amg_prolongations(A)
-        raise ValueError(f"hierarchy must be 'amg', a Hierarchy, a list of prolongation matrices or None, "
-                         f"got {hierarchy!r}")
-    if not isinstance(hierarchy, (list, tuple)):
-        raise TypeError(f"hierarchy must be 'amg', a Hierarchy, a list of prolongation matrices or None, "
-                        f"got {type(hierarchy).__name__}")
+    if kind == "amg":
+        return amg_prolongations(A)
     rows = A.shape[0]
     out = []
     for level, P in enumerate(hierarchy):

@@ -8,7 +8,7 @@ import time
 import numpy as np
 
 from . import _core
-from ._hierarchy import Hierarchy, HierarchyWarning, amg_levels_why, resolve_hierarchy
+from ._hierarchy import Hierarchy, HierarchyWarning, amg_levels_why, hierarchy_kind, resolve_hierarchy
 from ._inputs import _warn
 from ._zeta import CheckedZeta
 
@@ -41,7 +41,7 @@ def check_polish(polish) -> bool:
 
 
 def check_no_hierarchy(hierarchy, method):
-    if hierarchy is not None and not (isinstance(hierarchy, str) and hierarchy == "auto"):
+    if hierarchy_kind(hierarchy) not in ("none", "auto"):
         raise ValueError(f"hierarchy is the nested iteration of method 'newton'; method {method!r} has none "
                          f"(got hierarchy={hierarchy!r}; use None)")
 
@@ -80,8 +80,6 @@ def levels(hierarchy, A, A_core, dc, built=None, asked=None, components=None) ->
     if built is not None or resolves_to_amg(hierarchy, A):
         pairs, why = amg_levels_why(A_core, components) if built is None else built
         return [P for P, _ in pairs], [Ac for _, Ac in pairs], len(pairs) + 1 + (why is not None), why
-    if isinstance(hierarchy, str) and hierarchy == "auto":
-        hierarchy = None
     Ps = resolve_hierarchy(hierarchy, A) or []
     if Ps and dc is not None:
         # z = D_c y: a prolongation of y is D_c⁻¹ P (the coarse variables keep their scale).

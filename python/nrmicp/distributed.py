@@ -29,7 +29,7 @@ from ._api import (METHODS as _ALL_METHODS, Result, _make_upper, _make_zeta, _Ro
                    _omega2_hint, _progress_hook, _units_parameters, core_options, choose_method, dominance_margin,
                    failure_hint)
 from ._scaling import sigma_from_logs, weights_of_rows
-from ._hierarchy import Hierarchy, _fingerprint, resolve_hierarchy
+from ._hierarchy import Hierarchy, _fingerprint, hierarchy_kind, resolve_hierarchy
 from ._inputs import as_constant, as_csr, as_vector
 from ._zeta import CheckedZeta
 
@@ -192,19 +192,12 @@ def _member(Am, comm, o):
         hierarchy = o["hierarchy"]
         if m != "newton":
             check_no_hierarchy(hierarchy, m)
-            return m
+            return m, None
         check_polish(o["polish"])
         _owns_rows(Am)
-        named = hierarchy is None or (isinstance(hierarchy, str) and hierarchy in ("amg", "auto"))
-        if not (named or isinstance(hierarchy, (list, tuple, Hierarchy))):
-            got = hierarchy if isinstance(hierarchy, str) else type(hierarchy).__name__
-            raise ValueError(f"hierarchy must be 'amg', None, a nrmicp.Hierarchy or a list of prolongations (PETSc "
-                             f"Mats, or whole scipy matrices on every rank); got {got!r}")
-        return m
-    m = _collective(comm, local)
-    h = o["hierarchy"]   # (its kind: every rank takes the same branches)
-    kind = ("amg", "auto").index(h) + 1 if isinstance(h, str) else 0 if h is None else 3
-    _same(comm, float(kind) if m == "newton" else 0.0, ValueError, _DIFFERENT_HIERARCHY)
+        return m, hierarchy_kind(hierarchy)
+    m, kind = _collective(comm, local)   # (the hierarchy's kind alike on every rank: they take the same branches)
+    _same(comm, float(zlib.crc32(kind.encode())) if m == "newton" else 0.0, ValueError, _DIFFERENT_HIERARCHY)
     from . import _petsc   # (the engine's own rule, as its cores check it; after the options: an unassembled Mat fails here)
     _collective(comm, _petsc.check_operator, Am.handle)
     return m
