@@ -151,3 +151,18 @@ def test_validate_takes_an_option_given_as_its_default_none():
     _options.validate({"tol": None, "rtol": None, "accelerate": None}, where="distributed.solve")
     with pytest.raises(TypeError, match="tol must be a number"):
         _options.validate({"tol": "1e-8"}, where="distributed.solve")
+
+
+def test_the_distributed_refusals_are_the_tables_and_the_core_applies_them_on_a_distributed_engine():
+    # the table's column (OptionSpec::distributed): what nrmicp.distributed refuses for each kind of member
+    assert set(_options.distributed_refusals("newton")) == {"scale", "components", "inner"}
+    assert set(_options.distributed_refusals("nrmgs")) == {"scale", "components", "polish"}
+    assert set(_options.distributed_refusals()) == {"scale", "components"}
+    assert all(_options.distributed_refusals("newton").values())   # each says why
+    o = nrmicp._core.Options()
+    o.method, o.inner = nrmicp._core.Method.newton, nrmicp._core.Inner.cg
+    o.check(4)   # the serial engine takes it
+    with pytest.raises(ValueError, match="inner cannot apply to method 'newton' on a distributed engine"):
+        o.check(4, serial_engine=False)
+    o.method = nrmicp._core.Method.nrm   # the stationary members take it on every engine
+    o.check(4, serial_engine=False)
