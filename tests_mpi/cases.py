@@ -169,8 +169,6 @@ def _bad(kind):
         D = A.copy()
         D.data[(D.indices == n - 1) & (np.arange(D.nnz) >= D.indptr[n - 1])] = 5e-324
         return mat(D, lo, hi), q, zeta, kw
-    elif kind == "hierarchy_kinds":   # 'amg' on rank 0, None elsewhere (hung before)
-        kw = {"hierarchy": "amg" if RANK == 0 else None}
     elif kind == "nan_q":
         qa = pb.q[lo:hi].copy()
         if last:
@@ -1251,6 +1249,45 @@ def case_hints():
     return out
 
 
+#: Arguments one rank passes otherwise than the others (rank 0's, the others'): each took the ranks down different
+#: branches of the core (a hang) before the agreement check of distributed.Solver and its solve.
+DIFFERING = {"tol": ({"tol": 1e-4}, {"tol": 1e-12}), "maxiter": ({"maxiter": 1}, {"maxiter": 1000}),
+             "rtol": ({"rtol": 1e-2}, {"rtol": 1e-10}), "stall_iterations": ({"stall_iterations": 3}, {}),
+             "verbose": ({"verbose": 1}, {}), "method": ({"method": "nrmgs"}, {"method": "newton"}),
+             "hierarchy": ({"hierarchy": "amg"}, {"hierarchy": None}), "accelerate": ({"accelerate": "anderson"}, {}),
+             "record_history": ({"record_history": True}, {}), "callback": ({"callback": lambda k, z, r: False}, {}),
+             "zeta_jacobian": ({"zeta_jacobian": lambda z: sp.eye(len(z))}, {}), "x0": ({"x0": "zeros"}, {}),
+             "zeta": ({"zeta": None}, {}), "upper": ({"upper": 10.0}, {})}
+#: ... and arguments of each rank's own rows, which may differ (a diagonal's entries, x0's): solved.
+ALIKE_ENOUGH = {"omega2": ({"omega2": "diag", "method": "nrmgs"}, {"omega2": "1.1 diag", "method": "nrmgs"}),
+                "x0": ({"x0": "zeros"}, {"x0": "ones"})}
+
+
+def case_differing():
+    """Each DIFFERING argument: (exception type, message) on every rank, through one mpirun."""
+    pb = obstacle_2d(15, exact=False)
+    A = sp.csr_matrix(pb.A)
+    lo, hi = split(A.shape[0])
+    out = {"refused": {}, "solved": {}}
+    for name, (mine, others), group in [(*kv, "refused") for kv in DIFFERING.items()] + \
+            [(*kv, "solved") for kv in ALIKE_ENOUGH.items()]:
+        kw = {"zeta": pb.zeta[lo:hi], "method": "newton", "tol": 1e-8, **(mine if RANK == 0 else others)}
+        if "omega2" in kw:   # Ω2 = a multiple of A's (constant) diagonal, another on each rank
+            kw["omega2"] = (1.1 if kw["omega2"] == "1.1 diag" else 1.0) * A[0, 0]
+        if kw.get("x0") in ("zeros", "ones"):
+            kw["x0"] = np.full(hi - lo, float(kw["x0"] == "ones"))
+        if name == "zeta_jacobian":   # (a Jacobian is for a callable zeta: on every rank)
+            kw["zeta"] = lambda z, psi=pb.zeta[lo:hi]: psi + 0.1 * np.sin(z)
+        try:
+            r = dist.solve(A[lo:hi], pb.q[lo:hi], **kw)
+            outcome = ["no exception", str(r.status)]
+        except Exception as exc:  # noqa: BLE001 - the outcome is the test's subject
+            outcome = [type(exc).__name__, str(exc)]
+        got = _allgather_text(json.dumps(outcome))
+        out[group][name] = [json.loads(t) for t in got] if RANK == 0 else None
+    return out
+
+
 if __name__ == "__main__":
     name, args = sys.argv[1], sys.argv[2:]
     result = {"agreement": lambda: case_agreement(), "partition": case_partition,
@@ -1260,6 +1297,6 @@ if __name__ == "__main__":
               "fuzz": lambda: case_fuzz(int(args[0])), "family": case_family, "hooks": case_hooks, "no_rows": case_no_rows,
               "nonpositive_diagonal": case_nonpositive_diagonal,
               "upper_all_inf": case_upper_all_inf,
-              "reason_alike": case_reason_alike, "hints": case_hints}[name]()
+              "reason_alike": case_reason_alike, "hints": case_hints, "differing": case_differing}[name]()
     if RANK == 0:
         print("RESULT " + json.dumps(result), flush=True)

@@ -138,7 +138,6 @@ BAD = {
     "mat_as_zeta": ("TypeError", "nrmicp.Affine"),
     "B_columns": ("ValueError", "zeta.B must be"),
     "subnormal_diagonal": ("ValueError", "not subnormal"),
-    "hierarchy_kinds": ("ValueError", "hierarchy"),   # (newton: the same on every rank; nrmgs: none)
     "nonfinite_A": ("ValueError", "this rank's block of rows"),
     "crossing_bounds": ("ValueError", "upper"),   # (nrmgs: bounds are method 'newton''s)
     "q_length_affine": ("ValueError", "q must have length"),
@@ -157,6 +156,16 @@ def test_bad_input_raises_the_same_exception_on_every_rank(kind, method):
     assert text in message, outcomes
     assert message.startswith("rank "), outcomes
     assert untouched, "an input was modified"
+
+
+def test_an_argument_that_differs_between_ranks_is_refused_naming_it_on_every_rank():
+    out = mpirun(2, "differing", timeout=180)   # (a hang before: the ranks took different branches)
+    for name, outcomes in out["refused"].items():
+        assert len(outcomes) == 2 and outcomes[0] == outcomes[1], (name, outcomes)
+        kind, message = outcomes[0]
+        assert kind == "ValueError" and name in message and "must be the same on every rank" in message, (name, kind, message)
+    for name, outcomes in out["solved"].items():   # a rank's own rows' data may differ
+        assert outcomes == [["no exception", "CONVERGED"]] * 2, (name, outcomes)
 
 
 def test_a_rank_without_rows_newton_refuses_on_every_rank_the_stationary_members_solve():

@@ -3,6 +3,8 @@ and exceptions raised on some ranks only re-raised alike on every rank (no rank 
 collective call the failing ranks never reach)."""
 from __future__ import annotations
 
+import zlib
+
 import numpy as np
 from petsc4py import PETSc
 
@@ -40,24 +42,38 @@ def _reduce(comm, value: float, op) -> float:
     return out
 
 
+def differing(comm, values: dict) -> list:
+    """The keys of `values` (the same keys on every rank) whose values, as text, differ between ranks; every
+    rank gets the same sorted list. Collective (one gather of a checksum a key)."""
+    keys = sorted(values)
+    sums = np.array([zlib.crc32(str(values[k]).encode("utf-8")) for k in keys], dtype=float)
+    rows = _all_rows(comm, sums)
+    return [k for j, k in enumerate(keys) if np.any(rows[:, j] != rows[0, j])]
+
+
+def _all_rows(comm, local: np.ndarray) -> np.ndarray:
+    """Every rank's `local` (the same length on each) as the rows of one array, on every rank (collective)."""
+    v = PETSc.Vec().createMPI((len(local), PETSc.DECIDE), comm=comm)
+    v.setArray(local)
+    scatter, out = PETSc.Scatter.toAll(v)
+    scatter.scatter(v, out, PETSc.InsertMode.INSERT, PETSc.ScatterMode.FORWARD)
+    rows = out.getArray().reshape(comm.getSize(), len(local)).copy()
+    for obj in (scatter, out, v):   # destroyed here, on every rank together (not by a garbage collector)
+        obj.destroy()
+    return rows
+
+
 def agree(comm, exc: BaseException | None) -> None:
     """Every rank calls this after a step that may fail on some ranks only. When any rank
     failed, every rank raises the same exception (type and message of the lowest rank that failed
     first-hand, prefixed 'rank r: '); else returns. Collective: no rank is left waiting."""
     if not flag_max(comm, 0.0 if exc is None else 1.0):
         return
-    size = comm.getSize()
     buf = np.zeros(_MSG_LEN)
     if exc is not None:
         text = f"{type(exc).__name__}\x01{exc}".encode("utf-8")[: _MSG_LEN - 1]
         buf[: len(text)] = np.frombuffer(text, dtype=np.uint8)
-    v = PETSc.Vec().createMPI((_MSG_LEN, PETSc.DECIDE), comm=comm)
-    v.setArray(buf)
-    scatter, out = PETSc.Scatter.toAll(v)
-    scatter.scatter(v, out, PETSc.InsertMode.INSERT, PETSc.ScatterMode.FORWARD)
-    rows = out.getArray().reshape(size, _MSG_LEN).copy()
-    for obj in (scatter, out, v):   # destroyed here, on every rank together: the traceback keeps this frame
-        obj.destroy()
+    rows = _all_rows(comm, buf)   # (its Vecs destroyed there: the traceback keeps this frame)
     texts = {i: bytes(row[row > 0].astype(np.uint8)).decode("utf-8", "replace") for i, row in enumerate(rows) if row[0]}
     # the lowest rank that failed first-hand (the others' core says only that another rank refused its part)
     r = next((i for i, t in texts.items() if _core.refused_elsewhere not in t), min(texts))

@@ -21,12 +21,12 @@ except ImportError as exc:  # the core package needs no MPI; this module does
     raise ImportError("nrmicp.distributed needs petsc4py, PETSc (with hypre) and MPI: README, 'Beyond one machine' "
                       f"(make mpideps installs them on Debian); {exc}") from exc
 
-from . import _bounds, _core, _options
+from . import _bounds, _core, _mpi, _options
 from ._mpi import DistributedError, agree, collective as _collective, flag_max as _flag_max, flag_sum as _flag_sum
 from ._newton import (auto_builds_amg, check_jacobian, check_no_hierarchy, check_polish, core_jacobian, hierarchy_report,
                       warn_shortened)
-from ._api import (METHODS as _ALL_METHODS, Result, _make_upper, _make_zeta, _Rounds, _choice, _criterion, _settle, _log_final,
-                   _omega2_hint, _progress_hook, _units_parameters, core_options, choose_method, dominance_margin,
+from ._api import (METHODS as _ALL_METHODS, Affine, Result, _make_upper, _make_zeta, _Rounds, _choice, _criterion, _settle,
+                   _log_final, _omega2_hint, _progress_hook, _units_parameters, core_options, choose_method, dominance_margin,
                    failure_hint)
 from ._scaling import sigma_from_logs, weights_of_rows
 from ._hierarchy import Hierarchy, _fingerprint, hierarchy_kind, resolve_hierarchy
@@ -192,12 +192,12 @@ def _member(Am, comm, o):
         hierarchy = o["hierarchy"]
         if m != "newton":
             check_no_hierarchy(hierarchy, m)
-            return m, None
+            return m
         check_polish(o["polish"])
         _owns_rows(Am)
-        return m, hierarchy_kind(hierarchy)
-    m, kind = _collective(comm, local)   # (the hierarchy's kind alike on every rank: they take the same branches)
-    _same(comm, float(zlib.crc32(kind.encode())) if m == "newton" else 0.0, ValueError, _DIFFERENT_HIERARCHY)
+        hierarchy_kind(hierarchy)
+        return m
+    m = _collective(comm, local)
     from . import _petsc   # (the engine's own rule, as its cores check it; after the options: an unassembled Mat fails here)
     _collective(comm, _petsc.check_operator, Am.handle)
     return m
@@ -265,6 +265,7 @@ class Solver:
         _collective(comm, _scoped, options, ("setup", "solve"), "distributed.Solver", "its solve()")
         self._options = {**_options.defaults("setup", "solve"), **options}
         o = {**_options.defaults(), **self._options}
+        _agree(comm, {k: _text(k, v) for k, v in self._options.items()}, "distributed.Solver")
         self.A, self.method = _prepare_matrix(A, comm, o)
         self._owns_A = self.A is not A   # (made from scipy row blocks)
         mean = _flag_sum(comm, float(np.sum(_diagonal(self.A)))) / self.A.getSize()[0] if self.method == "nrm" else 1.0
@@ -305,6 +306,8 @@ class Solver:
             raise ValueError("this distributed.Solver was closed")
         _collective(comm, _scoped, options, ("solve", "call"), "distributed.Solver.solve", "distributed.Solver()")
         o = {**_options.defaults(), **self._options, **options, "method": m}
+        given = {**{k: o[k] for k in _options.names("solve", "call")}, "zeta": zeta, "upper": upper}
+        _agree(comm, {k: _text(k, v) for k, v in given.items()}, "distributed.Solver.solve")
         t_start = time.perf_counter()
         it, units = _criterion({"tol": o["tol"], "rtol": o["rtol"]})
         opts, q_user, xa, (kind, c, B, fn) = _prepare_call(A, m, q, zeta, o["x0"], comm, o, it)
@@ -388,6 +391,38 @@ def _prolongations(hierarchy, Am, comm):
 #: The refusal of hierarchy options that differ between ranks.
 _DIFFERENT_HIERARCHY = ("hierarchy must be the same on every rank ('amg', 'auto', None, or the whole prolongations, "
                         "or PETSc Mats); the ranks' differ in kind, number of levels, shapes or values")
+
+
+#: Arguments of each rank's own rows or code: whether they are given must agree between ranks, not their values.
+_ROWS = {"x0", "callback", "zeta_jacobian"} | {n for n, o in _options.TABLE.items() if o.kind == "diagonal"}
+
+
+def _text(name, value) -> str:
+    """What every rank must pass alike of argument `name`: a number's or a string's value; whether a _ROWS one is
+    given; what ζ or upper is (none, constant, affine, callable); else (arrays, hierarchies) its kind."""
+    if value is None:
+        return "none"
+    if name in _ROWS:
+        return "given"
+    if name in ("zeta", "upper"):
+        return "affine" if isinstance(value, Affine) else "callable" if callable(value) else "constant"
+    if isinstance(value, str):
+        return value.lower()
+    if isinstance(value, (list, tuple, Hierarchy)):
+        return "levels"   # (compared level by level in _prolongations)
+    try:
+        return type(value).__name__ if isinstance(value, PETSc.Object) or np.ndim(value) else float(value).hex()
+    except (TypeError, ValueError, OverflowError):
+        return type(value).__name__
+
+
+def _agree(comm, texts: dict, where: str) -> None:
+    """ValueError on every rank naming the arguments whose `texts` (_text's) differ between ranks: every rank
+    takes the branches they decide (else some would wait in a collective call the others never make)."""
+    names = _mpi.differing(comm, texts)
+    if names:
+        raise ValueError(f"{where}: {', '.join(names)} must be the same on every rank (a number or string alike; "
+                         f"an array, callable, zeta or upper given on every rank or none, of one kind), got different ones")
 
 
 def _same(comm, value: float, error: type, message: str) -> None:
