@@ -10,7 +10,6 @@ import functools
 import math
 import time
 import types
-import zlib
 
 import numpy as np
 import scipy.sparse as sp
@@ -376,7 +375,7 @@ def _prolongations(hierarchy, Am, comm):
     Ps = list(hierarchy) if petsc else _collective(comm, resolve_hierarchy, list(hierarchy),
                                                    types.SimpleNamespace(shape=(n, n))) or []
     shapes = repr([P.getSize() if petsc else (P.shape, _fingerprint(P)) for P in Ps])
-    _same(comm, float(zlib.crc32(shapes.encode())), ValueError, _DIFFERENT_HIERARCHY)
+    _same(comm, shapes, ValueError, _DIFFERENT_HIERARCHY)
     if petsc:
         return Ps, []
     made, (lo, hi) = [], Am.getOwnershipRange()
@@ -419,19 +418,22 @@ def _text(name, value) -> str:
 def _agree(comm, texts: dict, where: str) -> None:
     """ValueError on every rank naming the arguments whose `texts` (_text's) differ between ranks: every rank
     takes the branches they decide (else some would wait in a collective call the others never make)."""
-    names = _mpi.differing(comm, texts)
-    if names:
-        raise ValueError(f"{where}: {', '.join(names)} must be the same on every rank (a number or string alike; "
-                         f"an array, callable, zeta or upper given on every rank or none, of one kind), got different ones")
+    names = ", ".join(_mpi.differing(comm, texts))
+    _refuse(comm, names and ValueError(f"{where}: {names} must be the same on every rank (a number or string alike; "
+                                       "an array, callable, zeta or upper given on every rank or none, of one kind), "
+                                       "got different ones"))
 
 
-def _same(comm, value: float, error: type, message: str) -> None:
-    """error(message) on every rank unless every rank holds this value (a kind of input, or a checksum of it)."""
-    differ = _flag_max(comm, value) != -_flag_max(comm, -value)
+def _same(comm, value, error: type, message: str) -> None:
+    """error(message) on every rank unless every rank holds this value (a kind of input, or its shapes)."""
+    _refuse(comm, _mpi.differing(comm, {"value": value}) and error(message))
 
+
+def _refuse(comm, exc) -> None:
+    """`exc` (unless falsy) raised on every rank, as any rank's failure is ('rank 0: ...'; collective)."""
     def check():
-        if differ:
-            raise error(message)
+        if exc:
+            raise exc
     _collective(comm, check)
 
 
