@@ -166,6 +166,8 @@ def test_an_argument_that_differs_between_ranks_is_refused_naming_it_on_every_ra
         assert kind == "ValueError" and name in message and "must be the same on every rank" in message, (name, kind, message)
     for name, outcomes in out["solved"].items():   # a rank's own rows' data may differ
         assert outcomes == [["no exception", "CONVERGED"]] * 2, (name, outcomes)
+    kinds = {tuple(o) for o in out["callback_return"]}   # one rank's callback returned an array
+    assert len(kinds) == 1 and "callback must return None or a bool" in out["callback_return"][0][1], kinds
 
 
 def test_a_rank_without_rows_newton_refuses_on_every_rank_the_stationary_members_solve():
@@ -174,7 +176,7 @@ def test_a_rank_without_rows_newton_refuses_on_every_rank_the_stationary_members
         assert len(out[method]) == 2 and out[method][0] == out[method][1], out[method]   # the same on both ranks
         name, message = out[method][0]
         assert name == "ValueError" and message.startswith("rank 1: A has no rows on this rank"), out[method]
-    for method in ("nrmgs", "nrm_omega2", "nrm_omega2_icp"):
+    for method in ("nrmgs", "nrmgs_default", "nrm_omega2", "nrm_omega2_icp"):
         for status, err in out[method]:
             assert status == "CONVERGED" and err < 1e-6, (method, out[method])
     assert out["nrmgs_short"] == [["MAX_ITERATIONS", True]] * 2, out["nrmgs_short"]   # the member's advice

@@ -148,14 +148,15 @@ py::dict measure(std::uintptr_t A, py::array q, nrmicp::ZetaKind kind, py::objec
   o.method = nrmicp::Method::Newton;
   const nrmicp::detail::NewtonLevel<Matrix> level(M, o);
   const Eigen::VectorXd qv = to_vector(q, "q"), zv = to_vector(z, "z");
-  const Eigen::VectorXd d = rows.is_none() ? Eigen::VectorXd() : to_vector(rows.cast<py::array>(), "rows");
+  const bool weighted = !rows.is_none();  // (alike on every process: d is empty on one without rows)
+  const Eigen::VectorXd d = weighted ? to_vector(rows.cast<py::array>(), "rows") : Eigen::VectorXd();
   const Zeta zeta = with_upper(zeta_of(kind, zeta_c, zeta_fn), upper, qv.size());
   Eigen::VectorXd w, zeta_z, u;
   if (!zeta.eval_upper(zv, u)) throw py::value_error("upper(z) failed (or gave NaN or -inf) at the returned z");
   py::dict d_out;
   double res = level.icp_residual(qv, zeta, zv, zeta_z, w, u);
-  const Eigen::VectorXd dw = d.size() ? Eigen::VectorXd(d.cwiseProduct(w)) : w;
-  if (d.size() && std::isfinite(res)) {   // (an infinite Res: no certificate, weighted or not)
+  const Eigen::VectorXd dw = weighted ? Eigen::VectorXd(d.cwiseProduct(w)) : w;
+  if (weighted && std::isfinite(res)) {   // (an infinite Res: no certificate, weighted or not)
     res = nrmicp::detail::bounded_residual(dw, zv - zeta_z, zv, u, M.comm());
     if (std::isnan(res)) res = std::numeric_limits<double>::infinity();
   }

@@ -256,13 +256,17 @@ def _core_callback(callback: Callable[..., Any], dc: Optional[np.ndarray],
                 else callback(zk)
         except StopIteration:
             return True
-        try:
-            return bool(stop)
-        except (TypeError, ValueError):   # an array of several entries has no truth value
-            raise TypeError(f"callback must return None or a bool (True stops the solve), "
-                            f"got {type(stop).__name__}") from None
+        return callback_stops(stop)
 
     return hook
+
+
+def callback_stops(stop) -> bool:
+    """Whether a callback's return value stops the solve (its truth value); TypeError for one without any."""
+    try:
+        return bool(stop)
+    except (TypeError, ValueError):   # an array of several entries has no truth value
+        raise TypeError(f"callback must return None or a bool (True stops the solve), got {type(stop).__name__}") from None
 
 
 def _omega2_hint(diagonal, method, omega2, accelerate) -> str:

@@ -25,8 +25,8 @@ from ._mpi import DistributedError, agree, collective as _collective, flag_max a
 from ._newton import (auto_builds_amg, check_jacobian, check_no_hierarchy, check_polish, core_jacobian, hierarchy_report,
                       warn_shortened)
 from ._api import (METHODS as _ALL_METHODS, Affine, Result, _make_upper, _make_zeta, _Rounds, _choice, _criterion, _settle,
-                   _log_final, _omega2_hint, _progress_hook, _units_parameters, core_options, choose_method, dominance_margin,
-                   failure_hint)
+                   _log_final, _omega2_hint, _progress_hook, _units_parameters, callback_stops, core_options, choose_method,
+                   dominance_margin, failure_hint)
 from ._scaling import sigma_from_logs, weights_of_rows
 from ._hierarchy import Hierarchy, _fingerprint, hierarchy_kind, resolve_hierarchy
 from ._inputs import as_constant, as_csr, as_vector
@@ -457,7 +457,7 @@ def _collective_callback(comm, callback):
     """callback(k, z, res), each call collective; StopIteration stops the solve as True does (nrmicp.solve's rule)."""
     def call(k, z, res):
         try:
-            return callback(k, z, res)
+            return callback_stops(callback(k, z, res))   # (its own TypeError here: raised on every rank)
         except StopIteration:
             return True
     return functools.partial(_collective, comm, call)
