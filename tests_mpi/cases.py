@@ -1252,6 +1252,31 @@ def case_hints():
     return out
 
 
+def case_rows_apart():
+    """Random M-matrix LCPs whose rows lie 10^±8 apart (and the same times 1e-150), Newton's LU on the reduced
+    systems (no hierarchy): PETSc's absolute zero-pivot test took the small rows' pivots for zeros (STAGNATED
+    on one rank where serial nrmicp converges; a review's fuzz)."""
+    out = {}
+    for seed in range(6):
+        rng = np.random.default_rng(seed)
+        n = 174
+        R = sp.random(n, n, density=4.0 / n, random_state=seed)
+        R.data[:] = -np.abs(R.data)
+        R.setdiag(0.0)
+        M = sp.csr_matrix(R + sp.diags(np.abs(R).sum(axis=1).A.ravel() + rng.uniform(0.1, 2.0, n)))
+        rows, q0 = 10.0 ** rng.uniform(-8, 8, n), rng.normal(size=n) * 10
+        lo, hi = split(n)
+        for s in (1.0, 1e-150):
+            A, q = sp.csr_matrix(sp.diags(s * rows) @ M), s * rows * q0
+            r = dist.solve(A[lo:hi], q[lo:hi], method="newton", hierarchy=None, rtol=1e-8)
+            z = dist.gather(r.z)
+            if RANK == 0:
+                ref = nrmicp.solve(A, q, method="newton", hierarchy=None, rtol=1e-8)
+                out[f"{seed} {s:g}"] = {"status": str(r.status), "serial": str(ref.status),
+                                        "err": float(np.max(np.abs(z - ref.z)) / max(np.max(np.abs(ref.z)), 1e-300))}
+    return out
+
+
 #: Arguments one rank passes otherwise than the others (rank 0's, the others'): each took the ranks down different
 #: branches of the core (a hang) before the agreement check of distributed.Solver and its solve.
 DIFFERING = {"tol": ({"tol": 1e-4}, {"tol": 1e-12}), "maxiter": ({"maxiter": 1}, {"maxiter": 1000}),
@@ -1308,6 +1333,7 @@ if __name__ == "__main__":
               "fuzz": lambda: case_fuzz(int(args[0])), "family": case_family, "hooks": case_hooks, "no_rows": case_no_rows,
               "nonpositive_diagonal": case_nonpositive_diagonal,
               "upper_all_inf": case_upper_all_inf,
-              "reason_alike": case_reason_alike, "hints": case_hints, "differing": case_differing}[name]()
+              "reason_alike": case_reason_alike, "hints": case_hints, "differing": case_differing,
+              "rows_apart": case_rows_apart}[name]()
     if RANK == 0:
         print("RESULT " + json.dumps(result), flush=True)

@@ -550,6 +550,9 @@ class System {
       KSPGetPC(ksp_, &pc);
       PCSetType(pc, PCLU);
       if (A_.comm().size() > 1) PCFactorSetMatSolverType(pc, MATSOLVERMUMPS);  // PETSc's own LU is serial
+      // PETSc's zero-pivot test is absolute (1e2 eps): in small units, or on rows far below A's largest, it took
+      // every pivot for zero; exact zeros only, as the serial engine's factorizations (units-free)
+      PCFactorSetZeroPivot(pc, 0.0);
     } else {
       PC pc = krylov(ksp_);
       vcycle_ = std::make_unique<VCycle>(pc, A_, below_, A_.comm().size());
