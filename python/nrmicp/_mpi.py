@@ -1,14 +1,18 @@
 """Agreement between the ranks of a PETSc communicator, for nrmicp.distributed: one-float reductions,
-and exceptions raised on some ranks only re-raised alike on every rank (no rank left waiting in a
-collective call the failing ranks never reach)."""
+exceptions raised on some ranks only re-raised alike on every rank (no rank left waiting in a
+collective call the failing ranks never reach), and arguments that must agree refused by name when
+they differ."""
 from __future__ import annotations
 
+import functools
 import zlib
 
 import numpy as np
 from petsc4py import PETSc
 
-from . import _core
+from . import _core, _options
+from ._api import Affine, callback_stops
+from ._hierarchy import Hierarchy
 
 #: Longest error message exchanged between ranks (bytes, UTF-8).
 _MSG_LEN = 1024
@@ -95,3 +99,70 @@ def collective(comm, fn, *args):
     finally:
         del exc   # (the caught exception's traceback holds this frame: no cycle through it)
     return out
+
+
+#: Arguments of each rank's own rows or code: whether they are given must agree between ranks, not their values.
+_ROWS = {"x0", "callback", "zeta_jacobian"} | {n for n, o in _options.TABLE.items() if o.kind == "diagonal"}
+
+
+def agree_arguments(comm, arguments: dict, where: str) -> None:
+    """ValueError on every rank naming the arguments that differ between ranks (as _text reads them): every rank
+    takes the branches they decide (else some would wait in a collective call the others never make)."""
+    names = ", ".join(differing(comm, {k: _text(k, v) for k, v in arguments.items()}))
+    _refuse(comm, names and ValueError(f"{where}: {names} must be the same on every rank (a number or string alike; "
+                                       "an array, callable, zeta or upper given on every rank or none, of one kind), "
+                                       "got different ones"))
+
+
+def _text(name, value) -> str:
+    """What every rank must pass alike of argument `name`: a number's or a string's value; whether a _ROWS one is
+    given; what ζ or upper is (none, constant, affine, callable); else (arrays, hierarchies) its kind."""
+    if value is None:
+        return "none"
+    if name in _ROWS:
+        return "given"
+    if name in ("zeta", "upper"):
+        return "affine" if isinstance(value, Affine) else "callable" if callable(value) else "constant"
+    if isinstance(value, str):
+        return value.lower()
+    if isinstance(value, (list, tuple, Hierarchy)):
+        return "levels"   # (compared level by level by the caller)
+    try:
+        return type(value).__name__ if isinstance(value, PETSc.Object) or np.ndim(value) else float(value).hex()
+    except (TypeError, ValueError, OverflowError):
+        return type(value).__name__
+
+
+def same(comm, value, error: type, message: str) -> None:
+    """error(message) on every rank unless every rank holds this value (a kind of input, or its shapes)."""
+    _refuse(comm, differing(comm, {"value": value}) and error(message))
+
+
+def _refuse(comm, exc) -> None:
+    """`exc` (unless falsy) raised on every rank, as any rank's failure is ('rank 0: ...'; collective)."""
+    def check():
+        if exc:
+            raise exc
+    collective(comm, check)
+
+
+def collective_callback(comm, callback):
+    """callback(k, z, res), each call collective; StopIteration stops the solve as True does (nrmicp.solve's rule)."""
+    def call(k, z, res):
+        try:
+            return callback_stops(callback(k, z, res))   # (its own TypeError here: raised on every rank)
+        except StopIteration:
+            return True
+    return functools.partial(collective, comm, call)
+
+
+def deferred(hook, failed: list):
+    """`hook` keeping its first exception in `failed`, not raising it (the core calls it on rank 0 only, between
+    collectives; the caller raises it on every rank with agree once the core returns)."""
+    def call(*args):
+        if not failed:
+            try:
+                hook(*args)
+            except Exception as exc:  # noqa: BLE001 - raised on every rank once the core returns
+                failed.append(exc)
+    return call

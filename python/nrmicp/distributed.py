@@ -24,8 +24,8 @@ from . import _bounds, _core, _mpi, _options
 from ._mpi import DistributedError, agree, collective as _collective, flag_max as _flag_max, flag_sum as _flag_sum
 from ._newton import (auto_builds_amg, check_jacobian, check_no_hierarchy, check_polish, core_jacobian, hierarchy_report,
                       warn_shortened)
-from ._api import (METHODS as _ALL_METHODS, Affine, Result, _make_upper, _make_zeta, _Rounds, _choice, _criterion, _settle,
-                   _log_final, _omega2_hint, _progress_hook, _units_parameters, callback_stops, core_options, choose_method,
+from ._api import (METHODS as _ALL_METHODS, Result, _make_upper, _make_zeta, _Rounds, _choice, _criterion, _settle,
+                   _log_final, _omega2_hint, _progress_hook, _units_parameters, core_options, choose_method,
                    dominance_margin, failure_hint)
 from ._scaling import sigma_from_logs, weights_of_rows
 from ._hierarchy import Hierarchy, _fingerprint, hierarchy_kind, resolve_hierarchy
@@ -165,7 +165,7 @@ def _prepare_matrix(A, comm, o):
     """A's checks and the member, every rank's failure raised on all: (Am, method); the set-up options `o`
     checked too (tol, rtol at their defaults). A Mat made here is destroyed on failure."""
     A_in = _collective(comm, _check_mat, A)
-    _same(comm, float(sp.issparse(A_in)), TypeError,   # (else the ranks would part ways: a hang)
+    _mpi.same(comm, float(sp.issparse(A_in)), TypeError,   # (else the ranks would part ways: a hang)
           "A must be a petsc4py Mat on every rank or a scipy row block on every rank, not both")
     Am = _as_mat(A_in, comm) if sp.issparse(A_in) else A_in
     try:
@@ -264,7 +264,7 @@ class Solver:
         _collective(comm, _scoped, options, ("setup", "solve"), "distributed.Solver", "its solve()")
         self._options = {**_options.defaults("setup", "solve"), **options}
         o = {**_options.defaults(), **self._options}
-        _agree(comm, {k: _text(k, v) for k, v in self._options.items()}, "distributed.Solver")
+        _mpi.agree_arguments(comm, self._options, "distributed.Solver")
         self.A, self.method = _prepare_matrix(A, comm, o)
         self._owns_A = self.A is not A   # (made from scipy row blocks)
         mean = _flag_sum(comm, float(np.sum(_diagonal(self.A)))) / self.A.getSize()[0] if self.method == "nrm" else 1.0
@@ -306,7 +306,7 @@ class Solver:
         _collective(comm, _scoped, options, ("solve", "call"), "distributed.Solver.solve", "distributed.Solver()")
         o = {**_options.defaults(), **self._options, **options, "method": m}
         given = {**{k: o[k] for k in _options.names("solve", "call")}, "zeta": zeta, "upper": upper}
-        _agree(comm, {k: _text(k, v) for k, v in given.items()}, "distributed.Solver.solve")
+        _mpi.agree_arguments(comm, given, "distributed.Solver.solve")
         t_start = time.perf_counter()
         it, units = _criterion({"tol": o["tol"], "rtol": o["rtol"]})
         opts, q_user, xa, (kind, c, B, fn) = _prepare_call(A, m, q, zeta, o["x0"], comm, o, it)
@@ -371,11 +371,11 @@ def _prolongations(hierarchy, Am, comm):
         return [], []
     n = Am.getSize()[0]
     petsc = _collective(comm, _petsc_list, hierarchy)
-    _same(comm, float(petsc), ValueError, _DIFFERENT_HIERARCHY)
+    _mpi.same(comm, float(petsc), ValueError, _DIFFERENT_HIERARCHY)
     Ps = list(hierarchy) if petsc else _collective(comm, resolve_hierarchy, list(hierarchy),
                                                    types.SimpleNamespace(shape=(n, n))) or []
     shapes = repr([P.getSize() if petsc else (P.shape, _fingerprint(P)) for P in Ps])
-    _same(comm, shapes, ValueError, _DIFFERENT_HIERARCHY)
+    _mpi.same(comm, shapes, ValueError, _DIFFERENT_HIERARCHY)
     if petsc:
         return Ps, []
     made, (lo, hi) = [], Am.getOwnershipRange()
@@ -392,51 +392,6 @@ _DIFFERENT_HIERARCHY = ("hierarchy must be the same on every rank ('amg', 'auto'
                         "or PETSc Mats); the ranks' differ in kind, number of levels, shapes or values")
 
 
-#: Arguments of each rank's own rows or code: whether they are given must agree between ranks, not their values.
-_ROWS = {"x0", "callback", "zeta_jacobian"} | {n for n, o in _options.TABLE.items() if o.kind == "diagonal"}
-
-
-def _text(name, value) -> str:
-    """What every rank must pass alike of argument `name`: a number's or a string's value; whether a _ROWS one is
-    given; what ζ or upper is (none, constant, affine, callable); else (arrays, hierarchies) its kind."""
-    if value is None:
-        return "none"
-    if name in _ROWS:
-        return "given"
-    if name in ("zeta", "upper"):
-        return "affine" if isinstance(value, Affine) else "callable" if callable(value) else "constant"
-    if isinstance(value, str):
-        return value.lower()
-    if isinstance(value, (list, tuple, Hierarchy)):
-        return "levels"   # (compared level by level in _prolongations)
-    try:
-        return type(value).__name__ if isinstance(value, PETSc.Object) or np.ndim(value) else float(value).hex()
-    except (TypeError, ValueError, OverflowError):
-        return type(value).__name__
-
-
-def _agree(comm, texts: dict, where: str) -> None:
-    """ValueError on every rank naming the arguments whose `texts` (_text's) differ between ranks: every rank
-    takes the branches they decide (else some would wait in a collective call the others never make)."""
-    names = ", ".join(_mpi.differing(comm, texts))
-    _refuse(comm, names and ValueError(f"{where}: {names} must be the same on every rank (a number or string alike; "
-                                       "an array, callable, zeta or upper given on every rank or none, of one kind), "
-                                       "got different ones"))
-
-
-def _same(comm, value, error: type, message: str) -> None:
-    """error(message) on every rank unless every rank holds this value (a kind of input, or its shapes)."""
-    _refuse(comm, _mpi.differing(comm, {"value": value}) and error(message))
-
-
-def _refuse(comm, exc) -> None:
-    """`exc` (unless falsy) raised on every rank, as any rank's failure is ('rank 0: ...'; collective)."""
-    def check():
-        if exc:
-            raise exc
-    _collective(comm, check)
-
-
 def _petsc_list(hierarchy):
     """Whether a list of prolongations holds PETSc Mats (True) or matrices to convert (False); not both."""
     kinds = {isinstance(P, PETSc.Mat) for P in hierarchy}
@@ -451,16 +406,6 @@ def _scoped(options, scopes, where, elsewhere):
     if misplaced:
         raise TypeError(f"{where}() does not take {misplaced}: pass them to {elsewhere}")
     _options.validate(options, where=where, unsupported=_options.distributed_refusals())
-
-
-def _collective_callback(comm, callback):
-    """callback(k, z, res), each call collective; StopIteration stops the solve as True does (nrmicp.solve's rule)."""
-    def call(k, z, res):
-        try:
-            return callback_stops(callback(k, z, res))   # (its own TypeError here: raised on every rank)
-        except StopIteration:
-            return True
-    return functools.partial(_collective, comm, call)
 
 
 def _margin(Am, comm):
@@ -502,27 +447,15 @@ def _rounds(core, measure, xa, opts, o, jacobian, bounded, hint):
     verify = measure.weights is not None or kind == _core.ZetaKind.constant
     it = {**{k: o[k] for k in _options.names("solve")}, "tol": opts.tol, "rtol": 0.0}
     rounds = _Rounds(solver, problem, it, None, {"upper": ua, "zeta_jacobian": jacobian}, measure if verify else None, xa)
-    cb = None if o["callback"] is None else _collective_callback(measure.user[0].getComm(), o["callback"])
+    cb = None if o["callback"] is None else _mpi.collective_callback(measure.user[0].getComm(), o["callback"])
     rounds.cb = None if cb is None else (lambda k, z, r: cb(k + rounds.cb_offset[0], z, r))   # (k counts on)
     failed = []   # a progress line that raised (rank 0's: the only one the core calls), raised on every rank after
-    rounds.progress = lambda method, n: _deferred(_progress_hook(method, n), failed)
+    rounds.progress = lambda method, n: _mpi.deferred(_progress_hook(method, n), failed)
     rounds.run(xa, opts.tol)
     agree(measure.user[0].getComm(), failed[0] if failed else None)
     report = hierarchy_report(core.hierarchy["requested"], None, core) if m == "newton" else None
     return _settle(solver, rounds, problem, measure, opts.tol, polish=m == "newton" and o["polish"], bounded=bounded,
                    report=report, hint=hint)
-
-
-def _deferred(hook, failed):
-    """`hook` keeping its first exception in `failed`, not raising it (the core calls it on rank 0 only, between
-    collectives)."""
-    def call(*args):
-        if not failed:
-            try:
-                hook(*args)
-            except Exception as exc:  # noqa: BLE001 - raised on every rank once the core returns
-                failed.append(exc)
-    return call
 
 
 class _Measure:
