@@ -23,6 +23,13 @@ COMM = PETSc.COMM_WORLD
 RANK, SIZE = COMM.getRank(), COMM.getSize()
 
 
+def _kzr(f):
+    """f(k, z, res) as nrmicp.solve's callback (scipy's rule: one parameter named intermediate_result)."""
+    def callback(intermediate_result):
+        return f(intermediate_result.nit, intermediate_result.z, intermediate_result.residual)
+    return callback
+
+
 def split(n, weights=None):
     """Row ranges of the ranks: even, or proportional to weights."""
     w = np.ones(SIZE) if weights is None else np.asarray(weights[:SIZE], dtype=float)
@@ -180,8 +187,8 @@ def _bad(kind):
                 raise RuntimeError("zeta failed here")
             return np.zeros_like(z)
     elif kind == "callback_raises":   # the user's callback fails on the last rank in its second call
-        def callback(k, z, res):
-            if last and k >= 2:
+        def callback(intermediate_result):   # (nrmicp.solve's callbacks, as serially)
+            if last and intermediate_result.nit >= 2:
                 raise RuntimeError("callback failed here")
         kw = {"callback": callback}
     elif kind == "zeta_nan":
@@ -387,7 +394,7 @@ def case_fuzz(examples):
             kw["hierarchy"] = nrmicp.Hierarchy(A, Ps) if levels.random() < 0.5 else Ps
         r = dist.solve(A[lo:hi], q[lo:hi], local_zeta, method=method, tol=1e-9,
                        maxiter=100000, polish=polish and not callable(upper), upper=local_upper,
-                       callback=lambda k, zk, res: calls.append(k) and False, **kw)
+                       callback=lambda zk: calls.append(len(zk)) and False, **kw)
         z = dist.gather(r.z)
         if RANK == 0:
             serial = nrmicp.solve(A, q, zeta, upper=upper, method="newton", tol=1e-11, polish=not callable(upper))
@@ -395,7 +402,7 @@ def case_fuzz(examples):
             u = upper(z) if callable(upper) else upper
             m = np.minimum(A @ z + q, g) if upper is None else np.minimum(g, np.maximum(z - u, A @ z + q))
             rows.append({"n": n, "method": method, "status": str(r.status), "err": float(np.max(np.abs(z - serial.z))),
-                         "res": float(np.linalg.norm(m)), "bounded": upper is not None, "implicit": callable(upper), "called": bool(calls),
+                         "res": float(np.linalg.norm(m)), "bounded": upper is not None, "implicit": callable(upper), "called": bool(calls) and set(calls) == {hi - lo},
                          "options": sorted(k for k in kw if k != "omega2"), "scale": float(np.max(np.abs(q))),
                          "hierarchy": type(kw.get("hierarchy")).__name__})
     return rows
@@ -857,7 +864,7 @@ def case_rounds():
     r = dist.solve(A[lo:hi], pb.q[lo:hi], c[lo:hi], method="newton", hierarchy=None, polish=True, tol=1e-13)
     ks = []
     rc = dist.solve(A[lo:hi], pb.q[lo:hi], pb.zeta[lo:hi], method="newton", hierarchy=None, tol=1e-12,
-                    record_history=True, callback=lambda k, z, res: ks.append(k))
+                    record_history=True, callback=lambda intermediate_result: ks.append(intermediate_result.nit))
     zf = dist.gather(r.z)
     if RANK == 0:
         serial = nrmicp.solve(A, pb.q, c, method="newton", hierarchy=None, polish=True, tol=1e-13)
@@ -1040,7 +1047,7 @@ def case_options():
     def delivered(method, **kw):
         seen = []
         r = dist.solve(A, q, method=method, tol=1e-12, maxiter=500, stall_iterations=7, record_history=True,
-                       callback=lambda k, z, res: seen.append(k) and False, gamma=2.0, **kw)
+                       callback=lambda zk: seen.append(len(zk)) and False, gamma=2.0, **kw)
         z = dist.gather(r.z)
         w = A @ z + q
         return {"success": bool(r.success), "res": float(r.residual), "calls": len(seen),
@@ -1132,7 +1139,7 @@ def case_hooks():
 
     def run(name, **kw):
         calls = []
-        cb = kw.pop("callback", lambda k, z, res: calls.append((k, res)) and False)
+        cb = kw.pop("callback", _kzr(lambda k, z, res: calls.append((k, res)) and False))
         r = dist.solve(A[lo:hi], pb.q[lo:hi], tol=kw.pop("tol", 1e-10), callback=cb, **kw)
         z = dist.gather(r.z)
         if RANK == 0:
@@ -1146,12 +1153,12 @@ def case_hooks():
                          "target": r.criterion["target"]}
     run("plain", method="nrmgs")
     run("anderson", method="nrmgs", accelerate="anderson", anderson_m=3, record_history=True)
-    run("stop_on_one_rank", method="nrmgs", callback=lambda k, z, res: RANK == SIZE - 1 and k == 3)
+    run("stop_on_one_rank", method="nrmgs", callback=_kzr(lambda k, z, res: RANK == SIZE - 1 and k == 3))
 
     def stop_iteration(k, z, res):
         if RANK == SIZE - 1 and k == 3:
             raise StopIteration
-    run("stop_iteration_on_one_rank", method="nrmgs", callback=stop_iteration)
+    run("stop_iteration_on_one_rank", method="nrmgs", callback=_kzr(stop_iteration))
     run("two_sweep_theta", method="two_sweep", theta=0.8)
     run("phi", method="nrmgs", phi=0.5)
     run("verbose", method="nrmj", verbose=1)
@@ -1283,7 +1290,7 @@ DIFFERING = {"tol": ({"tol": 1e-4}, {"tol": 1e-12}), "maxiter": ({"maxiter": 1},
              "rtol": ({"rtol": 1e-2}, {"rtol": 1e-10}), "stall_iterations": ({"stall_iterations": 3}, {}),
              "verbose": ({"verbose": 1}, {}), "method": ({"method": "nrmgs"}, {"method": "newton"}),
              "hierarchy": ({"hierarchy": "amg"}, {"hierarchy": None}), "accelerate": ({"accelerate": "anderson"}, {}),
-             "record_history": ({"record_history": True}, {}), "callback": ({"callback": lambda k, z, r: False}, {}),
+             "record_history": ({"record_history": True}, {}), "callback": ({"callback": lambda zk: False}, {}),
              "zeta_jacobian": ({"zeta_jacobian": lambda z: sp.eye(len(z))}, {}), "x0": ({"x0": "zeros"}, {}),
              "zeta": ({"zeta": None}, {}), "upper": ({"upper": 10.0}, {})}
 #: ... and arguments of each rank's own rows, which may differ (a diagonal's entries, x0's): solved.
@@ -1315,7 +1322,7 @@ def case_differing():
         out[group][name] = [json.loads(t) for t in got] if RANK == 0 else None
     try:   # a callback whose return has no truth value on one rank (the core's cast failed there alone: a hang)
         dist.solve(A[lo:hi], pb.q[lo:hi], pb.zeta[lo:hi], method="nrmgs", tol=1e-8,
-                   callback=lambda k, z, r: np.ones(2) if RANK == 0 else None)
+                   callback=lambda zk: np.ones(2) if RANK == 0 else None)
         outcome = ["no exception", ""]
     except Exception as exc:  # noqa: BLE001 - the outcome is the test's subject
         outcome = [type(exc).__name__, str(exc)]

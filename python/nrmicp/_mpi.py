@@ -4,14 +4,13 @@ collective call the failing ranks never reach), and arguments that must agree re
 they differ."""
 from __future__ import annotations
 
-import functools
 import zlib
 
 import numpy as np
 from petsc4py import PETSc
 
 from . import _core, _options
-from ._api import Affine, callback_stops
+from ._api import Affine
 from ._hierarchy import Hierarchy
 
 #: Longest error message exchanged between ranks (bytes, UTF-8).
@@ -144,16 +143,6 @@ def _refuse(comm, exc) -> None:
         if exc:
             raise exc
     collective(comm, check)
-
-
-def collective_callback(comm, callback):
-    """callback(k, z, res), each call collective; StopIteration stops the solve as True does (nrmicp.solve's rule)."""
-    def call(k, z, res):
-        try:
-            return callback_stops(callback(k, z, res))   # (its own TypeError here: raised on every rank)
-        except StopIteration:
-            return True
-    return functools.partial(collective, comm, call)
 
 
 def deferred(hook, failed: list):

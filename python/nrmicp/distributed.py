@@ -226,8 +226,9 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     in A's layout) or a callable of this rank's rows (a row-local ζ). zeta_jacobian(z) of this rank's rows: a
     linear operator on them (its matvec is called on every rank together: it may communicate) or a sparse
     matrix. hierarchy ('newton'): 'amg' (BoomerAMG's), 'auto', None, or prolongations, finest first: PETSc
-    Mats, or a :class:`nrmicp.Hierarchy` or whole scipy matrices, the same on every rank. callback(k, z, res)
-    sees this rank's rows; True on any rank stops every rank. The stationary members run as synchronous
+    Mats, or a :class:`nrmicp.Hierarchy` or whole scipy matrices, the same on every rank. callback: as
+    nrmicp.solve's (``callback(zk)`` or ``callback(intermediate_result)``) with this rank's rows of z; a stop on
+    any rank stops every rank. The stationary members run as synchronous
     multisplitting of each rank's diagonal block.
 
     Returns a :class:`nrmicp.Result` on every rank, ``z`` and ``w`` as PETSc Vecs (:func:`gather`). A failure
@@ -446,9 +447,10 @@ def _rounds(core, measure, xa, opts, o, jacobian, bounded, hint):
     problem = (qa, kind, c, fn)
     verify = measure.weights is not None or kind == _core.ZetaKind.constant
     it = {**{k: o[k] for k in _options.names("solve")}, "tol": opts.tol, "rtol": 0.0}
-    rounds = _Rounds(solver, problem, it, None, {"upper": ua, "zeta_jacobian": jacobian}, measure if verify else None, xa)
-    cb = None if o["callback"] is None else _mpi.collective_callback(measure.user[0].getComm(), o["callback"])
-    rounds.cb = None if cb is None else (lambda k, z, r: cb(k + rounds.cb_offset[0], z, r))   # (k counts on)
+    rounds = _Rounds(solver, problem, it, o["callback"], {"upper": ua, "zeta_jacobian": jacobian},
+                     measure if verify else None, xa)
+    if rounds.cb is not None:   # nrmicp.solve's callback, each call collective (a failure on one rank raises on all)
+        rounds.cb = functools.partial(_collective, measure.user[0].getComm(), rounds.cb)
     failed = []   # a progress line that raised (rank 0's: the only one the core calls), raised on every rank after
     rounds.progress = lambda method, n: _mpi.deferred(_progress_hook(method, n), failed)
     rounds.run(xa, opts.tol)
