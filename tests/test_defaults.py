@@ -293,3 +293,35 @@ def test_rows_far_apart_in_size_get_the_scale_rows_advice_and_it_works():
     assert np.abs(advised.z - ref.z).max() < 1e-10 * np.abs(ref.z).max()
     uniform = nrmicp.solve(A0, q0, c, method="newton", maxiter=1)   # rows alike: no such advice
     assert not uniform.success and "scale='rows'" not in uniform.message, uniform.message
+
+
+def _numpy_rounding_level(A, q, z, g, u, dr, dc):
+    """ε ‖t‖₂ of Res_E = ‖min(d_r w, g/d_c)‖ (with u: the box form's terms), each t_i the rounding of the term
+    row i takes: d_r(|A||z| + |q|) for w, (|z| + |ζ|)/d_c for g, (|z| + |u|)/d_c for z − u; plain numpy."""
+    w = dr * (A @ z + q)
+    tw = dr * (abs(A) @ np.abs(z) + np.abs(q))
+    zs, gs = z / dc, g / dc
+    tg = np.abs(zs) + np.abs(zs - gs)
+    t = np.where(w < gs, tw, np.where(gs < w, tg, np.maximum(tw, tg)))
+    if u is not None:
+        us = u / dc
+        t = np.where(zs - us > w, np.where(gs < zs - us, tg, np.abs(zs) + np.abs(us)), t)
+    return np.finfo(float).eps * np.linalg.norm(t)
+
+
+@pytest.mark.parametrize("bounded", [False, True])
+@pytest.mark.parametrize("s", [1.0, 2.0 ** -1000, 2.0 ** 1021])
+def test_the_default_rules_rounding_level_is_the_rows_terms(bounded, s):
+    """The Python layer's floor (the core's detail::rounding_level) against numpy: row and column weights,
+    an upper bound, and z near float's limit (terms that overflow are measured in units of 2^600)."""
+    from nrmicp._api import _OriginalResidual
+    from nrmicp._core import ZetaKind
+    rng = np.random.default_rng(7)
+    A = sp.csr_matrix(sp.random(40, 40, 0.2, random_state=rng) + 4 * sp.eye(40))
+    z, q, c = rng.standard_normal(40), rng.standard_normal(40), rng.standard_normal(40)
+    dr, dc = rng.uniform(0.5, 2.0, 40), rng.uniform(0.5, 2.0, 40)
+    u = c + rng.uniform(0.0, 1.0, 40) if bounded else None
+    measure = _OriginalResidual(A, s * q, ZetaKind.constant, s * c, None, None, (dr, dc), None if u is None else s * u)
+    got = measure.rounding_level(s * z)
+    want = s * _numpy_rounding_level(A, q, z, z - c, u, dr, dc)   # (s a power of two: exact)
+    assert np.isfinite(got) and got == pytest.approx(want, rel=1e-12)

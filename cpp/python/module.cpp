@@ -457,6 +457,32 @@ void bind_utilities(py::module_& m) {
   });
 }
 
+// The Python layer's rounding level of Res (its floor rule; detail::rounding_level, the core's own).
+void bind_measures(py::module_& m) {
+  m.def("rounding_level", [](const py::array& indptr, const py::array& indices, const py::array& data, const py::array& z,
+                             const py::array& q, const py::array& g, const py::array& w, const py::object& upper,
+                             const py::object& rows, const py::object& cols) {
+    const py::ssize_t n = z.ndim() == 1 ? z.shape(0) : -1;
+    const auto vector = [n](const py::object& v, const char* what) {
+      const Eigen::VectorXd out = v.is_none() ? Eigen::VectorXd() : to_vector(v.cast<py::array>(), what);
+      if (!v.is_none() && out.size() != n) throw py::value_error(std::string("rounding_level: ") + what + " must have n entries");
+      return out;
+    };
+    const Eigen::VectorXd zv = vector(z, "z"), qv = vector(q, "q"), gv = vector(g, "g"), wv = vector(w, "w");
+    const Eigen::VectorXd u = vector(upper, "upper"), r = vector(rows, "rows"), c = vector(cols, "cols");
+    auto run = [&](auto index) {
+      using I = decltype(index);
+      check_compressed<I>(indptr, indices, data.shape(0), n, n, "A");
+      const I* ap = checked_data<I>(indptr, "indptr");
+      const CsrMap<I> A(n, n, ap[n], ap, checked_data<I>(indices, "indices"), checked_data<double>(data, "data"));
+      return nrmicp::detail::rounding_level(A, nrmicp::detail::comm_of(A), zv, qv, gv, wv, u, r, c);
+    };
+    return has_dtype<std::int64_t>(indices) ? run(std::int64_t{}) : run(std::int32_t{});
+  }, py::arg("indptr"), py::arg("indices"), py::arg("data"), py::arg("z"), py::arg("q"), py::arg("g"), py::arg("w"),
+     py::arg("upper"), py::arg("rows"), py::arg("cols"),
+     "eps ||t||_2 of Res's rounding at z (detail::rounding_level): w's terms times rows, z's over cols.");
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_core, m) {
@@ -470,4 +496,5 @@ PYBIND11_MODULE(_core, m) {
   bind_newton<std::int32_t>(m, "NewtonI32");
   bind_newton<std::int64_t>(m, "NewtonI64");
   bind_utilities(m);
+  bind_measures(m);
 }

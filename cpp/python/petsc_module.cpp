@@ -162,7 +162,7 @@ py::dict measure(std::uintptr_t A, py::array q, nrmicp::ZetaKind kind, py::objec
   }
   d_out["residual"] = res;
   d_out["w"] = py::array_t<double>(w.size(), w.data());
-  if (rounding) d_out["rounding_level"] = level.rounding_level(zv, qv, zv - zeta_z, dw, u, d);
+  if (rounding) d_out["rounding_level"] = level.rounding_level(zv, qv, zv - zeta_z, w, u, d);
   return d_out;
 }
 

@@ -804,22 +804,16 @@ class _OriginalResidual:
         return _bounds.active_mask(z, *self._wg(z))
 
     def rounding_level(self, z) -> float:
-        """ε ‖t‖₂, t the rounding of each row's term of Res_E at z (_bounds.term_rounding: d_r(|A||z| + |q|)
-        where it is d_r w, (|z| + |ζ(z)|)/d_c where it is g/d_c): what double precision can resolve of Res_E
-        (the Newton member's floor, newton_level.hpp, in the default rule's measure)."""
-        level = self._rounding_level(z, 1.0)
-        if math.isfinite(level) or not np.all(np.isfinite(z)):
-            return level
-        return 2.0 ** 600 * self._rounding_level(z, 2.0 ** -600)   # terms near float's limit overflowed (z of 1e307)
-
-    def _rounding_level(self, z, s):
-        """rounding_level with every term times `s` (a power of two), over s."""
+        """ε ‖t‖₂, t the rounding of each row's term of Res_E at z: d_r(|A||z| + |q|) where it is d_r w,
+        (|z| + |ζ(z)|)/d_c where it is g/d_c: what double precision can resolve of Res_E (the core's own
+        rule, detail::rounding_level: the Newton member's floor, in the default rule's measure)."""
         dr, dc = self.weights
         w, g, u = self._wg(z)
-        with np.errstate(over="ignore", invalid="ignore"):
-            tw = dr * (abs(self.A) @ (s * np.abs(z)) + s * np.abs(self.qv))
-            t = _bounds.term_rounding(tw, s * z / dc, dr * (s * w), s * g / dc, None if u is None else s * u / dc)
-        return float(np.finfo(float).eps * _norm(t))
+        A = self.A
+        index = A.indices.dtype if A.indptr.dtype == A.indices.dtype else np.int64
+        return _core.rounding_level(A.indptr.astype(index, copy=False), A.indices.astype(index, copy=False),
+                                    np.ascontiguousarray(A.data, dtype=float), np.ascontiguousarray(z, dtype=float),
+                                    self.qv, g, w, u, dr, dc)
 
 
 #: The default rule accepts a Res_E within this factor of its rounding level: the Newton member's

@@ -136,19 +136,6 @@ def residual_terms(z, w, g, upper):
         return np.where(cross, np.maximum(above, -g), terms) if np.any(cross) else terms
 
 
-def term_rounding(tw, z, w, g, upper):
-    """Row by row, the rounding error (over eps) of the term residual_terms takes: tw (the row of
-    |A||z| + |q|) where it is w, |z| + |ζ| where it is g = z − ζ, |z| + |u| where it is z − u; the larger
-    of tw and g's on a tie w = g (the core's term_rounding, detail/box.hpp)."""
-    with np.errstate(invalid="ignore", over="ignore"):
-        tg = np.abs(z) + np.abs(z - g)
-        t = np.where(w < g, tw, np.where(g < w, tg, np.maximum(tw, tg)))
-        if upper is not None:
-            zu = z - upper
-            t = np.where(zu > w, np.where(g < zu, tg, np.abs(z) + np.abs(upper)), t)
-    return t
-
-
 def active_mask(z, w, g, upper) -> np.ndarray:
     """scipy's ``active_mask`` (as in ``lsq_linear``): -1 where z is at its lower bound ζ (g = z − ζ
     <= w), +1 at its upper bound (z − u >= w), 0 strictly between (w = 0 at a solution)."""

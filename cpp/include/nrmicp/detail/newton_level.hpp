@@ -211,18 +211,34 @@ class FallbackMember {
   std::optional<typename Engine<MatrixType>::Fallback> fallback_;
 };
 
-/// NewtonLevel::rounding_level of the vectors times `s` (a power of two), over s.
+/// rounding_level of the vectors times `s` (a power of two), over s.
 template <typename MatrixType>
 double scaled_rounding_level(const MatrixType& A, const Comm& comm, double s, const Eigen::VectorXd& z,
                              const Eigen::VectorXd& q, const Eigen::VectorXd& g, const Eigen::VectorXd& w,
-                             const Eigen::VectorXd& upper, const Eigen::VectorXd& rows) {
-  Eigen::VectorXd t = s * q.cwiseAbs(), scaled_upper;
+                             const Eigen::VectorXd& upper, const Eigen::VectorXd& rows, const Eigen::VectorXd& cols) {
+  Eigen::VectorXd t = s * q.cwiseAbs();
   abs_multiply_add(A, s * z.cwiseAbs(), t);
   if (rows.size()) t.array() *= rows.array();
-  if (s != 1.0 && upper.size()) scaled_upper = s * upper;
-  const Eigen::VectorXd& u = scaled_upper.size() ? scaled_upper : upper;
-  for (Eigen::Index i = 0; i < t.size(); ++i) t[i] = term_rounding(t[i], s * w[i], s * g[i], s * z[i], u, i);
+  // the terms in z's units over the column weights: z_i, g_i and u_i times s / cols_i
+  const Eigen::VectorXd c = cols.size() ? Eigen::VectorXd(s * cols.cwiseInverse()) : Eigen::VectorXd::Constant(z.size(), s);
+  const Eigen::VectorXd u = upper.size() && (s != 1.0 || cols.size()) ? Eigen::VectorXd(upper.cwiseProduct(c)) : upper;
+  for (Eigen::Index i = 0; i < t.size(); ++i)
+    t[i] = term_rounding(t[i], rows.size() ? s * w[i] * rows[i] : s * w[i], c[i] * g[i], c[i] * z[i], u, i);
   return std::numeric_limits<double>::epsilon() * comm.stable_norm(t);
+}
+
+/// ε ‖t‖₂, t_i the rounding of row i's term of Res (term_rounding): rows_i (|A||z| + |q|)_i where it is w_i
+/// (its term rows_i w_i), (|z_i| + |ζ_i|) / cols_i where it is g_i / cols_i (rows, cols empty: ones). What double
+/// precision resolves of Res at z: the Newton member's floor, and the Python layer's (one rule, both engines).
+template <typename MatrixType>
+double rounding_level(const MatrixType& A, const Comm& comm, const Eigen::VectorXd& z, const Eigen::VectorXd& q,
+                      const Eigen::VectorXd& g, const Eigen::VectorXd& w, const Eigen::VectorXd& upper = Eigen::VectorXd(),
+                      const Eigen::VectorXd& rows = Eigen::VectorXd(), const Eigen::VectorXd& cols = Eigen::VectorXd()) {
+  const double level = scaled_rounding_level(A, comm, 1.0, z, q, g, w, upper, rows, cols);
+  if (std::isfinite(level) || !comm.all(z.allFinite() && q.allFinite())) return level;
+  // terms near float's limit overflowed (z of 1e307): the same in units of 2^600, exact but for subnormals
+  constexpr double units = 0x1p600;
+  return units * scaled_rounding_level(A, comm, 1.0 / units, z, q, g, w, upper, rows, cols);
 }
 
 /// One level: its matrix, the weights Ω1/Ω2 of the active-set test, the reduced LCP system
@@ -347,15 +363,11 @@ class NewtonLevel {
   /// g_i = z_i − ζ_i(z)), below which no step brings Res. Row by row, not the two parts' sums: a Res
   /// made of w's entries alone is not floored by z's size (docs/MEASUREMENTS.md, "The rounding level
   /// row by row"). `upper`: the bound of bounded_residual (empty: none); `rows`: weights d > 0 of
-  /// Res's rows, w then being d∘(Az + q) (empty: none; the default rule's Res_E).
+  /// Res's rows, its terms d∘w (empty: none; the default rule's Res_E).
   double rounding_level(const Vector& z, const Vector& q, const Vector& g, const Vector& w,
                         const Vector& upper = Vector(), const Vector& rows = Vector()) const {
     ScopedTimer timer(timings().spmv);
-    const double level = scaled_rounding_level(A_, comm_, 1.0, z, q, g, w, upper, rows);
-    if (std::isfinite(level) || !comm_.all(z.allFinite() && q.allFinite())) return level;
-    // terms near float's limit overflowed (z of 1e307): the same in units of 2^600, exact but for subnormals
-    constexpr double units = 0x1p600;
-    return units * scaled_rounding_level(A_, comm_, 1.0 / units, z, q, g, w, upper, rows);
+    return detail::rounding_level(A_, comm_, z, q, g, w, upper, rows);
   }
   /// The same for the box problem lo ≤ y ≤ hi (Box::residual's terms).
   double rounding_level(const Vector& y, const Vector& q, const Box& box, const Vector& w) const {
