@@ -367,8 +367,10 @@ py::dict option_row(const nrmicp::OptionSpec& spec) {
   d["high_open"] = r.high_open;
   d["finite"] = r.finite;
   d["note"] = r.note ? py::object(py::str(r.note)) : py::object(py::none());
-  static const char* distributed[] = {"every", "stationary", "newton", "neither"};
-  d["distributed"] = distributed[static_cast<int>(spec.distributed)];
+  py::list takes;  // the members that take it on a distributed engine (detail::distributed_takes)
+  for (nrmicp::Method method : nrmicp::all_methods)
+    if (nrmicp::detail::distributed_takes(spec, method)) takes.append(nrmicp::to_string(method));
+  d["distributed"] = py::tuple(takes);
   d["distributed_why"] = spec.distributed_why ? py::object(py::str(spec.distributed_why)) : py::object(py::none());
   return d;
 }

@@ -43,7 +43,7 @@ class Option:
     note: Optional[str]
     type: Optional[str]
     doc: str
-    distributed: str   # the members that take it on PETSc: 'every', 'stationary', 'newton' or 'neither'
+    distributed: tuple   # the members that take it on PETSc (the C++ table's rule, detail::distributed_takes)
     distributed_why: Optional[str]   # why the others cannot
 
     def range_text(self) -> str:
@@ -87,8 +87,7 @@ def names(*scopes: str) -> tuple[str, ...]:
 
 def distributed_refusals(method: Optional[str] = None) -> dict[str, str]:
     """{name: why} of the options nrmicp.distributed cannot apply to `method` (None: to any member)."""
-    takes = ("every", "newton" if method == "newton" else "stationary") if method else ("every", "newton", "stationary")
-    return {n: o.distributed_why for n, o in TABLE.items() if o.distributed not in takes}
+    return {n: o.distributed_why for n, o in TABLE.items() if (method not in o.distributed if method else not o.distributed)}
 
 
 def defaults(*scopes: str) -> dict[str, Any]:
