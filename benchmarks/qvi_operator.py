@@ -13,8 +13,9 @@ Scenes:
   scene's sparse LU a product).
 - ``impulse``: nrmicp.scenes.impulse_control, n = 101 -> 6401 (hierarchy 'auto'), its sparse selection
   Jacobian.
-- ``sin``: the 2D obstacle scene with zeta = psi + 0.2 sin z, m = 99 -> 1023 (n = 9,801 -> 1.05e6), its
-  geometric hierarchy; zeta' = diag(0.2 cos z) as a LinearOperator (or sparse, --sin-form sparse).
+- ``sin``: the 2D obstacle scene with zeta = psi + 0.2 sin z, m = 127 -> 1023 (n = 16,129 -> 1.05e6), its
+  geometric hierarchy (m = 2^k - 1: every size nests to the coarsest grid; m = 99 halves twice only);
+  zeta' = diag(0.2 cos z) as a LinearOperator (or sparse, --sin-form sparse).
 
 Columns: with zeta': Newton steps on the whole ICP (calls of zeta_jacobian), linear solves (every reduced
 system: obstacle solves, matrix-free steps' preconditioner solves), status and Res; without: outer steps
@@ -119,7 +120,7 @@ def main(argv=None):
     ap.add_argument("--thermo2d", type=int, nargs="*", default=[127, 255, 511, 1023],
                     help="2D grid sides m (n = m^2); 2^k - 1 keeps the scene's hierarchy deep")
     ap.add_argument("--impulse", type=int, nargs="*", default=[101, 401, 1601, 6401], help="impulse-control sizes n")
-    ap.add_argument("--sin", type=int, nargs="*", default=[99, 255, 511, 1023], help="2D grid sides m of zeta = psi + 0.2 sin z")
+    ap.add_argument("--sin", type=int, nargs="*", default=[127, 255, 511, 1023], help="2D grid sides m of zeta = psi + 0.2 sin z")
     ap.add_argument("--sin-form", default="operator", choices=["operator", "sparse"], help="the sin QVI's zeta'")
     ap.add_argument("--defaults", action="store_true", help="thermoforming_2d at the scene's kappa, delta")
     ap.add_argument("--tol", type=lambda t: None if t == "default" else float(t), default=1e-8,
