@@ -811,9 +811,8 @@ class _OriginalResidual:
         w, g, u = self._wg(z)
         A = self.A
         index = A.indices.dtype if A.indptr.dtype == A.indices.dtype else np.int64
-        return _core.rounding_level(A.indptr.astype(index, copy=False), A.indices.astype(index, copy=False),
-                                    np.ascontiguousarray(A.data, dtype=float), np.ascontiguousarray(z, dtype=float),
-                                    self.qv, g, w, u, dr, dc)
+        vectors = (None if v is None else np.ascontiguousarray(v, dtype=float) for v in (A.data, z, self.qv, g, w, u, dr, dc))
+        return _core.rounding_level(A.indptr.astype(index, copy=False), A.indices.astype(index, copy=False), *vectors)
 
 
 #: The default rule accepts a Res_E within this factor of its rounding level: the Newton member's
