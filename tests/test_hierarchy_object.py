@@ -94,6 +94,8 @@ def test_bad_input_names_the_argument(problem):
         nrmicp.Hierarchy(A, [sp.eye(A.shape[0] + 1, 3, format="csr")])
     with pytest.raises(TypeError, match="prolongations must be a list"):
         nrmicp.Hierarchy(A, Ps[0])
+    with pytest.raises(TypeError, match=r"Hierarchy\.amg\(A\) builds"):   # (the option's string is not a list)
+        nrmicp.Hierarchy(A, "amg")
     with pytest.raises(ValueError, match="A must be square"):
         nrmicp.Hierarchy(sp.csr_matrix(np.ones((3, 2))), [])
 

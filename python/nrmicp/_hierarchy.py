@@ -341,6 +341,9 @@ class Hierarchy:
 
     def __init__(self, A, prolongations):
         self._A = as_csr(A, "A")   # (square: as_csr's check)
+        if isinstance(prolongations, str):
+            raise TypeError(f"prolongations must be a list of sparse matrices, got the string {prolongations!r}: "
+                            "Hierarchy.amg(A) builds the 'amg' levels")
         if not isinstance(prolongations, (list, tuple)):
             raise TypeError(f"prolongations must be a list of sparse matrices, got {type(prolongations).__name__}")
         Ps = resolve_hierarchy(list(prolongations), self._A) or []
