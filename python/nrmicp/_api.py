@@ -809,10 +809,8 @@ class _OriginalResidual:
         rule, detail::rounding_level: the Newton member's floor, in the default rule's measure)."""
         dr, dc = self.weights
         w, g, u = self._wg(z)
-        A = self.A
-        index = A.indices.dtype if A.indptr.dtype == A.indices.dtype else np.int64
-        vectors = (None if v is None else np.ascontiguousarray(v, dtype=float) for v in (A.data, z, self.qv, g, w, u, dr, dc))
-        return _core.rounding_level(A.indptr.astype(index, copy=False), A.indices.astype(index, copy=False), *vectors)
+        vectors = (None if v is None else np.ascontiguousarray(v, dtype=float) for v in (z, self.qv, g, w, u, dr, dc))
+        return _core.rounding_level(self.A.indptr, self.A.indices, self.A.data, *vectors)   # (A: as_csr's, canonical)
 
 
 #: The default rule accepts a Res_E within this factor of its rounding level: the Newton member's

@@ -166,7 +166,7 @@ def _prepare_matrix(A, comm, o):
     checked too (tol, rtol at their defaults). A Mat made here is destroyed on failure."""
     A_in = _collective(comm, _check_mat, A)
     _mpi.same(comm, float(sp.issparse(A_in)), TypeError,   # (else the ranks would part ways: a hang)
-          "A must be a petsc4py Mat on every rank or a scipy row block on every rank, not both")
+              "A must be a petsc4py Mat on every rank or a scipy row block on every rank, not both")
     Am = _as_mat(A_in, comm) if sp.issparse(A_in) else A_in
     try:
         return Am, _member(Am, comm, o)

@@ -220,10 +220,15 @@ double scaled_rounding_level(const MatrixType& A, const Comm& comm, double s, co
   abs_multiply_add(A, s * z.cwiseAbs(), t);
   if (rows.size()) t.array() *= rows.array();
   // the terms in z's units over the column weights: z_i, g_i and u_i times s / cols_i
-  const Eigen::VectorXd c = cols.size() ? Eigen::VectorXd(s * cols.cwiseInverse()) : Eigen::VectorXd::Constant(z.size(), s);
-  const Eigen::VectorXd u = upper.size() && (s != 1.0 || cols.size()) ? Eigen::VectorXd(upper.cwiseProduct(c)) : upper;
+  const auto c = [&](Eigen::Index i) { return cols.size() ? s / cols[i] : s; };
+  Eigen::VectorXd scaled_upper;
+  if (upper.size() && (s != 1.0 || cols.size())) {
+    scaled_upper.resize(upper.size());
+    for (Eigen::Index i = 0; i < upper.size(); ++i) scaled_upper[i] = c(i) * upper[i];
+  }
+  const Eigen::VectorXd& u = scaled_upper.size() ? scaled_upper : upper;
   for (Eigen::Index i = 0; i < t.size(); ++i)
-    t[i] = term_rounding(t[i], rows.size() ? s * w[i] * rows[i] : s * w[i], c[i] * g[i], c[i] * z[i], u, i);
+    t[i] = term_rounding(t[i], rows.size() ? s * w[i] * rows[i] : s * w[i], c(i) * g[i], c(i) * z[i], u, i);
   return std::numeric_limits<double>::epsilon() * comm.stable_norm(t);
 }
 
