@@ -545,6 +545,10 @@ def case_implicit_upper():
             out[name] = {"status": str(r.status), "serial_status": str(s.status), "res": float(r.residual),
                          "err": float(np.max(np.abs(z - s.z))), "at_upper": int(np.sum(z >= u - 1e-12)),
                          "above": float(np.max(z - u))}
+    D = A + sp.diags(A.diagonal())   # row-dominant by half its diagonal: 'auto' alone would take nrmgs
+    r = dist.solve(D[lo:hi], q[lo:hi], pb.zeta[lo:hi], upper=uppers["callable"][1], tol=1e-10)
+    if RANK == 0:   # (an implicit upper is newton's: 'auto' takes it, as nrmicp.solve's 'auto' does)
+        out["auto"] = [r.method, nrmicp.solve(D, q, pb.zeta, upper=uppers["callable"][0], tol=1e-10).method]
     try:
         dist.solve(A[lo:hi], q[lo:hi], pb.zeta[lo:hi], upper=uppers["callable"][1], method="nrmgs")
         out["nrmgs"] = "solved"
@@ -1093,10 +1097,21 @@ def family_problems():
     c = obs.zeta.c.copy()
     c[::7] = -np.inf                         # rows free below (the box form's lo' = -inf)
     upper = np.where(np.arange(len(c)) % 3 == 0, obs.zeta.c + 0.5, np.inf)
+    c1, u1 = _bounded_on_rank_0(obs.zeta.c, upper)
     return [("lcp", lcp.A, lcp.q, None, lambda lo, hi: None, None),
             ("constant", obs.A, obs.q, obs.zeta.c, lambda lo, hi: obs.zeta.c[lo:hi], None),
             ("callable", icp.A, icp.q, icp.zeta, lambda lo, hi: (lambda z, s=s[lo:hi]: 0.1 * np.sin(z) + s), None),
-            ("bounds", obs.A, obs.q, c, lambda lo, hi: c[lo:hi], upper)]
+            ("bounds", obs.A, obs.q, c, lambda lo, hi: c[lo:hi], upper),
+            ("bounds_on_rank_0", obs.A, obs.q, c1, lambda lo, hi: c1[lo:hi], u1)]
+
+
+def _bounded_on_rank_0(c, upper):
+    """(ζ, upper) of a problem whose bounds lie in its first quarter of rows (rank 0's on up to 3 ranks):
+    a row free below and upper bounds there, none on the other ranks' rows (each core then decides alike)."""
+    c, upper = c.copy(), upper.copy()
+    c[3] = -np.inf
+    upper[len(c) // 4:] = np.inf
+    return c, upper
 
 
 def _box_residual(A, q, z, zeta, upper):
@@ -1203,6 +1218,21 @@ def case_nonpositive_diagonal():
         except ValueError as exc:
             out["serial_stationary"] = str(exc)
     return out
+
+
+def case_bounds_on_rank_0():
+    """Newton with a free row and upper bounds on rank 0's rows only (the others' +inf: none there) against
+    the serial solve: status, level steps, z, Res by numpy."""
+    obs = make_obstacle_icp(16)
+    A = sp.csr_matrix(obs.A)
+    c, upper = _bounded_on_rank_0(obs.zeta.c, np.where(np.arange(A.shape[0]) % 3 == 0, obs.zeta.c + 0.5, np.inf))
+    lo, hi = split(A.shape[0])
+    r = dist.solve(A[lo:hi], obs.q[lo:hi], c[lo:hi], upper=upper[lo:hi], method="newton", tol=1e-10)
+    z = dist.gather(r.z)
+    if RANK == 0:
+        s = nrmicp.solve(A, obs.q, c, upper=upper, method="newton", tol=1e-10)
+        return {"status": str(r.status), "serial_status": str(s.status), "res": _box_residual(A, obs.q, z, c, upper),
+                "err": float(np.max(np.abs(z - s.z)) / np.max(np.abs(s.z)))}
 
 
 def case_upper_all_inf():
@@ -1339,7 +1369,7 @@ if __name__ == "__main__":
               "warm": case_warm, "one_sided_contact": case_one_sided_contact, "implicit_upper": case_implicit_upper, "jacobian": case_jacobian, "jacobian_still_rows": case_jacobian_still_rows, "solver": case_solver, "units": case_units, "z_units": case_z_units, "engine": lambda: case_engine(*args), "options": case_options, "rounds": case_rounds, "shared_hierarchy": case_shared_hierarchy, "hazards": case_hazards,
               "fuzz": lambda: case_fuzz(int(args[0])), "family": case_family, "hooks": case_hooks, "no_rows": case_no_rows,
               "nonpositive_diagonal": case_nonpositive_diagonal,
-              "upper_all_inf": case_upper_all_inf,
+              "upper_all_inf": case_upper_all_inf, "bounds_on_rank_0": case_bounds_on_rank_0,
               "reason_alike": case_reason_alike, "hints": case_hints, "differing": case_differing,
               "rows_apart": case_rows_apart}[name]()
     if RANK == 0:

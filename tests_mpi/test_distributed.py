@@ -248,6 +248,7 @@ def test_an_implicit_upper_bound_runs_the_serial_outer_fixed_point(np_):
         assert r["err"] < 1e-8 and r["res"] < 1e-10, (np_, name, r)
         assert r["at_upper"] > 100 and r["above"] <= 1e-12, (np_, name, r)   # the ceiling is met, never crossed
     assert "solved by method 'newton'" in out["nrmgs"] and "upper" in out["nrmgs"]
+    assert out["auto"] == ["newton", "newton"], out
 
 
 @pytest.mark.parametrize("np_", [1, 2])
@@ -369,6 +370,13 @@ def test_a_nonpositive_diagonal_is_refused_and_gives_the_amg_set_up_up(ranks):
 def test_an_upper_of_plus_infinity_everywhere_is_no_bound(ranks):
     out = mpirun(ranks, "upper_all_inf", timeout=120)
     assert out == {"status": "CONVERGED", "polished": True}, out
+
+
+@pytest.mark.parametrize("ranks", [2, 3])
+def test_bounds_on_one_ranks_rows_only_are_every_ranks_problem(ranks):
+    out = mpirun(ranks, "bounds_on_rank_0", timeout=120)   # (the core gives the other ranks +inf upper bounds)
+    assert out["status"] == out["serial_status"] == "CONVERGED", out
+    assert out["res"] < 1.0001e-10 and out["err"] < 1e-8, out
 
 
 def test_a_hierarchy_given_up_on_one_rank_gives_every_rank_the_same_reason():

@@ -8,7 +8,7 @@ import pytest
 from conftest import mpirun
 
 MEMBERS = {"nrm", "nrmm", "nrmaor", "nrmsor", "nrmgs", "nrmj"}
-PROBLEMS = {"lcp", "constant", "callable", "bounds"}
+PROBLEMS = {"lcp", "constant", "callable", "bounds", "bounds_on_rank_0"}
 TOL = 1e-10
 
 

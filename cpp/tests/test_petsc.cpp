@@ -564,6 +564,42 @@ TEST_CASE("an input one process alone gets wrong is refused on every process (no
   MatDestroy(&C);
 }
 
+TEST_CASE("bounds on one process's rows only (an upper bound, a free row) are every process's problem") {
+  INFO("on " << size_of() << " processes");
+  Case c = membrane(31, 20.0, true, 2);
+  const Eigen::Index n = c.A.rows();
+  c.upper.tail(n - n / 3).setConstant(HUGE_VAL);  // bounded above on the first third (process 0's) only
+  c.lower[5] = -HUGE_VAL;                          // and free below on row 5 (process 0's)
+  const int lo = split(static_cast<int>(n)).first;
+  const bool own_upper = lo < n / 3;
+  const Result serial = Newton<RowMat>(c.A, with_method(Method::Newton, 1e-9), c.P).solve(
+      c.q, Zeta<int>::constant(c.lower).with_upper(c.upper));
+  REQUIRE(serial.status == Status::Converged);
+  Mat A = to_petsc(c.A);
+  std::vector<petsc::Matrix> P;
+  for (const RowMat& p : c.P) {
+    Mat M = to_petsc(p);
+    P.emplace_back(M);
+    MatDestroy(&M);
+  }
+  {
+    const petsc::Matrix Am(A);
+    Zeta<PetscInt> zd = Zeta<PetscInt>::constant(rows_of(c.lower));
+    if (own_upper) zd = zd.with_upper(rows_of(c.upper));  // the other processes pass none
+    if (size_of() > 1) CHECK(zd.bounded() == (rank_of() == 0));  // process 1 passes an unbounded zeta
+    for (const Method m : {Method::Newton, Method::NRMGS}) {
+      INFO("method " << (m == Method::Newton ? "newton" : "nrmgs"));
+      const Result r = m == Method::Newton ? Newton<petsc::Matrix>(Am, with_method(m, 1e-9), P).solve(rows_of(c.q), zd)
+                                           : Solver<petsc::Matrix>(Am, with_method(m, 1e-9)).solve(rows_of(c.q), zd);
+      CHECK(r.status == Status::Converged);
+      const Eigen::VectorXd z = gather(r.z, n);
+      CHECK((z - serial.z).lpNorm<Eigen::Infinity>() <= 1e-6 * serial.z.lpNorm<Eigen::Infinity>());
+      check_conditions(c, z, 1e-6);
+    }
+  }
+  MatDestroy(&A);
+}
+
 TEST_CASE("an option the PETSc engine cannot apply to a member is refused naming it (the option table's column)") {
   const Case c = membrane(7, 20.0, false, 0);
   Mat A = to_petsc(c.A);

@@ -1183,17 +1183,23 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
     """
     options = _options.pick(locals())   # the options, as given
     t0 = time.perf_counter()
-    if isinstance(method, str) and method.lower() == "auto" and (
-            zeta_jacobian is not None or callable(upper) or isinstance(upper, Affine) or
-            (upper is not None and (callable(zeta) or isinstance(zeta, Affine)))):
-        options["method"] = "newton"   # a ζ Jacobian, an implicit upper, an implicit ζ with upper: newton's only
-    # Bounds take choose_method's rule as they are: nrmgs's box form contracts as its LCP form does
-    # (m(x) is 1-Lipschitz as |x| is, detail/modulus.hpp), so a row-dominant A needs as few sweeps.
+    options["method"] = implied_method(method, zeta, upper, zeta_jacobian)
     s = Solver(A, **_options.pick(options, "setup", "solve"))
     res = s.solve(q, zeta, upper=upper, **_options.pick(options, "call"))
     _charge_setup(res.timings, s._setup_timings)   # the whole call: the set-up is part of it
     res.timings["total"] = time.perf_counter() - t0
     return res
+
+
+def implied_method(method, zeta, upper, zeta_jacobian):
+    """'newton' for 'auto' given what only newton solves (a ζ Jacobian, an implicit upper bound, an implicit ζ with
+    bounds), else `method`. Bounds alone take choose_method's rule: nrmgs's box form contracts as its LCP form does
+    (m(x) is 1-Lipschitz as |x| is, detail/modulus.hpp), so a row-dominant A needs as few sweeps."""
+    if isinstance(method, str) and method.lower() == "auto" and (
+            zeta_jacobian is not None or callable(upper) or isinstance(upper, Affine) or
+            (upper is not None and (callable(zeta) or isinstance(zeta, Affine)))):
+        return "newton"
+    return method
 
 
 def _charge_setup(timings: dict, setup: dict) -> None:

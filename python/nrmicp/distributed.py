@@ -26,7 +26,7 @@ from ._newton import (auto_builds_amg, check_jacobian, check_no_hierarchy, check
                       warn_shortened)
 from ._api import (METHODS as _ALL_METHODS, Result, _make_upper, _make_zeta, _Rounds, _choice, _criterion, _settle,
                    _log_final, _omega2_hint, _progress_hook, _units_parameters, core_options, choose_method,
-                   dominance_margin, failure_hint)
+                   dominance_margin, failure_hint, implied_method)
 from ._scaling import sigma_from_logs, weights_of_rows
 from ._hierarchy import Hierarchy, _fingerprint, hierarchy_kind, resolve_hierarchy
 from ._inputs import as_constant, as_csr, as_vector
@@ -237,9 +237,8 @@ def solve(A, q, zeta=None, *, upper=None, comm=None, **options) -> Result:
     comm = comm or (A.getComm() if isinstance(A, PETSc.Mat) else PETSc.COMM_WORLD)
     _collective(comm, lambda: _options.validate(options, where="distributed.solve",
                                                          unsupported=_options.distributed_refusals()))
-    setup = {k: v for k, v in options.items() if _options.TABLE[k].scope != "call"}   # (method='auto' reads both)
-    if options.get("zeta_jacobian") is not None and str(setup.get("method", "auto")).lower() == "auto":
-        setup["method"] = "newton"   # (nrmicp.solve's rule: a Jacobian is for Newton)
+    method = implied_method(options.get("method", "auto"), zeta, upper, options.get("zeta_jacobian"))
+    setup = {k: v for k, v in {**options, "method": method}.items() if _options.TABLE[k].scope != "call"}
     t0 = time.perf_counter()
     with Solver(A, comm=comm, **setup) as solver:
         r = solver.solve(q, zeta, upper=upper, **{k: v for k, v in options.items() if k not in setup})
@@ -418,24 +417,20 @@ def _margin(Am, comm):
 
 
 def _upper(upper, Am, zeta, comm, method):
-    """(this rank's rows of the upper bound, or the core's functor of an implicit one, or None; whether the
-    problem is bounded, as _bounds.is_bounded over every rank's rows). `zeta`: (kind, c). A -inf entry of a
-    constant ζ on any rank (a free row) makes every rank's problem a box problem."""
+    """(this rank's rows of the upper bound, None where they have none (the core bounds them by +inf when
+    another rank's are bounded), or the core's functor of an implicit one; whether the problem is bounded,
+    _bounds.is_bounded over every rank's rows). `zeta`: (kind, c)."""
     nloc, (kind, c) = Am.getLocalSize()[0], zeta
-    if upper is None:
-        free = kind == _K.constant and _flag_max(comm, float(np.any(np.isneginf(c)))) > 0
-        return np.full(nloc, np.inf) if free and method != "newton" else None, free
 
     def local():
         _not_a_mat(upper, "upper")
         u = _make_upper(upper, nloc, _Rows(Am))
         _bounds.check(kind, c if kind == _K.constant else None, u, method, None)
-        return np.full(nloc, np.inf) if u is None else u   # (all +inf on this rank: the same core call as the others)
-    u = _collective(comm, local)
-    if not isinstance(u, _bounds.ImplicitUpper):   # (+inf on every rank's rows: no upper bound, as serially)
-        bound = _flag_max(comm, float(np.any(u < np.inf)))
-        return (u, True) if bound else _upper(None, Am, zeta, comm, method)
-    return (_K.functor, None, None, None, None, _functor(u.kind, u.B, u.c, u.fn, Am, comm, "upper(z)")), True
+        return u
+    u = None if upper is None else _collective(comm, local)
+    if isinstance(u, _bounds.ImplicitUpper):
+        return (_K.functor, None, None, None, None, _functor(u.kind, u.B, u.c, u.fn, Am, comm, "upper(z)")), True
+    return u, _flag_max(comm, float(_bounds.is_bounded(c if kind == _K.constant else None, u))) > 0
 
 
 def _rounds(core, measure, xa, opts, o, jacobian, bounded, hint):

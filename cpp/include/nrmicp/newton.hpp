@@ -143,10 +143,7 @@ class Newton {
     o.tol = tol, o.rtol = 0.0;  // (tol is the polish's target: a set-up's rtol, met at z already, takes no step)
     o.maxiter = polish_steps;
     o.record_history = false;
-    const Callback no_callback;
-    const Poll no_poll;
-    const Progress no_progress;
-    return run(q, zeta, &z, {no_callback, no_poll, no_progress}, o, false);
+    return run(q, zeta, &z, {Callback(), Poll(), Progress()}, o, false);  // (none: temporaries outlive the call)
   }
 
  private:
@@ -258,11 +255,12 @@ class Newton {
            "]) has a_ii" + what + " (the active-set test needs a positive diagonal): the hierarchy ends above it";
   }
 
-  Result run(const Vector& q, const Zeta<StorageIndex>& zeta, const Vector* z0, const detail::Hooks& hooks,
+  Result run(const Vector& q, const Zeta<StorageIndex>& given, const Vector* z0, const detail::Hooks& hooks,
              const Options& o, bool nest) const {
     const auto t0 = std::chrono::steady_clock::now();
     const Eigen::Index n = levels_.A.rows();
-    detail::collective_check(levels_.finest->comm(), [&] { detail::check_solve_input("Newton::solve", q, z0, zeta, n); });
+    detail::collective_check(levels_.finest->comm(), [&] { detail::check_solve_input("Newton::solve", q, z0, given, n); });
+    const Zeta<StorageIndex> zeta = detail::agree_upper(given, n, levels_.finest->comm());
     Options resolved = o;
     resolve_tolerance(resolved, q, zeta, levels_.finest->comm());
     detail::NewtonRun<MatrixType> run(levels_, resolved, hooks, nest, zeta.upper());

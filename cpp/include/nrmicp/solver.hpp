@@ -148,7 +148,7 @@ class Solver {
   /// Solves ICP(q, A, ζ) from the initial guess z0 (zeros when null). `solve_options`, when
   /// given, replace the constructor's per-solve options (the splitting stays); the merged
   /// options are checked against the method.
-  Result solve(const Vector& q, const Zeta<StorageIndex>& zeta = Zeta<StorageIndex>::none(),
+  Result solve(const Vector& q, const Zeta<StorageIndex>& given = Zeta<StorageIndex>::none(),
                const Vector* z0 = nullptr, const Callback& callback = {}, const Poll& poll = {},
                const SolveOptions* solve_options = nullptr, const Progress& progress = {}) const {
     const auto t0 = std::chrono::steady_clock::now();
@@ -156,18 +156,13 @@ class Solver {
     Options o = options_;
     detail::collective_check(comm(), [&] {
       if (solve_options) o = options_.with(solve_options, n);
-      detail::check_solve_input("Solver::solve", q, z0, zeta, n);
+      detail::check_solve_input("Solver::solve", q, z0, given, n);
+      check_bounds(given);
     });
+    const Zeta<StorageIndex> zeta = detail::agree_upper(given, n, comm());
     resolve_tolerance(o, q, zeta, comm());
     Result r;
-    if (zeta.bounded()) {
-      if (zeta.implicit_upper())
-        throw std::invalid_argument("Solver: an implicit upper bound (affine or functor) is solved by the Newton member "
-                                    "(nrmicp::Newton, its outer fixed point); the modulus members take a constant upper bound");
-      if (zeta.kind() == ZetaKind::Affine || zeta.kind() == ZetaKind::Functor)
-        throw std::invalid_argument("Solver: an affine or functor zeta with an upper bound is solved by the Newton member "
-                                    "(nrmicp::Newton, its outer fixed point); the modulus members take bounds with zeta "
-                                    "none or constant");
+    if (comm().any(zeta.bounded())) {  // (a free row on one process: the box problem on all)
       r = solve_box(q, zeta, z0, {callback, poll, progress}, o);
     } else if (zeta.kind() == ZetaKind::Constant) {
       // ζ ≡ c: LCP(q + Ac, A) in y = z − c. Res and w are the same in both variables.
@@ -211,6 +206,18 @@ class Solver {
   }
 
   using Hooks = detail::Hooks;
+
+  /// The bounds the modulus members take: constant ones, with ζ none or constant.
+  static void check_bounds(const Zeta<StorageIndex>& zeta) {
+    if (!zeta.bounded()) return;
+    if (zeta.implicit_upper())
+      throw std::invalid_argument("Solver: an implicit upper bound (affine or functor) is solved by the Newton member "
+                                  "(nrmicp::Newton, its outer fixed point); the modulus members take a constant upper bound");
+    if (zeta.kind() == ZetaKind::Affine || zeta.kind() == ZetaKind::Functor)
+      throw std::invalid_argument("Solver: an affine or functor zeta with an upper bound is solved by the Newton member "
+                                  "(nrmicp::Newton, its outer fixed point); the modulus members take bounds with zeta "
+                                  "none or constant");
+  }
 
   // Bounds (ζ none or constant lower, upper): the box problem in y = z − s, q' = q + As, started
   // from y0 = z0 − s as the constant obstacle's LCP is; m(x) replaces |x| (detail/modulus.hpp).

@@ -225,6 +225,15 @@ void check_solve_input(const std::string& who, const Eigen::VectorXd& q, const E
     throw std::invalid_argument(who + ": x0 has length " + std::to_string(z0->size()) + ", expected n = " + std::to_string(n));
   zeta.check(n);
 }
+
+/// ζ whose constant upper bound, where any process has one, every process has (+∞ on the rows of a
+/// process without): the branches a solve takes on bounds are then the same on all (one reduction).
+template <typename StorageIndex>
+Zeta<StorageIndex> agree_upper(const Zeta<StorageIndex>& zeta, Eigen::Index n, const Comm& comm) {
+  const bool elsewhere = comm.any(zeta.upper().size() > 0);
+  if (!elsewhere || zeta.upper().size() || zeta.implicit_upper()) return zeta;
+  return zeta.with_upper(Eigen::VectorXd::Constant(n, std::numeric_limits<double>::infinity()));
+}
 }  // namespace detail
 
 }  // namespace nrmicp

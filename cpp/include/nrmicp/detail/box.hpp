@@ -194,13 +194,13 @@ struct ShiftedBounds {
   ShiftedBounds(const Eigen::VectorXd& psi, const Eigen::VectorXd& upper, bool shift = true,
                 const Comm& comm = serial_comm()) {
     constexpr double inf = std::numeric_limits<double>::infinity();
-    const bool free_below = comm.max(psi.size() && (psi.array() == -inf).any() ? 1.0 : 0.0) > 0;
-    const bool has_upper = comm.max(upper.size() ? 1.0 : 0.0) > 0;
+    const bool free_below = comm.any(psi.size() && (psi.array() == -inf).any());
+    const bool has_upper = comm.any(upper.size() > 0);
     if (!free_below && !has_upper) { s = psi; return; }
     if (!shift) {
       box.lo = psi;
       box.hi = upper;
-      box.has_lo = comm.max(psi.size() ? 1.0 : 0.0) > 0;
+      box.has_lo = comm.any(psi.size() > 0);
       box.has_hi = has_upper;
       return;
     }

@@ -29,6 +29,8 @@ class Comm {
   std::uint64_t sum(std::uint64_t v) const { sum(&v, 1); return v; }
   /// Whether b holds on every process.
   bool all(bool b) const { return !(max(b ? 0.0 : 1.0) > 0); }
+  /// Whether b holds on some process.
+  bool any(bool b) const { return max(b ? 1.0 : 0.0) > 0; }
   /// ‖v‖∞ over every process (a NaN stays NaN, as in lpNorm).
   template <typename Derived>
   double inf_norm(const Eigen::MatrixBase<Derived>& v) const {

@@ -93,7 +93,7 @@ struct SemismoothLinearization {
       if (!comm.all(zeta.derivative(z, J))) return false;
     }
     K.is_matrix_free = J.matrix_free();
-    if (!comm.all(K.is_matrix_free) && !comm.all(!K.is_matrix_free))
+    if (comm.any(K.is_matrix_free) && !comm.all(K.is_matrix_free))
       throw std::invalid_argument("zeta_jacobian returned a linear operator on some processes and a matrix on others");
     if (!K.is_matrix_free && !assembled(z, zeta_z)) {  // an engine without J's system: its product, matrix-free
       J.product = [M = J.matrix](const double* v, double* out, Eigen::Index n) {

@@ -166,7 +166,7 @@ class Monitor {
     const std::optional<Status> end = verdict(r);
     // The callback sees every iterate that has a Res (those of the history), the last one too;
     // asking to stop at an iterate that ends the solve anyway does not change why it ended.
-    const bool asked = callback_ && !comm_->all(!call_back(k, improved ? best_z_ : s.z, r));
+    const bool asked = callback_ && comm_->any(call_back(k, improved ? best_z_ : s.z, r));
     if (end) return finish_with(*end, k);
     if (asked) return finish_with(Status::CallbackStop, k);
     if (poll_ && ScopedTimer::seconds_since(last_poll_) > 0.05) {
