@@ -166,6 +166,13 @@ def _bad(kind):
         return B, pb.q[lo:hi], zeta, kw
     elif kind == "mat_as_zeta":   # a bare Mat (callable in petsc4py) where nrmicp.Affine(B, c) was meant
         return M, q, mat(A * 0.01, lo, hi), kw
+    elif kind == "dense_A":   # a dense Mat: the engine reads AIJ rows
+        return M.convert("dense"), q, zeta, kw
+    elif kind == "layout_A":   # A's columns split unlike its rows (one more column on rank 0, one fewer on rank 1)
+        cols = (hi - lo) + (1 if RANK == 0 else -1 if RANK == 1 else 0) if SIZE > 1 else hi - lo
+        B = A[lo:hi]
+        return PETSc.Mat().createAIJ(size=((hi - lo, n), (cols, n)), comm=COMM, csr=(
+            B.indptr.astype(PETSc.IntType), B.indices.astype(PETSc.IntType), B.data)), pb.q[lo:hi], zeta, kw
     elif kind == "B_columns":   # zeta.B with A's rows but another column layout (one more column on rank 0)
         cols = [(hi - lo) + (1 if RANK == 0 else -1 if RANK == 1 else 0)] if SIZE > 1 else [hi - lo]
         B = PETSc.Mat().createAIJ(size=((hi - lo, n), (cols[0], n)), comm=COMM)
@@ -272,7 +279,9 @@ def case_no_rows():
 def _snapshot(*objs):
     out = []
     for o in objs:
-        if isinstance(o, PETSc.Mat):
+        if isinstance(o, PETSc.Mat) and "dense" in o.getType():
+            out.append(o.getDenseArray().tolist())
+        elif isinstance(o, PETSc.Mat):
             out.append([a.tolist() for a in o.getValuesCSR()])
         elif isinstance(o, PETSc.Vec):
             out.append(o.getArray().tolist())

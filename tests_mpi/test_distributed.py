@@ -124,6 +124,8 @@ def test_a_p_matrix_where_active_sets_may_cycle_takes_the_serial_path(partition_
 BAD = {
     "layout": ("ValueError", "does not match A's rows"),
     "nonsquare": ("ValueError", "must together be square"),
+    "dense_A": ("ValueError", "A must be an AIJ (sparse) PETSc matrix, got type 'mpidense'"),
+    "layout_A": ("ValueError", "create A with the same row and column layout"),
     "zero_diagonal": ("ValueError", "diagonal must be positive"),
     "nan_q": ("ValueError", "q has a non-finite entry"),
     "complex_A": ("TypeError", "A must be real"),

@@ -39,16 +39,9 @@ _K = _core.ZetaKind
 METHODS = _ALL_METHODS
 # ----------------------------------------------------------------------------- inputs
 def _check_mat(A):
-    """A's local checks: a square AIJ Mat with equal layouts, or a scipy row block (as nrmicp.solve checks A)."""
+    """A's local checks: a petsc4py Mat (its layout the engine's to check: _member), or a scipy row block (as
+    nrmicp.solve checks A)."""
     if isinstance(A, PETSc.Mat):
-        if "aij" not in A.getType():
-            raise TypeError(f"A must be an AIJ (sparse) PETSc matrix, got type {A.getType()!r}")
-        (m, n), (M, N) = A.getLocalSize(), A.getSize()
-        if M != N:
-            raise ValueError(f"A must be square, got shape ({M}, {N})")
-        if m != n:
-            raise ValueError(f"A's local row and column sizes differ on this rank ({m} rows, {n} columns): "
-                             "create A with the same row and column layout")
         return A
     if not sp.issparse(A):
         raise TypeError(f"A must be a petsc4py Mat or this rank's scipy.sparse row block, got {type(A).__name__}")
@@ -179,6 +172,8 @@ def _prepare_matrix(A, comm, o):
 def _member(Am, comm, o):
     """The member for Am and the set-up options `o`, checked on every rank ('auto': nrmicp.solve's rule, A's
     dominance margin reduced over the ranks), and A as the PETSc engine needs it."""
+    from . import _petsc   # (the engine's rules, as its cores check them: A's layout now, its diagonal after the options)
+    _collective(comm, _petsc.check_layout, Am.handle)
     nloc, method = Am.getLocalSize()[0], o["method"]
     if isinstance(method, str) and method.lower() == "auto":
         method = choose_method(None, o, _margin(Am, comm))
@@ -197,7 +192,6 @@ def _member(Am, comm, o):
         hierarchy_kind(hierarchy)
         return m
     m = _collective(comm, local)
-    from . import _petsc   # (the engine's own rule, as its cores check it; after the options: an unassembled Mat fails here)
     _collective(comm, _petsc.check_operator, Am.handle)
     return m
 

@@ -92,12 +92,12 @@ class Newton {
          std::vector<RowMatrix> coarse_operators = {})
       : options_(as_newton(std::move(options))), levels_{A, {}, {}, {}} {
     using detail::comm_of, detail::check_operator;  // (rows and columns below: this process's)
+    detail::collective_check(comm_of(A), [&] { check_operator(A); });  // (the engine's layout first: collective calls)
     detail::collective_check(comm_of(A), [&] {
       if (A.rows() != A.cols() || (!A.rows() && comm_of(A).size() > 1))  // (each process decides on its rows)
         throw std::invalid_argument("Newton: A must be square with rows on every process, got " + std::to_string(A.rows()) + "x" + std::to_string(A.cols()));
       options_.check(A.rows(), detail::Engine<MatrixType>::serial);
     });
-    detail::collective_check(comm_of(A), [&] { check_operator(A); });  // (collective calls: once every process's shape passed)
     check_shapes([&] { using detail::global_rows; return global_rows(A); }(), prolongations, coarse_operators);
     const auto t0 = std::chrono::steady_clock::now();
     levels_.finest = std::make_unique<detail::NewtonLevel<MatrixType>>(A, options_);  // checks Ω1, Ω2

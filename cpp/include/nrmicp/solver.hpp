@@ -116,13 +116,13 @@ class Solver {
     if (!is_stationary(options_.method))
       throw std::invalid_argument("Solver: method 'newton' is the Newton member: use nrmicp::Newton (newton.hpp), "
                                   "not nrmicp::Solver");
+    detail::collective_check(comm(), [&] { using detail::check_operator; check_operator(A); });  // (the engine's layout first)
     detail::collective_check(comm(), [&] {  // (rows and columns are this process's)
       if (A.rows() != A.cols())
         throw std::invalid_argument("Solver: A must be square, got " + std::to_string(A.rows()) + "x" +
                                     std::to_string(A.cols()));
       options_.check(A.rows(), detail::Engine<MatrixType>::serial);
     });
-    detail::collective_check(comm(), [&] { using detail::check_operator; check_operator(A); });  // (collective calls)
     const auto t0 = std::chrono::steady_clock::now();
     detail::collective_check(comm(), [&] {  // (Ω2 = diag(A) and the splitting read this process's rows)
       params_ = resolve_parameters(A, options_);

@@ -27,6 +27,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <memory>
 #include <stdexcept>
@@ -274,9 +275,23 @@ inline Matrix galerkin(const Matrix&, const Matrix& A, const Matrix& P) {
   return out;
 }
 inline Eigen::VectorXd diagonal(const Matrix& A) { return A.diagonal(); }
-/// Every member on this engine divides by a_ii (V-cycle smoothers, Krylov solves, splittings): this process's
-/// diagonal positive and normal (a subnormal one's reciprocal overflows); the serial member has other rules.
+/// A as this engine reads it: AIJ (its rows' CSR arrays), square, this process's rows its columns (the driver's
+/// vectors hold both). Local queries only; throws naming what differs.
+inline void check_layout(const Matrix& A) {
+  MatType type;
+  check(MatGetType(A.get(), &type), "MatGetType");
+  if (!std::strstr(type, "aij")) throw std::invalid_argument(std::string("A must be an AIJ (sparse) PETSc matrix, got type '") + type + "'");
+  if (global_rows(A) != global_cols(A))
+    throw std::invalid_argument("A must be square, got shape (" + std::to_string(global_rows(A)) + ", " + std::to_string(global_cols(A)) + ")");
+  if (A.rows() != A.cols())
+    throw std::invalid_argument("A's local row and column sizes differ on this process (" + std::to_string(A.rows()) + " rows, " +
+                                std::to_string(A.cols()) + " columns): create A with the same row and column layout");
+}
+/// A's layout (check_layout, on every process first), then what every member on this engine needs: it divides by
+/// a_ii (V-cycle smoothers, Krylov solves, splittings), so this process's diagonal is positive and normal (a
+/// subnormal one's reciprocal overflows); the serial member has other rules.
 inline void check_operator(const Matrix& A) {
+  detail::collective_check(A.comm(), [&] { check_layout(A); });  // (before the diagonal's collective calls)
   const Eigen::VectorXd d = A.diagonal();
   for (Eigen::Index i = 0; i < d.size(); ++i)
     if (!(d[i] >= std::numeric_limits<double>::min())) {
