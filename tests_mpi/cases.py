@@ -922,7 +922,14 @@ def case_shared_hierarchy():
                 s = nrmicp.solve(A, pb.q, pb.zeta, method="newton", hierarchy=h, tol=1e-9, scale=None)
                 out[f"{name} {form}"] = {"steps": r.level_steps, "serial_steps": s.level_steps, "status": str(r.status),
                                          "serial_status": str(s.status), "err": float(np.max(np.abs(z - s.z)))}
-    return out
+    other = nrmicp.Hierarchy(2 * A, pb.prolongations())   # built on another A: refused, as serially
+    try:
+        dist.solve(A[lo:hi], pb.q[lo:hi], pb.zeta[lo:hi], method="newton", hierarchy=other)
+        refused = "solved"
+    except ValueError as exc:
+        refused = str(exc)
+    texts = _allgather_text(refused)
+    return {"levels": out, "another A": texts} if RANK == 0 else None
 
 
 def case_hazards():

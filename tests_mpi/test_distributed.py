@@ -340,6 +340,9 @@ def test_the_serial_rounds_decide_as_in_nrmicp_solve(np_):
 @pytest.mark.parametrize("np_", [1, 2, 3])
 def test_one_hierarchy_object_serves_both_engines_with_the_same_decisions(np_):
     out = mpirun(np_, "shared_hierarchy")
+    refused = out["another A"]   # a Hierarchy of another A: refused on every rank, as nrmicp.solve refuses it
+    assert len(set(refused)) == 1 and "hierarchy was built on another matrix than A" in refused[0], refused
+    out = out["levels"]
     assert len(out) == 4
     for name, r in out.items():
         assert r["status"] == r["serial_status"] == "CONVERGED" and r["steps"] == r["serial_steps"], (name, r)

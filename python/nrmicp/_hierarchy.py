@@ -393,11 +393,11 @@ class Hierarchy:
         lines = [f"  {l:5d} {M.shape[0]:12,d} {M.nnz:14,d}" for l, M in enumerate(self.operators)]
         return "\n".join([repr(self), "  level         rows       nonzeros", *lines])
 
-    def check_fits(self, A: sp.csr_matrix) -> None:
+    def check_fits(self, A: sp.csr_matrix, rows: tuple | None = None) -> None:
         """ValueError naming hierarchy unless it was built on A as A is now (the same pattern and values:
-        its coarse operators are their Galerkin products)."""
-        B = self._A
-        if B.shape != A.shape or B.nnz != A.nnz or _fingerprint(A) != self._fingerprint:
+        its coarse operators are their Galerkin products); `rows` (lo, hi): A is those rows of it (a rank's)."""
+        B = self._A if rows is None else self._A[rows[0]:rows[1]]
+        if B.shape != A.shape or B.nnz != A.nnz or _fingerprint(A) != (self._fingerprint if rows is None else _fingerprint(B)):
             raise ValueError(f"hierarchy was built on another matrix than A, or on A before it changed (shape "
                              f"{B.shape}, {B.nnz} nonzeros, against A's {A.shape}, {A.nnz}): its coarse operators "
                              "are that matrix's; build Hierarchy(A, hierarchy.prolongations) for this A, or pass "

@@ -359,7 +359,10 @@ def _prolongations(hierarchy, Am, comm):
     """(the core's prolongation Mats, finest first; those made here, destroyed by the caller): PETSc Mats as
     given; a nrmicp.Hierarchy's or whole scipy matrices, checked as nrmicp.solve checks a list and against the
     other ranks', as MPIAIJ Mats (level 0's rows in A's layout, each coarser level's split evenly)."""
-    if isinstance(hierarchy, Hierarchy):
+    if isinstance(hierarchy, Hierarchy):   # (built on A: this rank's rows against its A's, as serially)
+        indptr, indices, data = Am.getValuesCSR()
+        mine = sp.csr_matrix((data, indices, indptr), shape=(len(indptr) - 1, Am.getSize()[1]))
+        _collective(comm, hierarchy.check_fits, mine, Am.getOwnershipRange())
         hierarchy = list(hierarchy.prolongations)
     if not isinstance(hierarchy, (list, tuple)):
         return [], []
