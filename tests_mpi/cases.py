@@ -208,6 +208,12 @@ def _bad(kind):
         if last:
             upper[-1] = pb.zeta[hi - 1] - 1.0
         kw = {"upper": upper}
+    elif kind == "z_update_solve":   # the core's refusal at set-up (the engine has no factorization of A)
+        kw = {"z_update": "solve"}
+    elif kind == "mms_icp":   # ... and during the solve: 'auto' is 'solve' for mms on an ICP
+        kw = {"method": "mms"}
+        def zeta(z):
+            return 0.01 * np.sin(z)
     elif kind == "bad_method":
         kw = {"method": "sor"}
     elif kind == "q_length_affine":   # q one entry too long on the last rank beside an Affine ζ: ζ's product,

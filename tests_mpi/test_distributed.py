@@ -135,6 +135,8 @@ BAD = {
     "zeta_nan": ("ValueError", "NaN or Inf"),
     "bad_option": ("ValueError", "tol"),
     "bad_method": ("ValueError", "method must be one of"),
+    "z_update_solve": ("ValueError", "z_update"),
+    "mms_icp": ("ValueError", "z_update 'solve'"),
     "array_hierarchy": ("TypeError", "hierarchy"),   # (a wrong type for any member, as nrmicp.solve says)
     "mixed_kinds": ("TypeError", "not both"),
     "mat_as_zeta": ("TypeError", "nrmicp.Affine"),

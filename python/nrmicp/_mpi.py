@@ -4,6 +4,7 @@ collective call the failing ranks never reach), and arguments that must agree re
 they differ."""
 from __future__ import annotations
 
+import re
 import zlib
 
 import numpy as np
@@ -23,6 +24,9 @@ _KNOWN = {e.__name__: e for e in (ValueError, TypeError, ZeroDivisionError, Floa
 class DistributedError(RuntimeError):
     """An exception of a type this module does not re-create, raised on one rank; every rank
     raises it with the original type's name and message."""
+
+
+_KNOWN[DistributedError.__name__] = DistributedError
 
 
 def flag_max(comm, value: float) -> float:
@@ -69,7 +73,7 @@ def _all_rows(comm, local: np.ndarray) -> np.ndarray:
 def agree(comm, exc: BaseException | None) -> None:
     """Every rank calls this after a step that may fail on some ranks only. When any rank
     failed, every rank raises the same exception (type and message of the lowest rank that failed
-    first-hand, prefixed 'rank r: '); else returns. Collective: no rank is left waiting."""
+    first-hand, prefixed 'rank r: ' unless it was agreed before); else returns. Collective: no rank is left waiting."""
     if not flag_max(comm, 0.0 if exc is None else 1.0):
         return
     buf = np.zeros(_MSG_LEN)
@@ -82,9 +86,11 @@ def agree(comm, exc: BaseException | None) -> None:
     r = next((i for i, t in texts.items() if _core.refused_elsewhere not in t), min(texts))
     name, _, msg = texts[r].partition("\x01")
     cls = _KNOWN.get(name)
+    if not (cls and re.match(r"rank \d+: ", msg)):   # (an agreed exception raised again keeps its rank)
+        msg = f"rank {r}: {msg}" if cls else f"rank {r}: {name}: {msg}"
     # (no local holds the new exception: a frame -> exception -> traceback -> frame cycle would leave this
     # frame, and what it holds, to each rank's cyclic garbage collector, at different times)
-    raise (cls(f"rank {r}: {msg}") if cls else DistributedError(f"rank {r}: {name}: {msg}")) from exc
+    raise (cls or DistributedError)(msg) from exc
 
 
 def collective(comm, fn, *args):

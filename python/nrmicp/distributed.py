@@ -434,7 +434,7 @@ def _rounds(core, measure, xa, opts, o, jacobian, bounded, hint):
     """The fields of a Result: `core` (either member on the PETSc engine) run by the serial layer's rounds
     (_api._Rounds: Res re-measured where the core iterated another problem, re-solved when it misses tol) and
     settled by its _settle (polish unless `bounded`, the status, `hint(status)`: _api.failure_hint's)."""
-    m, qa, (kind, c, fn, ua) = o["method"], measure.qa, measure.problem
+    m, qa, (kind, c, fn, ua), comm = o["method"], measure.qa, measure.problem, measure.user[0].getComm()
     solver = types.SimpleNamespace(_core=core, method=m, n=len(qa), _dr=None, _dc=None)   # (a serial Solver's shape)
     problem = (qa, kind, c, fn)
     verify = measure.weights is not None or kind == _core.ZetaKind.constant
@@ -442,11 +442,11 @@ def _rounds(core, measure, xa, opts, o, jacobian, bounded, hint):
     rounds = _Rounds(solver, problem, it, o["callback"], {"upper": ua, "zeta_jacobian": jacobian},
                      measure if verify else None, xa)
     if rounds.cb is not None:   # nrmicp.solve's callback, each call collective (a failure on one rank raises on all)
-        rounds.cb = functools.partial(_collective, measure.user[0].getComm(), rounds.cb)
+        rounds.cb = functools.partial(_collective, comm, rounds.cb)
     failed = []   # a progress line that raised (rank 0's: the only one the core calls), raised on every rank after
     rounds.progress = lambda method, n: _mpi.deferred(_progress_hook(method, n), failed)
-    rounds.run(xa, opts.tol)
-    agree(measure.user[0].getComm(), failed[0] if failed else None)
+    _collective(comm, rounds.run, xa, opts.tol)   # (the core's refusals during the run, as every other: 'rank r: ')
+    agree(comm, failed[0] if failed else None)
     report = hierarchy_report(core.hierarchy["requested"], None, core) if m == "newton" else None
     return _settle(solver, rounds, problem, measure, opts.tol, polish=m == "newton" and o["polish"], bounded=bounded,
                    report=report, hint=hint)
