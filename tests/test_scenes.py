@@ -217,6 +217,18 @@ def test_registry_builds_every_scene_with_its_sizes_grid_parameter(name):
     assert [p.name for p in scenes.catalog("tiny")] == [scenes.build(n, "tiny").name for n in scenes.NAMES]
 
 
+def test_the_exact_obstacle_settles_where_its_free_boundary_moves_a_node_a_step():
+    """Policy iteration from the unconstrained solution moves a 1D free boundary about a node a step: at
+    obstacle_1d's 'large' n = 4,095 it takes more than the old fixed cap of 500 steps (scenes.build raised)."""
+    pb = scenes.build("obstacle_1d", "large", exact=False)
+    A, q, psi = pb.A, pb.q, pb.zeta
+    with pytest.raises(RuntimeError, match="did not settle in 500 steps"):
+        scenes._exact.solve_exact_obstacle(A, q, psi, maxiter=500)
+    z = scenes._exact.solve_exact_obstacle(A, q, psi)
+    w = A @ z + q
+    assert np.all(z >= psi - 1e-12) and np.all(w >= -1e-9) and np.max(np.abs(np.minimum(w, z - psi))) < 1e-9
+
+
 def test_registry_sizes_are_the_benchs():
     from nrmicp.bench import family
 

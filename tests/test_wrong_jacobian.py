@@ -93,6 +93,16 @@ def test_a_local_jacobian_that_contracts_slowly_is_given_up_in_few_steps():
     assert complementarity(*problem[:3], res.z) < 1e-6
 
 
+def test_a_jacobian_given_up_though_it_matches_along_the_step_says_so_after_converged():
+    # impulse control with ζ′ = 0.99 I: along the last step (nearly a shift of z) it misses ζ's difference
+    # quotient by 5% only, so the core's note is the 'matches' one; it was lost when Python re-decided 'converged'
+    p = scenes.build("impulse_control", "medium")
+    res = nrmicp.solve(p.A, p.q, p.zeta, method="newton", zeta_jacobian=lambda z: 0.99 * sp.identity(p.n, format="csr"))
+    assert res.path == "newton+outer" and res.success, res.message
+    assert res.message.startswith("converged") and "the Newton steps with zeta_jacobian stopped converging" in res.message
+    assert np.max(np.abs(res.z - p.z_exact)) < 1e-6 * np.max(np.abs(p.z_exact))
+
+
 def test_the_outer_fixed_point_after_a_wrong_jacobian_counts_against_maxiter_and_keeps_the_word():
     problem = thermoforming_problem(31)
     full = solve(problem, "10x", hierarchy=None)

@@ -199,16 +199,18 @@ def with_shortening(status, message: str, report) -> str:
     return message if note in message else message + note
 
 
-#: The start of the core's note that it gave up a zeta_jacobian (path 'newton+outer'; detail::JacobianCheck).
-JACOBIAN_NOTE = "zeta_jacobian looks wrong"
+#: The starts of the core's notes that it gave up a zeta_jacobian (path 'newton+outer'; detail::JacobianCheck::message):
+#: one that looks wrong, and one that matches ζ's difference quotient but whose steps stopped converging.
+JACOBIAN_NOTES = ("zeta_jacobian looks wrong", "the Newton steps with zeta_jacobian")
 
 
 def with_jacobian_note(message: str, path: str, core_message: str) -> str:
     """`message` with the core's note that it gave up the zeta_jacobian, when the returned round did
     (path 'newton+outer') and the message, re-decided in Python, lost it."""
-    if path != "newton+outer" or JACOBIAN_NOTE in message or JACOBIAN_NOTE not in core_message:
+    starts = [core_message.index(note) for note in JACOBIAN_NOTES if note in core_message]
+    if path != "newton+outer" or not starts or any(note in message for note in JACOBIAN_NOTES):
         return message
-    return f"{message}; {core_message[core_message.index(JACOBIAN_NOTE):]}"
+    return f"{message}; {core_message[min(starts):]}"
 
 
 def check_jacobian(zeta_jacobian, method, kind) -> bool:

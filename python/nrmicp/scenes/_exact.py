@@ -37,18 +37,20 @@ def exact_box_if_small(A, q, lower, upper, exact, max_n: int = 20_000):
     return solve_exact_box(A, q, lower, np.full(A.shape[0], np.inf) if upper is None else upper)
 
 
-def solve_exact_obstacle(A, q, psi, z0=None, maxiter: int = 500) -> np.ndarray:
+def solve_exact_obstacle(A, q, psi, z0=None, maxiter: int | None = None) -> np.ndarray:
     """Exact solution of min(A z + q, z − ψ) = 0 (constant obstacle ψ), A an M-matrix.
 
     Policy iteration: with z the current iterate, the active set is where z − ψ < A z + q
     (the obstacle row gives the smaller value); solve z = ψ there and (A z + q) = 0 elsewhere.
     ``z0`` warm-starts the active set. Raises RuntimeError if it has not settled in
-    ``maxiter`` steps (it cannot cycle for an M-matrix).
+    ``maxiter`` steps (default n + 1: for an M-matrix it cannot cycle, and in 1D its free boundary may move a
+    node a step).
     """
     A = sp.csr_matrix(A, dtype=np.float64)
     q = np.asarray(q, dtype=np.float64)
     psi = np.asarray(psi, dtype=np.float64)
     normA = spla.norm(A, np.inf)
+    maxiter = A.shape[0] + 1 if maxiter is None else maxiter
     if z0 is None:
         z = spla.spsolve(A.tocsc(), -q)
         active = z < psi

@@ -534,7 +534,7 @@ class NewtonRun {
     const Eigen::Index n = q.size();
     Vector psi(n);
     levels_.finest->eval_zeta(zeta, z0 ? *z0 : Vector::Zero(n), psi);
-    const Vector start = (z0 && !nest_) ? *z0 : solve_inner_obstacle(q, psi, z0);
+    const Vector start = (z0 && !nest_) ? *z0 : solve_obstacle(q, psi, z0, nest_, 0.0, std::min(start_maxiter, o_.maxiter), false).z;
     const auto t0 = std::chrono::steady_clock::now();
     auto K = levels_.finest->affine_system(zeta.B(), &Timings::setup);  // analysed once for the solve
     const Vector& c = zeta.c();
@@ -615,8 +615,7 @@ class NewtonRun {
       if (!outer_ok_ || !levels_.finest->eval_zeta(zeta, z, zeta_z) || !outer_step(q, zeta_z, z))
         return levels_.finest->sweep(q, zeta, z, sweeps, tol);
       Result r;
-      r.iterations = 1;
-      r.z = outer_z_;
+      r.iterations = 1, r.z = outer_z_;
       r.residual = levels_.finest->icp_residual(q, zeta, r.z, zeta_z, w);
       return r;
     };
@@ -632,15 +631,24 @@ class NewtonRun {
       tally_.count("matrix_free_iterations", record.iterations);
       tally_.count("matrix_free_preconditioner_iterations", record.preconditioner);
     }
-    if (!out.jacobian_poor) return no_worse_than_start(out, q, z_start, psi);
-    // the Jacobian does not deliver (detail::JacobianCheck): the path without it, from the best iterate
-    tally_.switch_to_outer();
-    Result r = solve_outer_fixed_point(q, zeta, &out.z);
-    r.message += "; " + out.message + ", so the solve went on with the outer fixed point without it (path newton+outer)";
-    return r;
+    if (!out.jacobian_poor && out.status != Status::Diverged) return no_worse_than_start(out, q, z_start, psi);
+    return without_jacobian(q, zeta, z0, out);
   }
 
  private:
+  /// Where ζ′ did not deliver (JacobianCheck) or diverged: the outer fixed point from its best iterate, else from the start.
+  Result without_jacobian(const Vector& q, const Z& zeta, const Vector* z0, const LevelOutcome& out) {
+    tally_.switch_to_outer();
+    Result r = solve_outer_fixed_point(q, zeta, &out.z);
+    std::string from;
+    if (r.status != Status::Converged && r.status != Status::MaxIterations && r.status != Status::ZetaFailed) {
+      Result again = solve_outer_fixed_point(q, zeta, z0);
+      if (again.status == Status::Converged || again.residual < r.residual) r = std::move(again), from = ", from the solve's start";
+    }
+    r.message += "; " + (out.jacobian_poor ? out.message : "the Newton steps with zeta_jacobian diverged") +
+                 ", so the solve went on with the outer fixed point without it (path newton+outer" + from + ")";
+    return r;
+  }
   /// The semismooth loop's result, or the solve's start z_start (ψ = ζ(z_start)) where the loop did not
   /// converge and no iterate of it has a lower Res: its first outer step, S(ζ(z_start)), may lie far from
   /// the answer where ζ′ is large, and the best iterate is the start's.
@@ -705,10 +713,6 @@ class NewtonRun {
     for (const auto& level : levels_.coarse) level->record_into(tm);
   }
 
-  /// The obstacle problem as the start of an affine or semismooth solve (no report, to a settled set).
-  Vector solve_inner_obstacle(const Vector& q, const Vector& psi, const Vector* z0) {
-    return solve_obstacle(q, psi, z0, nest_, 0.0, std::min(start_maxiter, o_.maxiter), false).z;
-  }
 
   const NewtonLevels<MatrixType>& levels_;
   const Options& o_;

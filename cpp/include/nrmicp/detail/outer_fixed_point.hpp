@@ -10,7 +10,10 @@
 // active set: a stop at a fraction of Res, which weighs w against z − ζ(z), made the outer steps
 // depend on A's units). The outer map is accelerated by Anderson (detail/anderson.hpp), safeguarded.
 //
-// The outer steps are judged by the map's own residual ‖G(z) − z‖₂, in z's units: S, hence G and
+// The outer steps are judged by the map's own residual ‖G(z) − z‖∞, in z's units and in the norm in
+// which S (an M-matrix's comparison principle) and a Lipschitz-1 ζ (impulse control's) are non-expansive:
+// in ‖·‖₂ a warm start near the answer saw it double and stagnated (docs/MEASUREMENTS.md, "The outer
+// fixed point judged in the max norm"). S, hence G and
 // every decision below, is the same when A and q are scaled together, whereas Res mixes w (A's units)
 // with z − ζ(z) (z's): on σA (the default rule's units) Res(0) is the small load ‖σq‖ and every
 // good outer step looked worse than z = 0 (docs/MEASUREMENTS.md, "The outer fixed point in z's
@@ -87,7 +90,7 @@ class OuterFixedPoint {
     // (z_f is not a best iterate: the Monitor never saw it, and the floor's message quotes the best)
     if (first_) run_.moved_start(z_, psi_, r_);
     first_ = false;
-    const double f = run_.comm().stable_norm(inner.z - z_);  // ‖G(z) − z‖, z's units
+    const double f = run_.comm().inf_norm(inner.z - z_);  // ‖G(z) − z‖∞, z's units
     if (stalled(f)) return;
     if (mixed_) {
       mixed_ = false;
