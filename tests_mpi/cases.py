@@ -166,6 +166,15 @@ def _bad(kind):
         return B, pb.q[lo:hi], zeta, kw
     elif kind == "mat_as_zeta":   # a bare Mat (callable in petsc4py) where nrmicp.Affine(B, c) was meant
         return M, q, mat(A * 0.01, lo, hi), kw
+    elif kind == "inf_in_A":   # an inf off the diagonal in the last rank's rows of a Mat (hung before: one rank raised)
+        B = A.copy()
+        if last:
+            B.data[B.indptr[hi - 1]] = np.inf
+        return mat(B, lo, hi), q, zeta, kw
+    elif kind == "sbaij_A":   # a symmetric block Mat: not AIJ (nrmgs split its upper triangle only)
+        return M.convert("sbaij"), q, zeta, kw
+    elif kind == "callback_not_callable":
+        kw = {"callback": 5}
     elif kind == "dense_A":   # a dense Mat: the engine reads AIJ rows
         return M.convert("dense"), q, zeta, kw
     elif kind == "layout_A":   # A's columns split unlike its rows (one more column on rank 0, one fewer on rank 1)
@@ -285,7 +294,9 @@ def case_no_rows():
 def _snapshot(*objs):
     out = []
     for o in objs:
-        if isinstance(o, PETSc.Mat) and "dense" in o.getType():
+        if isinstance(o, PETSc.Mat) and "baij" in o.getType():
+            out.append(o.getSize())
+        elif isinstance(o, PETSc.Mat) and "dense" in o.getType():
             out.append(o.getDenseArray().tolist())
         elif isinstance(o, PETSc.Mat):
             out.append([a.tolist() for a in o.getValuesCSR()])
@@ -1257,6 +1268,25 @@ def case_bounds_on_rank_0():
                 "err": float(np.max(np.abs(z - s.z)) / np.max(np.abs(s.z)))}
 
 
+def case_base_exception():
+    """A callback that raises KeyboardInterrupt, or calls sys.exit, on the last rank only: every rank raises it."""
+    pb = obstacle_2d(15, exact=False)
+    A = sp.csr_matrix(pb.A)
+    lo, hi = split(A.shape[0])
+    out = {}
+    for name, exc in (("KeyboardInterrupt", KeyboardInterrupt()), ("SystemExit", SystemExit(3))):
+        def callback(zk, exc=exc):
+            if RANK == SIZE - 1:
+                raise exc
+        try:
+            dist.solve(A[lo:hi], pb.q[lo:hi], pb.zeta[lo:hi], method="newton", callback=callback)
+            got = "no exception"
+        except BaseException as e:  # noqa: BLE001 - the outcome is the test's subject
+            got = f"{type(e).__name__}: {e}"
+        out[name] = _allgather_text(got)
+    return out if RANK == 0 else None
+
+
 def case_upper_all_inf():
     """upper=+inf on every rank's rows is no upper bound, as serially: a callable ζ with its Jacobian converges
     (the core refused a Jacobian with bounds) and polish runs."""
@@ -1392,6 +1422,7 @@ if __name__ == "__main__":
               "fuzz": lambda: case_fuzz(int(args[0])), "family": case_family, "hooks": case_hooks, "no_rows": case_no_rows,
               "nonpositive_diagonal": case_nonpositive_diagonal,
               "upper_all_inf": case_upper_all_inf, "bounds_on_rank_0": case_bounds_on_rank_0,
+              "base_exception": case_base_exception,
               "reason_alike": case_reason_alike, "hints": case_hints, "differing": case_differing,
               "rows_apart": case_rows_apart}[name]()
     if RANK == 0:

@@ -125,6 +125,9 @@ BAD = {
     "layout": ("ValueError", "does not match A's rows"),
     "nonsquare": ("ValueError", "must together be square"),
     "dense_A": ("ValueError", "A must be an AIJ (sparse) PETSc matrix, got type 'mpidense'"),
+    "sbaij_A": ("ValueError", "A must be an AIJ (sparse) PETSc matrix, got type 'mpisbaij'"),
+    "inf_in_A": ("ValueError", "A has a non-finite entry inf at"),
+    "callback_not_callable": ("TypeError", "callback must be callable, got int"),
     "layout_A": ("ValueError", "create A with the same row and column layout"),
     "zero_diagonal": ("ValueError", "diagonal must be positive"),
     "nan_q": ("ValueError", "q has a non-finite entry"),
@@ -143,7 +146,7 @@ BAD = {
     "B_columns": ("ValueError", "zeta.B must be"),
     "subnormal_diagonal": ("ValueError", "not subnormal"),
     "nonfinite_A": ("ValueError", "this rank's block of rows"),
-    "crossing_bounds": ("ValueError", "upper"),   # (nrmgs: bounds are method 'newton''s)
+    "crossing_bounds": ("ValueError", "which start at global row"),   # (the index is the rank's row)
     "q_length_affine": ("ValueError", "q must have length"),
 }
 
@@ -377,6 +380,12 @@ def test_a_nonpositive_diagonal_is_refused_and_gives_the_amg_set_up_up(ranks):
 def test_an_upper_of_plus_infinity_everywhere_is_no_bound(ranks):
     out = mpirun(ranks, "upper_all_inf", timeout=120)
     assert out == {"status": "CONVERGED", "polished": True}, out
+
+
+def test_a_base_exception_on_one_rank_is_raised_on_every_rank():
+    out = mpirun(2, "base_exception", timeout=120)   # (they hung: collective caught Exception only)
+    assert out["KeyboardInterrupt"] == ["KeyboardInterrupt: rank 1: "] * 2, out
+    assert out["SystemExit"] == ["SystemExit: rank 1: 3"] * 2, out
 
 
 @pytest.mark.parametrize("ranks", [2, 3])

@@ -592,8 +592,7 @@ class Solver:
         bounded = _bounds.is_bounded(c if kind == ZetaKind.constant else None, us)
         if bounded:
             _bounds.check(kind, c, us, self.method, zeta_jacobian)
-        if callback is not None and not callable(callback):
-            raise TypeError(f"callback must be callable, got {type(callback).__name__}")
+        check_callback(callback)
         if self._reduced is not None:
             zD = None
             if kind in (ZetaKind.none, ZetaKind.constant) and not bounded:   # (the closed form is the LCP's)
@@ -1189,6 +1188,12 @@ def solve(A: MatrixLike, q: ArrayLike, zeta: ZetaLike = None, *, upper: Any = No
     _charge_setup(res.timings, s._setup_timings)   # the whole call: the set-up is part of it
     res.timings["total"] = time.perf_counter() - t0
     return res
+
+
+def check_callback(callback) -> None:
+    """TypeError naming ``callback`` unless it is None or callable (both engines' rule)."""
+    if callback is not None and not callable(callback):
+        raise TypeError(f"callback must be callable, got {type(callback).__name__}")
 
 
 def implied_method(method, zeta, upper, zeta_jacobian):

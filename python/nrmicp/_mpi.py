@@ -18,7 +18,8 @@ from ._hierarchy import Hierarchy
 _MSG_LEN = 1024
 #: Exception types re-raised as themselves on every rank; others become DistributedError.
 _KNOWN = {e.__name__: e for e in (ValueError, TypeError, ZeroDivisionError, FloatingPointError,
-                                  ArithmeticError, RuntimeError, KeyError, IndexError, MemoryError)}
+                                  ArithmeticError, RuntimeError, KeyError, IndexError, MemoryError,
+                                  KeyboardInterrupt, SystemExit)}
 
 
 class DistributedError(RuntimeError):
@@ -97,7 +98,7 @@ def collective(comm, fn, *args):
     """fn(*args) on every rank; an exception on any rank is raised on all (see agree)."""
     try:
         out, exc = fn(*args), None
-    except Exception as e:  # noqa: BLE001 - re-raised on every rank by agree
+    except BaseException as e:  # noqa: BLE001 - re-raised on every rank by agree (Ctrl-C, sys.exit on one rank too)
         out, exc = None, e
     try:
         agree(comm, exc)
@@ -158,6 +159,6 @@ def deferred(hook, failed: list):
         if not failed:
             try:
                 hook(*args)
-            except Exception as exc:  # noqa: BLE001 - raised on every rank once the core returns
+            except BaseException as exc:  # noqa: BLE001 - raised on every rank once the core returns
                 failed.append(exc)
     return call

@@ -26,7 +26,7 @@ from ._newton import (auto_builds_amg, check_jacobian, check_no_hierarchy, check
                       warn_shortened)
 from ._api import (METHODS as _ALL_METHODS, Result, _make_upper, _make_zeta, _Rounds, _choice, _criterion, _settle,
                    _log_final, _omega2_hint, _progress_hook, _units_parameters, core_options, choose_method,
-                   dominance_margin, failure_hint, implied_method)
+                   check_callback, dominance_margin, failure_hint, implied_method)
 from ._scaling import sigma_from_logs, weights_of_rows
 from ._hierarchy import Hierarchy, _fingerprint, hierarchy_kind, resolve_hierarchy
 from ._inputs import as_constant, as_csr, as_vector
@@ -203,6 +203,7 @@ def _prepare_call(Am, m, q, zeta, x0, comm, o, it):
 
     def local():
         checked = _core_options(o, m, nloc, it), _local(q, Am, "q"), None if x0 is None else _local(x0, Am, "x0")
+        check_callback(o["callback"])
         _not_a_mat(zeta, "zeta")
         return (*checked, _make_zeta(zeta, nloc, _Rows(Am)))
     return _collective(comm, local)
@@ -297,6 +298,7 @@ class Solver:
         comm, A, m = self.comm, self.A, self.method
         if self._closed:
             raise ValueError("this distributed.Solver was closed")
+        PETSc.garbage_cleanup(comm)   # (earlier Results' Vecs: petsc4py frees parallel objects only collectively)
         _collective(comm, _scoped, options, ("solve", "call"), "distributed.Solver.solve", "distributed.Solver()")
         o = {**_options.defaults(), **self._options, **options, "method": m}
         given = {**{k: o[k] for k in _options.names("solve", "call")}, "zeta": zeta, "upper": upper}
@@ -422,7 +424,11 @@ def _upper(upper, Am, zeta, comm, method):
     def local():
         _not_a_mat(upper, "upper")
         u = _make_upper(upper, nloc, _Rows(Am))
-        _bounds.check(kind, c if kind == _K.constant else None, u, method, None)
+        try:
+            _bounds.check(kind, c if kind == _K.constant else None, u, method, None)
+        except ValueError as exc:
+            raise ValueError(f"{exc} (indices of this rank's rows, which start at global row "
+                             f"{Am.getOwnershipRange()[0]})") from None
         return u
     u = None if upper is None else _collective(comm, local)
     if isinstance(u, _bounds.ImplicitUpper):

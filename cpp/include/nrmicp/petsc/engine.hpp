@@ -275,17 +275,25 @@ inline Matrix galerkin(const Matrix&, const Matrix& A, const Matrix& P) {
   return out;
 }
 inline Eigen::VectorXd diagonal(const Matrix& A) { return A.diagonal(); }
-/// A as this engine reads it: AIJ (its rows' CSR arrays), square, this process's rows its columns (the driver's
-/// vectors hold both). Local queries only; throws naming what differs.
+/// A as this engine reads it: AIJ (its rows' CSR arrays; not (S)BAIJ's blocks), square, this process's rows its
+/// columns (the driver's vectors hold both), every stored entry finite (as the serial entry point's rule). Local
+/// queries only; throws naming what differs.
 inline void check_layout(const Matrix& A) {
   MatType type;
   check(MatGetType(A.get(), &type), "MatGetType");
-  if (!std::strstr(type, "aij")) throw std::invalid_argument(std::string("A must be an AIJ (sparse) PETSc matrix, got type '") + type + "'");
+  if (!std::strstr(type, "aij") || std::strstr(type, "baij"))
+    throw std::invalid_argument(std::string("A must be an AIJ (sparse) PETSc matrix, got type '") + type + "'");
   if (global_rows(A) != global_cols(A))
     throw std::invalid_argument("A must be square, got shape (" + std::to_string(global_rows(A)) + ", " + std::to_string(global_cols(A)) + ")");
   if (A.rows() != A.cols())
     throw std::invalid_argument("A's local row and column sizes differ on this process (" + std::to_string(A.rows()) + " rows, " +
                                 std::to_string(A.cols()) + " columns): create A with the same row and column layout");
+  const LocalRows rows(A.get(), false);
+  rows.for_each([&](PetscInt i, PetscInt j, PetscInt p) {
+    if (!std::isfinite(rows.value(p)))
+      throw std::invalid_argument("A has a non-finite entry " + to_text(rows.value(p)) + " at (" +
+                                  std::to_string(rows.row_begin() + i) + ", " + std::to_string(j) + ")");
+  });
 }
 /// A's layout (check_layout, on every process first), then what every member on this engine needs: it divides by
 /// a_ii (V-cycle smoothers, Krylov solves, splittings), so this process's diagonal is positive and normal (a
