@@ -300,7 +300,10 @@ class Globalized {
       // is solved again, to repeat_tol()
       const bool trusted = !loose_ || plain_.residual() < ctl_.repeat_trust * start_r_;
       if (repeat && trusted && !moved_set_) return settle(), true;
-      if (!repeat && !seen_.insert(h).second) return false;  // a cycle
+      if (!repeat && !seen_.insert(h).second) {  // a cycle: the fallback's, unless the sweeps may cause it
+        if (!smooth_) return false;
+        smooth_ = false, seen_.clear();  // (no M-matrix: a projected sweep can move the set back; none from here)
+      }
     }
     if (!repeat && !plain_.factorize(inactive_)) return false;  // a repeat keeps its system
     // Loose only where a repeat is recognized (a set fixes the step): the repeat is then solved to repeat_tol().
@@ -315,7 +318,7 @@ class Globalized {
     // is a solve (the semismooth loop's outer step: the loop ends there anyway)
     if (!repeat && !(Plain::smoothing_solves && r < ctl_.solve.tol)) {
       // a damped z⁺, or one whose set the sweeps changed, is no set's exact solve: its repeat is solved again
-      moved_set_ = plain_.smooth(kSmoothingSweeps) || damped;
+      moved_set_ = plain_.smooth(smooth_ ? kSmoothingSweeps : 0) || damped;
       r = plain_.trial_residual();
     }
     const bool same_set = have_last_ && plain_.same_set(inactive_, last_inactive_);
@@ -441,6 +444,7 @@ class Globalized {
   bool exempt_;
   bool have_last_ = false, still_ = false, settled_ = false, at_floor_ = false;
   bool loose_ = false;  // the last step was solved to a forcing: a repeat of its set may be solved again (repeat_trust)
+  bool smooth_ = true;  // the steps are followed by kSmoothingSweeps (until a cycle)
   bool moved_set_ = false;  // the sweeps after the last step changed its active set: a repeat of it is solved again
   double floor_ = 0;  // the rounding level of Res (computed when a stop at it is considered)
   SweepRuns runs_;
