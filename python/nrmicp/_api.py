@@ -406,7 +406,8 @@ def _member_hint(margin: Callable[[], float], method: str) -> str:
     why = ("A has a diagonal entry <= 0" if margin == -math.inf else
            f"A's rows are dominant by only {max(margin, 0.0):.2g} of their diagonal")
     return (f"; {why}, where the stationary members need O(h^-2) iterations: method='newton' "
-            f"(what method='auto' takes here) solves such problems in a few Newton steps")
+            f"(what method='auto' takes for such an A, unless an option only they read is given) solves such "
+            f"problems in a few Newton steps")
 
 
 #: With scaling, at most this many re-solves with a tighter tolerance when the scaled problem
