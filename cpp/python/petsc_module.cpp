@@ -214,9 +214,9 @@ PYBIND11_MODULE(_petsc, m) {
         "{'rows', 'nonzeros'} of the 'amg' hierarchy's coarse operators, finest first (built and let go).");
   m.def("check_layout", [](std::uintptr_t A) { nrmicp::petsc::check_layout(from_handle(A, "A")); }, py::arg("A"),
         "ValueError unless A is AIJ, square, its rows and columns split alike (local queries).");
-  m.def("check_operator", [](std::uintptr_t A) { nrmicp::petsc::check_operator(from_handle(A, "A")); }, py::arg("A"),
-        "check_layout on every process, then ValueError naming this process's first row of A the PETSc engine refuses "
-        "(a_ii not positive and normal).");
+  m.def("check_diagonal", [](std::uintptr_t A) { nrmicp::petsc::check_diagonal(from_handle(A, "A")); }, py::arg("A"),
+        "ValueError naming this process's first row of A the PETSc engine refuses (a_ii not positive and normal); "
+        "collective: after check_layout passed on every process.");
   m.def("row_max_abs", [](std::uintptr_t A) {
     const Eigen::VectorXd r = from_handle(A, "A").row_max_abs();
     return py::array_t<double>(r.size(), r.data());

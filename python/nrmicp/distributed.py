@@ -192,7 +192,7 @@ def _member(Am, comm, o):
         hierarchy_kind(hierarchy)
         return m
     m = _collective(comm, local)
-    _collective(comm, _petsc.check_operator, Am.handle)
+    _collective(comm, _petsc.check_diagonal, Am.handle)
     return m
 
 

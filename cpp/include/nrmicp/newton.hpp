@@ -260,7 +260,8 @@ class Newton {
     const auto t0 = std::chrono::steady_clock::now();
     const Eigen::Index n = levels_.A.rows();
     detail::collective_check(levels_.finest->comm(), [&] { detail::check_solve_input("Newton::solve", q, z0, given, n); });
-    const Zeta<StorageIndex> zeta = detail::agree_upper(given, n, levels_.finest->comm());
+    const auto agreed = detail::agree_upper(given, n, levels_.finest->comm());
+    const Zeta<StorageIndex>& zeta = agreed ? *agreed : given;
     Options resolved = o;
     resolve_tolerance(resolved, q, zeta, levels_.finest->comm());
     detail::NewtonRun<MatrixType> run(levels_, resolved, hooks, nest, zeta.upper());

@@ -159,7 +159,8 @@ class Solver {
       detail::check_solve_input("Solver::solve", q, z0, given, n);
       check_bounds(given);
     });
-    const Zeta<StorageIndex> zeta = detail::agree_upper(given, n, comm());
+    const auto agreed = detail::agree_upper(given, n, comm());
+    const Zeta<StorageIndex>& zeta = agreed ? *agreed : given;
     resolve_tolerance(o, q, zeta, comm());
     Result r;
     if (comm().any(zeta.bounded())) {  // (a free row on one process: the box problem on all)

@@ -13,6 +13,7 @@
 #include <functional>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
@@ -226,12 +227,12 @@ void check_solve_input(const std::string& who, const Eigen::VectorXd& q, const E
   zeta.check(n);
 }
 
-/// ζ whose constant upper bound, where any process has one, every process has (+∞ on the rows of a
-/// process without): the branches a solve takes on bounds are then the same on all (one reduction).
+/// ζ with the constant upper bound another process has, +∞ on this process's n rows, where this process has
+/// none (empty: ζ as it is): the branches a solve takes on bounds are then the same on all (one reduction).
 template <typename StorageIndex>
-Zeta<StorageIndex> agree_upper(const Zeta<StorageIndex>& zeta, Eigen::Index n, const Comm& comm) {
+std::optional<Zeta<StorageIndex>> agree_upper(const Zeta<StorageIndex>& zeta, Eigen::Index n, const Comm& comm) {
   const bool elsewhere = comm.any(zeta.upper().size() > 0);
-  if (!elsewhere || zeta.upper().size() || zeta.implicit_upper()) return zeta;
+  if (!elsewhere || zeta.upper().size() || zeta.implicit_upper()) return std::nullopt;
   return zeta.with_upper(Eigen::VectorXd::Constant(n, std::numeric_limits<double>::infinity()));
 }
 }  // namespace detail

@@ -302,7 +302,8 @@ class Globalized {
       if (repeat && trusted && !moved_set_) return settle(), true;
       if (!repeat && !seen_.insert(h).second) {  // a cycle: the fallback's, unless the sweeps may cause it
         if (!smooth_) return false;
-        smooth_ = false, seen_.clear();  // (no M-matrix: a projected sweep can move the set back; none from here)
+        smooth_ = false;  // (no M-matrix: a projected sweep can move the set back; none from here)
+        seen_.clear();
       }
     }
     if (!repeat && !plain_.factorize(inactive_)) return false;  // a repeat keeps its system

@@ -615,7 +615,8 @@ class NewtonRun {
       if (!outer_ok_ || !levels_.finest->eval_zeta(zeta, z, zeta_z) || !outer_step(q, zeta_z, z))
         return levels_.finest->sweep(q, zeta, z, sweeps, tol);
       Result r;
-      r.iterations = 1, r.z = outer_z_;
+      r.iterations = 1;
+      r.z = outer_z_;
       r.residual = levels_.finest->icp_residual(q, zeta, r.z, zeta_z, w);
       return r;
     };
@@ -641,7 +642,7 @@ class NewtonRun {
     tally_.switch_to_outer();
     Result r = solve_outer_fixed_point(q, zeta, &out.z);
     std::string from;
-    if (r.status != Status::Converged && r.status != Status::MaxIterations && r.status != Status::ZetaFailed) {
+    if (r.status == Status::Stagnated || r.status == Status::Diverged) {  // (not a callback's stop, nor maxiter)
       Result again = solve_outer_fixed_point(q, zeta, z0);
       if (again.status == Status::Converged || again.residual < r.residual) r = std::move(again), from = ", from the solve's start";
     }
@@ -712,7 +713,6 @@ class NewtonRun {
     levels_.finest->record_into(tm);
     for (const auto& level : levels_.coarse) level->record_into(tm);
   }
-
 
   const NewtonLevels<MatrixType>& levels_;
   const Options& o_;

@@ -284,7 +284,8 @@ inline void check_layout(const Matrix& A) {
   if (!std::strstr(type, "aij") || std::strstr(type, "baij"))
     throw std::invalid_argument(std::string("A must be an AIJ (sparse) PETSc matrix, got type '") + type + "'");
   if (global_rows(A) != global_cols(A))
-    throw std::invalid_argument("A must be square, got shape (" + std::to_string(global_rows(A)) + ", " + std::to_string(global_cols(A)) + ")");
+    throw std::invalid_argument("A must be square, got shape (" + std::to_string(global_rows(A)) + ", " +
+                                std::to_string(global_cols(A)) + ")");
   if (A.rows() != A.cols())
     throw std::invalid_argument("A's local row and column sizes differ on this process (" + std::to_string(A.rows()) + " rows, " +
                                 std::to_string(A.cols()) + " columns): create A with the same row and column layout");
@@ -295,11 +296,10 @@ inline void check_layout(const Matrix& A) {
                                   std::to_string(rows.row_begin() + i) + ", " + std::to_string(j) + ")");
   });
 }
-/// A's layout (check_layout, on every process first), then what every member on this engine needs: it divides by
-/// a_ii (V-cycle smoothers, Krylov solves, splittings), so this process's diagonal is positive and normal (a
-/// subnormal one's reciprocal overflows); the serial member has other rules.
-inline void check_operator(const Matrix& A) {
-  detail::collective_check(A.comm(), [&] { check_layout(A); });  // (before the diagonal's collective calls)
+/// What every member on this engine needs of A's diagonal: it divides by a_ii (V-cycle smoothers, Krylov solves,
+/// splittings), so this process's diagonal is positive and normal (a subnormal one's reciprocal overflows); the
+/// serial member has other rules.
+inline void check_diagonal(const Matrix& A) {
   const Eigen::VectorXd d = A.diagonal();
   for (Eigen::Index i = 0; i < d.size(); ++i)
     if (!(d[i] >= std::numeric_limits<double>::min())) {
@@ -307,6 +307,11 @@ inline void check_operator(const Matrix& A) {
       throw std::invalid_argument("A's diagonal must be positive (not subnormal) on the PETSc engine (its smoothers, "
                                   "Krylov solves and splittings divide by it); A[" + row + ", " + row + "] = " + to_text(d[i]));
     }
+}
+/// A's layout (check_layout, on every process first: the diagonal's calls are collective), then its diagonal.
+inline void check_operator(const Matrix& A) {
+  detail::collective_check(A.comm(), [&] { check_layout(A); });
+  check_diagonal(A);
 }
 /// The diagonal block (a view of A's own arrays): the stationary members split it (multisplitting).
 inline Matrix::Block diagonal_block(const Matrix& A) { return A.block(); }
